@@ -1,0 +1,119 @@
+/**
+ * @file bigusSliceFrame.h
+ * @brief The orthonormal probe frame of one tracked ultrasound slice (DESIGN section 3).
+ *
+ * ImageToReference (row-major 4x4) maps a pixel index (column i, row j, 0, 1) to millimetres in the
+ * reference frame; pixel (i, j) is the centre of the pixel. The slice frame is
+ *   u = first column / |first column|, v = second column / |second column|, n = u x v,
+ *   origin = fourth column (mm), spacing = (|first column|, |second column|) mm per pixel,
+ * so that pixel (i, j) sits at origin + i * spacing[0] * u + j * spacing[1] * v.
+ *
+ * Plain C++ with no VTK types so that every backend (and the metafile reader) shares one definition.
+ */
+#ifndef bigusSliceFrame_h
+#define bigusSliceFrame_h
+
+#include <cmath>
+
+namespace bigus
+{
+
+/// Result of checking an ImageToReference matrix.
+enum class PoseStatus
+{
+  Ok = 0,
+  NotFinite,   ///< a NaN or Inf entry
+  NotAffine,   ///< the bottom row is not (0, 0, 0, 1)
+  Singular,    ///< an image axis has (almost) zero length or the two axes are parallel
+  Sheared      ///< the image axes are further from perpendicular than the tolerance
+};
+
+inline const char* PoseStatusText(PoseStatus s)
+{
+  switch (s)
+  {
+    case PoseStatus::Ok:
+      return "ok";
+    case PoseStatus::NotFinite:
+      return "contains NaN or Inf";
+    case PoseStatus::NotAffine:
+      return "bottom row is not 0 0 0 1";
+    case PoseStatus::Singular:
+      return "is singular (an image axis has zero length or the axes are parallel)";
+    case PoseStatus::Sheared:
+      return "is sheared (image axes not perpendicular)";
+  }
+  return "unknown";
+}
+
+/// Orthonormal frame of a slice. All lengths in mm.
+struct SliceFrame
+{
+  double u[3];          ///< unit image x axis (columns), reference frame
+  double v[3];          ///< unit image y axis (rows), reference frame
+  double n[3];          ///< unit slice normal u x v (elevation direction)
+  double origin[3];     ///< centre of pixel (0, 0), mm
+  double spacing[2];    ///< mm per pixel along u and v
+  double shearDegrees;  ///< |90 - angle between the two image axes|, degrees
+};
+
+/**
+ * Build the slice frame of a row-major ImageToReference matrix and check it.
+ * @param m                 16 doubles, row-major, pixel index -> mm.
+ * @param maxShearDegrees   largest accepted |90 deg - angle(u, v)|; real calibrations carry a few
+ *                          degrees of shear (the PLUS spine-phantom calibration has about 2.8).
+ * @return PoseStatus::Ok, or the first problem found; @p frame is filled as far as it could be.
+ */
+inline PoseStatus ComputeSliceFrame(const double m[16], double maxShearDegrees, SliceFrame& frame)
+{
+  for (int k = 0; k < 16; ++k)
+  {
+    if (!std::isfinite(m[k]))
+    {
+      return PoseStatus::NotFinite;
+    }
+  }
+  if (m[12] != 0.0 || m[13] != 0.0 || m[14] != 0.0 || std::abs(m[15] - 1.0) > 1e-12)
+  {
+    return PoseStatus::NotAffine;
+  }
+  double a[3] = { m[0], m[4], m[8] };
+  double b[3] = { m[1], m[5], m[9] };
+  const double na = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+  const double nb = std::sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
+  frame.origin[0] = m[3];
+  frame.origin[1] = m[7];
+  frame.origin[2] = m[11];
+  frame.spacing[0] = na;
+  frame.spacing[1] = nb;
+  // Pixel spacings of real probes lie between micrometres and a few millimetres.
+  const double tiny = 1e-9;
+  if (na < tiny || nb < tiny)
+  {
+    return PoseStatus::Singular;
+  }
+  for (int k = 0; k < 3; ++k)
+  {
+    frame.u[k] = a[k] / na;
+    frame.v[k] = b[k] / nb;
+  }
+  frame.n[0] = frame.u[1] * frame.v[2] - frame.u[2] * frame.v[1];
+  frame.n[1] = frame.u[2] * frame.v[0] - frame.u[0] * frame.v[2];
+  frame.n[2] = frame.u[0] * frame.v[1] - frame.u[1] * frame.v[0];
+  const double nn = std::sqrt(frame.n[0] * frame.n[0] + frame.n[1] * frame.n[1] + frame.n[2] * frame.n[2]);
+  const double cosine = frame.u[0] * frame.v[0] + frame.u[1] * frame.v[1] + frame.u[2] * frame.v[2];
+  frame.shearDegrees = std::abs(std::asin(std::fmax(-1.0, std::fmin(1.0, cosine)))) * 180.0 / M_PI;
+  if (nn < 1e-6)
+  {
+    return PoseStatus::Singular;
+  }
+  for (int k = 0; k < 3; ++k)
+  {
+    frame.n[k] /= nn;
+  }
+  return frame.shearDegrees > maxShearDegrees ? PoseStatus::Sheared : PoseStatus::Ok;
+}
+
+} // namespace bigus
+
+#endif
