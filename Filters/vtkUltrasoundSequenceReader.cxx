@@ -306,6 +306,11 @@ int vtkUltrasoundSequenceReader::RequestInformation(
     Matrix pose = Identity;
     if (const std::string* status = in.FrameField(k, "ImageStatus"))
     {
+      if (*status != "OK" && *status != "INVALID")
+      {
+        return this->Fail(file + ": frame " + std::to_string(k) + ": field " +
+          bigus::FrameFieldName(k, "ImageStatus") + " is '" + status->substr(0, 40) + "', expected OK or INVALID");
+      }
       valid = *status == "OK";
     }
     for (std::size_t t = 0; t < terms.size(); ++t)

@@ -1,0 +1,105 @@
+#!/usr/bin/env bash
+# BIGUS-VTK setup: installs every dependency by Debian package name, configures and builds.
+#
+#   ./setup.sh main   set up, build, and run the main job on the bundled real liver sweep
+#   ./setup.sh test   set up, build, and run the whole test suite (what CI runs):
+#                     ctest (GoogleTest + Python), the reader tests again under AddressSanitizer and
+#                     UndefinedBehaviorSanitizer, and the libFuzzer target of the header parser
+#   ./setup.sh build  set up and build only
+#
+# Environment: BIGUS_JOBS (parallel build jobs, default: number of cores),
+#              BIGUS_FUZZ_SECONDS (fuzzing time in `test`, default 60).
+set -euo pipefail
+cd "$(dirname "$0")"
+root=$(pwd)
+jobs=${BIGUS_JOBS:-$(nproc)}
+
+packages=(
+  build-essential cmake ninja-build pkg-config
+  libvtk9-dev python3-vtk9 vtk9 python3-dev python3-numpy
+  libeigen3-dev libopencv-dev zlib1g-dev
+  libgtest-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev
+  clang libclang-rt-14-dev
+  xvfb xauth
+)
+
+install_dependencies() {
+  local missing=()
+  for p in "${packages[@]}"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+  done
+  if [ ${#missing[@]} -eq 0 ]; then
+    return
+  fi
+  echo "setup: installing ${missing[*]}"
+  local sudo=""
+  [ "$(id -u)" -eq 0 ] || sudo="sudo"
+  export DEBIAN_FRONTEND=noninteractive
+  $sudo apt-get update -q
+  $sudo apt-get install -y -q --no-install-recommends "${packages[@]}"
+}
+
+build() {
+  cmake -S "$root" -B "$root/build" -G Ninja -DCMAKE_BUILD_TYPE=Release
+  cmake --build "$root/build" -j "$jobs"
+}
+
+run_tests() {
+  local runner=()
+  # Render tests need an X server; they skip (exit 125) where none is available.
+  if [ -z "${DISPLAY:-}" ] && command -v xvfb-run >/dev/null; then
+    runner=(xvfb-run -a)
+  fi
+  echo "== ctest (release build)"
+  "${runner[@]}" ctest --test-dir "$root/build" --output-on-failure -j "$jobs"
+
+  echo "== reader tests under AddressSanitizer + UndefinedBehaviorSanitizer"
+  cmake -S "$root" -B "$root/build-asan" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+    -DBIGUS_ENABLE_SANITIZERS=ON -DBIGUS_CUDA=OFF
+  cmake --build "$root/build-asan" -j "$jobs"
+  ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+    ctest --test-dir "$root/build-asan" --output-on-failure -j "$jobs" -L "reader|filters|rendering"
+
+  echo "== libFuzzer: sequence metafile header parser"
+  cmake -S "$root/Testing/Fuzz" -B "$root/build-fuzz" -G Ninja -DCMAKE_CXX_COMPILER=clang++ \
+    -DCMAKE_BUILD_TYPE=RelWithDebInfo
+  cmake --build "$root/build-fuzz" -j "$jobs"
+  local seeds="$root/build-fuzz/seeds"
+  mkdir -p "$seeds"
+  # Seeds: the text headers of every metafile we ship (real sweeps and the malformed corpus).
+  find "$root/Testing/Data" "$root/Examples/Data" \( -name '*.mha' -o -name '*.mhd' \) -print0 |
+    while IFS= read -r -d '' f; do
+      sed -n '1,/^ElementDataFile/p' "$f" | head -c 65536 >"$seeds/$(basename "$f").header"
+    done
+  local log="$root/build-fuzz/fuzz.log"
+  if ! "$root/build-fuzz/FuzzMetaImageHeader" -max_total_time="${BIGUS_FUZZ_SECONDS:-60}" -max_len=65536 \
+    -artifact_prefix="$root/build-fuzz/" -print_final_stats=1 "$seeds" >"$log" 2>&1; then
+    tail -n 60 "$log"
+    echo "fuzz: the header parser crashed (input saved by libFuzzer as crash-*)"
+    return 1
+  fi
+  grep -E "^(Done|stat::number_of_executed_units)" "$log"
+  echo "fuzz: no crash"
+}
+
+mode=${1:-}
+case "$mode" in
+  main)
+    install_dependencies
+    build
+    "$root/build/bin/bigus" info "$root/Examples/Data/liver/liver_sweep.igs.mha"
+    ;;
+  test)
+    install_dependencies
+    build
+    run_tests
+    ;;
+  build)
+    install_dependencies
+    build
+    ;;
+  *)
+    sed -n '2,13p' "$0"
+    exit 2
+    ;;
+esac
