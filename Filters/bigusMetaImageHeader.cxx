@@ -137,7 +137,8 @@ MetaImageHeader ParseMetaImageHeader(std::istream& in, const std::string& where)
     const std::size_t eq = trimmed.find('=');
     if (eq == std::string::npos)
     {
-      Fail(where, "header line " + std::to_string(lineNumber) + " is not 'Key = Value': " + Excerpt(trimmed));
+      Fail(where, "header line " + std::to_string(lineNumber) + " is not 'Key = Value': " + Excerpt(trimmed) +
+          " (binary data or a cut before the ElementDataFile field?)");
     }
     const std::string key = Trim(trimmed.substr(0, eq));
     const std::string value = Trim(trimmed.substr(eq + 1));

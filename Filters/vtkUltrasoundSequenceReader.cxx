@@ -413,6 +413,11 @@ int vtkUltrasoundSequenceReader::RequestData(
 {
   vtkImageData* output = vtkImageData::GetData(outputVector, 0);
   output->Initialize();
+  // Every failure leaves an empty output: no partly filled sweep reaches the pipeline.
+  auto fail = [&](const std::string& message) {
+    output->Initialize();
+    return this->Fail(message);
+  };
   vtkInternals& in = *this->Internals;
   if (in.Count == 0)
   {
@@ -436,7 +441,7 @@ int vtkUltrasoundSequenceReader::RequestData(
   std::ifstream data(dataPath, std::ios::binary | std::ios::ate);
   if (!data)
   {
-    return this->Fail(file + ": field ElementDataFile names '" + layout.ElementDataFile +
+    return fail(file + ": field ElementDataFile names '" + layout.ElementDataFile +
       "', which cannot be opened (" + dataPath + ")");
   }
   const std::uint64_t fileSize = static_cast<std::uint64_t>(data.tellg());
@@ -499,7 +504,7 @@ int vtkUltrasoundSequenceReader::RequestData(
   {
     if (available != expected)
     {
-      return this->Fail(file + ": field DimSize " + dims + " needs " + std::to_string(expected) +
+      return fail(file + ": field DimSize " + dims + " needs " + std::to_string(expected) +
         " bytes of pixel data but " + dataPath + " holds " + std::to_string(available) +
         (available < expected ? " (truncated file?)" : ""));
     }
@@ -508,7 +513,7 @@ int vtkUltrasoundSequenceReader::RequestData(
     {
       if (!data.read(reinterpret_cast<char*>(frame.data()), frameBytes))
       {
-        return this->Fail(file + ": frame " + std::to_string(k) + ": read error in " + dataPath);
+        return fail(file + ": frame " + std::to_string(k) + ": read error in " + dataPath);
       }
       store(k);
       this->UpdateProgress(double(k - in.First + 1) / in.Count);
@@ -526,7 +531,7 @@ int vtkUltrasoundSequenceReader::RequestData(
     {
       if (std::uint64_t(layout.CompressedDataSize) > available)
       {
-        return this->Fail(file + ": field CompressedDataSize says " + std::to_string(layout.CompressedDataSize) +
+        return fail(file + ": field CompressedDataSize says " + std::to_string(layout.CompressedDataSize) +
           " bytes but only " + std::to_string(available) + " follow in " + dataPath + " (truncated file?)");
       }
       body = std::uint64_t(layout.CompressedDataSize);
@@ -535,7 +540,7 @@ int vtkUltrasoundSequenceReader::RequestData(
     std::memset(&z, 0, sizeof(z));
     if (inflateInit2(&z, 15 + 32) != Z_OK) // zlib or gzip wrapper, detected from the stream
     {
-      return this->Fail(file + ": cannot initialise zlib");
+      return fail(file + ": cannot initialise zlib");
     }
     std::vector<unsigned char> chunk(1 << 20);
     std::uint64_t consumed = 0;
@@ -608,8 +613,7 @@ int vtkUltrasoundSequenceReader::RequestData(
     inflateEnd(&z);
     if (!error.empty())
     {
-      output->Initialize();
-      return this->Fail(file + ": " + error);
+      return fail(file + ": " + error);
     }
   }
 
