@@ -69,7 +69,9 @@ run_tests() {
   # Seeds: the text headers of every metafile we ship (real sweeps and the malformed corpus).
   find "$root/Testing/Data" "$root/Examples/Data" \( -name '*.mha' -o -name '*.mhd' \) -print0 |
     while IFS= read -r -d '' f; do
-      sed -n '1,/^ElementDataFile/p' "$f" | head -c 65536 >"$seeds/$(basename "$f").header"
+      seed="$seeds/$(basename "$f").header"
+      sed -n '1,/^ElementDataFile/p' "$f" >"$seed"
+      truncate -s '<65536' "$seed"
     done
   local log="$root/build-fuzz/fuzz.log"
   if ! "$root/build-fuzz/FuzzMetaImageHeader" -max_total_time="${BIGUS_FUZZ_SECONDS:-60}" -max_len=65536 \
