@@ -114,6 +114,37 @@ inline PoseStatus ComputeSliceFrame(const double m[16], double maxShearDegrees, 
   return frame.shearDegrees > maxShearDegrees ? PoseStatus::Sheared : PoseStatus::Ok;
 }
 
+/**
+ * Orthonormal rendering frame of a slice and the affine map from pixel index to in-plane position.
+ * Rows of @p F: u, v_perp (v made orthogonal to u), n = u x v. Pixel (i, j) lies at in-plane position
+ * x = i * pixelToPlane[0] + j * pixelToPlane[1], y = j * pixelToPlane[2] (mm), elevation 0; this is
+ * exact for a sheared pose too (pixelToPlane[1] = s_v cos(angle(u, v)) is then non-zero).
+ */
+inline PoseStatus ComputeRenderingFrame(
+  const double m[16], double maxShearDegrees, double F[3][3], double origin[3], double pixelToPlane[3])
+{
+  SliceFrame frame;
+  const PoseStatus status = ComputeSliceFrame(m, maxShearDegrees, frame);
+  if (status != PoseStatus::Ok)
+  {
+    return status;
+  }
+  const double c = frame.u[0] * frame.v[0] + frame.u[1] * frame.v[1] + frame.u[2] * frame.v[2];
+  double vp[3] = { frame.v[0] - c * frame.u[0], frame.v[1] - c * frame.u[1], frame.v[2] - c * frame.u[2] };
+  const double nv = std::sqrt(vp[0] * vp[0] + vp[1] * vp[1] + vp[2] * vp[2]);
+  for (int k = 0; k < 3; ++k)
+  {
+    F[0][k] = frame.u[k];
+    F[1][k] = vp[k] / nv;
+    F[2][k] = frame.n[k];
+    origin[k] = frame.origin[k];
+  }
+  pixelToPlane[0] = frame.spacing[0];
+  pixelToPlane[1] = frame.spacing[1] * c;
+  pixelToPlane[2] = frame.spacing[1] * nv;
+  return PoseStatus::Ok;
+}
+
 } // namespace bigus
 
 #endif

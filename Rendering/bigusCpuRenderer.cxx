@@ -1,0 +1,544 @@
+// CPU backend of the beam-integrated Gaussian renderer: phase 1 (per Gaussian, double precision),
+// deterministic tile binning, phase 2 (per tile, float, vectorisable), and a Gaussian-parallel
+// backward pass without atomics. Multi-threaded with vtkSMPTools; results do not depend on the
+// number of threads (every pixel sums its Gaussians in index order).
+#include "bigusGaussianMath.h"
+#include "bigusRenderer.h"
+#include "bigusSliceFrame.h"
+
+#include "vtkSMPTools.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <vector>
+
+namespace bigus
+{
+
+Renderer::~Renderer() = default;
+
+namespace
+{
+constexpr int TileSize = 16;
+constexpr std::int64_t ChunkSize = 2048; // Gaussians per binning chunk (fixed: keeps binning deterministic)
+
+double Now()
+{
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+/// A slice ready to render: orthonormal frame and the pixel -> plane map.
+struct PreparedSlice
+{
+  SliceFrameD Frame;
+  double PixelToPlane[3]; // x = i P0 + j P1, y = j P2 (mm)
+  int Width, Height, TilesX, TilesY;
+};
+
+bool PrepareSlice(const SliceGeometry& g, const RenderOptions& o, int index, PreparedSlice& p, std::string* error)
+{
+  if (g.Width <= 0 || g.Height <= 0 || g.Width > 65536 || g.Height > 65536)
+  {
+    if (error)
+    {
+      *error = "slice " + std::to_string(index) + ": grid " + std::to_string(g.Width) + " x " +
+        std::to_string(g.Height) + " is not between 1 and 65536 pixels per side";
+    }
+    return false;
+  }
+  const PoseStatus status =
+    ComputeRenderingFrame(g.ImageToReference, o.MaximumShearAngle, p.Frame.F, p.Frame.Origin, p.PixelToPlane);
+  if (status != PoseStatus::Ok)
+  {
+    if (error)
+    {
+      *error = "slice " + std::to_string(index) + ": ImageToReference " + PoseStatusText(status);
+    }
+    return false;
+  }
+  p.Width = g.Width;
+  p.Height = g.Height;
+  p.TilesX = (g.Width + TileSize - 1) / TileSize;
+  p.TilesY = (g.Height + TileSize - 1) / TileSize;
+  return true;
+}
+
+GaussianParams LoadGaussian(const FieldView& field, std::int64_t i)
+{
+  GaussianParams g;
+  for (int k = 0; k < 3; ++k)
+  {
+    g.Mean[k] = field.Means[3 * i + k];
+    g.LogScale[k] = field.LogScales[3 * i + k];
+  }
+  for (int k = 0; k < 4; ++k)
+  {
+    g.Quaternion[k] = field.Quaternions[4 * i + k];
+  }
+  g.Reflectivity = field.Reflectivities[i];
+  return g;
+}
+
+/// Elevation variance n^T Sigma n of every Gaussian needs Sigma; computed once per call.
+struct WorldCovariance
+{
+  std::vector<double> Sigma; // [N, 6]: xx, xy, xz, yy, yz, zz (mm^2)
+
+  void Compute(const FieldView& field)
+  {
+    this->Sigma.resize(6 * field.Count);
+    vtkSMPTools::For(0, field.Count, 4096, [&](std::int64_t begin, std::int64_t end) {
+      for (std::int64_t i = begin; i < end; ++i)
+      {
+        const GaussianParams g = LoadGaussian(field, i);
+        SliceFrameD identity = { { { 1, 0, 0 }, { 0, 1, 0 }, { 0, 0, 1 } }, { 0, 0, 0 } };
+        SetupCache c;
+        SetupFootprint(g, identity, 0.0, 0.0, &c);
+        double* s = &this->Sigma[6 * i];
+        s[0] = c.P[0][0];
+        s[1] = c.P[0][1];
+        s[2] = c.P[0][2];
+        s[3] = c.P[1][1];
+        s[4] = c.P[1][2];
+        s[5] = c.P[2][2];
+      }
+    });
+  }
+};
+
+/// Cheap elevation test from the world covariance; looser than SetupFootprint's own test, so it never
+/// drops a Gaussian that the exact setup would keep.
+bool MayBeVisible(const FieldView& field, const WorldCovariance& world, std::int64_t i, const PreparedSlice& s,
+  double sigmaE, double cutoff)
+{
+  const double* n = s.Frame.F[2];
+  const double dz = n[0] * (field.Means[3 * i] - s.Frame.Origin[0]) +
+    n[1] * (field.Means[3 * i + 1] - s.Frame.Origin[1]) + n[2] * (field.Means[3 * i + 2] - s.Frame.Origin[2]);
+  const double* S = &world.Sigma[6 * i];
+  const double var = n[0] * n[0] * S[0] + n[1] * n[1] * S[3] + n[2] * n[2] * S[5] +
+    2 * (n[0] * n[1] * S[1] + n[0] * n[2] * S[2] + n[1] * n[2] * S[4]) + sigmaE * sigmaE;
+  const double k = cutoff * 1.001 + 1e-9;
+  return dz * dz <= k * k * var * (1 + 1e-9) || !(var > 0);
+}
+
+/// A visible Gaussian's footprint as phase 2 uses it.
+struct Splat
+{
+  double Cx, Cy;      // centre in the plane, mm
+  float A, B, C;      // conic
+  float Weight;       // r_eff * amp
+  int X0, X1, Y0, Y1; // pixel bounding box, inclusive, clipped to the image
+  std::int64_t Index; // Gaussian index
+};
+
+/// Pixel bounding box of the k-sigma ellipse; false when it misses the image.
+bool FootprintBox(const Footprint& f, const PreparedSlice& s, double cutoff, int box[4])
+{
+  const double P0 = s.PixelToPlane[0], P1 = s.PixelToPlane[1], P2 = s.PixelToPlane[2];
+  // pixel = K^-1 plane, K = [[P0, P1], [0, P2]].
+  const double k00 = 1 / P0, k01 = -P1 / (P0 * P2), k11 = 1 / P2;
+  const double ci = k00 * f.Center[0] + k01 * f.Center[1];
+  const double cj = k11 * f.Center[1];
+  const double vi = k00 * k00 * f.Cov[0] + 2 * k00 * k01 * f.Cov[1] + k01 * k01 * f.Cov[2];
+  const double vj = k11 * k11 * f.Cov[2];
+  const double hi = cutoff * std::sqrt(std::max(vi, 0.0));
+  const double hj = cutoff * std::sqrt(std::max(vj, 0.0));
+  const double lo[2] = { std::ceil(ci - hi), std::ceil(cj - hj) };
+  const double up[2] = { std::floor(ci + hi), std::floor(cj + hj) };
+  if (!(lo[0] <= s.Width - 1) || !(up[0] >= 0) || !(lo[1] <= s.Height - 1) || !(up[1] >= 0) || !(lo[0] <= up[0]) ||
+    !(lo[1] <= up[1]))
+  {
+    return false;
+  }
+  box[0] = static_cast<int>(std::max(lo[0], 0.0));
+  box[1] = static_cast<int>(std::min(up[0], s.Width - 1.0));
+  box[2] = static_cast<int>(std::max(lo[1], 0.0));
+  box[3] = static_cast<int>(std::min(up[1], s.Height - 1.0));
+  return true;
+}
+
+double EffectiveReflectivity(double r, const RenderOptions& o)
+{
+  return o.NonNegativeReflectivity ? std::max(r, 0.0) : r;
+}
+
+double EffectiveSigma(const RenderOptions& o)
+{
+  return o.BeamIntegration ? o.ElevationSigma : 0.0;
+}
+
+/// Phase 1 for one slice: the visible splats, in Gaussian index order.
+void SetupSlice(const FieldView& field, const WorldCovariance& world, const PreparedSlice& s,
+  const RenderOptions& o, std::vector<Splat>& splats)
+{
+  const double sigmaE = EffectiveSigma(o);
+  const std::int64_t chunks = (field.Count + ChunkSize - 1) / ChunkSize;
+  std::vector<std::vector<Splat>> perChunk(chunks);
+  vtkSMPTools::For(0, chunks, 1, [&](std::int64_t begin, std::int64_t end) {
+    for (std::int64_t chunk = begin; chunk < end; ++chunk)
+    {
+      std::vector<Splat>& out = perChunk[chunk];
+      const std::int64_t last = std::min(field.Count, (chunk + 1) * ChunkSize);
+      for (std::int64_t i = chunk * ChunkSize; i < last; ++i)
+      {
+        if (!MayBeVisible(field, world, i, s, sigmaE, o.Cutoff))
+        {
+          continue;
+        }
+        const GaussianParams g = LoadGaussian(field, i);
+        const double r = EffectiveReflectivity(g.Reflectivity, o);
+        if (r == 0)
+        {
+          continue;
+        }
+        const Footprint f = SetupFootprint(g, s.Frame, sigmaE, o.Cutoff, nullptr);
+        Splat splat;
+        int box[4];
+        if (!f.Visible || !FootprintBox(f, s, o.Cutoff, box))
+        {
+          continue;
+        }
+        splat.Cx = f.Center[0];
+        splat.Cy = f.Center[1];
+        splat.A = static_cast<float>(f.Conic[0]);
+        splat.B = static_cast<float>(f.Conic[1]);
+        splat.C = static_cast<float>(f.Conic[2]);
+        splat.Weight = static_cast<float>(r * f.Amplitude);
+        splat.X0 = box[0];
+        splat.X1 = box[1];
+        splat.Y0 = box[2];
+        splat.Y1 = box[3];
+        splat.Index = i;
+        out.push_back(splat);
+      }
+    }
+  });
+  splats.clear();
+  for (const auto& chunk : perChunk)
+  {
+    splats.insert(splats.end(), chunk.begin(), chunk.end());
+  }
+}
+
+/// Deterministic binning: per tile, the indices (into splats) of the splats that touch it, in order.
+void BinSplats(const std::vector<Splat>& splats, const PreparedSlice& s, std::vector<std::int64_t>& tileStart,
+  std::vector<std::int32_t>& entries)
+{
+  const int tiles = s.TilesX * s.TilesY;
+  const std::int64_t count = static_cast<std::int64_t>(splats.size());
+  const std::int64_t chunks = std::max<std::int64_t>(1, (count + ChunkSize - 1) / ChunkSize);
+  std::vector<std::int64_t> counts(chunks * tiles, 0); // [chunk, tile]
+  auto forTiles = [&](const Splat& sp, auto&& visit) {
+    for (int ty = sp.Y0 / TileSize; ty <= sp.Y1 / TileSize; ++ty)
+    {
+      for (int tx = sp.X0 / TileSize; tx <= sp.X1 / TileSize; ++tx)
+      {
+        visit(ty * s.TilesX + tx);
+      }
+    }
+  };
+  vtkSMPTools::For(0, chunks, 1, [&](std::int64_t begin, std::int64_t end) {
+    for (std::int64_t c = begin; c < end; ++c)
+    {
+      std::int64_t* row = &counts[c * tiles];
+      for (std::int64_t k = c * ChunkSize; k < std::min(count, (c + 1) * ChunkSize); ++k)
+      {
+        forTiles(splats[k], [&](int t) { ++row[t]; });
+      }
+    }
+  });
+  tileStart.assign(tiles + 1, 0);
+  std::vector<std::int64_t> offsets(chunks * tiles);
+  std::int64_t total = 0;
+  for (int t = 0; t < tiles; ++t)
+  {
+    tileStart[t] = total;
+    for (std::int64_t c = 0; c < chunks; ++c)
+    {
+      offsets[c * tiles + t] = total;
+      total += counts[c * tiles + t];
+    }
+  }
+  tileStart[tiles] = total;
+  entries.resize(total);
+  vtkSMPTools::For(0, chunks, 1, [&](std::int64_t begin, std::int64_t end) {
+    for (std::int64_t c = begin; c < end; ++c)
+    {
+      std::int64_t* next = &offsets[c * tiles];
+      for (std::int64_t k = c * ChunkSize; k < std::min(count, (c + 1) * ChunkSize); ++k)
+      {
+        forTiles(splats[k], [&](int t) { entries[next[t]++] = static_cast<std::int32_t>(k); });
+      }
+    }
+  });
+}
+
+/// Phase 2 for one slice: every tile sums its splats in order into S.
+std::int64_t RasterSlice(const std::vector<Splat>& splats, const PreparedSlice& s,
+  const std::vector<std::int64_t>& tileStart, const std::vector<std::int32_t>& entries, double cutoff, float* S)
+{
+  const int tiles = s.TilesX * s.TilesY;
+  const float P0 = static_cast<float>(s.PixelToPlane[0]);
+  const float P1 = static_cast<float>(s.PixelToPlane[1]);
+  const float P2 = static_cast<float>(s.PixelToPlane[2]);
+  const float k2 = static_cast<float>(cutoff * cutoff);
+  std::vector<std::int64_t> perTile(tiles, 0);
+  vtkSMPTools::For(0, tiles, 1, [&](int begin, int end) {
+    alignas(64) float acc[TileSize * TileSize];
+    alignas(64) float local[TileSize];
+    for (int t = begin; t < end; ++t)
+    {
+      const int tx = t % s.TilesX, ty = t / s.TilesX;
+      const int i0 = tx * TileSize, j0 = ty * TileSize;
+      const int i1 = std::min(s.Width, i0 + TileSize), j1 = std::min(s.Height, j0 + TileSize);
+      std::fill(acc, acc + TileSize * TileSize, 0.0f);
+      for (int k = 0; k < TileSize; ++k)
+      {
+        local[k] = k * P0;
+      }
+      // Tile-relative coordinates keep float offsets small, whatever the size of the image.
+      const double X0 = i0 * s.PixelToPlane[0] + j0 * s.PixelToPlane[1];
+      const double Y0 = j0 * s.PixelToPlane[2];
+      std::int64_t evals = 0;
+      for (std::int64_t e = tileStart[t]; e < tileStart[t + 1]; ++e)
+      {
+        const Splat& sp = splats[entries[e]];
+        const float dcx = static_cast<float>(sp.Cx - X0);
+        const float dcy = static_cast<float>(sp.Cy - Y0);
+        const int cs = std::max(sp.X0, i0) - i0, ce = std::min(sp.X1 + 1, i1) - i0;
+        const int rs = std::max(sp.Y0, j0) - j0, re = std::min(sp.Y1 + 1, j1) - j0;
+        const float a = sp.A, b2 = 2 * sp.B, c = sp.C, w = sp.Weight;
+        for (int r = rs; r < re; ++r)
+        {
+          const float dy = r * P2 - dcy;
+          const float xrow = r * P1 - dcx;
+          const float cdy2 = c * dy * dy;
+          const float bdy = b2 * dy;
+          float* out = acc + r * TileSize;
+          for (int q = cs; q < ce; ++q)
+          {
+            const float dx = local[q] + xrow;
+            const float form = dx * (a * dx + bdy) + cdy2;
+            const float value = w * FastExp(-0.5f * form);
+            out[q] += form <= k2 ? value : 0.0f;
+          }
+          evals += ce - cs;
+        }
+      }
+      perTile[t] = evals;
+      for (int j = j0; j < j1; ++j)
+      {
+        std::copy(acc + (j - j0) * TileSize, acc + (j - j0) * TileSize + (i1 - i0), S + std::int64_t(j) * s.Width + i0);
+      }
+    }
+  });
+  std::int64_t total = 0;
+  for (std::int64_t v : perTile)
+  {
+    total += v;
+  }
+  return total;
+}
+
+class CpuRenderer : public Renderer
+{
+public:
+  const char* GetName() const override { return "cpu"; }
+
+  bool Forward(const FieldView& field, const SliceGeometry* slices, int count, const RenderOptions& options,
+    float* S, float* I, RenderStats* stats, std::string* error) override
+  {
+    std::vector<PreparedSlice> prepared(count);
+    for (int k = 0; k < count; ++k)
+    {
+      if (!PrepareSlice(slices[k], options, k, prepared[k], error))
+      {
+        return false;
+      }
+    }
+    const float gamma = static_cast<float>(options.Gamma);
+    double t0 = Now();
+    this->World.Compute(field);
+    std::int64_t offset = 0;
+    for (int k = 0; k < count; ++k)
+    {
+      const PreparedSlice& s = prepared[k];
+      SetupSlice(field, this->World, s, options, this->Splats);
+      BinSplats(this->Splats, s, this->TileStart, this->Entries);
+      const double t1 = Now();
+      const std::int64_t evals = RasterSlice(this->Splats, s, this->TileStart, this->Entries, options.Cutoff, S + offset);
+      const std::int64_t pixels = std::int64_t(s.Width) * s.Height;
+      if (I)
+      {
+        vtkSMPTools::For(0, pixels, 16384, [&](std::int64_t b, std::int64_t e) {
+          for (std::int64_t p = b; p < e; ++p)
+          {
+            I[offset + p] = ImageFromScattering(S[offset + p], gamma);
+          }
+        });
+      }
+      const double t2 = Now();
+      if (stats)
+      {
+        stats->GaussiansVisible += static_cast<std::int64_t>(this->Splats.size());
+        stats->TileEntries += static_cast<std::int64_t>(this->Entries.size());
+        stats->PixelEvaluations += evals;
+        stats->SetupSeconds += t1 - t0;
+        stats->RasterSeconds += t2 - t1;
+      }
+      t0 = t2;
+      offset += pixels;
+    }
+    return true;
+  }
+
+  bool Backward(const FieldView& field, const SliceGeometry* slices, int count, const RenderOptions& options,
+    const float* S, const float* dL, bool gradientIsWithRespectToS, FieldGradients& gradients, RenderStats* stats,
+    std::string* error) override
+  {
+    std::vector<PreparedSlice> prepared(count);
+    for (int k = 0; k < count; ++k)
+    {
+      if (!PrepareSlice(slices[k], options, k, prepared[k], error))
+      {
+        return false;
+      }
+    }
+    const double t0 = Now();
+    this->World.Compute(field);
+    const double sigmaE = EffectiveSigma(options);
+    const float k2 = static_cast<float>(options.Cutoff * options.Cutoff);
+    std::int64_t offset = 0;
+    std::vector<float> gS;
+    for (int k = 0; k < count; ++k)
+    {
+      const PreparedSlice& s = prepared[k];
+      const std::int64_t pixels = std::int64_t(s.Width) * s.Height;
+      gS.resize(pixels);
+      const double gamma = options.Gamma;
+      vtkSMPTools::For(0, pixels, 16384, [&](std::int64_t b, std::int64_t e) {
+        for (std::int64_t p = b; p < e; ++p)
+        {
+          gS[p] = gradientIsWithRespectToS
+            ? dL[offset + p]
+            : static_cast<float>(dL[offset + p] * ImageFromScatteringDerivative<double>(S[offset + p], gamma));
+        }
+      });
+      const float P0 = static_cast<float>(s.PixelToPlane[0]);
+      const float P1 = static_cast<float>(s.PixelToPlane[1]);
+      const float P2 = static_cast<float>(s.PixelToPlane[2]);
+      vtkSMPTools::For(0, field.Count, 256, [&](std::int64_t begin, std::int64_t end) {
+        for (std::int64_t i = begin; i < end; ++i)
+        {
+          if (!MayBeVisible(field, this->World, i, s, sigmaE, options.Cutoff))
+          {
+            continue;
+          }
+          const GaussianParams g = LoadGaussian(field, i);
+          const double r = EffectiveReflectivity(g.Reflectivity, options);
+          SetupCache cache;
+          const Footprint f = SetupFootprint(g, s.Frame, sigmaE, options.Cutoff, &cache);
+          int box[4];
+          if (!f.Visible || !FootprintBox(f, s, options.Cutoff, box))
+          {
+            continue;
+          }
+          // Offsets relative to the box's first pixel, as in phase 2 relative to the tile.
+          const double X0 = box[0] * s.PixelToPlane[0] + box[2] * s.PixelToPlane[1];
+          const double Y0 = box[2] * s.PixelToPlane[2];
+          const float dcx = static_cast<float>(f.Center[0] - X0), dcy = static_cast<float>(f.Center[1] - Y0);
+          const float a = static_cast<float>(f.Conic[0]), b = static_cast<float>(f.Conic[1]);
+          const float c = static_cast<float>(f.Conic[2]);
+          const float w = static_cast<float>(r * f.Amplitude);
+          double sum[7] = { 0, 0, 0, 0, 0, 0, 0 }; // centre x, y, conic a, b, c, sum gS e, attribution
+          for (int row = box[2]; row <= box[3]; ++row)
+          {
+            const float dy = (row - box[2]) * P2 - dcy;
+            const float xrow = (row - box[2]) * P1 - dcx;
+            const float* gRow = gS.data() + std::int64_t(row) * s.Width;
+            float part[7] = { 0, 0, 0, 0, 0, 0, 0 };
+            for (int col = box[0]; col <= box[1]; ++col)
+            {
+              const float dx = (col - box[0]) * P0 + xrow;
+              const float form = a * dx * dx + 2 * b * dx * dy + c * dy * dy;
+              const float e = form <= k2 ? FastExp(-0.5f * form) : 0.0f;
+              const float ge = gRow[col] * e;
+              const float gw = ge * w;
+              part[0] += gw * (a * dx + b * dy);
+              part[1] += gw * (b * dx + c * dy);
+              part[2] += -0.5f * gw * dx * dx;
+              part[3] += -gw * dx * dy;
+              part[4] += -0.5f * gw * dy * dy;
+              part[5] += ge;
+              part[6] += std::abs(gRow[col]) * std::abs(w) * e;
+            }
+            for (int q = 0; q < 7; ++q)
+            {
+              sum[q] += part[q];
+            }
+          }
+          FootprintGrad gf;
+          gf.Center[0] = sum[0];
+          gf.Center[1] = sum[1];
+          gf.Conic[0] = sum[2];
+          gf.Conic[1] = sum[3];
+          gf.Conic[2] = sum[4];
+          gf.Amplitude = r * sum[5];
+          GaussianGrad gg = {};
+          SetupFootprintBackward(f, cache, s.Frame, sigmaE, gf, gg);
+          gg.Reflectivity = (options.NonNegativeReflectivity && g.Reflectivity <= 0) ? 0.0 : f.Amplitude * sum[5];
+          if (gradients.Means)
+          {
+            for (int q = 0; q < 3; ++q)
+            {
+              gradients.Means[3 * i + q] += static_cast<float>(gg.Mean[q]);
+            }
+          }
+          if (gradients.LogScales)
+          {
+            for (int q = 0; q < 3; ++q)
+            {
+              gradients.LogScales[3 * i + q] += static_cast<float>(gg.LogScale[q]);
+            }
+          }
+          if (gradients.Quaternions)
+          {
+            for (int q = 0; q < 4; ++q)
+            {
+              gradients.Quaternions[4 * i + q] += static_cast<float>(gg.Quaternion[q]);
+            }
+          }
+          if (gradients.Reflectivities)
+          {
+            gradients.Reflectivities[i] += static_cast<float>(gg.Reflectivity);
+          }
+          if (gradients.Attribution)
+          {
+            gradients.Attribution[i] += static_cast<float>(sum[6]);
+          }
+        }
+      });
+      offset += pixels;
+    }
+    if (stats)
+    {
+      stats->RasterSeconds += Now() - t0;
+    }
+    return true;
+  }
+
+private:
+  WorldCovariance World;
+  std::vector<Splat> Splats;
+  std::vector<std::int64_t> TileStart;
+  std::vector<std::int32_t> Entries;
+};
+} // namespace
+
+std::unique_ptr<Renderer> CreateCpuRenderer()
+{
+  return std::unique_ptr<Renderer>(new CpuRenderer);
+}
+
+} // namespace bigus

@@ -1,0 +1,179 @@
+/**
+ * @file bigusReferenceRenderer.h
+ * @brief Naive double-precision renderer for tests and benchmarks only: every Gaussian at every pixel,
+ *        no culling, no tiles, no threads. Built from the same formulas (bigusGaussianMath.h) as the
+ *        backends, so that a finite-difference check of its backward validates those formulas, and the
+ *        float backends are measured against it.
+ */
+#ifndef bigusReferenceRenderer_h
+#define bigusReferenceRenderer_h
+
+#include "bigusGaussianMath.h"
+#include "bigusRenderer.h"
+#include "bigusSliceFrame.h"
+
+#include <limits>
+#include <string>
+#include <vector>
+
+namespace bigus
+{
+namespace reference
+{
+
+/// A Gaussian field in double precision (same layout as FieldView).
+struct FieldD
+{
+  std::vector<double> Means, LogScales, Quaternions, Reflectivities; // [N,3], [N,3], [N,4], [N]
+  std::int64_t Count() const { return static_cast<std::int64_t>(this->Reflectivities.size()); }
+  GaussianParams Get(std::int64_t i) const
+  {
+    GaussianParams g;
+    for (int k = 0; k < 3; ++k)
+    {
+      g.Mean[k] = this->Means[3 * i + k];
+      g.LogScale[k] = this->LogScales[3 * i + k];
+    }
+    for (int k = 0; k < 4; ++k)
+    {
+      g.Quaternion[k] = this->Quaternions[4 * i + k];
+    }
+    g.Reflectivity = this->Reflectivities[i];
+    return g;
+  }
+};
+
+/// Gradients in double, same layout.
+struct GradD
+{
+  std::vector<double> Means, LogScales, Quaternions, Reflectivities, Attribution;
+  explicit GradD(std::int64_t n = 0)
+    : Means(3 * n, 0.0)
+    , LogScales(3 * n, 0.0)
+    , Quaternions(4 * n, 0.0)
+    , Reflectivities(n, 0.0)
+    , Attribution(n, 0.0)
+  {
+  }
+};
+
+inline bool Prepare(const SliceGeometry& slice, const RenderOptions& o, SliceFrameD& frame, double pixel[3])
+{
+  return ComputeRenderingFrame(slice.ImageToReference, o.MaximumShearAngle, frame.F, frame.Origin, pixel) ==
+    PoseStatus::Ok;
+}
+
+inline double Reflectivity(double r, const RenderOptions& o)
+{
+  return o.NonNegativeReflectivity ? (r > 0 ? r : 0.0) : r;
+}
+
+/// S (and I if non-null), [H, W], double. Returns false for a bad pose.
+inline bool Forward(const FieldD& field, const SliceGeometry& slice, const RenderOptions& o, std::vector<double>& S,
+  std::vector<double>* I = nullptr)
+{
+  SliceFrameD frame;
+  double pixel[3];
+  if (!Prepare(slice, o, frame, pixel))
+  {
+    return false;
+  }
+  const double sigmaE = o.BeamIntegration ? o.ElevationSigma : 0.0;
+  S.assign(std::size_t(slice.Width) * slice.Height, 0.0);
+  for (std::int64_t i = 0; i < field.Count(); ++i)
+  {
+    const GaussianParams g = field.Get(i);
+    const Footprint f = SetupFootprint(g, frame, sigmaE, std::numeric_limits<double>::infinity(), nullptr);
+    if (!f.Visible)
+    {
+      continue;
+    }
+    const double r = Reflectivity(g.Reflectivity, o);
+    for (int j = 0; j < slice.Height; ++j)
+    {
+      for (int k = 0; k < slice.Width; ++k)
+      {
+        const double dx = k * pixel[0] + j * pixel[1] - f.Center[0];
+        const double dy = j * pixel[2] - f.Center[1];
+        S[std::size_t(j) * slice.Width + k] += r * PixelWeight(f.Amplitude, f.Conic[0], f.Conic[1], f.Conic[2], dx, dy);
+      }
+    }
+  }
+  if (I)
+  {
+    I->resize(S.size());
+    for (std::size_t p = 0; p < S.size(); ++p)
+    {
+      (*I)[p] = ImageFromScattering(S[p], o.Gamma);
+    }
+  }
+  return true;
+}
+
+/// Gradients for dL/dS (or dL/dI with the forward S) on one slice, accumulated into @p grad.
+inline bool Backward(const FieldD& field, const SliceGeometry& slice, const RenderOptions& o,
+  const std::vector<double>& S, const std::vector<double>& dL, bool gradientIsWithRespectToS, GradD& grad)
+{
+  SliceFrameD frame;
+  double pixel[3];
+  if (!Prepare(slice, o, frame, pixel))
+  {
+    return false;
+  }
+  const double sigmaE = o.BeamIntegration ? o.ElevationSigma : 0.0;
+  std::vector<double> gS(dL.size());
+  for (std::size_t p = 0; p < dL.size(); ++p)
+  {
+    gS[p] = gradientIsWithRespectToS ? dL[p] : dL[p] * ImageFromScatteringDerivative(S[p], o.Gamma);
+  }
+  for (std::int64_t i = 0; i < field.Count(); ++i)
+  {
+    const GaussianParams g = field.Get(i);
+    SetupCache cache;
+    const Footprint f = SetupFootprint(g, frame, sigmaE, std::numeric_limits<double>::infinity(), &cache);
+    if (!f.Visible)
+    {
+      continue;
+    }
+    const double r = Reflectivity(g.Reflectivity, o);
+    double sums[6] = { 0, 0, 0, 0, 0, 0 };
+    double attribution = 0;
+    for (int j = 0; j < slice.Height; ++j)
+    {
+      for (int k = 0; k < slice.Width; ++k)
+      {
+        const double dx = k * pixel[0] + j * pixel[1] - f.Center[0];
+        const double dy = j * pixel[2] - f.Center[1];
+        const double gp = gS[std::size_t(j) * slice.Width + k];
+        PixelWeightBackward(gp, r, f.Amplitude, f.Conic[0], f.Conic[1], f.Conic[2], dx, dy, sums);
+        attribution += std::abs(gp) * std::abs(r) * PixelWeight(f.Amplitude, f.Conic[0], f.Conic[1], f.Conic[2], dx, dy);
+      }
+    }
+    FootprintGrad gf;
+    gf.Center[0] = sums[0];
+    gf.Center[1] = sums[1];
+    gf.Conic[0] = sums[2];
+    gf.Conic[1] = sums[3];
+    gf.Conic[2] = sums[4];
+    gf.Amplitude = r * sums[5];
+    GaussianGrad gg = {};
+    SetupFootprintBackward(f, cache, frame, sigmaE, gf, gg);
+    for (int q = 0; q < 3; ++q)
+    {
+      grad.Means[3 * i + q] += gg.Mean[q];
+      grad.LogScales[3 * i + q] += gg.LogScale[q];
+    }
+    for (int q = 0; q < 4; ++q)
+    {
+      grad.Quaternions[4 * i + q] += gg.Quaternion[q];
+    }
+    grad.Reflectivities[i] += (o.NonNegativeReflectivity && g.Reflectivity <= 0) ? 0.0 : f.Amplitude * sums[5];
+    grad.Attribution[i] += attribution;
+  }
+  return true;
+}
+
+} // namespace reference
+} // namespace bigus
+
+#endif

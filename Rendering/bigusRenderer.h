@@ -1,0 +1,104 @@
+/**
+ * @file bigusRenderer.h
+ * @brief Backend-neutral interface of the beam-integrated Gaussian renderer (DESIGN sections 3 and 5).
+ *
+ * A renderer turns a Gaussian field and a batch of slice poses into the signed scattering field S and
+ * the image I = 1 - exp(-gamma max(S, 0)), and turns dL/dI (or dL/dS) back into gradients of the
+ * field's parameters plus the error-attribution score E_i = sum_p |dL/dS(p)| w_i(p) that
+ * densification uses. Buffers are host memory, structure of arrays, float; shapes in comments.
+ *
+ * Pixel (i, j) of a slice lies at ImageToReference * (i, j, 0, 1) (mm), i.e. columns along the first
+ * column of the matrix; the slice's elevation axis is n = u x v. Output images are row-major
+ * [H, W] per slice (pixel (i, j) at index j * W + i), slices one after the other.
+ */
+#ifndef bigusRenderer_h
+#define bigusRenderer_h
+
+#include "bigusRenderingModule.h" // For export macro
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+namespace bigus
+{
+
+/// Read-only view of a Gaussian field (host memory).
+struct FieldView
+{
+  std::int64_t Count = 0;
+  const float* Means = nullptr;          ///< [N, 3] mm, reference frame
+  const float* LogScales = nullptr;      ///< [N, 3] ln(standard deviation in mm), local axes
+  const float* Quaternions = nullptr;    ///< [N, 4] w, x, y, z; normalised on use
+  const float* Reflectivities = nullptr; ///< [N] signed reflectivity r
+};
+
+/// Gradients of a field, accumulated (+=) by Backward. Any pointer may be null to skip that output.
+struct FieldGradients
+{
+  float* Means = nullptr;          ///< [N, 3] dL/dmean, 1/mm
+  float* LogScales = nullptr;      ///< [N, 3] dL/dlog-scale
+  float* Quaternions = nullptr;    ///< [N, 4] dL/dq (through the normalisation)
+  float* Reflectivities = nullptr; ///< [N] dL/dr
+  float* Attribution = nullptr;    ///< [N] E_i = sum_p |dL/dS(p)| w_i(p)
+};
+
+/// One slice: its pose and its pixel grid.
+struct SliceGeometry
+{
+  double ImageToReference[16]; ///< row-major 4x4, pixel index -> mm (spacing inside)
+  int Width = 0;               ///< pixels along the first matrix column
+  int Height = 0;              ///< pixels along the second matrix column
+};
+
+/// Rendering settings.
+struct RenderOptions
+{
+  double ElevationSigma = 0.5;          ///< sigma_E, mm: standard deviation of the elevation beam profile
+  double Gamma = 1.0;                   ///< gamma of I = 1 - exp(-gamma max(S, 0))
+  double Cutoff = 5.0;                  ///< k: footprint extends k standard deviations (elevation and in plane);
+                                        ///< 5 keeps the float error in I below 1e-5 (TestCpuRenderer)
+  bool BeamIntegration = true;          ///< false: thin plane (sigma_E -> 0), the UltraGauss ablation
+  bool NonNegativeReflectivity = false; ///< true: r is used as max(r, 0) (ablation)
+  double MaximumShearAngle = 5.0;       ///< degrees; a pose sheared more is rejected
+};
+
+/// What one call did (summed over its slices).
+struct RenderStats
+{
+  std::int64_t GaussiansVisible = 0;  ///< Gaussians kept after elevation culling
+  std::int64_t TileEntries = 0;       ///< (Gaussian, tile) pairs after binning
+  std::int64_t PixelEvaluations = 0;  ///< Gaussian-pixel pairs evaluated (inside bounding boxes)
+  double SetupSeconds = 0;            ///< phase 1 (transform, cull, set up) and binning
+  double RasterSeconds = 0;           ///< phase 2 (per-tile evaluation) or the backward pass
+};
+
+class BIGUSRENDERING_EXPORT Renderer
+{
+public:
+  virtual ~Renderer();
+  virtual const char* GetName() const = 0;
+
+  /**
+   * Render @p count slices. @p S and @p I receive [count, H, W] floats each (@p I may be null).
+   * Returns false with @p error set for a bad pose (NaN, singular, sheared beyond the limit) or a bad
+   * grid; nothing is written then.
+   */
+  virtual bool Forward(const FieldView& field, const SliceGeometry* slices, int count, const RenderOptions& options,
+    float* S, float* I, RenderStats* stats, std::string* error) = 0;
+
+  /**
+   * Accumulate gradients for @p count slices. @p S: the forward scattering field [count, H, W];
+   * @p dL: dL/dI [count, H, W], or dL/dS when @p gradientIsWithRespectToS is true.
+   */
+  virtual bool Backward(const FieldView& field, const SliceGeometry* slices, int count,
+    const RenderOptions& options, const float* S, const float* dL, bool gradientIsWithRespectToS,
+    FieldGradients& gradients, RenderStats* stats, std::string* error) = 0;
+};
+
+/// The multi-threaded CPU backend (vtkSMPTools). Always available.
+BIGUSRENDERING_EXPORT std::unique_ptr<Renderer> CreateCpuRenderer();
+
+} // namespace bigus
+
+#endif

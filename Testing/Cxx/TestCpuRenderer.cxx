@@ -1,0 +1,404 @@
+// The beam-integrated renderer: gradients of the shared formulas against central finite differences
+// (double, through the quaternion normalisation and the rectifier), the float CPU backend against the
+// naive double renderer, determinism across runs and thread counts, and bad poses.
+#include "bigusReferenceRenderer.h"
+#include "bigusRenderer.h"
+
+#include "vtkSMPTools.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <random>
+#include <vector>
+
+using namespace bigus;
+
+namespace
+{
+/// A slice pose: rotation about the axis (ax, ay, az) by `degrees`, then translation; spacing in mm.
+SliceGeometry MakeSlice(int w, int h, double spacing, double degrees, const double axis[3], const double origin[3])
+{
+  const double n = std::sqrt(axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]);
+  const double x = axis[0] / n, y = axis[1] / n, z = axis[2] / n;
+  const double t = degrees * M_PI / 180, c = std::cos(t), s = std::sin(t), C = 1 - c;
+  const double R[3][3] = { { c + x * x * C, x * y * C - z * s, x * z * C + y * s },
+    { y * x * C + z * s, c + y * y * C, y * z * C - x * s }, { z * x * C - y * s, z * y * C + x * s, c + z * z * C } };
+  SliceGeometry g;
+  for (int r = 0; r < 3; ++r)
+  {
+    g.ImageToReference[4 * r + 0] = R[r][0] * spacing;
+    g.ImageToReference[4 * r + 1] = R[r][1] * spacing;
+    g.ImageToReference[4 * r + 2] = R[r][2] * spacing;
+    g.ImageToReference[4 * r + 3] = origin[r];
+  }
+  g.ImageToReference[12] = g.ImageToReference[13] = g.ImageToReference[14] = 0;
+  g.ImageToReference[15] = 1;
+  g.Width = w;
+  g.Height = h;
+  return g;
+}
+
+/// Random field around the slice centre: means in a cube of side `extent` mm, scales 0.3..2 mm,
+/// random (unnormalised) quaternions, reflectivities N(mean, sd).
+reference::FieldD RandomField(int n, const double centre[3], double extent, double meanR, double sdR, unsigned seed)
+{
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u01(0, 1);
+  std::normal_distribution<double> normal(0, 1);
+  reference::FieldD f;
+  for (int i = 0; i < n; ++i)
+  {
+    for (int k = 0; k < 3; ++k)
+    {
+      f.Means.push_back(centre[k] + (u01(rng) - 0.5) * extent);
+      f.LogScales.push_back(std::log(0.3 + 1.7 * u01(rng)));
+    }
+    for (int k = 0; k < 4; ++k)
+    {
+      f.Quaternions.push_back(normal(rng));
+    }
+    f.Reflectivities.push_back(meanR + sdR * normal(rng));
+  }
+  return f;
+}
+
+struct FieldF
+{
+  std::vector<float> Means, LogScales, Quaternions, Reflectivities;
+  FieldView View() const
+  {
+    FieldView v;
+    v.Count = static_cast<std::int64_t>(this->Reflectivities.size());
+    v.Means = this->Means.data();
+    v.LogScales = this->LogScales.data();
+    v.Quaternions = this->Quaternions.data();
+    v.Reflectivities = this->Reflectivities.data();
+    return v;
+  }
+};
+
+FieldF ToFloat(const reference::FieldD& d)
+{
+  FieldF f;
+  f.Means.assign(d.Means.begin(), d.Means.end());
+  f.LogScales.assign(d.LogScales.begin(), d.LogScales.end());
+  f.Quaternions.assign(d.Quaternions.begin(), d.Quaternions.end());
+  f.Reflectivities.assign(d.Reflectivities.begin(), d.Reflectivities.end());
+  return f;
+}
+
+/// Same field rounded to float and back, so that the float and double renderers see one field.
+reference::FieldD RoundedToFloat(const reference::FieldD& d)
+{
+  const FieldF f = ToFloat(d);
+  reference::FieldD r;
+  r.Means.assign(f.Means.begin(), f.Means.end());
+  r.LogScales.assign(f.LogScales.begin(), f.LogScales.end());
+  r.Quaternions.assign(f.Quaternions.begin(), f.Quaternions.end());
+  r.Reflectivities.assign(f.Reflectivities.begin(), f.Reflectivities.end());
+  return r;
+}
+
+/// L = sum_p c_p X_p, X = I (or S).
+double Loss(const reference::FieldD& field, const SliceGeometry& slice, const RenderOptions& o,
+  const std::vector<double>& c, bool onS)
+{
+  std::vector<double> S, I;
+  EXPECT_TRUE(reference::Forward(field, slice, o, S, &I));
+  const std::vector<double>& X = onS ? S : I;
+  double L = 0;
+  for (std::size_t p = 0; p < X.size(); ++p)
+  {
+    L += c[p] * X[p];
+  }
+  return L;
+}
+
+/// Central differences of every parameter against the analytic reference backward.
+void CheckGradients(reference::FieldD field, const SliceGeometry& slice, const RenderOptions& o, bool onS,
+  double* worst)
+{
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-1, 1);
+  std::vector<double> c(std::size_t(slice.Width) * slice.Height);
+  for (double& v : c)
+  {
+    v = u(rng);
+  }
+  std::vector<double> S, I;
+  ASSERT_TRUE(reference::Forward(field, slice, o, S, &I));
+  reference::GradD grad(field.Count());
+  ASSERT_TRUE(reference::Backward(field, slice, o, S, c, onS, grad));
+
+  struct Group
+  {
+    const char* Name;
+    std::vector<double>* Values;
+    const std::vector<double>* Grad;
+  };
+  Group groups[] = { { "mean", &field.Means, &grad.Means }, { "log-scale", &field.LogScales, &grad.LogScales },
+    { "quaternion", &field.Quaternions, &grad.Quaternions },
+    { "reflectivity", &field.Reflectivities, &grad.Reflectivities } };
+  for (Group& g : groups)
+  {
+    double largest = 0;
+    for (double v : *g.Grad)
+    {
+      largest = std::max(largest, std::abs(v));
+    }
+    ASSERT_GT(largest, 0) << g.Name << ": the case must exercise this gradient";
+    for (std::size_t k = 0; k < g.Values->size(); ++k)
+    {
+      const double x = (*g.Values)[k];
+      // Richardson-extrapolated central difference (error O(h^4)): a step large enough that
+      // round-off in the loss stays near 1e-13 relative, small enough that truncation does too.
+      const double h = 1e-4 * std::max(1.0, std::abs(x));
+      auto at = [&](double v) {
+        (*g.Values)[k] = v;
+        return Loss(field, slice, o, c, onS);
+      };
+      const double d1 = at(x + h) - at(x - h);
+      const double d2 = at(x + h / 2) - at(x - h / 2);
+      (*g.Values)[k] = x;
+      const double fd = (8 * d2 - d1) / (6 * h);
+      const double an = (*g.Grad)[k];
+      // Relative to the component, floored at 1e-6 of the group's largest so that components that
+      // are zero up to round-off are compared absolutely.
+      const double err = std::abs(fd - an) / std::max({ std::abs(fd), std::abs(an), 1e-6 * largest });
+      *worst = std::max(*worst, err);
+      EXPECT_LE(err, 1e-6) << g.Name << " [" << k << "]: finite difference " << fd << ", analytic " << an;
+    }
+  }
+}
+
+reference::FieldD GradientCaseField()
+{
+  // Five Gaussians near a tilted slice: anisotropic, off-plane, one with negative reflectivity and
+  // unnormalised quaternions (norms 0.3 .. 2.5) so that the normalisation gradient is exercised.
+  reference::FieldD f;
+  f.Means = { 3.1, 2.4, 0.3, 5.2, 3.9, -0.6, 2.0, 5.1, 0.9, 6.3, 1.7, 0.1, 4.4, 4.6, -0.2 };
+  f.LogScales = { std::log(1.2), std::log(0.5), std::log(0.8), std::log(2.0), std::log(0.4), std::log(0.6),
+    std::log(0.7), std::log(0.7), std::log(1.5), std::log(0.3), std::log(1.9), std::log(0.9), std::log(1.0),
+    std::log(0.8), std::log(0.35) };
+  f.Quaternions = { 0.9, 0.3, -0.2, 0.1, 0.2, -0.1, 0.25, 0.05, 1.5, 1.1, 0.7, -1.2, -0.4, 0.8, 0.3, 0.6, 0.7,
+    -0.2, 0.1, 0.9 };
+  f.Reflectivities = { 0.9, 0.6, -0.35, 0.8, 0.7 };
+  return f;
+}
+}
+
+TEST(RendererGradients, MatchFiniteDifferencesThroughTheRectifier)
+{
+  const double axis[3] = { 0.3, 1.0, 0.2 }, origin[3] = { 0.5, 0.2, 0.4 };
+  const SliceGeometry slice = MakeSlice(22, 18, 0.4, 25, axis, origin);
+  RenderOptions o;
+  o.ElevationSigma = 0.8;
+  o.Gamma = 1.3;
+  double worst = 0;
+  CheckGradients(GradientCaseField(), slice, o, false, &worst);
+  std::printf("worst relative error, loss on I: %.3g\n", worst);
+}
+
+TEST(RendererGradients, MatchFiniteDifferencesOnTheScatteringField)
+{
+  const double axis[3] = { 1.0, -0.4, 0.5 }, origin[3] = { 0.2, 0.6, -0.3 };
+  const SliceGeometry slice = MakeSlice(20, 20, 0.45, 60, axis, origin);
+  double worst = 0;
+  RenderOptions o;
+  o.ElevationSigma = 0.3;
+  CheckGradients(GradientCaseField(), slice, o, true, &worst);
+  o.BeamIntegration = false; // thin plane
+  CheckGradients(GradientCaseField(), slice, o, true, &worst);
+  o.BeamIntegration = true;
+  o.ElevationSigma = 5.0; // beam much thicker than the Gaussians
+  CheckGradients(GradientCaseField(), slice, o, true, &worst);
+  std::printf("worst relative error, loss on S: %.3g\n", worst);
+}
+
+TEST(RendererGradients, NonNegativeReflectivityPassesNoGradientToNegativeOnes)
+{
+  const double axis[3] = { 0.3, 1.0, 0.2 }, origin[3] = { 0.5, 0.2, 0.4 };
+  const SliceGeometry slice = MakeSlice(22, 18, 0.4, 25, axis, origin);
+  RenderOptions o;
+  o.NonNegativeReflectivity = true;
+  reference::FieldD f = GradientCaseField();
+  std::vector<double> S, c(22 * 18, 1.0);
+  ASSERT_TRUE(reference::Forward(f, slice, o, S));
+  reference::GradD grad(f.Count());
+  ASSERT_TRUE(reference::Backward(f, slice, o, S, c, true, grad));
+  EXPECT_EQ(grad.Reflectivities[2], 0.0);
+  EXPECT_EQ(grad.Means[6], 0.0) << "a Gaussian used as r = 0 has no footprint gradient either";
+  EXPECT_NE(grad.Reflectivities[0], 0.0);
+}
+
+namespace
+{
+struct RealisticCase
+{
+  reference::FieldD Field;
+  FieldF Float;
+  SliceGeometry Slice;
+};
+
+RealisticCase MakeRealisticCase(int n, int pixels)
+{
+  // Gaussians in a 40 mm cube around an oblique 0.3 mm slice (38 mm field of view at 128 pixels),
+  // scales 0.3..2 mm, signed reflectivities: the statistics of a trained liver field.
+  RealisticCase c;
+  const double centre[3] = { 120.0, -40.0, 80.0 };
+  c.Field = RoundedToFloat(RandomField(n, centre, 40.0, 0.05, 0.3, 11));
+  c.Float = ToFloat(c.Field);
+  const double axis[3] = { 0.2, 0.9, -0.3 };
+  const double spacing = 38.4 / pixels;
+  const double origin[3] = { centre[0] - 19.2, centre[1] - 19.2, centre[2] };
+  c.Slice = MakeSlice(pixels, pixels, spacing, 35, axis, origin);
+  return c;
+}
+}
+
+TEST(CpuRenderer, ForwardMatchesTheNaiveDoubleRenderer)
+{
+  const RealisticCase c = MakeRealisticCase(10000, 128);
+  RenderOptions o;
+  o.ElevationSigma = 0.5;
+  o.Gamma = 1.0;
+  std::vector<double> Sref, Iref;
+  ASSERT_TRUE(reference::Forward(c.Field, c.Slice, o, Sref, &Iref));
+  auto renderer = CreateCpuRenderer();
+  const std::size_t pixels = Sref.size();
+  std::vector<float> S(pixels), I(pixels);
+  const double defaultCutoff = o.Cutoff;
+  double errorAtDefault = 0;
+  for (double cutoff : { 3.0, 4.0, 5.0, 6.0, defaultCutoff })
+  {
+    o.Cutoff = cutoff;
+    RenderStats stats;
+    std::string error;
+    ASSERT_TRUE(renderer->Forward(c.Float.View(), &c.Slice, 1, o, S.data(), I.data(), &stats, &error)) << error;
+    double maxI = 0, maxS = 0;
+    for (std::size_t p = 0; p < pixels; ++p)
+    {
+      maxI = std::max(maxI, std::abs(I[p] - Iref[p]));
+      maxS = std::max(maxS, std::abs(S[p] - Sref[p]));
+    }
+    std::printf("cutoff %.1f: max |I - I_ref| %.3g, max |S - S_ref| %.3g, %lld Gaussians kept, %lld evaluations\n",
+      cutoff, maxI, maxS, static_cast<long long>(stats.GaussiansVisible),
+      static_cast<long long>(stats.PixelEvaluations));
+    if (cutoff == defaultCutoff)
+    {
+      errorAtDefault = maxI;
+    }
+  }
+  EXPECT_LT(errorAtDefault, 1e-5) << "default cutoff " << defaultCutoff;
+}
+
+TEST(CpuRenderer, BackwardMatchesTheNaiveDoubleRenderer)
+{
+  const RealisticCase c = MakeRealisticCase(600, 48);
+  RenderOptions o;
+  o.ElevationSigma = 0.5;
+  std::vector<double> Sref, Iref;
+  ASSERT_TRUE(reference::Forward(c.Field, c.Slice, o, Sref, &Iref));
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1, 1);
+  std::vector<double> dL(Sref.size());
+  for (double& v : dL)
+  {
+    v = u(rng);
+  }
+  reference::GradD ref(c.Field.Count());
+  ASSERT_TRUE(reference::Backward(c.Field, c.Slice, o, Sref, dL, false, ref));
+
+  auto renderer = CreateCpuRenderer();
+  std::vector<float> S(Sref.size()), dLf(dL.begin(), dL.end());
+  ASSERT_TRUE(renderer->Forward(c.Float.View(), &c.Slice, 1, o, S.data(), nullptr, nullptr, nullptr));
+  const std::int64_t n = c.Field.Count();
+  std::vector<float> gm(3 * n, 0.f), gl(3 * n, 0.f), gq(4 * n, 0.f), gr(n, 0.f), ga(n, 0.f);
+  FieldGradients grads;
+  grads.Means = gm.data();
+  grads.LogScales = gl.data();
+  grads.Quaternions = gq.data();
+  grads.Reflectivities = gr.data();
+  grads.Attribution = ga.data();
+  ASSERT_TRUE(renderer->Backward(c.Float.View(), &c.Slice, 1, o, S.data(), dLf.data(), false, grads, nullptr, nullptr));
+
+  auto compare = [](const char* name, const std::vector<float>& cpu, const std::vector<double>& exact) {
+    double largest = 0, worst = 0;
+    for (double v : exact)
+    {
+      largest = std::max(largest, std::abs(v));
+    }
+    for (std::size_t k = 0; k < cpu.size(); ++k)
+    {
+      worst = std::max(worst, std::abs(cpu[k] - exact[k]));
+    }
+    std::printf("%-13s max |cpu - exact| = %.3g of largest %.3g\n", name, worst, largest);
+    EXPECT_LE(worst, 1e-3 * largest) << name;
+  };
+  compare("mean", gm, ref.Means);
+  compare("log-scale", gl, ref.LogScales);
+  compare("quaternion", gq, ref.Quaternions);
+  compare("reflectivity", gr, ref.Reflectivities);
+  compare("attribution", ga, ref.Attribution);
+}
+
+TEST(CpuRenderer, ForwardIsBitwiseIdenticalAcrossRunsAndThreadCounts)
+{
+  const RealisticCase c = MakeRealisticCase(20000, 100);
+  RenderOptions o;
+  auto renderer = CreateCpuRenderer();
+  const std::size_t pixels = 100 * 100;
+  std::vector<float> first(pixels), again(pixels), single(pixels);
+  vtkSMPTools::Initialize(2);
+  ASSERT_TRUE(renderer->Forward(c.Float.View(), &c.Slice, 1, o, first.data(), nullptr, nullptr, nullptr));
+  ASSERT_TRUE(renderer->Forward(c.Float.View(), &c.Slice, 1, o, again.data(), nullptr, nullptr, nullptr));
+  vtkSMPTools::Initialize(1);
+  ASSERT_TRUE(renderer->Forward(c.Float.View(), &c.Slice, 1, o, single.data(), nullptr, nullptr, nullptr));
+  vtkSMPTools::Initialize(0);
+  EXPECT_EQ(first, again);
+  EXPECT_EQ(first, single);
+  const double nonZero = static_cast<double>(std::count_if(first.begin(), first.end(), [](float v) { return v != 0; }));
+  EXPECT_GT(nonZero, 0.9 * pixels) << "the case must cover the slice";
+}
+
+TEST(CpuRenderer, GradientsAreIdenticalAcrossRuns)
+{
+  const RealisticCase c = MakeRealisticCase(5000, 64);
+  RenderOptions o;
+  auto renderer = CreateCpuRenderer();
+  std::vector<float> S(64 * 64), dL(64 * 64);
+  for (std::size_t p = 0; p < dL.size(); ++p)
+  {
+    dL[p] = std::sin(0.37f * p);
+  }
+  ASSERT_TRUE(renderer->Forward(c.Float.View(), &c.Slice, 1, o, S.data(), nullptr, nullptr, nullptr));
+  std::vector<float> runs[2];
+  for (auto& g : runs)
+  {
+    g.assign(3 * 5000, 0.f);
+    FieldGradients grads;
+    grads.Means = g.data();
+    ASSERT_TRUE(renderer->Backward(c.Float.View(), &c.Slice, 1, o, S.data(), dL.data(), false, grads, nullptr, nullptr));
+  }
+  EXPECT_EQ(runs[0], runs[1]);
+}
+
+TEST(CpuRenderer, BadPosesAreRejectedWithAReason)
+{
+  const RealisticCase c = MakeRealisticCase(10, 16);
+  SliceGeometry slices[2] = { c.Slice, c.Slice };
+  slices[1].ImageToReference[1] = slices[1].ImageToReference[0]; // make the axes parallel
+  slices[1].ImageToReference[5] = slices[1].ImageToReference[4];
+  slices[1].ImageToReference[9] = slices[1].ImageToReference[8];
+  auto renderer = CreateCpuRenderer();
+  std::vector<float> S(2 * 16 * 16, -7.f);
+  std::string error;
+  RenderOptions o;
+  EXPECT_FALSE(renderer->Forward(c.Float.View(), slices, 2, o, S.data(), nullptr, nullptr, &error));
+  EXPECT_NE(error.find("slice 1"), std::string::npos) << error;
+  EXPECT_NE(error.find("singular"), std::string::npos) << error;
+  EXPECT_TRUE(std::all_of(S.begin(), S.end(), [](float v) { return v == -7.f; })) << "nothing written";
+}
