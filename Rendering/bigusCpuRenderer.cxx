@@ -13,6 +13,14 @@
 #include <cmath>
 #include <vector>
 
+// The inner loops are compiled twice, for AVX2 + FMA and for baseline x86-64, and the loader picks
+// one per machine (GCC function multi-versioning), so one binary runs everywhere and fast where it can.
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(__SANITIZE_ADDRESS__)
+#define BIGUS_TARGET_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
+#else
+#define BIGUS_TARGET_CLONES
+#endif
+
 namespace bigus
 {
 
@@ -274,62 +282,84 @@ void BinSplats(const std::vector<Splat>& splats, const PreparedSlice& s, std::ve
   });
 }
 
+/// Geometry of one tile: its pixel range and the plane offsets of its first pixel.
+struct TileFrame
+{
+  int I0, J0, I1, J1; // pixel range [I0, I1) x [J0, J1)
+  double X0, Y0;      // in-plane position of pixel (I0, J0), mm
+  float P0, P1, P2;   // pixel -> plane map
+  float CutoffSquared;
+};
+
+/**
+ * Phase 2 for one tile: adds every listed splat, in order, into the TileSize x TileSize accumulator.
+ * Offsets are taken relative to the tile's first pixel so that float keeps its precision whatever the
+ * size of the image. Returns the number of pixel evaluations.
+ */
+BIGUS_TARGET_CLONES std::int64_t RasterTile(const Splat* splats, const std::int32_t* entries, std::int64_t count,
+  const TileFrame& t, float* acc)
+{
+  alignas(64) float column[TileSize];
+  for (int k = 0; k < TileSize; ++k)
+  {
+    column[k] = k * t.P0;
+  }
+  std::int64_t evaluations = 0;
+  for (std::int64_t e = 0; e < count; ++e)
+  {
+    const Splat& sp = splats[entries[e]];
+    const float dcx = static_cast<float>(sp.Cx - t.X0);
+    const float dcy = static_cast<float>(sp.Cy - t.Y0);
+    const int cs = std::max(sp.X0, t.I0) - t.I0, ce = std::min(sp.X1 + 1, t.I1) - t.I0;
+    const int rs = std::max(sp.Y0, t.J0) - t.J0, re = std::min(sp.Y1 + 1, t.J1) - t.J0;
+    const float a = sp.A, b2 = 2 * sp.B, c = sp.C, w = sp.Weight;
+    for (int r = rs; r < re; ++r)
+    {
+      const float dy = r * t.P2 - dcy;
+      const float xrow = r * t.P1 - dcx;
+      const float cdy2 = c * dy * dy;
+      const float bdy = b2 * dy;
+      float* out = acc + r * TileSize;
+      for (int q = cs; q < ce; ++q)
+      {
+        const float dx = column[q] + xrow;
+        const float form = dx * (a * dx + bdy) + cdy2;
+        const float value = w * FastExp(-0.5f * form);
+        out[q] += form <= t.CutoffSquared ? value : 0.0f;
+      }
+      evaluations += ce - cs;
+    }
+  }
+  return evaluations;
+}
+
 /// Phase 2 for one slice: every tile sums its splats in order into S.
 std::int64_t RasterSlice(const std::vector<Splat>& splats, const PreparedSlice& s,
   const std::vector<std::int64_t>& tileStart, const std::vector<std::int32_t>& entries, double cutoff, float* S)
 {
   const int tiles = s.TilesX * s.TilesY;
-  const float P0 = static_cast<float>(s.PixelToPlane[0]);
-  const float P1 = static_cast<float>(s.PixelToPlane[1]);
-  const float P2 = static_cast<float>(s.PixelToPlane[2]);
-  const float k2 = static_cast<float>(cutoff * cutoff);
   std::vector<std::int64_t> perTile(tiles, 0);
   vtkSMPTools::For(0, tiles, 1, [&](int begin, int end) {
     alignas(64) float acc[TileSize * TileSize];
-    alignas(64) float local[TileSize];
-    for (int t = begin; t < end; ++t)
+    for (int k = begin; k < end; ++k)
     {
-      const int tx = t % s.TilesX, ty = t / s.TilesX;
-      const int i0 = tx * TileSize, j0 = ty * TileSize;
-      const int i1 = std::min(s.Width, i0 + TileSize), j1 = std::min(s.Height, j0 + TileSize);
+      TileFrame t;
+      t.I0 = (k % s.TilesX) * TileSize;
+      t.J0 = (k / s.TilesX) * TileSize;
+      t.I1 = std::min(s.Width, t.I0 + TileSize);
+      t.J1 = std::min(s.Height, t.J0 + TileSize);
+      t.X0 = t.I0 * s.PixelToPlane[0] + t.J0 * s.PixelToPlane[1];
+      t.Y0 = t.J0 * s.PixelToPlane[2];
+      t.P0 = static_cast<float>(s.PixelToPlane[0]);
+      t.P1 = static_cast<float>(s.PixelToPlane[1]);
+      t.P2 = static_cast<float>(s.PixelToPlane[2]);
+      t.CutoffSquared = static_cast<float>(cutoff * cutoff);
       std::fill(acc, acc + TileSize * TileSize, 0.0f);
-      for (int k = 0; k < TileSize; ++k)
+      perTile[k] = RasterTile(splats.data(), entries.data() + tileStart[k], tileStart[k + 1] - tileStart[k], t, acc);
+      for (int j = t.J0; j < t.J1; ++j)
       {
-        local[k] = k * P0;
-      }
-      // Tile-relative coordinates keep float offsets small, whatever the size of the image.
-      const double X0 = i0 * s.PixelToPlane[0] + j0 * s.PixelToPlane[1];
-      const double Y0 = j0 * s.PixelToPlane[2];
-      std::int64_t evals = 0;
-      for (std::int64_t e = tileStart[t]; e < tileStart[t + 1]; ++e)
-      {
-        const Splat& sp = splats[entries[e]];
-        const float dcx = static_cast<float>(sp.Cx - X0);
-        const float dcy = static_cast<float>(sp.Cy - Y0);
-        const int cs = std::max(sp.X0, i0) - i0, ce = std::min(sp.X1 + 1, i1) - i0;
-        const int rs = std::max(sp.Y0, j0) - j0, re = std::min(sp.Y1 + 1, j1) - j0;
-        const float a = sp.A, b2 = 2 * sp.B, c = sp.C, w = sp.Weight;
-        for (int r = rs; r < re; ++r)
-        {
-          const float dy = r * P2 - dcy;
-          const float xrow = r * P1 - dcx;
-          const float cdy2 = c * dy * dy;
-          const float bdy = b2 * dy;
-          float* out = acc + r * TileSize;
-          for (int q = cs; q < ce; ++q)
-          {
-            const float dx = local[q] + xrow;
-            const float form = dx * (a * dx + bdy) + cdy2;
-            const float value = w * FastExp(-0.5f * form);
-            out[q] += form <= k2 ? value : 0.0f;
-          }
-          evals += ce - cs;
-        }
-      }
-      perTile[t] = evals;
-      for (int j = j0; j < j1; ++j)
-      {
-        std::copy(acc + (j - j0) * TileSize, acc + (j - j0) * TileSize + (i1 - i0), S + std::int64_t(j) * s.Width + i0);
+        std::copy(acc + (j - t.J0) * TileSize, acc + (j - t.J0) * TileSize + (t.I1 - t.I0),
+          S + std::int64_t(j) * s.Width + t.I0);
       }
     }
   });
@@ -339,6 +369,59 @@ std::int64_t RasterSlice(const std::vector<Splat>& splats, const PreparedSlice& 
     total += v;
   }
   return total;
+}
+
+constexpr int Lanes = 8;
+
+/**
+ * The per-Gaussian pixel sums of the backward pass over its bounding box @p box (columns box[0..1],
+ * rows box[2..3]); @p gS points at row box[2] of dL/dS. sum[0..1]: dL/dcentre; sum[2..4]: dL/dconic;
+ * sum[5]: sum dL/dS e; sum[6]: attribution sum |dL/dS| |w| e. Columns are processed in groups of
+ * Lanes with one partial sum per lane (vectorisable without reassociation, deterministic order).
+ */
+BIGUS_TARGET_CLONES void FootprintSums(const float* gS, int width, const int box[4], float dcx, float dcy, float a,
+  float b, float c, float w, float P0, float P1, float P2, float cutoffSquared, double sum[7])
+{
+  for (int q = 0; q < 7; ++q)
+  {
+    sum[q] = 0;
+  }
+  const float absW = std::abs(w);
+  for (int row = box[2]; row <= box[3]; ++row)
+  {
+    const float dy = (row - box[2]) * P2 - dcy;
+    const float xrow = (row - box[2]) * P1 - dcx;
+    const float* g = gS + std::int64_t(row - box[2]) * width;
+    alignas(64) float part[7][Lanes] = {};
+    for (int base = box[0]; base <= box[1]; base += Lanes)
+    {
+      for (int l = 0; l < Lanes; ++l)
+      {
+        const int col = base + l;
+        const float inside = col <= box[1] ? 1.0f : 0.0f;
+        const float gv = g[col <= box[1] ? col : box[1]] * inside;
+        const float dx = (col - box[0]) * P0 + xrow;
+        const float form = a * dx * dx + 2 * b * dx * dy + c * dy * dy;
+        const float e = form <= cutoffSquared ? FastExp(-0.5f * form) : 0.0f;
+        const float ge = gv * e;
+        const float gw = ge * w;
+        part[0][l] += gw * (a * dx + b * dy);
+        part[1][l] += gw * (b * dx + c * dy);
+        part[2][l] += -0.5f * gw * dx * dx;
+        part[3][l] += -gw * dx * dy;
+        part[4][l] += -0.5f * gw * dy * dy;
+        part[5][l] += ge;
+        part[6][l] += std::abs(gv) * absW * e;
+      }
+    }
+    for (int q = 0; q < 7; ++q)
+    {
+      for (int l = 0; l < Lanes; ++l)
+      {
+        sum[q] += part[q][l];
+      }
+    }
+  }
 }
 
 class CpuRenderer : public Renderer
@@ -451,33 +534,9 @@ public:
           const float a = static_cast<float>(f.Conic[0]), b = static_cast<float>(f.Conic[1]);
           const float c = static_cast<float>(f.Conic[2]);
           const float w = static_cast<float>(r * f.Amplitude);
-          double sum[7] = { 0, 0, 0, 0, 0, 0, 0 }; // centre x, y, conic a, b, c, sum gS e, attribution
-          for (int row = box[2]; row <= box[3]; ++row)
-          {
-            const float dy = (row - box[2]) * P2 - dcy;
-            const float xrow = (row - box[2]) * P1 - dcx;
-            const float* gRow = gS.data() + std::int64_t(row) * s.Width;
-            float part[7] = { 0, 0, 0, 0, 0, 0, 0 };
-            for (int col = box[0]; col <= box[1]; ++col)
-            {
-              const float dx = (col - box[0]) * P0 + xrow;
-              const float form = a * dx * dx + 2 * b * dx * dy + c * dy * dy;
-              const float e = form <= k2 ? FastExp(-0.5f * form) : 0.0f;
-              const float ge = gRow[col] * e;
-              const float gw = ge * w;
-              part[0] += gw * (a * dx + b * dy);
-              part[1] += gw * (b * dx + c * dy);
-              part[2] += -0.5f * gw * dx * dx;
-              part[3] += -gw * dx * dy;
-              part[4] += -0.5f * gw * dy * dy;
-              part[5] += ge;
-              part[6] += std::abs(gRow[col]) * std::abs(w) * e;
-            }
-            for (int q = 0; q < 7; ++q)
-            {
-              sum[q] += part[q];
-            }
-          }
+          double sum[7];
+          FootprintSums(gS.data() + std::int64_t(box[2]) * s.Width, s.Width, box, dcx, dcy, a, b, c, w, P0, P1, P2,
+            k2, sum);
           FootprintGrad gf;
           gf.Center[0] = sum[0];
           gf.Center[1] = sum[1];

@@ -410,14 +410,17 @@ BIGUS_HD void PixelWeightBackward(T gS, T r, T amp, T a, T b, T c, T dx, T dy, T
 
 /**
  * exp(x) for float, as a branch-free polynomial that compilers vectorise (std::exp does not vectorise
- * without -ffast-math). Range reduction x = k ln2 + f, |f| <= ln2 / 2, then a degree-6 Taylor
+ * without -ffast-math). Range reduction x = k ln2 + f, |f| <= ln2 / 2 (k rounded to nearest), then a
+ * degree-6 Taylor
  * polynomial; relative error below 2.5e-7 on [-87, 0] (tested against std::exp). Inputs are clamped
  * to [-87, 88].
  */
 BIGUS_HD float FastExp(float x)
 {
-  x = x < -87.0f ? -87.0f : (x > 88.0f ? 88.0f : x);
-  const float k = std::floor(x * 1.44269504f + 0.5f);
+  x = x < -87.0f ? -87.0f : x;
+  x = x > 88.0f ? 88.0f : x;
+  // Round x / ln2 to the nearest integer without a call: adding 1.5 * 2^23 leaves no fraction bits.
+  const float k = (x * 1.44269504f + 12582912.0f) - 12582912.0f;
   const float f = x - k * 0.693145751953125f - k * 1.428606765330187e-06f; // ln2 split for exact k ln2
   float p = 1.0f / 720.0f;
   p = p * f + 1.0f / 120.0f;
