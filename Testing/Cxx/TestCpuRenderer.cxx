@@ -402,3 +402,62 @@ TEST(CpuRenderer, BadPosesAreRejectedWithAReason)
   EXPECT_NE(error.find("singular"), std::string::npos) << error;
   EXPECT_TRUE(std::all_of(S.begin(), S.end(), [](float v) { return v == -7.f; })) << "nothing written";
 }
+
+TEST(CpuRenderer, HardCasesGiveNoNaNOrInfInOutputsOrGradients)
+{
+  // Needles and pancakes (ratios to 1e4), extreme log-scales, tiny / huge / zero quaternions, all
+  // tilts, near and far from a slice 1 m from the origin, for a thin and a thick beam.
+  const double centre[3] = { 1000.0, -1000.0, 1000.0 };
+  const double axis[3] = { 0.3, 0.2, 1.0 };
+  const double origin[3] = { centre[0] - 4.8, centre[1] - 4.8, centre[2] };
+  const SliceGeometry slice = MakeSlice(32, 32, 0.3, 20, axis, origin);
+  reference::FieldD f;
+  const double logScales[][3] = { { 0, 0, 0 }, { std::log(2.0), std::log(2e-4), std::log(2e-4) },
+    { std::log(3.0), std::log(3.0), std::log(3e-4) }, { -40, 0, 0 }, { 40, -40, 0 }, { 25, 25, 25 },
+    { -25, -25, -25 } };
+  const double quaternions[][4] = { { 1, 0, 0, 0 }, { 1e-12, 1e-13, 0, 0 }, { 1e12, 3e11, -2e12, 0 }, { 0, 0, 0, 0 },
+    { 0.7, 0.7, 0, 0 }, { 0.38, 0, 0.92, 0 } };
+  for (const auto& l : logScales)
+  {
+    for (const auto& q : quaternions)
+    {
+      for (double offset : { 0.0, 0.4, 3.0, 1e3 })
+      {
+        for (int k = 0; k < 3; ++k)
+        {
+          f.Means.push_back(centre[k] + (k == 2 ? offset : 0.7 * k));
+          f.LogScales.push_back(l[k]);
+        }
+        f.Quaternions.insert(f.Quaternions.end(), q, q + 4);
+        f.Reflectivities.push_back(offset > 1 ? -0.5 : 0.8);
+      }
+    }
+  }
+  const FieldF field = ToFloat(f);
+  auto renderer = CreateCpuRenderer();
+  for (double sigmaE : { 0.0, 1e-4, 0.5, 100.0 })
+  {
+    RenderOptions o;
+    o.ElevationSigma = sigmaE;
+    std::vector<float> S(32 * 32), I(32 * 32), dL(32 * 32, 1.0f);
+    std::string error;
+    ASSERT_TRUE(renderer->Forward(field.View(), &slice, 1, o, S.data(), I.data(), nullptr, &error)) << error;
+    const std::int64_t n = field.View().Count;
+    std::vector<float> gm(3 * n), gl(3 * n), gq(4 * n), gr(n), ga(n);
+    FieldGradients grads;
+    grads.Means = gm.data();
+    grads.LogScales = gl.data();
+    grads.Quaternions = gq.data();
+    grads.Reflectivities = gr.data();
+    grads.Attribution = ga.data();
+    ASSERT_TRUE(renderer->Backward(field.View(), &slice, 1, o, S.data(), dL.data(), false, grads, nullptr, &error));
+    for (const std::vector<float>* v : { &S, &I, &gm, &gl, &gq, &gr, &ga })
+    {
+      for (float x : *v)
+      {
+        ASSERT_TRUE(std::isfinite(x)) << "sigma_E " << sigmaE;
+      }
+    }
+    EXPECT_TRUE(std::any_of(S.begin(), S.end(), [](float v) { return v != 0; })) << "some case must be visible";
+  }
+}
