@@ -1,0 +1,58 @@
+/**
+ * @file bigusImageLoss.h
+ * @brief Training losses between a rendered ultrasound image and a recorded frame, with gradients.
+ *
+ * All images are row-major [H, W] floats with intensities in [0, 1]; the fan mask is [H, W] unsigned
+ * char (non-zero = imaged). Every term is evaluated on the masked pixels only:
+ * - L1: mean over masked pixels of |x - y|.
+ * - D-SSIM: 1 - mean over masked pixels of the SSIM map of (m x, m y) (Wang et al. 2004, Eq. 13), with
+ *   an 11 x 11 Gaussian window of sigma 1.5 pixels, C1 = 0.01^2, C2 = 0.03^2 (data range 1) and zero
+ *   padding outside the image (so that the window filter is self-adjoint and the gradient exact).
+ * - FFL, the focal frequency loss (Jiang et al., ICCV 2021, Eq. 2-5): mean over frequencies of
+ *   w(u, v) |F(u, v)|^2, F = DFT of the masked residual m (x - y), w = (|F| / max |F|)^alpha held
+ *   constant (not differentiated, as in the paper).
+ * Total = WeightL1 L1 + WeightDSSIM D-SSIM + WeightFFL FFL. The gradient dTotal/dx is exact for each
+ * term (checked against finite differences in TestImageLoss).
+ */
+#ifndef bigusImageLoss_h
+#define bigusImageLoss_h
+
+#include "bigusRenderingModule.h" // For export macro
+
+namespace bigus
+{
+
+/// Weights of the loss terms. Defaults: see vtkGaussianFieldTrainer's documentation for the reasons.
+struct ImageLossWeights
+{
+  double L1 = 0.8;
+  double DSSIM = 0.2;
+  double FFL = 0.0;
+  double FFLAlpha = 1.0; ///< focusing exponent of the FFL spectrum weight
+};
+
+/// The value of each term (unweighted) and the weighted total.
+struct ImageLossTerms
+{
+  double L1 = 0, DSSIM = 0, FFL = 0, Total = 0;
+  long MaskedPixels = 0;
+};
+
+/**
+ * Evaluate the loss of @p rendered against @p target inside @p mask (may be null = every pixel).
+ * @param gradient  if non-null, receives dTotal/d(rendered) [H, W] (zero outside the mask).
+ * @return the terms; Total is 0 with MaskedPixels 0 when the mask is empty.
+ */
+BIGUSRENDERING_EXPORT ImageLossTerms ComputeImageLoss(const float* rendered, const float* target,
+  const unsigned char* mask, int width, int height, const ImageLossWeights& weights, float* gradient);
+
+/**
+ * Mean SSIM over the masked pixels (same definition as the D-SSIM term, without the mask applied to
+ * the images when @p maskImages is false: the form used for evaluation metrics).
+ */
+BIGUSRENDERING_EXPORT double MeanSSIM(
+  const float* x, const float* y, const unsigned char* mask, int width, int height, bool maskImages);
+
+} // namespace bigus
+
+#endif

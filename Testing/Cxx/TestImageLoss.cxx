@@ -1,0 +1,192 @@
+// Training losses: every gradient against central finite differences, FFL against a direct O(N^2)
+// DFT, SSIM against known cases.
+#include "bigusImageLoss.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <complex>
+#include <random>
+#include <vector>
+
+using namespace bigus;
+
+namespace
+{
+constexpr int W = 23, H = 19;
+
+struct Images
+{
+  std::vector<float> X, Y;
+  std::vector<unsigned char> Mask;
+};
+
+/// Random images whose residual stays away from 0 (L1 is not differentiable there), and an
+/// elliptical mask that leaves a border outside.
+Images MakeImages(unsigned seed)
+{
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.1f, 0.9f);
+  Images im;
+  for (int p = 0; p < W * H; ++p)
+  {
+    const float y = u(rng);
+    const float offset = 0.05f + 0.1f * u(rng);
+    im.Y.push_back(y);
+    im.X.push_back(p % 2 ? y + offset : y - offset);
+    const int i = p % W, j = p / W;
+    im.Mask.push_back(std::pow((i - 11.0) / 10.0, 2) + std::pow((j - 9.0) / 8.0, 2) <= 1.0 ? 1 : 0);
+  }
+  return im;
+}
+
+void CheckGradient(const ImageLossWeights& weights, double tolerance)
+{
+  Images im = MakeImages(4);
+  std::vector<float> grad(W * H);
+  ComputeImageLoss(im.X.data(), im.Y.data(), im.Mask.data(), W, H, weights, grad.data());
+  double largest = 0;
+  for (float g : grad)
+  {
+    largest = std::max(largest, double(std::abs(g)));
+  }
+  ASSERT_GT(largest, 0);
+  double worst = 0;
+  for (int p = 0; p < W * H; ++p)
+  {
+    const float x = im.X[p];
+    const float h = 1.0f / 1024; // exact in float, so the step is exactly what the loss sees
+    im.X[p] = x + h;
+    const double up = ComputeImageLoss(im.X.data(), im.Y.data(), im.Mask.data(), W, H, weights, nullptr).Total;
+    im.X[p] = x - h;
+    const double down = ComputeImageLoss(im.X.data(), im.Y.data(), im.Mask.data(), W, H, weights, nullptr).Total;
+    im.X[p] = x;
+    const double fd = (up - down) / (2.0 * h);
+    const double err = std::abs(fd - grad[p]) / std::max({ std::abs(fd), double(std::abs(grad[p])), 1e-3 * largest });
+    worst = std::max(worst, err);
+    EXPECT_LE(err, tolerance) << "pixel " << p << ": finite difference " << fd << ", analytic " << grad[p];
+    if (!im.Mask[p])
+    {
+      EXPECT_EQ(grad[p], 0.0f) << "no gradient outside the fan mask";
+    }
+  }
+  std::printf("worst relative error %.3g\n", worst);
+}
+}
+
+TEST(ImageLoss, L1GradientMatchesFiniteDifferences)
+{
+  ImageLossWeights w;
+  w.L1 = 1;
+  w.DSSIM = 0;
+  CheckGradient(w, 1e-5);
+}
+
+TEST(ImageLoss, DssimGradientMatchesFiniteDifferences)
+{
+  ImageLossWeights w;
+  w.L1 = 0;
+  w.DSSIM = 1;
+  // The gradient is exact; the tolerance covers the float rounding of the stored gradient and
+  // the O(h^2) truncation of the central difference.
+  CheckGradient(w, 2e-4);
+}
+
+TEST(ImageLoss, FflGradientMatchesFiniteDifferencesWithUniformWeights)
+{
+  ImageLossWeights w;
+  w.L1 = 0;
+  w.DSSIM = 0;
+  w.FFL = 1;
+  w.FFLAlpha = 0; // the spectrum weight is then constant, so finite differences see the same loss
+  CheckGradient(w, 1e-4);
+}
+
+TEST(ImageLoss, FflMatchesADirectDftWithFocalWeights)
+{
+  const Images im = MakeImages(9);
+  ImageLossWeights w;
+  w.L1 = 0;
+  w.DSSIM = 0;
+  w.FFL = 1;
+  w.FFLAlpha = 1;
+  std::vector<float> grad(W * H);
+  const ImageLossTerms t = ComputeImageLoss(im.X.data(), im.Y.data(), im.Mask.data(), W, H, w, grad.data());
+  // Direct DFT of the masked residual, weights (|F| / max |F|), held constant for the gradient.
+  const double N = W * H;
+  std::vector<std::complex<double>> F(W * H);
+  for (int v = 0; v < H; ++v)
+  {
+    for (int u = 0; u < W; ++u)
+    {
+      std::complex<double> sum = 0;
+      for (int j = 0; j < H; ++j)
+      {
+        for (int i = 0; i < W; ++i)
+        {
+          const int p = j * W + i;
+          const double r = im.Mask[p] ? double(im.X[p]) - double(im.Y[p]) : 0.0;
+          sum += r * std::polar(1.0, -2 * M_PI * (double(u) * i / W + double(v) * j / H));
+        }
+      }
+      F[v * W + u] = sum;
+    }
+  }
+  double largest = 0;
+  for (const auto& f : F)
+  {
+    largest = std::max(largest, std::abs(f));
+  }
+  double loss = 0;
+  std::vector<double> weight(W * H);
+  for (int k = 0; k < W * H; ++k)
+  {
+    weight[k] = std::abs(F[k]) / largest;
+    loss += weight[k] * std::norm(F[k]) / (N * N);
+  }
+  EXPECT_NEAR(t.FFL, loss, 1e-12 * loss);
+  for (int j = 0; j < H; ++j)
+  {
+    for (int i = 0; i < W; ++i)
+    {
+      const int p = j * W + i;
+      double g = 0;
+      for (int v = 0; v < H; ++v)
+      {
+        for (int u = 0; u < W; ++u)
+        {
+          g += 2 * weight[v * W + u] *
+            std::real(std::conj(F[v * W + u]) * std::polar(1.0, -2 * M_PI * (double(u) * i / W + double(v) * j / H)));
+        }
+      }
+      g = im.Mask[p] ? g / (N * N) : 0.0;
+      EXPECT_NEAR(grad[p], g, 1e-6 * std::abs(g) + 1e-9) << "pixel " << p;
+    }
+  }
+}
+
+TEST(ImageLoss, SsimKnownCases)
+{
+  const Images im = MakeImages(2);
+  EXPECT_NEAR(MeanSSIM(im.Y.data(), im.Y.data(), im.Mask.data(), W, H, false), 1.0, 1e-12) << "identical images";
+  // A constant brightness offset keeps contrast and structure; SSIM drops by the luminance term only.
+  std::vector<float> brighter(im.Y);
+  for (float& v : brighter)
+  {
+    v += 0.2f;
+  }
+  const double shifted = MeanSSIM(im.Y.data(), brighter.data(), nullptr, W, H, false);
+  EXPECT_GT(shifted, 0.5);
+  EXPECT_LT(shifted, 0.999);
+  // An inverted image is anti-correlated: SSIM below zero.
+  std::vector<float> inverted(im.Y);
+  for (float& v : inverted)
+  {
+    v = 1.0f - v;
+  }
+  EXPECT_LT(MeanSSIM(im.Y.data(), inverted.data(), nullptr, W, H, false), 0.0);
+  ImageLossWeights w;
+  const ImageLossTerms same = ComputeImageLoss(im.Y.data(), im.Y.data(), im.Mask.data(), W, H, w, nullptr);
+  EXPECT_NEAR(same.Total, 0.0, 1e-12);
+  EXPECT_EQ(same.MaskedPixels, std::count(im.Mask.begin(), im.Mask.end(), 1));
+}
