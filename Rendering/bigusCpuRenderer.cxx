@@ -6,10 +6,13 @@
 #include "bigusRenderer.h"
 #include "bigusSliceFrame.h"
 
+#include "vtkSMPThreadLocal.h"
 #include "vtkSMPTools.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
+#include <limits>
 #include <cmath>
 #include <vector>
 
@@ -88,53 +91,48 @@ GaussianParams LoadGaussian(const FieldView& field, std::int64_t i)
   return g;
 }
 
-/// Elevation variance n^T Sigma n of every Gaussian needs Sigma; computed once per call.
-struct WorldCovariance
+/**
+ * Bound on every Gaussian's variance along any direction, exp(2 max_k l_k) (mm^2), computed once per
+ * call. n^T Sigma n never exceeds it, so the elevation test below only keeps extra candidates, which
+ * SetupFootprint's exact test then drops: a cheap, vectorisable first cull instead of a full setup.
+ */
+struct CullBounds
 {
-  std::vector<double> Sigma; // [N, 6]: xx, xy, xz, yy, yz, zz (mm^2)
+  std::vector<float> MaxVariance; // [N]
 
   void Compute(const FieldView& field)
   {
-    this->Sigma.resize(6 * field.Count);
-    vtkSMPTools::For(0, field.Count, 4096, [&](std::int64_t begin, std::int64_t end) {
+    this->MaxVariance.resize(field.Count);
+    vtkSMPTools::For(0, field.Count, 8192, [&](std::int64_t begin, std::int64_t end) {
       for (std::int64_t i = begin; i < end; ++i)
       {
-        const GaussianParams g = LoadGaussian(field, i);
-        SliceFrameD identity = { { { 1, 0, 0 }, { 0, 1, 0 }, { 0, 0, 1 } }, { 0, 0, 0 } };
-        SetupCache c;
-        SetupFootprint(g, identity, 0.0, 0.0, &c);
-        double* s = &this->Sigma[6 * i];
-        s[0] = c.P[0][0];
-        s[1] = c.P[0][1];
-        s[2] = c.P[0][2];
-        s[3] = c.P[1][1];
-        s[4] = c.P[1][2];
-        s[5] = c.P[2][2];
+        const float* l = field.LogScales + 3 * i;
+        const float m = std::max(std::max(l[0], l[1]), l[2]);
+        // NaN or huge log-scales keep the Gaussian as a candidate; SetupFootprint clamps them.
+        this->MaxVariance[i] = (m == m && m < 40.f) ? std::exp(2.f * std::min(m, float(MaximumLogScale)))
+                                                  : std::numeric_limits<float>::infinity();
       }
     });
   }
 };
 
-/// Cheap elevation test from the world covariance; looser than SetupFootprint's own test, so it never
-/// drops a Gaussian that the exact setup would keep.
-bool MayBeVisible(const FieldView& field, const WorldCovariance& world, std::int64_t i, const PreparedSlice& s,
+/// First elevation cull: |m_z| <= k sqrt(max variance + sigma_E^2) with a small safety margin.
+bool MayBeVisible(const FieldView& field, const CullBounds& bounds, std::int64_t i, const PreparedSlice& s,
   double sigmaE, double cutoff)
 {
   const double* n = s.Frame.F[2];
   const double dz = n[0] * (field.Means[3 * i] - s.Frame.Origin[0]) +
     n[1] * (field.Means[3 * i + 1] - s.Frame.Origin[1]) + n[2] * (field.Means[3 * i + 2] - s.Frame.Origin[2]);
-  const double* S = &world.Sigma[6 * i];
-  const double var = n[0] * n[0] * S[0] + n[1] * n[1] * S[3] + n[2] * n[2] * S[5] +
-    2 * (n[0] * n[1] * S[1] + n[0] * n[2] * S[2] + n[1] * n[2] * S[4]) + sigmaE * sigmaE;
   const double k = cutoff * 1.001 + 1e-9;
-  return dz * dz <= k * k * var * (1 + 1e-9) || !(var > 0);
+  return dz * dz <= k * k * (double(bounds.MaxVariance[i]) * 1.001 + sigmaE * sigmaE);
 }
 
 /// A visible Gaussian's footprint as phase 2 uses it.
 struct Splat
 {
   double Cx, Cy;      // centre in the plane, mm
-  float A, B, C;      // conic
+  float Cos, Sin;     // major axis of the footprint in the plane
+  float InvMajor, InvMinor; // 1 / standard deviations along the axes, 1/mm
   float Weight;       // r_eff * amp
   int X0, X1, Y0, Y1; // pixel bounding box, inclusive, clipped to the image
   std::int64_t Index; // Gaussian index
@@ -177,7 +175,7 @@ double EffectiveSigma(const RenderOptions& o)
 }
 
 /// Phase 1 for one slice: the visible splats, in Gaussian index order.
-void SetupSlice(const FieldView& field, const WorldCovariance& world, const PreparedSlice& s,
+void SetupSlice(const FieldView& field, const CullBounds& bounds, const PreparedSlice& s,
   const RenderOptions& o, std::vector<Splat>& splats)
 {
   const double sigmaE = EffectiveSigma(o);
@@ -190,7 +188,7 @@ void SetupSlice(const FieldView& field, const WorldCovariance& world, const Prep
       const std::int64_t last = std::min(field.Count, (chunk + 1) * ChunkSize);
       for (std::int64_t i = chunk * ChunkSize; i < last; ++i)
       {
-        if (!MayBeVisible(field, world, i, s, sigmaE, o.Cutoff))
+        if (!MayBeVisible(field, bounds, i, s, sigmaE, o.Cutoff))
         {
           continue;
         }
@@ -209,9 +207,10 @@ void SetupSlice(const FieldView& field, const WorldCovariance& world, const Prep
         }
         splat.Cx = f.Center[0];
         splat.Cy = f.Center[1];
-        splat.A = static_cast<float>(f.Conic[0]);
-        splat.B = static_cast<float>(f.Conic[1]);
-        splat.C = static_cast<float>(f.Conic[2]);
+        splat.Cos = static_cast<float>(f.Axes[0]);
+        splat.Sin = static_cast<float>(f.Axes[1]);
+        splat.InvMajor = static_cast<float>(f.Axes[2]);
+        splat.InvMinor = static_cast<float>(f.Axes[3]);
         splat.Weight = static_cast<float>(r * f.Amplitude);
         splat.X0 = box[0];
         splat.X1 = box[1];
@@ -312,18 +311,19 @@ BIGUS_TARGET_CLONES std::int64_t RasterTile(const Splat* splats, const std::int3
     const float dcy = static_cast<float>(sp.Cy - t.Y0);
     const int cs = std::max(sp.X0, t.I0) - t.I0, ce = std::min(sp.X1 + 1, t.I1) - t.I0;
     const int rs = std::max(sp.Y0, t.J0) - t.J0, re = std::min(sp.Y1 + 1, t.J1) - t.J0;
-    const float a = sp.A, b2 = 2 * sp.B, c = sp.C, w = sp.Weight;
+    const float co = sp.Cos, si = sp.Sin, s1 = sp.InvMajor, s2 = sp.InvMinor, w = sp.Weight;
     for (int r = rs; r < re; ++r)
     {
       const float dy = r * t.P2 - dcy;
       const float xrow = r * t.P1 - dcx;
-      const float cdy2 = c * dy * dy;
-      const float bdy = b2 * dy;
+      const float sdy = si * dy, cdy = co * dy;
       float* out = acc + r * TileSize;
       for (int q = cs; q < ce; ++q)
       {
         const float dx = column[q] + xrow;
-        const float form = dx * (a * dx + bdy) + cdy2;
+        const float u = (co * dx + sdy) * s1;
+        const float v = (cdy - si * dx) * s2;
+        const float form = u * u + v * v;
         const float value = w * FastExp(-0.5f * form);
         out[q] += form <= t.CutoffSquared ? value : 0.0f;
       }
@@ -375,12 +375,13 @@ constexpr int Lanes = 8;
 
 /**
  * The per-Gaussian pixel sums of the backward pass over its bounding box @p box (columns box[0..1],
- * rows box[2..3]); @p gS points at row box[2] of dL/dS. sum[0..1]: dL/dcentre; sum[2..4]: dL/dconic;
+ * rows box[2..3]); @p gS points at row box[2] of dL/dS. The weight comes from the principal-axes
+ * form (@p axes, as phase 2), the gradient terms from the conic (a, b, c). sum[0..1]: dL/dcentre; sum[2..4]: dL/dconic;
  * sum[5]: sum dL/dS e; sum[6]: attribution sum |dL/dS| |w| e. Columns are processed in groups of
  * Lanes with one partial sum per lane (vectorisable without reassociation, deterministic order).
  */
 BIGUS_TARGET_CLONES void FootprintSums(const float* gS, int width, const int box[4], float dcx, float dcy, float a,
-  float b, float c, float w, float P0, float P1, float P2, float cutoffSquared, double sum[7])
+  float b, float c, const float axes[4], float w, float P0, float P1, float P2, float cutoffSquared, double sum[7])
 {
   for (int q = 0; q < 7; ++q)
   {
@@ -401,7 +402,9 @@ BIGUS_TARGET_CLONES void FootprintSums(const float* gS, int width, const int box
         const float inside = col <= box[1] ? 1.0f : 0.0f;
         const float gv = g[col <= box[1] ? col : box[1]] * inside;
         const float dx = (col - box[0]) * P0 + xrow;
-        const float form = a * dx * dx + 2 * b * dx * dy + c * dy * dy;
+        const float u = (axes[0] * dx + axes[1] * dy) * axes[2];
+        const float v = (axes[0] * dy - axes[1] * dx) * axes[3];
+        const float form = u * u + v * v;
         const float e = form <= cutoffSquared ? FastExp(-0.5f * form) : 0.0f;
         const float ge = gv * e;
         const float gw = ge * w;
@@ -442,12 +445,12 @@ public:
     }
     const float gamma = static_cast<float>(options.Gamma);
     double t0 = Now();
-    this->World.Compute(field);
+    this->Bounds.Compute(field);
     std::int64_t offset = 0;
     for (int k = 0; k < count; ++k)
     {
       const PreparedSlice& s = prepared[k];
-      SetupSlice(field, this->World, s, options, this->Splats);
+      SetupSlice(field, this->Bounds, s, options, this->Splats);
       BinSplats(this->Splats, s, this->TileStart, this->Entries);
       const double t1 = Now();
       const std::int64_t evals = RasterSlice(this->Splats, s, this->TileStart, this->Entries, options.Cutoff, S + offset);
@@ -489,7 +492,7 @@ public:
       }
     }
     const double t0 = Now();
-    this->World.Compute(field);
+    this->Bounds.Compute(field);
     const double sigmaE = EffectiveSigma(options);
     const float k2 = static_cast<float>(options.Cutoff * options.Cutoff);
     std::int64_t offset = 0;
@@ -511,10 +514,12 @@ public:
       const float P0 = static_cast<float>(s.PixelToPlane[0]);
       const float P1 = static_cast<float>(s.PixelToPlane[1]);
       const float P2 = static_cast<float>(s.PixelToPlane[2]);
+      vtkSMPThreadLocal<std::array<std::int64_t, 2>> counters(std::array<std::int64_t, 2>{ { 0, 0 } });
       vtkSMPTools::For(0, field.Count, 256, [&](std::int64_t begin, std::int64_t end) {
+        std::array<std::int64_t, 2>& counter = counters.Local(); // visible, pixel evaluations
         for (std::int64_t i = begin; i < end; ++i)
         {
-          if (!MayBeVisible(field, this->World, i, s, sigmaE, options.Cutoff))
+          if (!MayBeVisible(field, this->Bounds, i, s, sigmaE, options.Cutoff))
           {
             continue;
           }
@@ -534,9 +539,17 @@ public:
           const float a = static_cast<float>(f.Conic[0]), b = static_cast<float>(f.Conic[1]);
           const float c = static_cast<float>(f.Conic[2]);
           const float w = static_cast<float>(r * f.Amplitude);
+          const float axes[4] = { static_cast<float>(f.Axes[0]), static_cast<float>(f.Axes[1]),
+            static_cast<float>(f.Axes[2]), static_cast<float>(f.Axes[3]) };
           double sum[7];
-          FootprintSums(gS.data() + std::int64_t(box[2]) * s.Width, s.Width, box, dcx, dcy, a, b, c, w, P0, P1, P2,
-            k2, sum);
+          FootprintSums(gS.data() + std::int64_t(box[2]) * s.Width, s.Width, box, dcx, dcy, a, b, c, axes, w, P0, P1,
+            P2, k2, sum);
+          counter[0] += 1;
+          counter[1] += std::int64_t(box[1] - box[0] + 1) * (box[3] - box[2] + 1);
+          if (gradients.VisibleCount)
+          {
+            gradients.VisibleCount[i] += 1;
+          }
           FootprintGrad gf;
           gf.Center[0] = sum[0];
           gf.Center[1] = sum[1];
@@ -578,6 +591,14 @@ public:
           }
         }
       });
+      for (const auto& counter : counters)
+      {
+        if (stats)
+        {
+          stats->GaussiansVisible += counter[0];
+          stats->PixelEvaluations += counter[1];
+        }
+      }
       offset += pixels;
     }
     if (stats)
@@ -588,7 +609,7 @@ public:
   }
 
 private:
-  WorldCovariance World;
+  CullBounds Bounds;
   std::vector<Splat> Splats;
   std::vector<std::int64_t> TileStart;
   std::vector<std::int32_t> Entries;

@@ -41,6 +41,7 @@ struct FieldGradients
   float* Quaternions = nullptr;    ///< [N, 4] dL/dq (through the normalisation)
   float* Reflectivities = nullptr; ///< [N] dL/dr
   float* Attribution = nullptr;    ///< [N] E_i = sum_p |dL/dS(p)| w_i(p)
+  int* VisibleCount = nullptr;     ///< [N] number of slices whose pixels the Gaussian's footprint touched
 };
 
 /// One slice: its pose and its pixel grid.
@@ -70,7 +71,7 @@ struct RenderStats
   std::int64_t TileEntries = 0;       ///< (Gaussian, tile) pairs after binning
   std::int64_t PixelEvaluations = 0;  ///< Gaussian-pixel pairs evaluated (inside bounding boxes)
   double SetupSeconds = 0;            ///< phase 1 (transform, cull, set up) and binning
-  double RasterSeconds = 0;           ///< phase 2 (per-tile evaluation) or the backward pass
+  double RasterSeconds = 0;           ///< phase 2 (per-tile evaluation) and the image map, or the backward pass
 };
 
 class BIGUSRENDERING_EXPORT Renderer
