@@ -1,0 +1,175 @@
+/**
+ * @file bigusTrainer.h
+ * @brief The BIGUS training loop (DESIGN section 4), independent of the VTK pipeline: initialisation
+ *        (Harris or uniform random), Adam, losses, error-attributed densification (EA-D), adaptive
+ *        growth stop, final pruning, NaN roll-back, checkpoints. vtkGaussianFieldTrainer wraps it.
+ *
+ * Private to BIGUS::Filters. Deterministic for a given seed and thread count on the CPU backend.
+ */
+#ifndef bigusTrainer_h
+#define bigusTrainer_h
+
+#include "bigusImageLoss.h"
+#include "bigusRenderer.h"
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <random>
+#include <string>
+#include <vector>
+
+namespace bigus
+{
+
+/// The frames a trainer learns from. Intensities in [0, 1].
+struct TrainingData
+{
+  int Width = 0, Height = 0;
+  std::vector<float> Frames;                     ///< [N, H, W]
+  std::vector<std::array<double, 16>> Poses;     ///< [N] ImageToReference, row-major
+  std::vector<unsigned char> Mask;               ///< [H, W] fan mask (1 = imaged)
+  std::vector<int> TrainFrames;                  ///< indices into Frames used for training
+  int Count() const { return static_cast<int>(this->Poses.size()); }
+};
+
+/// A Gaussian field's parameters (float, structure of arrays).
+struct GaussianField
+{
+  std::vector<float> Means, LogScales, Quaternions, Reflectivities; ///< [N,3], [N,3], [N,4], [N]
+  std::int64_t Count() const { return static_cast<std::int64_t>(this->Reflectivities.size()); }
+  FieldView View() const;
+  void Resize(std::int64_t n);
+  /// Keeps the Gaussians whose flag is non-zero, in order.
+  void Compact(const std::vector<unsigned char>& keep);
+};
+
+struct TrainerSettings
+{
+  // Model
+  double ElevationSigma = 0.5;       ///< mm; see vtkGaussianFieldTrainer for how to set it for a probe
+  bool BeamIntegration = true;
+  bool NonNegativeReflectivity = false;
+  double Cutoff = 5.0;
+  // Initialisation
+  bool HarrisInitialisation = true;  ///< false: uniform random in the sweep's bounding box
+  std::int64_t InitialGaussians = 20000;
+  double UniformShare = 0.1;         ///< share of Harris seeds drawn uniformly inside the mask
+  double InitialScalePixels = 1.5;   ///< in-plane standard deviation of a seed, pixels
+  // Optimisation
+  int Iterations = 3000;
+  double TimeBudget = 0;             ///< seconds of training; 0 = no limit
+  double MeanLearningRate = 0.02;    ///< mm per step at the start ...
+  double MeanLearningRateFinal = 0.002; ///< ... decaying exponentially to this at Iterations
+  double LogScaleLearningRate = 0.01;
+  double QuaternionLearningRate = 0.005;
+  double ReflectivityLearningRate = 0.01;
+  ImageLossWeights Loss;
+  double ConvergenceTolerance = 0;   ///< stop when the mean loss of the last 200 steps improved by less (relative); 0 = off
+  // Densification (EA-D)
+  bool Densify = true;
+  int DensifyStart = 200, DensifyEnd = -1, DensifyInterval = 200; ///< End -1: 60 % of Iterations
+  double DensifyPercentile = 5.0;    ///< top share (%) of the attribution score densified each time
+  double SplitScalePixels = 3.0;     ///< largest scale above which a Gaussian is split, not cloned
+  double PruneReflectivity = 1e-3;   ///< |r| below this is pruned (after the first densification)
+  double GrowthMargin = 0.005;       ///< growth stops when the validation loss improves by less (relative)
+  std::int64_t MaximumGaussians = 200000;
+  double FinalPruneTolerance = 1.0 / 512; ///< final prune: max change of any training pixel's I
+  // Run
+  unsigned Seed = 1;
+  int CheckpointInterval = 0;        ///< steps between checkpoints (0 = none)
+  std::string CheckpointFile;
+};
+
+/// What a run did.
+struct TrainerReport
+{
+  int Iterations = 0;
+  double Seconds = 0;
+  std::string StopReason;
+  std::string GrowthStopReason;
+  std::int64_t Gaussians = 0;
+  std::int64_t PrunedAtEnd = 0;
+  double Gamma = 0;
+  double LastLoss = 0;              ///< mean loss of the last 50 steps
+  int RolledBackSteps = 0;
+  std::vector<double> LossHistory;  ///< loss of every step
+};
+
+class Trainer
+{
+public:
+  Trainer(TrainingData data, const TrainerSettings& settings);
+
+  /// Initial field (Harris or random) and gamma. Returns false with @p error on bad data.
+  bool Initialize(std::string* error);
+  /// Start from a given field instead (gamma still from the data).
+  void SetField(const GaussianField& field);
+
+  /**
+   * Train until Iterations, TimeBudget, convergence or @p abort. @p progress(fraction, iteration,
+   * loss, gaussians) is called every few steps. Returns false with @p error on an unrecoverable problem.
+   */
+  bool Run(const std::function<void(double, int, double, std::int64_t)>& progress, const std::function<bool()>& abort,
+    std::string* error);
+  /// One optimisation step (no densification); returns the loss, or NaN if the step was rolled back.
+  double Step();
+
+  /// Checkpoint: field, Adam state, schedule and random state (format in bigusTrainer.cxx).
+  bool SaveCheckpoint(const std::string& file, std::string* error) const;
+  bool LoadCheckpoint(const std::string& file, std::string* error);
+
+  /// Remove Gaussians whose removal changes no training pixel by more than FinalPruneTolerance.
+  std::int64_t FinalPrune();
+
+  const GaussianField& GetField() const { return this->Field; }
+  double GetGamma() const { return this->Gamma; }
+  const TrainerReport& GetReport() const { return this->Report; }
+  int GetIteration() const { return this->Iteration; }
+  const TrainingData& GetData() const { return this->Data; }
+  SliceGeometry Slice(int frame) const;
+  RenderOptions Options() const;
+
+private:
+  void InitializeHarris(std::mt19937_64& rng);
+  void InitializeRandom(std::mt19937_64& rng);
+  void FitReflectivityScale();
+  void DensifyAndPrune();
+  double ValidationLoss();
+  double MeanLearningRateAt(int iteration) const;
+  void ResizeState(std::int64_t n);
+
+  TrainingData Data;
+  TrainerSettings Settings;
+  std::unique_ptr<Renderer> Backend;
+  GaussianField Field;
+  double Gamma = 1;
+  double PixelSpacing = 1; // mean in-plane pixel spacing of the training frames, mm
+  // Adam state, same layout as the field
+  GaussianField AdamM, AdamV;
+  int Iteration = 0;
+  double LearningRateScale = 1; // halved on every roll-back
+  std::mt19937_64 Random;
+  // EA-D accumulators since the last densification
+  std::vector<float> Attribution;
+  std::vector<int> SeenCount;
+  bool Growing = true;
+  double BestValidationLoss = -1;
+  int StalledGrowthSteps = 0;
+  // Last known-good field for roll-back
+  GaussianField Snapshot, SnapshotM, SnapshotV;
+  TrainerReport Report;
+  // Scratch
+  std::vector<float> S, I, LossGradient, Gradients;
+};
+
+/// Quaternion (w, x, y, z) of the rotation whose columns are the unit vectors u, v, n.
+std::array<double, 4> QuaternionFromAxes(const double u[3], const double v[3], const double n[3]);
+
+/// Mean in-plane pixel spacing (mm) of a pose.
+double PixelSpacingOf(const std::array<double, 16>& pose);
+
+} // namespace bigus
+
+#endif
