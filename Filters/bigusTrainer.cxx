@@ -436,9 +436,8 @@ double Trainer::Step()
   this->Backend->Backward(this->Field.View(), &slice, 1, o, this->S.data(), this->LossGradient.data(), false, grads,
     nullptr, nullptr);
 
-  if (!std::isfinite(loss.Total) || !AllFinite(this->Gradients))
-  {
-    // Never write a non-finite step into the field: back to the last good state, half the rates.
+  // Never keep a non-finite step in the field: back to the last good state, half the rates.
+  auto rollBack = [this]() {
     this->Field = this->Snapshot;
     this->AdamM = this->SnapshotM;
     this->AdamV = this->SnapshotV;
@@ -447,6 +446,10 @@ double Trainer::Step()
     this->Report.RolledBackSteps += 1;
     ++this->Iteration;
     return std::numeric_limits<double>::quiet_NaN();
+  };
+  if (!std::isfinite(loss.Total) || !AllFinite(this->Gradients))
+  {
+    return rollBack();
   }
 
   const int t = this->Iteration + 1;
@@ -490,6 +493,11 @@ double Trainer::Step()
       float& l = this->Field.LogScales[3 * i + k];
       l = std::min(hi, std::max(lo, l));
     }
+  }
+  if (!AllFinite(this->Field.Means) || !AllFinite(this->Field.LogScales) || !AllFinite(this->Field.Quaternions) ||
+    !AllFinite(this->Field.Reflectivities))
+  {
+    return rollBack();
   }
   ++this->Iteration;
   if (this->Iteration % SnapshotInterval == 0)

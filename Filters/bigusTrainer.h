@@ -9,6 +9,7 @@
 #ifndef bigusTrainer_h
 #define bigusTrainer_h
 
+#include "bigusFiltersModule.h" // For export macro
 #include "bigusImageLoss.h"
 #include "bigusRenderer.h"
 
@@ -97,7 +98,7 @@ struct TrainerReport
   std::vector<double> LossHistory;  ///< loss of every step
 };
 
-class Trainer
+class BIGUSFILTERS_EXPORT Trainer
 {
 public:
   Trainer(TrainingData data, const TrainerSettings& settings);

@@ -41,14 +41,17 @@ struct ImageLossTerms
 /**
  * Evaluate the loss of @p rendered against @p target inside @p mask (may be null = every pixel).
  * @param gradient  if non-null, receives dTotal/d(rendered) [H, W] (zero outside the mask).
+ * @param doublePrecision  evaluate in double (tests, metrics) instead of float (training: about twice
+ *        as fast; sums are accumulated in double either way).
  * @return the terms; Total is 0 with MaskedPixels 0 when the mask is empty.
  */
 BIGUSRENDERING_EXPORT ImageLossTerms ComputeImageLoss(const float* rendered, const float* target,
-  const unsigned char* mask, int width, int height, const ImageLossWeights& weights, float* gradient);
+  const unsigned char* mask, int width, int height, const ImageLossWeights& weights, float* gradient,
+  bool doublePrecision = false);
 
 /**
- * Mean SSIM over the masked pixels (same definition as the D-SSIM term, without the mask applied to
- * the images when @p maskImages is false: the form used for evaluation metrics).
+ * Mean SSIM over the masked pixels, in double (same definition as the D-SSIM term, without the mask
+ * applied to the images when @p maskImages is false: the form used for evaluation metrics).
  */
 BIGUSRENDERING_EXPORT double MeanSSIM(
   const float* x, const float* y, const unsigned char* mask, int width, int height, bool maskImages);

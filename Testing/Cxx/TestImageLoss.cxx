@@ -44,7 +44,7 @@ void CheckGradient(const ImageLossWeights& weights, double tolerance)
 {
   Images im = MakeImages(4);
   std::vector<float> grad(W * H);
-  ComputeImageLoss(im.X.data(), im.Y.data(), im.Mask.data(), W, H, weights, grad.data());
+  ComputeImageLoss(im.X.data(), im.Y.data(), im.Mask.data(), W, H, weights, grad.data(), true);
   double largest = 0;
   for (float g : grad)
   {
@@ -57,9 +57,9 @@ void CheckGradient(const ImageLossWeights& weights, double tolerance)
     const float x = im.X[p];
     const float h = 1.0f / 1024; // exact in float, so the step is exactly what the loss sees
     im.X[p] = x + h;
-    const double up = ComputeImageLoss(im.X.data(), im.Y.data(), im.Mask.data(), W, H, weights, nullptr).Total;
+    const double up = ComputeImageLoss(im.X.data(), im.Y.data(), im.Mask.data(), W, H, weights, nullptr, true).Total;
     im.X[p] = x - h;
-    const double down = ComputeImageLoss(im.X.data(), im.Y.data(), im.Mask.data(), W, H, weights, nullptr).Total;
+    const double down = ComputeImageLoss(im.X.data(), im.Y.data(), im.Mask.data(), W, H, weights, nullptr, true).Total;
     im.X[p] = x;
     const double fd = (up - down) / (2.0 * h);
     const double err = std::abs(fd - grad[p]) / std::max({ std::abs(fd), double(std::abs(grad[p])), 1e-3 * largest });
@@ -79,6 +79,7 @@ TEST(ImageLoss, L1GradientMatchesFiniteDifferences)
   ImageLossWeights w;
   w.L1 = 1;
   w.DSSIM = 0;
+  w.FFL = 0;
   CheckGradient(w, 1e-5);
 }
 
@@ -87,6 +88,7 @@ TEST(ImageLoss, DssimGradientMatchesFiniteDifferences)
   ImageLossWeights w;
   w.L1 = 0;
   w.DSSIM = 1;
+  w.FFL = 0;
   // The gradient is exact; the tolerance covers the float rounding of the stored gradient and
   // the O(h^2) truncation of the central difference.
   CheckGradient(w, 2e-4);
@@ -111,13 +113,15 @@ TEST(ImageLoss, FflMatchesADirectDftWithFocalWeights)
   w.FFL = 1;
   w.FFLAlpha = 1;
   std::vector<float> grad(W * H);
-  const ImageLossTerms t = ComputeImageLoss(im.X.data(), im.Y.data(), im.Mask.data(), W, H, w, grad.data());
-  // Direct DFT of the masked residual, weights (|F| / max |F|), held constant for the gradient.
-  const double N = W * H;
-  std::vector<std::complex<double>> F(W * H);
-  for (int v = 0; v < H; ++v)
+  const ImageLossTerms t = ComputeImageLoss(im.X.data(), im.Y.data(), im.Mask.data(), W, H, w, grad.data(), true);
+  // Direct DFT of the masked residual zero-padded to the next 5-smooth sizes (as documented: 24 x 20),
+  // weights (|F| / max |F|), held constant for the gradient.
+  constexpr int PW = 24, PH = 20;
+  const double N = PW * PH;
+  std::vector<std::complex<double>> F(PW * PH);
+  for (int v = 0; v < PH; ++v)
   {
-    for (int u = 0; u < W; ++u)
+    for (int u = 0; u < PW; ++u)
     {
       std::complex<double> sum = 0;
       for (int j = 0; j < H; ++j)
@@ -126,10 +130,10 @@ TEST(ImageLoss, FflMatchesADirectDftWithFocalWeights)
         {
           const int p = j * W + i;
           const double r = im.Mask[p] ? double(im.X[p]) - double(im.Y[p]) : 0.0;
-          sum += r * std::polar(1.0, -2 * M_PI * (double(u) * i / W + double(v) * j / H));
+          sum += r * std::polar(1.0, -2 * M_PI * (double(u) * i / PW + double(v) * j / PH));
         }
       }
-      F[v * W + u] = sum;
+      F[v * PW + u] = sum;
     }
   }
   double largest = 0;
@@ -138,8 +142,8 @@ TEST(ImageLoss, FflMatchesADirectDftWithFocalWeights)
     largest = std::max(largest, std::abs(f));
   }
   double loss = 0;
-  std::vector<double> weight(W * H);
-  for (int k = 0; k < W * H; ++k)
+  std::vector<double> weight(PW * PH);
+  for (int k = 0; k < PW * PH; ++k)
   {
     weight[k] = std::abs(F[k]) / largest;
     loss += weight[k] * std::norm(F[k]) / (N * N);
@@ -151,12 +155,12 @@ TEST(ImageLoss, FflMatchesADirectDftWithFocalWeights)
     {
       const int p = j * W + i;
       double g = 0;
-      for (int v = 0; v < H; ++v)
+      for (int v = 0; v < PH; ++v)
       {
-        for (int u = 0; u < W; ++u)
+        for (int u = 0; u < PW; ++u)
         {
-          g += 2 * weight[v * W + u] *
-            std::real(std::conj(F[v * W + u]) * std::polar(1.0, -2 * M_PI * (double(u) * i / W + double(v) * j / H)));
+          g += 2 * weight[v * PW + u] *
+            std::real(std::conj(F[v * PW + u]) * std::polar(1.0, -2 * M_PI * (double(u) * i / PW + double(v) * j / PH)));
         }
       }
       g = im.Mask[p] ? g / (N * N) : 0.0;
@@ -189,4 +193,21 @@ TEST(ImageLoss, SsimKnownCases)
   const ImageLossTerms same = ComputeImageLoss(im.Y.data(), im.Y.data(), im.Mask.data(), W, H, w, nullptr);
   EXPECT_NEAR(same.Total, 0.0, 1e-12);
   EXPECT_EQ(same.MaskedPixels, std::count(im.Mask.begin(), im.Mask.end(), 1));
+}
+
+TEST(ImageLoss, FloatEvaluationAgreesWithDouble)
+{
+  const Images im = MakeImages(12);
+  ImageLossWeights w; // every term on
+  std::vector<float> gf(W * H), gd(W * H);
+  const ImageLossTerms f = ComputeImageLoss(im.X.data(), im.Y.data(), im.Mask.data(), W, H, w, gf.data(), false);
+  const ImageLossTerms d = ComputeImageLoss(im.X.data(), im.Y.data(), im.Mask.data(), W, H, w, gd.data(), true);
+  EXPECT_NEAR(f.Total, d.Total, 1e-5 * d.Total);
+  double largest = 0, worst = 0;
+  for (int p = 0; p < W * H; ++p)
+  {
+    largest = std::max(largest, double(std::abs(gd[p])));
+    worst = std::max(worst, double(std::abs(gf[p] - gd[p])));
+  }
+  EXPECT_LE(worst, 1e-4 * largest);
 }

@@ -1,0 +1,270 @@
+#include "vtkGaussianFieldTrainer.h"
+
+#include "bigusTrainer.h"
+#include "vtkUltrasoundFanMask.h"
+
+#include "vtkCellArray.h"
+#include "vtkDataArray.h"
+#include "vtkDoubleArray.h"
+#include "vtkFieldData.h"
+#include "vtkFloatArray.h"
+#include "vtkIdList.h"
+#include "vtkImageData.h"
+#include "vtkInformation.h"
+#include "vtkInformationVector.h"
+#include "vtkIntArray.h"
+#include "vtkNew.h"
+#include "vtkObjectFactory.h"
+#include "vtkPointData.h"
+#include "vtkPoints.h"
+#include "vtkPolyData.h"
+#include "vtkStringArray.h"
+
+#include <cmath>
+
+vtkStandardNewMacro(vtkGaussianFieldTrainer);
+vtkCxxSetObjectMacro(vtkGaussianFieldTrainer, TrainingFrameList, vtkIdList);
+
+vtkGaussianFieldTrainer::vtkGaussianFieldTrainer()
+{
+  this->SetNumberOfInputPorts(2);
+}
+
+vtkGaussianFieldTrainer::~vtkGaussianFieldTrainer()
+{
+  this->SetTrainingFrameList(nullptr);
+  this->SetCheckpointFile(nullptr);
+  this->SetResumeFile(nullptr);
+}
+
+int vtkGaussianFieldTrainer::FillInputPortInformation(int port, vtkInformation* info)
+{
+  info->Set(vtkAlgorithm::INPUT_REQUIRED_DATA_TYPE(), "vtkImageData");
+  if (port == 1)
+  {
+    info->Set(vtkAlgorithm::INPUT_IS_OPTIONAL(), 1);
+  }
+  return 1;
+}
+
+int vtkGaussianFieldTrainer::RequestData(
+  vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector* outputVector)
+{
+  vtkImageData* sequence = vtkImageData::GetData(inputVector[0], 0);
+  vtkImageData* maskImage = vtkImageData::GetData(inputVector[1], 0);
+  vtkPolyData* output = vtkPolyData::GetData(outputVector, 0);
+  this->StopReason.clear();
+  this->GrowthStopReason.clear();
+  this->NumberOfGaussians = 0;
+
+  vtkDataArray* pixels = sequence ? sequence->GetPointData()->GetScalars() : nullptr;
+  vtkDataArray* poses = sequence ? sequence->GetFieldData()->GetArray("ImageToReference") : nullptr;
+  vtkDataArray* valid = sequence ? sequence->GetFieldData()->GetArray("FrameValid") : nullptr;
+  int dims[3] = { 0, 0, 0 };
+  if (sequence)
+  {
+    sequence->GetDimensions(dims);
+  }
+  if (!pixels || pixels->GetNumberOfComponents() != 1 || !poses || poses->GetNumberOfComponents() != 16 ||
+    poses->GetNumberOfTuples() != dims[2])
+  {
+    vtkErrorMacro("input 0 must be a tracked frame sequence: W x H x N one-component scalars and field data "
+                  "ImageToReference with N tuples of 16");
+    return 0;
+  }
+
+  bigus::TrainingData data;
+  data.Width = dims[0];
+  data.Height = dims[1];
+  const vtkIdType framePixels = vtkIdType(dims[0]) * dims[1];
+  const double scale = pixels->GetDataType() == VTK_UNSIGNED_CHAR ? 1.0 / 255.0 : 1.0;
+  data.Frames.resize(std::size_t(framePixels) * dims[2]);
+  for (vtkIdType p = 0; p < framePixels * dims[2]; ++p)
+  {
+    data.Frames[p] = static_cast<float>(std::min(1.0, std::max(0.0, pixels->GetComponent(p, 0) * scale)));
+  }
+  for (int k = 0; k < dims[2]; ++k)
+  {
+    std::array<double, 16> m;
+    poses->GetTuple(k, m.data());
+    data.Poses.push_back(m);
+    const bool isValid = !valid || valid->GetTuple1(k) != 0;
+    bool train = isValid;
+    if (this->TrainingFrameList && this->TrainingFrameList->GetNumberOfIds() > 0)
+    {
+      train = isValid && this->TrainingFrameList->IsId(k) >= 0;
+    }
+    else if (this->HoldOutEvery > 0)
+    {
+      train = isValid && k % this->HoldOutEvery != this->HoldOutOffset;
+    }
+    if (train)
+    {
+      data.TrainFrames.push_back(k);
+    }
+  }
+  if (data.TrainFrames.empty())
+  {
+    vtkErrorMacro("no valid training frames (" << dims[2] << " frames in the input)");
+    return 0;
+  }
+
+  vtkSmartPointer<vtkImageData> mask = maskImage;
+  if (!mask)
+  {
+    vtkNew<vtkUltrasoundFanMask> estimate;
+    estimate->SetInputData(sequence);
+    estimate->Update();
+    mask = estimate->GetOutput();
+  }
+  vtkDataArray* maskValues = mask->GetPointData()->GetScalars();
+  if (!maskValues || maskValues->GetNumberOfTuples() != framePixels)
+  {
+    vtkErrorMacro("the fan mask must be a " << dims[0] << " x " << dims[1] << " image");
+    return 0;
+  }
+  data.Mask.resize(framePixels);
+  for (vtkIdType p = 0; p < framePixels; ++p)
+  {
+    data.Mask[p] = maskValues->GetTuple1(p) != 0 ? 1 : 0;
+  }
+
+  bigus::TrainerSettings s;
+  s.ElevationSigma = this->ElevationSigma;
+  s.BeamIntegration = this->BeamIntegration;
+  s.NonNegativeReflectivity = this->NonNegativeReflectivity;
+  s.HarrisInitialisation = this->HarrisInitialisation;
+  s.Densify = this->Densify;
+  s.InitialGaussians = this->InitialGaussians;
+  s.MaximumGaussians = this->MaximumGaussians;
+  s.Iterations = this->Iterations;
+  s.TimeBudget = this->TimeBudget;
+  s.ConvergenceTolerance = this->ConvergenceTolerance;
+  s.Loss.L1 = this->LossWeights[0];
+  s.Loss.DSSIM = this->LossWeights[1];
+  s.Loss.FFL = this->LossWeights[2];
+  s.DensifyStart = this->DensifyStart;
+  s.DensifyEnd = this->DensifyEnd;
+  s.DensifyInterval = this->DensifyInterval;
+  s.DensifyPercentile = this->DensifyPercentile;
+  s.Seed = this->Seed;
+  s.CheckpointInterval = this->CheckpointInterval;
+  s.CheckpointFile = this->CheckpointFile ? this->CheckpointFile : "";
+
+  bigus::Trainer trainer(std::move(data), s);
+  std::string error;
+  if (!trainer.Initialize(&error) ||
+    (this->ResumeFile && *this->ResumeFile && !trainer.LoadCheckpoint(this->ResumeFile, &error)))
+  {
+    vtkErrorMacro(<< error);
+    return 0;
+  }
+  const bool ok = trainer.Run([this](double fraction, int, double, std::int64_t) { this->UpdateProgress(fraction); },
+    [this]() { return this->AbortExecute != 0; }, &error);
+  if (!ok)
+  {
+    vtkErrorMacro(<< error);
+    return 0;
+  }
+
+  const bigus::GaussianField& field = trainer.GetField();
+  const bigus::TrainerReport& report = trainer.GetReport();
+  const vtkIdType n = field.Count();
+  vtkNew<vtkPoints> points;
+  points->SetDataTypeToFloat();
+  points->SetNumberOfPoints(n);
+  vtkNew<vtkFloatArray> scales, rotations, reflectivities;
+  scales->SetName("Scale");
+  scales->SetNumberOfComponents(3);
+  scales->SetNumberOfTuples(n);
+  rotations->SetName("Rotation");
+  rotations->SetNumberOfComponents(4);
+  rotations->SetNumberOfTuples(n);
+  reflectivities->SetName("Reflectivity");
+  reflectivities->SetNumberOfTuples(n);
+  vtkNew<vtkCellArray> vertices;
+  for (vtkIdType i = 0; i < n; ++i)
+  {
+    points->SetPoint(i, field.Means[3 * i], field.Means[3 * i + 1], field.Means[3 * i + 2]);
+    for (int k = 0; k < 3; ++k)
+    {
+      scales->SetTypedComponent(i, k, std::exp(field.LogScales[3 * i + k]));
+    }
+    const float* q = &field.Quaternions[4 * i];
+    const float norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    for (int k = 0; k < 4; ++k)
+    {
+      rotations->SetTypedComponent(i, k, norm > 0 ? q[k] / norm : (k == 0 ? 1.f : 0.f));
+    }
+    reflectivities->SetValue(i, field.Reflectivities[i]);
+    vertices->InsertNextCell(1, &i);
+  }
+  output->SetPoints(points);
+  output->SetVerts(vertices);
+  output->GetPointData()->AddArray(scales);
+  output->GetPointData()->AddArray(rotations);
+  output->GetPointData()->AddArray(reflectivities);
+  output->GetPointData()->SetActiveScalars("Reflectivity");
+
+  auto addValue = [&](const char* name, double value) {
+    vtkNew<vtkDoubleArray> a;
+    a->SetName(name);
+    a->InsertNextValue(value);
+    output->GetFieldData()->AddArray(a);
+  };
+  auto addText = [&](const char* name, const std::string& text) {
+    vtkNew<vtkStringArray> a;
+    a->SetName(name);
+    a->InsertNextValue(text);
+    output->GetFieldData()->AddArray(a);
+  };
+  addValue("ElevationSigma", this->BeamIntegration ? this->ElevationSigma : 0.0);
+  addValue("Gamma", trainer.GetGamma());
+  addValue("Iterations", report.Iterations);
+  addValue("TrainingSeconds", report.Seconds);
+  addText("StopReason", report.StopReason);
+  addText("GrowthStopReason", report.GrowthStopReason);
+  vtkNew<vtkIntArray> frames;
+  frames->SetName("TrainingFrames");
+  for (int f : trainer.GetData().TrainFrames)
+  {
+    frames->InsertNextValue(f);
+  }
+  output->GetFieldData()->AddArray(frames);
+
+  this->NumberOfGaussians = n;
+  this->TrainingSeconds = report.Seconds;
+  this->CompletedIterations = report.Iterations;
+  this->FinalLoss = report.LastLoss;
+  this->Gamma = trainer.GetGamma();
+  this->StopReason = report.StopReason;
+  this->GrowthStopReason = report.GrowthStopReason;
+  return 1;
+}
+
+void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
+{
+  this->Superclass::PrintSelf(os, indent);
+  os << indent << "ElevationSigma: " << this->ElevationSigma << "\n";
+  os << indent << "BeamIntegration: " << this->BeamIntegration << "\n";
+  os << indent << "NonNegativeReflectivity: " << this->NonNegativeReflectivity << "\n";
+  os << indent << "HarrisInitialisation: " << this->HarrisInitialisation << "\n";
+  os << indent << "Densify: " << this->Densify << "\n";
+  os << indent << "Iterations: " << this->Iterations << "\n";
+  os << indent << "TimeBudget: " << this->TimeBudget << "\n";
+  os << indent << "ConvergenceTolerance: " << this->ConvergenceTolerance << "\n";
+  os << indent << "InitialGaussians: " << this->InitialGaussians << "\n";
+  os << indent << "MaximumGaussians: " << this->MaximumGaussians << "\n";
+  os << indent << "LossWeights: " << this->LossWeights[0] << " " << this->LossWeights[1] << " " << this->LossWeights[2]
+     << "\n";
+  os << indent << "Densify schedule: start " << this->DensifyStart << ", end " << this->DensifyEnd << ", interval "
+     << this->DensifyInterval << ", percentile " << this->DensifyPercentile << "\n";
+  os << indent << "HoldOutEvery: " << this->HoldOutEvery << ", HoldOutOffset: " << this->HoldOutOffset << "\n";
+  os << indent << "TrainingFrameList: " << (this->TrainingFrameList ? this->TrainingFrameList->GetNumberOfIds() : 0)
+     << " frames\n";
+  os << indent << "Seed: " << this->Seed << "\n";
+  os << indent << "CheckpointFile: " << (this->CheckpointFile ? this->CheckpointFile : "(none)") << " every "
+     << this->CheckpointInterval << " steps\n";
+  os << indent << "ResumeFile: " << (this->ResumeFile ? this->ResumeFile : "(none)") << "\n";
+  os << indent << "NumberOfGaussians: " << this->NumberOfGaussians << ", StopReason: " << this->StopReason << "\n";
+}
