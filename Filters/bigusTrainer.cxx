@@ -788,7 +788,7 @@ bool Trainer::Run(const std::function<void(double, int, double, std::int64_t)>& 
       progress(std::min(1.0, fraction), it, std::isfinite(loss) ? loss : 0.0, this->Field.Count());
     }
   }
-  if (this->Report.GrowthStopReason.empty())
+  if (this->Report.GrowthStopReason.empty() && (!s.Densify || this->Iteration > s.DensifyEnd))
   {
     this->Report.GrowthStopReason = s.Densify ? "densification schedule ended" : "densification off";
   }

@@ -2,7 +2,12 @@
 // checkpoint/resume, ablation switches, and a short run on the real spine-phantom sweep.
 #include "bigusTrainer.h"
 
+#include "vtkCallbackCommand.h"
 #include "vtkDataArray.h"
+#include "vtkDoubleArray.h"
+#include "vtkGaussianFieldTrainer.h"
+#include "vtkPointData.h"
+#include "vtkPolyData.h"
 #include "vtkFieldData.h"
 #include "vtkImageData.h"
 #include "vtkNew.h"
@@ -400,4 +405,80 @@ TEST(Trainer, SpinePhantomShortRunLearnsAndBeatsTheNearestFrameOnHeldOutFrames)
               "nearest training frame %.4f\n",
     r.Iterations, r.Seconds, static_cast<long long>(r.Gaussians), first, last, rendered, nearest);
   EXPECT_LT(rendered, nearest);
+}
+
+TEST(GaussianFieldTrainer, PipelineOutputsTheFieldOfTheDataModel)
+{
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(150, 9), 0.5, heldOut);
+  // The synthetic sweep as a tracked frame sequence (unsigned char, as a reader gives it).
+  vtkNew<vtkImageData> sequence;
+  sequence->SetDimensions(W, H, data.Count());
+  sequence->AllocateScalars(VTK_UNSIGNED_CHAR, 1);
+  auto* pixels = static_cast<unsigned char*>(sequence->GetScalarPointer());
+  for (std::size_t p = 0; p < data.Frames.size(); ++p)
+  {
+    pixels[p] = static_cast<unsigned char>(std::lround(255 * data.Frames[p]));
+  }
+  vtkNew<vtkDoubleArray> poses;
+  poses->SetName("ImageToReference");
+  poses->SetNumberOfComponents(16);
+  for (const auto& m : data.Poses)
+  {
+    poses->InsertNextTuple(m.data());
+  }
+  sequence->GetFieldData()->AddArray(poses);
+
+  vtkNew<vtkGaussianFieldTrainer> trainer;
+  trainer->SetInputData(sequence);
+  trainer->SetIterations(150);
+  trainer->SetInitialGaussians(500);
+  trainer->SetHoldOutEvery(4);
+  trainer->SetHoldOutOffset(2);
+  int progressEvents = 0;
+  vtkNew<vtkCallbackCommand> counter;
+  counter->SetClientData(&progressEvents);
+  counter->SetCallback([](vtkObject*, unsigned long, void* client, void*) { ++*static_cast<int*>(client); });
+  trainer->AddObserver(vtkCommand::ProgressEvent, counter);
+  trainer->Update();
+  vtkPolyData* field = trainer->GetOutput();
+  const vtkIdType n = field->GetNumberOfPoints();
+  EXPECT_EQ(n, trainer->GetNumberOfGaussians());
+  EXPECT_GT(n, 400);
+  EXPECT_EQ(field->GetNumberOfVerts(), n) << "one vertex per Gaussian, so it shows as a point cloud";
+  for (const char* name : { "Scale", "Rotation", "Reflectivity" })
+  {
+    ASSERT_NE(field->GetPointData()->GetArray(name), nullptr) << name;
+  }
+  vtkDataArray* rotation = field->GetPointData()->GetArray("Rotation");
+  for (vtkIdType i = 0; i < n; i += 37)
+  {
+    double q[4];
+    rotation->GetTuple(i, q);
+    EXPECT_NEAR(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3], 1.0, 1e-5);
+  }
+  EXPECT_EQ(field->GetFieldData()->GetArray("ElevationSigma")->GetTuple1(0), 0.5);
+  vtkDataArray* frames = field->GetFieldData()->GetArray("TrainingFrames");
+  ASSERT_NE(frames, nullptr);
+  EXPECT_EQ(frames->GetNumberOfTuples(), 45);
+  for (vtkIdType k = 0; k < frames->GetNumberOfTuples(); ++k)
+  {
+    EXPECT_NE(static_cast<int>(frames->GetTuple1(k)) % 4, 2) << "held-out frames are never trained on";
+  }
+  EXPECT_STREQ(trainer->GetStopReason(), "iterations");
+  EXPECT_GT(progressEvents, 5);
+
+  // AbortExecute stops a run early and still leaves a valid field.
+  vtkNew<vtkGaussianFieldTrainer> aborted;
+  aborted->SetInputData(sequence);
+  aborted->SetIterations(100000);
+  aborted->SetInitialGaussians(300);
+  vtkNew<vtkCallbackCommand> stopper;
+  stopper->SetCallback([](vtkObject* caller, unsigned long, void*, void*) {
+    static_cast<vtkAlgorithm*>(caller)->SetAbortExecute(1);
+  });
+  aborted->AddObserver(vtkCommand::ProgressEvent, stopper);
+  aborted->Update();
+  EXPECT_STREQ(aborted->GetStopReason(), "aborted");
+  EXPECT_LT(aborted->GetCompletedIterations(), 100);
 }
