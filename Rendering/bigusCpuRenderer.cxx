@@ -550,13 +550,7 @@ public:
           {
             gradients.VisibleCount[i] += 1;
           }
-          FootprintGrad gf;
-          gf.Center[0] = sum[0];
-          gf.Center[1] = sum[1];
-          gf.Conic[0] = sum[2];
-          gf.Conic[1] = sum[3];
-          gf.Conic[2] = sum[4];
-          gf.Amplitude = r * sum[5];
+          const FootprintGrad gf = FootprintGradFromSums(sum, r);
           GaussianGrad gg = {};
           SetupFootprintBackward(f, cache, s.Frame, sigmaE, gf, gg);
           gg.Reflectivity = (options.NonNegativeReflectivity && g.Reflectivity <= 0) ? 0.0 : f.Amplitude * sum[5];

@@ -397,6 +397,22 @@ BIGUS_HD void SetupFootprintBackward(const Footprint& f, const SetupCache& c, co
   }
 }
 
+/**
+ * The footprint gradient from the per-pixel sums of PixelWeightBackward (sums[0..4]: centre and conic
+ * terms; sums[5]: sum dL/dS e) for a Gaussian of effective reflectivity @p r: dL/d(amp) = r sums[5].
+ */
+BIGUS_HD FootprintGrad FootprintGradFromSums(const double sums[6], double r)
+{
+  FootprintGrad gf;
+  gf.Center[0] = sums[0];
+  gf.Center[1] = sums[1];
+  gf.Conic[0] = sums[2];
+  gf.Conic[1] = sums[3];
+  gf.Conic[2] = sums[4];
+  gf.Amplitude = r * sums[5];
+  return gf;
+}
+
 // ---------------------------------------------------------------------------------------------
 // Phase 2: per-pixel evaluation and its gradient twin.
 

@@ -77,6 +77,10 @@ cv::Mat SsimMap(const cv::Mat& X, const cv::Mat& Y, const cv::Mat& g, cv::Mat* g
     const T* pyy = syy.ptr<T>(j);
     const T* pxy = sxy.ptr<T>(j);
     T* out = map.ptr<T>(j);
+    const T* w = gradX ? g.ptr<T>(j) : nullptr;
+    T* d1 = gradX ? dm1.ptr<T>(j) : nullptr;
+    T* dxx = gradX ? dsxx.ptr<T>(j) : nullptr;
+    T* dxy = gradX ? dsxy.ptr<T>(j) : nullptr;
     for (int i = 0; i < X.cols; ++i)
     {
       const double a = pm1[i], b = pm2[i];
@@ -84,22 +88,10 @@ cv::Mat SsimMap(const cv::Mat& X, const cv::Mat& Y, const cv::Mat& g, cv::Mat* g
       const double A2 = 2 * (pxy[i] - a * b) + C2;
       const double B1 = a * a + b * b + C1;
       const double B2 = pxx[i] - a * a + pyy[i] - b * b + C2;
-      out[i] = static_cast<T>(A1 * A2 / (B1 * B2));
-    }
-    if (gradX)
-    {
-      const T* w = g.ptr<T>(j);
-      T* d1 = dm1.ptr<T>(j);
-      T* dxx = dsxx.ptr<T>(j);
-      T* dxy = dsxy.ptr<T>(j);
-      for (int i = 0; i < X.cols; ++i)
+      const double s = A1 * A2 / (B1 * B2);
+      out[i] = static_cast<T>(s);
+      if (w)
       {
-        const double a = pm1[i], b = pm2[i];
-        const double A1 = 2 * a * b + C1;
-        const double A2 = 2 * (pxy[i] - a * b) + C2;
-        const double B1 = a * a + b * b + C1;
-        const double B2 = pxx[i] - a * a + pyy[i] - b * b + C2;
-        const double s = out[i];
         d1[i] = static_cast<T>(w[i] * (2 * b * (A2 - A1) / (B1 * B2) - 2 * a * s * (1 / B1 - 1 / B2)));
         dxx[i] = static_cast<T>(w[i] * (-s / B2));
         dxy[i] = static_cast<T>(w[i] * (2 * A1 / (B1 * B2)));

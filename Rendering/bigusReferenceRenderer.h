@@ -149,13 +149,7 @@ inline bool Backward(const FieldD& field, const SliceGeometry& slice, const Rend
         attribution += std::abs(gp) * std::abs(r) * PixelWeight(f.Amplitude, f.Conic[0], f.Conic[1], f.Conic[2], dx, dy);
       }
     }
-    FootprintGrad gf;
-    gf.Center[0] = sums[0];
-    gf.Center[1] = sums[1];
-    gf.Conic[0] = sums[2];
-    gf.Conic[1] = sums[3];
-    gf.Conic[2] = sums[4];
-    gf.Amplitude = r * sums[5];
+    const FootprintGrad gf = FootprintGradFromSums(sums, r);
     GaussianGrad gg = {};
     SetupFootprintBackward(f, cache, frame, sigmaE, gf, gg);
     for (int q = 0; q < 3; ++q)
