@@ -1,14 +1,17 @@
 #!/usr/bin/env bash
 # BIGUS-VTK setup: installs every dependency by Debian package name, configures and builds.
 #
-#   ./setup.sh main   set up, build, and run the main job on the bundled real liver sweep
+#   ./setup.sh main   set up, build, and run the main job on the bundled real liver sweep: train with
+#                     frames i mod 4 == 2 held out (BIGUS_TIME_BUDGET seconds, default 300), evaluate the
+#                     held-out frames, write the report folder liver-report/
 #   ./setup.sh test   set up, build, and run the whole test suite (what CI runs):
 #                     ctest (GoogleTest + Python), the reader tests again under AddressSanitizer and
 #                     UndefinedBehaviorSanitizer, and the libFuzzer target of the header parser
 #   ./setup.sh build  set up and build only
 #
 # Environment: BIGUS_JOBS (parallel build jobs, default: number of cores),
-#              BIGUS_FUZZ_SECONDS (fuzzing time in `test`, default 60).
+#              BIGUS_FUZZ_SECONDS (fuzzing time in `test`, default 60),
+#              BIGUS_TIME_BUDGET (training seconds in `main`, default 300).
 set -euo pipefail
 cd "$(dirname "$0")"
 root=$(pwd)
@@ -89,7 +92,16 @@ case "$mode" in
   main)
     install_dependencies
     build
-    "$root/build/bin/bigus" info "$root/Examples/Data/liver/liver_sweep.igs.mha"
+    sweep="$root/Examples/Data/liver/liver_sweep.igs.mha"
+    report="$root/liver-report"
+    mkdir -p "$report"
+    "$root/build/bin/bigus" info "$sweep"
+    "$root/build/bin/bigus" train "$sweep" -o "$report/liver_field.vtp" --holdout-every 4 --holdout-offset 2 \
+      --time-budget "${BIGUS_TIME_BUDGET:-300}" --iterations 3000 --elevation-sigma 1.0 --evaluate-every 30
+    "$root/build/bin/bigus" evaluate "$report/liver_field.vtp" "$sweep" --holdout-every 4 --holdout-offset 2 \
+      --report "$report"
+    echo "report: $report (metrics.json, side-by-side PNGs, slice_orthogonal.png, slice_oblique.png," \
+      "psnr_against_time.png, liver_field.vtp)"
     ;;
   test)
     install_dependencies
@@ -101,7 +113,7 @@ case "$mode" in
     build
     ;;
   *)
-    sed -n '2,13p' "$0"
+    sed -n '2,16p' "$0"
     exit 2
     ;;
 esac

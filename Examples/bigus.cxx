@@ -1,49 +1,172 @@
 // bigus: command-line front end of BIGUS-VTK.
 //
 //   bigus info SWEEP [--calibration XML] [--transform CHAIN] [--frames FIRST LAST]
+//   bigus train SWEEP -o FIELD.vtp [--holdout-every K --holdout-offset J] [--time-budget S] [--iterations N] ...
+//   bigus render FIELD.vtp --poses SWEEP [--frames LIST] -o OUT.igs.mha
+//   bigus render FIELD.vtp --plane OX OY OZ NX NY NZ [--size W H] [--spacing MM] -o slice.png|.mha
+//   bigus render FIELD.vtp --volume [--spacing MM] -o volume.mha|.vti
+//   bigus evaluate FIELD.vtp SWEEP [--holdout-every K --holdout-offset J | --frames LIST] --report DIR
 //
-// prints what a tracked sweep holds: frames, frame size, pixel spacing, pose ranges, timestamps,
-// valid frames and the fan-mask coverage. Exit code 0 on success, 1 on a bad file, 2 on bad arguments.
+// Exit codes: 0 success, 1 a bad file or a failed step (one line on stderr), 2 bad arguments.
+// Outputs are written under a temporary name and renamed: an existing file is never left half-written.
+#include "bigusImageMetrics.h"
 #include "bigusSliceFrame.h"
+#include "vtkCallbackCommand.h"
 #include "vtkDataArray.h"
 #include "vtkFieldData.h"
+#include "vtkGaussianFieldReslice.h"
+#include "vtkGaussianFieldSequenceRenderer.h"
+#include "vtkGaussianFieldTrainer.h"
+#include "vtkIdList.h"
 #include "vtkImageData.h"
 #include "vtkLogger.h"
+#include "vtkMatrix4x4.h"
+#include "vtkMetaImageWriter.h"
 #include "vtkNew.h"
 #include "vtkOutputWindow.h"
 #include "vtkPointData.h"
+#include "vtkPolyData.h"
+#include "vtkSMPTools.h"
 #include "vtkUltrasoundFanMask.h"
 #include "vtkUltrasoundSequenceReader.h"
+#include "vtkUltrasoundSequenceWriter.h"
+#include "vtkXMLImageDataWriter.h"
+#include "vtkXMLPolyDataReader.h"
+#include "vtkXMLPolyDataWriter.h"
 
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include <algorithm>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
 #include <cstdio>
+#include <fstream>
 #include <limits>
 #include <string>
+#include <sys/stat.h>
+#include <unistd.h>
 #include <vector>
 
 namespace
 {
+/// One-line failure with exit code 1.
+int Fail(const std::string& what)
+{
+  std::fprintf(stderr, "bigus: %s\n", what.c_str());
+  return 1;
+}
+
+bool EndsWith(const std::string& s, const std::string& suffix)
+{
+  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+/// "name.tmp<pid>.ext": same folder and extension, so that writers that look at the extension work.
+std::string TemporaryName(const std::string& path)
+{
+  const std::size_t slash = path.find_last_of('/');
+  const std::size_t dot = path.find('.', slash == std::string::npos ? 0 : slash + 1);
+  const std::string tag = ".tmp" + std::to_string(::getpid());
+  return dot == std::string::npos ? path + tag : path.substr(0, dot) + tag + path.substr(dot);
+}
+
+bool Publish(const std::string& temporary, const std::string& path)
+{
+  if (std::rename(temporary.c_str(), path.c_str()) != 0)
+  {
+    std::remove(temporary.c_str());
+    return false;
+  }
+  return true;
+}
+
+struct SweepOptions
+{
+  std::string Sweep, Calibration, Chain;
+};
+
+/// Reads a sweep; on failure prints the reader's message and returns null.
+vtkSmartPointer<vtkUltrasoundSequenceReader> ReadSweep(const SweepOptions& o)
+{
+  auto reader = vtkSmartPointer<vtkUltrasoundSequenceReader>::New();
+  reader->SetFileName(o.Sweep.c_str());
+  if (!o.Calibration.empty())
+  {
+    reader->SetCalibrationFileName(o.Calibration.c_str());
+  }
+  if (!o.Chain.empty())
+  {
+    reader->SetTransformChain(o.Chain.c_str());
+  }
+  reader->Update();
+  if (*reader->GetLastErrorText())
+  {
+    Fail(reader->GetLastErrorText());
+    return nullptr;
+  }
+  return reader;
+}
+
+vtkSmartPointer<vtkPolyData> ReadField(const std::string& file)
+{
+  std::ifstream probe(file);
+  if (!probe)
+  {
+    Fail(file + ": cannot open the field file");
+    return nullptr;
+  }
+  vtkNew<vtkXMLPolyDataReader> reader;
+  reader->SetFileName(file.c_str());
+  reader->Update();
+  vtkPolyData* field = reader->GetOutput();
+  if (!field || field->GetNumberOfPoints() == 0 || !field->GetPointData()->GetArray("Scale"))
+  {
+    Fail(file + ": not a Gaussian field (.vtp with point data Scale, Rotation, Reflectivity)");
+    return nullptr;
+  }
+  auto copy = vtkSmartPointer<vtkPolyData>::New();
+  copy->DeepCopy(field);
+  return copy;
+}
+
+/// Frames with index k mod every == offset (every > 0), or the explicit list, or all.
+std::vector<int> ChooseFrames(int count, int every, int offset, const std::vector<int>& list)
+{
+  std::vector<int> frames;
+  for (int k = 0; k < count; ++k)
+  {
+    if (!list.empty() ? std::find(list.begin(), list.end(), k) != list.end() : (every <= 0 || k % every == offset))
+    {
+      frames.push_back(k);
+    }
+  }
+  return frames;
+}
+
+// ---------------------------------------------------------------------------------------------
+// info
+
 struct InfoOptions
 {
-  std::string Sweep;
-  std::string Calibration;
-  std::string Chain;
+  SweepOptions Sweep;
   std::vector<int> Frames;
 };
 
 int RunInfo(const InfoOptions& options)
 {
   vtkNew<vtkUltrasoundSequenceReader> reader;
-  reader->SetFileName(options.Sweep.c_str());
-  if (!options.Calibration.empty())
+  reader->SetFileName(options.Sweep.Sweep.c_str());
+  if (!options.Sweep.Calibration.empty())
   {
-    reader->SetCalibrationFileName(options.Calibration.c_str());
+    reader->SetCalibrationFileName(options.Sweep.Calibration.c_str());
   }
-  if (!options.Chain.empty())
+  if (!options.Sweep.Chain.empty())
   {
-    reader->SetTransformChain(options.Chain.c_str());
+    reader->SetTransformChain(options.Sweep.Chain.c_str());
   }
   if (options.Frames.size() == 2)
   {
@@ -52,8 +175,7 @@ int RunInfo(const InfoOptions& options)
   reader->Update();
   if (*reader->GetLastErrorText())
   {
-    std::fprintf(stderr, "bigus info: %s\n", reader->GetLastErrorText());
-    return 1;
+    return Fail(reader->GetLastErrorText());
   }
   vtkImageData* frames = reader->GetOutput();
   int dims[3];
@@ -101,8 +223,7 @@ int RunInfo(const InfoOptions& options)
     }
     if (havePrevious)
     {
-      const double d[3] = { m[3] - previous[0], m[7] - previous[1], m[11] - previous[2] };
-      path += std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+      path += std::hypot(m[3] - previous[0], m[7] - previous[1], m[11] - previous[2]);
     }
     previous[0] = m[3];
     previous[1] = m[7];
@@ -120,7 +241,7 @@ int RunInfo(const InfoOptions& options)
     covered += mask->GetTuple1(p);
   }
 
-  std::printf("sweep          %s\n", options.Sweep.c_str());
+  std::printf("sweep          %s\n", options.Sweep.Sweep.c_str());
   std::printf("frames         %d (%d valid), file has %d\n", dims[2], validCount, reader->GetNumberOfFramesInFile());
   std::printf("frame size     %d x %d pixels, %s, orientation in file %s (read as MF)\n", dims[0], dims[1],
     frames->GetScalarTypeAsString(), reader->GetFileOrientation());
@@ -138,11 +259,504 @@ int RunInfo(const InfoOptions& options)
     100.0 * covered / std::max<vtkIdType>(1, mask->GetNumberOfTuples()));
   return 0;
 }
+
+// ---------------------------------------------------------------------------------------------
+// train
+
+struct TrainOptions
+{
+  SweepOptions Sweep;
+  std::string Output, Checkpoint, Resume, Backend = "auto";
+  int HoldOutEvery = 0, HoldOutOffset = 0, Iterations = 3000, Threads = 0;
+  double TimeBudget = 0, ElevationSigma = 1.0, EvaluationInterval = 0;
+  long long MaxGaussians = 200000;
+  unsigned Seed = 1;
+};
+
+int RunTrain(const TrainOptions& o)
+{
+  if (o.Backend == "cuda")
+  {
+    return Fail("--backend cuda: the CUDA renderer is not available in this build yet; use cpu or auto");
+  }
+  if (o.Threads > 0)
+  {
+    vtkSMPTools::Initialize(o.Threads);
+  }
+  auto reader = ReadSweep(o.Sweep);
+  if (!reader)
+  {
+    return 1;
+  }
+  vtkNew<vtkGaussianFieldTrainer> trainer;
+  trainer->SetInputConnection(reader->GetOutputPort());
+  trainer->SetHoldOutEvery(o.HoldOutEvery);
+  trainer->SetHoldOutOffset(o.HoldOutOffset);
+  trainer->SetIterations(o.Iterations);
+  trainer->SetTimeBudget(o.TimeBudget);
+  trainer->SetMaximumGaussians(o.MaxGaussians);
+  trainer->SetElevationSigma(o.ElevationSigma);
+  trainer->SetSeed(o.Seed);
+  trainer->SetEvaluationInterval(o.EvaluationInterval);
+  if (!o.Checkpoint.empty())
+  {
+    trainer->SetCheckpointFile(o.Checkpoint.c_str());
+    trainer->SetCheckpointInterval(200);
+  }
+  if (!o.Resume.empty())
+  {
+    trainer->SetResumeFile(o.Resume.c_str());
+  }
+  // Progress: a bar on a terminal, a line every 10 % otherwise.
+  const bool terminal = ::isatty(STDOUT_FILENO);
+  const auto start = std::chrono::steady_clock::now();
+  int lastDecile = -1;
+  vtkNew<vtkCallbackCommand> progress;
+  struct Context
+  {
+    bool Terminal;
+    std::chrono::steady_clock::time_point Start;
+    int* LastDecile;
+  } context{ terminal, start, &lastDecile };
+  progress->SetClientData(&context);
+  progress->SetCallback([](vtkObject* caller, unsigned long, void* client, void* data) {
+    const Context& c = *static_cast<Context*>(client);
+    const double fraction = *static_cast<double*>(data);
+    const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - c.Start).count();
+    const double eta = fraction > 0 ? elapsed * (1 - fraction) / fraction : 0;
+    (void)caller;
+    if (c.Terminal)
+    {
+      const int width = 30, filled = static_cast<int>(fraction * width);
+      std::printf("\r[%s%s] %3.0f%%  elapsed %4.0f s  ETA %4.0f s", std::string(filled, '#').c_str(),
+        std::string(width - filled, ' ').c_str(), 100 * fraction, elapsed, eta);
+      std::fflush(stdout);
+    }
+    else if (static_cast<int>(fraction * 10) > *c.LastDecile)
+    {
+      *c.LastDecile = static_cast<int>(fraction * 10);
+      std::printf("training %3.0f%%  elapsed %.0f s  ETA %.0f s\n", 100 * fraction, elapsed, eta);
+      std::fflush(stdout);
+    }
+  });
+  trainer->AddObserver(vtkCommand::ProgressEvent, progress);
+  trainer->Update();
+  if (terminal)
+  {
+    std::printf("\n");
+  }
+  if (trainer->GetNumberOfGaussians() == 0)
+  {
+    return Fail("training failed (see the message above)");
+  }
+  const std::string temporary = TemporaryName(o.Output);
+  vtkNew<vtkXMLPolyDataWriter> writer;
+  writer->SetInputConnection(trainer->GetOutputPort());
+  writer->SetFileName(temporary.c_str());
+  writer->SetDataModeToAppended();
+  if (!writer->Write() || !Publish(temporary, o.Output))
+  {
+    std::remove(temporary.c_str());
+    return Fail(o.Output + ": cannot write the field");
+  }
+  std::printf("field          %s: %lld Gaussians after %d iterations in %.1f s (stop: %s; growth: %s)\n",
+    o.Output.c_str(), static_cast<long long>(trainer->GetNumberOfGaussians()), trainer->GetCompletedIterations(),
+    trainer->GetTrainingSeconds(), trainer->GetStopReason(), trainer->GetGrowthStopReason());
+  return 0;
+}
+
+// ---------------------------------------------------------------------------------------------
+// render
+
+struct RenderOptionsCli
+{
+  std::string Field, Output;
+  SweepOptions Poses;
+  std::vector<int> Frames;
+  std::vector<double> Plane;
+  std::vector<int> Size = { 512, 512 };
+  double Spacing = 0;
+  bool Volume = false;
+};
+
+/// Writes an image: .png (8-bit, rows flipped so that row 0 is the top), .mha (MetaImage), .vti.
+int WriteImage(vtkImageData* image, const std::string& path)
+{
+  const std::string temporary = TemporaryName(path);
+  bool ok = false;
+  if (EndsWith(path, ".png"))
+  {
+    int dims[3];
+    image->GetDimensions(dims);
+    vtkDataArray* values = image->GetPointData()->GetScalars();
+    cv::Mat png(dims[1], dims[0], CV_8U);
+    for (int j = 0; j < dims[1]; ++j)
+    {
+      for (int i = 0; i < dims[0]; ++i)
+      {
+        const double v = values->GetTuple1(vtkIdType(j) * dims[0] + i);
+        png.at<unsigned char>(j, i) =
+          static_cast<unsigned char>(std::lround(std::min(255.0, std::max(0.0, values->GetDataType() == VTK_FLOAT ? 255 * v : v))));
+      }
+    }
+    ok = cv::imwrite(temporary, png);
+  }
+  else if (EndsWith(path, ".mha") || EndsWith(path, ".mhd"))
+  {
+    vtkNew<vtkMetaImageWriter> writer;
+    writer->SetInputData(image);
+    writer->SetFileName(temporary.c_str());
+    writer->SetCompression(true);
+    writer->Write();
+    ok = writer->GetErrorCode() == 0;
+  }
+  else if (EndsWith(path, ".vti"))
+  {
+    vtkNew<vtkXMLImageDataWriter> writer;
+    writer->SetInputData(image);
+    writer->SetFileName(temporary.c_str());
+    ok = writer->Write() != 0;
+  }
+  else
+  {
+    return Fail(path + ": unknown image format (use .png, .mha or .vti)");
+  }
+  if (!ok || !Publish(temporary, path))
+  {
+    std::remove(temporary.c_str());
+    return Fail(path + ": cannot write the image");
+  }
+  return 0;
+}
+
+int RunRender(const RenderOptionsCli& o)
+{
+  auto field = ReadField(o.Field);
+  if (!field)
+  {
+    return 1;
+  }
+  if (!o.Poses.Sweep.empty())
+  {
+    auto reader = ReadSweep(o.Poses);
+    if (!reader)
+    {
+      return 1;
+    }
+    vtkNew<vtkGaussianFieldSequenceRenderer> renderer;
+    renderer->SetInputData(field);
+    renderer->SetPoseConnection(reader->GetOutputPort());
+    renderer->SetOutputScalarTypeToUnsignedChar();
+    vtkNew<vtkIdList> frames;
+    for (int f : o.Frames)
+    {
+      frames->InsertNextId(f);
+    }
+    renderer->SetFrameList(frames);
+    renderer->Update();
+    if (renderer->GetOutput()->GetNumberOfPoints() == 0)
+    {
+      return Fail("rendering failed (see the message above)");
+    }
+    vtkNew<vtkUltrasoundSequenceWriter> writer;
+    writer->SetInputConnection(renderer->GetOutputPort());
+    writer->SetFileName(o.Output.c_str());
+    writer->Write();
+    if (*writer->GetLastErrorText())
+    {
+      return Fail(writer->GetLastErrorText());
+    }
+    std::printf("rendered %d frames (%.1f ms each) to %s\n", renderer->GetOutput()->GetDimensions()[2],
+      1e3 * renderer->GetSecondsPerFrame(), o.Output.c_str());
+    return 0;
+  }
+  vtkNew<vtkGaussianFieldReslice> reslice;
+  reslice->SetInputData(field);
+  if (o.Spacing > 0)
+  {
+    reslice->SetOutputSpacing(o.Spacing, o.Spacing, o.Spacing);
+  }
+  if (o.Volume)
+  {
+    reslice->SetOutputDimensionality(3);
+  }
+  else
+  {
+    if (o.Plane.size() != 6)
+    {
+      return Fail("render: give --poses SWEEP, --plane OX OY OZ NX NY NZ, or --volume");
+    }
+    // Plane axes: the normal n; x = a unit vector perpendicular to n; y = n x x.
+    double n[3] = { o.Plane[3], o.Plane[4], o.Plane[5] };
+    const double nn = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    if (!(nn > 0))
+    {
+      return Fail("--plane: the normal must not be zero");
+    }
+    for (double& v : n)
+    {
+      v /= nn;
+    }
+    const double helper[3] = { std::abs(n[0]) < 0.9 ? 1.0 : 0.0, std::abs(n[0]) < 0.9 ? 0.0 : 1.0, 0.0 };
+    double x[3] = { helper[1] * n[2] - helper[2] * n[1], helper[2] * n[0] - helper[0] * n[2],
+      helper[0] * n[1] - helper[1] * n[0] };
+    const double nx = std::sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
+    for (double& v : x)
+    {
+      v /= nx;
+    }
+    const double y[3] = { n[1] * x[2] - n[2] * x[1], n[2] * x[0] - n[0] * x[2], n[0] * x[1] - n[1] * x[0] };
+    reslice->SetResliceAxesDirectionCosines(x[0], x[1], x[2], y[0], y[1], y[2], n[0], n[1], n[2]);
+    reslice->SetResliceAxesOrigin(o.Plane[0], o.Plane[1], o.Plane[2]);
+    const double spacing = o.Spacing > 0 ? o.Spacing : 0.25;
+    reslice->SetOutputSpacing(spacing, spacing, 1);
+    reslice->SetOutputOrigin(-0.5 * spacing * (o.Size[0] - 1), -0.5 * spacing * (o.Size[1] - 1), 0);
+    reslice->SetOutputExtent(0, o.Size[0] - 1, 0, o.Size[1] - 1, 0, 0);
+  }
+  if (EndsWith(o.Output, ".png"))
+  {
+    reslice->SetOutputScalarTypeToUnsignedChar();
+  }
+  reslice->Update();
+  if (reslice->GetOutput()->GetNumberOfPoints() == 0)
+  {
+    return Fail("rendering failed (see the message above)");
+  }
+  if (WriteImage(reslice->GetOutput(), o.Output) != 0)
+  {
+    return 1;
+  }
+  int dims[3];
+  reslice->GetOutput()->GetDimensions(dims);
+  std::printf("rendered %d x %d x %d to %s\n", dims[0], dims[1], dims[2], o.Output.c_str());
+  return 0;
+}
+
+// ---------------------------------------------------------------------------------------------
+// evaluate
+
+struct EvaluateOptions
+{
+  std::string Field, Report;
+  SweepOptions Sweep;
+  int HoldOutEvery = 0, HoldOutOffset = 0;
+  std::vector<int> Frames;
+};
+
+/// PNG plot of held-out PSNR (dB) against training time (s), from the field's HeldOutPSNR array.
+bool PlotHistory(vtkDataArray* history, const std::string& path)
+{
+  const int W = 720, H = 440, left = 70, right = 20, top = 40, bottom = 60;
+  cv::Mat plot(H, W, CV_8UC3, cv::Scalar(255, 255, 255));
+  double tMax = 1, pMin = 1e9, pMax = -1e9;
+  for (vtkIdType k = 0; k < history->GetNumberOfTuples(); ++k)
+  {
+    tMax = std::max(tMax, history->GetComponent(k, 0));
+    pMin = std::min(pMin, history->GetComponent(k, 1));
+    pMax = std::max(pMax, history->GetComponent(k, 1));
+  }
+  pMin = std::floor(pMin - 1);
+  pMax = std::ceil(pMax + 1);
+  auto at = [&](double t, double p) {
+    return cv::Point(left + static_cast<int>((W - left - right) * t / tMax),
+      H - bottom - static_cast<int>((H - top - bottom) * (p - pMin) / (pMax - pMin)));
+  };
+  cv::line(plot, at(0, pMin), at(tMax, pMin), cv::Scalar(0, 0, 0));
+  cv::line(plot, at(0, pMin), at(0, pMax), cv::Scalar(0, 0, 0));
+  for (int tick = 0; tick <= 4; ++tick)
+  {
+    const double t = tMax * tick / 4, p = pMin + (pMax - pMin) * tick / 4;
+    char label[32];
+    std::snprintf(label, sizeof(label), "%.0f", t);
+    cv::putText(plot, label, at(t, pMin) + cv::Point(-10, 20), cv::FONT_HERSHEY_SIMPLEX, 0.45, cv::Scalar(0, 0, 0));
+    std::snprintf(label, sizeof(label), "%.1f", p);
+    cv::putText(plot, label, at(0, p) + cv::Point(-55, 5), cv::FONT_HERSHEY_SIMPLEX, 0.45, cv::Scalar(0, 0, 0));
+  }
+  for (vtkIdType k = 1; k < history->GetNumberOfTuples(); ++k)
+  {
+    cv::line(plot, at(history->GetComponent(k - 1, 0), history->GetComponent(k - 1, 1)),
+      at(history->GetComponent(k, 0), history->GetComponent(k, 1)), cv::Scalar(200, 80, 0), 2);
+  }
+  cv::putText(plot, "held-out PSNR (dB) against training time (s)", cv::Point(left, 25), cv::FONT_HERSHEY_SIMPLEX, 0.6,
+    cv::Scalar(0, 0, 0));
+  const std::string temporary = TemporaryName(path);
+  return cv::imwrite(temporary, plot) && Publish(temporary, path);
+}
+
+/// Renders a slice through the centre of frame @p pose (W x H pixels at the frame's spacing) whose
+/// in-plane axes are @p x and @p y (unit vectors), and writes it as PNG.
+int WriteSliceThrough(vtkPolyData* field, const double pose[16], int width, int height, const double x[3],
+  const double y[3], const std::string& path)
+{
+  bigus::SliceFrame frame;
+  bigus::ComputeSliceFrame(pose, 90, frame);
+  const double spacing = 0.5 * (frame.spacing[0] + frame.spacing[1]);
+  double centre[3];
+  for (int c = 0; c < 3; ++c)
+  {
+    centre[c] = pose[4 * c] * 0.5 * (width - 1) + pose[4 * c + 1] * 0.5 * (height - 1) + pose[4 * c + 3];
+  }
+  const double n[3] = { x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2], x[0] * y[1] - x[1] * y[0] };
+  vtkNew<vtkGaussianFieldReslice> reslice;
+  reslice->SetInputData(field);
+  reslice->SetResliceAxesDirectionCosines(x[0], x[1], x[2], y[0], y[1], y[2], n[0], n[1], n[2]);
+  reslice->SetResliceAxesOrigin(centre[0], centre[1], centre[2]);
+  reslice->SetOutputSpacing(spacing, spacing, 1);
+  reslice->SetOutputOrigin(-0.5 * spacing * (width - 1), -0.5 * spacing * (height - 1), 0);
+  reslice->SetOutputExtent(0, width - 1, 0, height - 1, 0, 0);
+  reslice->SetOutputScalarTypeToUnsignedChar();
+  reslice->Update();
+  return WriteImage(reslice->GetOutput(), path);
+}
+
+int RunEvaluate(const EvaluateOptions& o)
+{
+  auto field = ReadField(o.Field);
+  auto reader = field ? ReadSweep(o.Sweep) : nullptr;
+  if (!reader)
+  {
+    return 1;
+  }
+  vtkImageData* truth = reader->GetOutput();
+  int dims[3];
+  truth->GetDimensions(dims);
+  std::vector<int> frames = ChooseFrames(dims[2], o.HoldOutEvery, o.HoldOutOffset, o.Frames);
+  vtkDataArray* valid = truth->GetFieldData()->GetArray("FrameValid");
+  frames.erase(std::remove_if(frames.begin(), frames.end(), [&](int k) { return valid->GetTuple1(k) == 0; }),
+    frames.end());
+  if (frames.empty())
+  {
+    return Fail("evaluate: no valid frame chosen");
+  }
+  vtkNew<vtkUltrasoundFanMask> fan;
+  fan->SetInputConnection(reader->GetOutputPort());
+  fan->Update();
+  const auto* mask = static_cast<unsigned char*>(fan->GetOutput()->GetScalarPointer());
+  vtkNew<vtkGaussianFieldSequenceRenderer> renderer;
+  renderer->SetInputData(field);
+  renderer->SetPoseConnection(reader->GetOutputPort());
+  vtkNew<vtkIdList> list;
+  for (int k : frames)
+  {
+    list->InsertNextId(k);
+  }
+  renderer->SetFrameList(list);
+  renderer->Update();
+  vtkImageData* rendered = renderer->GetOutput();
+  if (rendered->GetNumberOfPoints() == 0)
+  {
+    return Fail("rendering failed (see the message above)");
+  }
+  if (::mkdir(o.Report.c_str(), 0755) != 0 && errno != EEXIST)
+  {
+    return Fail(o.Report + ": cannot create the report folder");
+  }
+  const std::size_t pixels = std::size_t(dims[0]) * dims[1];
+  const auto* renderedPixels = static_cast<float*>(rendered->GetScalarPointer());
+  vtkDataArray* truthPixels = truth->GetPointData()->GetScalars();
+  const double scale = truthPixels->GetDataType() == VTK_UNSIGNED_CHAR ? 1.0 / 255 : 1.0;
+  nlohmann::json report;
+  report["field"] = o.Field;
+  report["sweep"] = o.Sweep.Sweep;
+  report["render_seconds_per_frame"] = renderer->GetSecondsPerFrame();
+  double sums[4] = { 0, 0, 0, 0 };
+  std::vector<float> truthFrame(pixels);
+  std::printf("%6s %8s %8s %8s %8s\n", "frame", "PSNR", "SSIM", "NCC", "speckle");
+  for (std::size_t n = 0; n < frames.size(); ++n)
+  {
+    const int k = frames[n];
+    for (std::size_t p = 0; p < pixels; ++p)
+    {
+      truthFrame[p] = static_cast<float>(truthPixels->GetTuple1(vtkIdType(pixels * k + p)) * scale);
+    }
+    const float* image = renderedPixels + pixels * n;
+    const bigus::ImageMetrics m = bigus::CompareImages(image, truthFrame.data(), mask, dims[0], dims[1]);
+    report["frames"].push_back(
+      { { "frame", k }, { "psnr", m.PSNR }, { "ssim", m.SSIM }, { "ncc", m.NCC }, { "speckle", m.Speckle } });
+    sums[0] += m.PSNR;
+    sums[1] += m.SSIM;
+    sums[2] += m.NCC;
+    sums[3] += m.Speckle;
+    std::printf("%6d %8.2f %8.4f %8.4f %8.4f\n", k, m.PSNR, m.SSIM, m.NCC, m.Speckle);
+    // Side by side for a few frames: truth | rendering | absolute error (x 4, so that it shows).
+    if (n % std::max<std::size_t>(1, frames.size() / 4) == 0)
+    {
+      cv::Mat side(dims[1], 3 * dims[0], CV_8U);
+      for (int j = 0; j < dims[1]; ++j)
+      {
+        for (int i = 0; i < dims[0]; ++i)
+        {
+          const std::size_t p = std::size_t(j) * dims[0] + i;
+          side.at<unsigned char>(j, i) = cv::saturate_cast<unsigned char>(255 * truthFrame[p]);
+          side.at<unsigned char>(j, dims[0] + i) = cv::saturate_cast<unsigned char>(255 * image[p]);
+          side.at<unsigned char>(j, 2 * dims[0] + i) =
+            cv::saturate_cast<unsigned char>(4 * 255 * std::abs(image[p] - truthFrame[p]));
+        }
+      }
+      const std::string path = o.Report + "/frame_" + std::to_string(k) + "_truth_rendering_error.png";
+      const std::string temporary = TemporaryName(path);
+      if (!cv::imwrite(temporary, side) || !Publish(temporary, path))
+      {
+        return Fail(path + ": cannot write");
+      }
+    }
+  }
+  // Views that no frame saw, through the centre of the middle evaluated frame: the plane spanned by
+  // depth and elevation (orthogonal to the frames), and one tilted 45 degrees between the two.
+  double pose[16];
+  truth->GetFieldData()->GetArray("ImageToReference")->GetTuple(frames[frames.size() / 2], pose);
+  bigus::SliceFrame middle;
+  bigus::ComputeSliceFrame(pose, 90, middle);
+  double tilted[3];
+  for (int c = 0; c < 3; ++c)
+  {
+    tilted[c] = (middle.u[c] + middle.n[c]) / std::sqrt(2.0);
+  }
+  if (WriteSliceThrough(field, pose, dims[0], dims[1], middle.n, middle.v, o.Report + "/slice_orthogonal.png") != 0 ||
+    WriteSliceThrough(field, pose, dims[0], dims[1], tilted, middle.v, o.Report + "/slice_oblique.png") != 0)
+  {
+    return 1;
+  }
+  if (vtkDataArray* history = field->GetFieldData()->GetArray("HeldOutPSNR"))
+  {
+    if (!PlotHistory(history, o.Report + "/psnr_against_time.png"))
+    {
+      return Fail(o.Report + "/psnr_against_time.png: cannot write");
+    }
+    for (vtkIdType k = 0; k < history->GetNumberOfTuples(); ++k)
+    {
+      report["held_out_psnr_against_time"].push_back(
+        { { "seconds", history->GetComponent(k, 0) }, { "psnr", history->GetComponent(k, 1) } });
+    }
+  }
+  const double n = static_cast<double>(frames.size());
+  report["mean"] = { { "psnr", sums[0] / n }, { "ssim", sums[1] / n }, { "ncc", sums[2] / n },
+    { "speckle", sums[3] / n } };
+  std::printf("%6s %8.2f %8.4f %8.4f %8.4f  (%zu frames, %.1f ms per rendered frame)\n", "mean", sums[0] / n,
+    sums[1] / n, sums[2] / n, sums[3] / n, frames.size(), 1e3 * renderer->GetSecondsPerFrame());
+  const std::string path = o.Report + "/metrics.json";
+  const std::string temporary = TemporaryName(path);
+  std::ofstream(temporary) << report.dump(2) << "\n";
+  if (!Publish(temporary, path))
+  {
+    return Fail(path + ": cannot write");
+  }
+  return 0;
+}
+
+void AddSweepOptions(CLI::App* command, SweepOptions& o, const char* what)
+{
+  command->add_option("--calibration", o.Calibration, "PLUS device-set configuration XML (ImageToProbe)")
+    ->check(CLI::ExistingFile);
+  command->add_option("--transform", o.Chain,
+    std::string("Transform chain for ImageToReference of the ") + what +
+      ", e.g. \"inverse(ReferenceToTracker) * ProbeToTracker * ImageToProbe\"");
+}
 }
 
 int main(int argc, char** argv)
 {
-  // Errors are reported once, on one line, by this program; VTK's own window would repeat them.
+  // Errors are reported once, on one line, by this program; VTK's own output would repeat them.
   vtkOutputWindow::GetInstance()->SetDisplayModeToNever();
   vtkLogger::SetStderrVerbosity(vtkLogger::VERBOSITY_OFF);
 
@@ -151,14 +765,58 @@ int main(int argc, char** argv)
 
   InfoOptions info;
   CLI::App* infoCommand = app.add_subcommand("info", "Summarise a tracked sweep (PLUS/IGSIO sequence metafile)");
-  infoCommand->add_option("SWEEP", info.Sweep, "Sequence metafile (.igs.mha, .seq.mha, .mha, .mhd)")
+  infoCommand->add_option("SWEEP", info.Sweep.Sweep, "Sequence metafile (.igs.mha, .seq.mha, .mha, .mhd)")
     ->required()
     ->check(CLI::ExistingFile);
-  infoCommand->add_option("--calibration", info.Calibration, "PLUS device-set configuration XML (ImageToProbe)")
-    ->check(CLI::ExistingFile);
-  infoCommand->add_option("--transform", info.Chain,
-    "Transform chain for ImageToReference, e.g. \"inverse(ReferenceToTracker) * ProbeToTracker * ImageToProbe\"");
+  AddSweepOptions(infoCommand, info.Sweep, "sweep");
   infoCommand->add_option("--frames", info.Frames, "First and last frame to read (inclusive)")->expected(2);
+
+  TrainOptions train;
+  CLI::App* trainCommand = app.add_subcommand("train", "Train a Gaussian scattering field from a tracked sweep");
+  trainCommand->add_option("SWEEP", train.Sweep.Sweep, "Sequence metafile")->required()->check(CLI::ExistingFile);
+  trainCommand->add_option("-o,--output", train.Output, "Field to write (.vtp)")->required();
+  AddSweepOptions(trainCommand, train.Sweep, "sweep");
+  trainCommand->add_option("--holdout-every", train.HoldOutEvery, "Hold out frames with index % K == J (0: none)");
+  trainCommand->add_option("--holdout-offset", train.HoldOutOffset, "J of --holdout-every");
+  trainCommand->add_option("--time-budget", train.TimeBudget, "Wall-clock budget for training, seconds (0: none)");
+  trainCommand->add_option("--iterations", train.Iterations, "Optimisation steps")->capture_default_str();
+  trainCommand->add_option("--max-gaussians", train.MaxGaussians, "Hard maximum of Gaussians")->capture_default_str();
+  trainCommand->add_option("--elevation-sigma", train.ElevationSigma, "Elevation beam sigma, mm (FWHM / 2.355)")
+    ->capture_default_str();
+  trainCommand->add_option("--backend", train.Backend, "auto, cpu or cuda")
+    ->check(CLI::IsMember({ "auto", "cpu", "cuda" }))
+    ->capture_default_str();
+  trainCommand->add_option("--threads", train.Threads, "Threads (0: all cores)");
+  trainCommand->add_option("--seed", train.Seed, "Random seed")->capture_default_str();
+  trainCommand->add_option("--checkpoint", train.Checkpoint, "Checkpoint file, written every 200 steps");
+  trainCommand->add_option("--resume", train.Resume, "Continue from this checkpoint (same settings)")
+    ->check(CLI::ExistingFile);
+  trainCommand->add_option("--evaluate-every", train.EvaluationInterval,
+    "Record the held-out PSNR every S seconds (field data HeldOutPSNR)");
+
+  RenderOptionsCli render;
+  CLI::App* renderCommand = app.add_subcommand("render", "Render a field at sweep poses, a plane or a volume");
+  renderCommand->add_option("FIELD", render.Field, "Gaussian field (.vtp)")->required()->check(CLI::ExistingFile);
+  renderCommand->add_option("-o,--output", render.Output, "Output: .igs.mha (poses), .png/.mha (plane), .mha/.vti")
+    ->required();
+  renderCommand->add_option("--poses", render.Poses.Sweep, "Render at the poses of this sweep")
+    ->check(CLI::ExistingFile);
+  AddSweepOptions(renderCommand, render.Poses, "pose sweep");
+  renderCommand->add_option("--frames", render.Frames, "Frames of the pose sweep (default: all)");
+  renderCommand->add_option("--plane", render.Plane, "Plane origin and normal, mm: OX OY OZ NX NY NZ")->expected(6);
+  renderCommand->add_option("--size", render.Size, "Plane size in pixels: W H")->expected(2);
+  renderCommand->add_option("--spacing", render.Spacing, "Pixel spacing, mm");
+  renderCommand->add_flag("--volume", render.Volume, "Render a stack of parallel slices covering the field");
+
+  EvaluateOptions evaluate;
+  CLI::App* evaluateCommand = app.add_subcommand("evaluate", "Render sweep frames and compare them with the recording");
+  evaluateCommand->add_option("FIELD", evaluate.Field, "Gaussian field (.vtp)")->required()->check(CLI::ExistingFile);
+  evaluateCommand->add_option("SWEEP", evaluate.Sweep.Sweep, "Sequence metafile")->required()->check(CLI::ExistingFile);
+  AddSweepOptions(evaluateCommand, evaluate.Sweep, "sweep");
+  evaluateCommand->add_option("--holdout-every", evaluate.HoldOutEvery, "Evaluate frames with index % K == J");
+  evaluateCommand->add_option("--holdout-offset", evaluate.HoldOutOffset, "J of --holdout-every");
+  evaluateCommand->add_option("--frames", evaluate.Frames, "Evaluate these frames");
+  evaluateCommand->add_option("--report", evaluate.Report, "Folder for metrics.json and side-by-side PNGs")->required();
 
   try
   {
@@ -172,6 +830,18 @@ int main(int argc, char** argv)
   if (infoCommand->parsed())
   {
     return RunInfo(info);
+  }
+  if (trainCommand->parsed())
+  {
+    return RunTrain(train);
+  }
+  if (renderCommand->parsed())
+  {
+    return RunRender(render);
+  }
+  if (evaluateCommand->parsed())
+  {
+    return RunEvaluate(evaluate);
   }
   return 2;
 }

@@ -126,6 +126,8 @@ public:
 
   const GaussianField& GetField() const { return this->Field; }
   double GetGamma() const { return this->Gamma; }
+  /// Mean in-plane pixel spacing of the training frames, mm.
+  double GetPixelSpacing() const { return this->PixelSpacing; }
   const TrainerReport& GetReport() const { return this->Report; }
   int GetIteration() const { return this->Iteration; }
   const TrainingData& GetData() const { return this->Data; }

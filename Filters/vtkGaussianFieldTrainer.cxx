@@ -1,13 +1,13 @@
 #include "vtkGaussianFieldTrainer.h"
 
+#include "bigusGaussianFieldData.h"
+#include "bigusImageMetrics.h"
 #include "bigusTrainer.h"
 #include "vtkUltrasoundFanMask.h"
 
-#include "vtkCellArray.h"
 #include "vtkDataArray.h"
 #include "vtkDoubleArray.h"
 #include "vtkFieldData.h"
-#include "vtkFloatArray.h"
 #include "vtkIdList.h"
 #include "vtkImageData.h"
 #include "vtkInformation.h"
@@ -16,11 +16,13 @@
 #include "vtkNew.h"
 #include "vtkObjectFactory.h"
 #include "vtkPointData.h"
-#include "vtkPoints.h"
 #include "vtkPolyData.h"
 #include "vtkStringArray.h"
 
+#include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <vector>
 
 vtkStandardNewMacro(vtkGaussianFieldTrainer);
 vtkCxxSetObjectMacro(vtkGaussianFieldTrainer, TrainingFrameList, vtkIdList);
@@ -159,52 +161,66 @@ int vtkGaussianFieldTrainer::RequestData(
     vtkErrorMacro(<< error);
     return 0;
   }
-  const bool ok = trainer.Run([this](double fraction, int, double, std::int64_t) { this->UpdateProgress(fraction); },
+  // Held-out frames for the evaluation: valid, not trained on.
+  std::vector<int> heldOut;
+  for (int k = 0; k < dims[2]; ++k)
+  {
+    const bool isValid = !valid || valid->GetTuple1(k) != 0;
+    if (isValid && !std::binary_search(trainer.GetData().TrainFrames.begin(), trainer.GetData().TrainFrames.end(), k))
+    {
+      heldOut.push_back(k);
+    }
+  }
+  vtkNew<vtkDoubleArray> history;
+  history->SetName("HeldOutPSNR");
+  history->SetNumberOfComponents(2);
+  const auto start = std::chrono::steady_clock::now();
+  double nextEvaluation = 0;
+  auto evaluate = [&]() {
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    auto renderer = bigus::CreateCpuRenderer();
+    const bigus::TrainingData& d = trainer.GetData();
+    const std::size_t framePixels = std::size_t(d.Width) * d.Height;
+    std::vector<float> S(framePixels), I(framePixels);
+    double psnr = 0;
+    for (int k : heldOut)
+    {
+      const bigus::SliceGeometry g = trainer.Slice(k);
+      renderer->Forward(trainer.GetField().View(), &g, 1, trainer.Options(), S.data(), I.data(), nullptr, nullptr);
+      psnr += bigus::CompareImages(I.data(), &d.Frames[framePixels * k], d.Mask.data(), d.Width, d.Height).PSNR /
+        heldOut.size();
+    }
+    const double row[2] = { seconds, psnr };
+    history->InsertNextTuple(row);
+  };
+  const bool ok = trainer.Run(
+    [&](double fraction, int, double, std::int64_t) {
+      this->UpdateProgress(fraction);
+      if (this->EvaluationInterval > 0 && !heldOut.empty() &&
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() >= nextEvaluation)
+      {
+        evaluate();
+        nextEvaluation += this->EvaluationInterval;
+      }
+    },
     [this]() { return this->AbortExecute != 0; }, &error);
+  if (ok && this->EvaluationInterval > 0 && !heldOut.empty())
+  {
+    evaluate();
+  }
   if (!ok)
   {
     vtkErrorMacro(<< error);
     return 0;
   }
 
-  const bigus::GaussianField& field = trainer.GetField();
   const bigus::TrainerReport& report = trainer.GetReport();
-  const vtkIdType n = field.Count();
-  vtkNew<vtkPoints> points;
-  points->SetDataTypeToFloat();
-  points->SetNumberOfPoints(n);
-  vtkNew<vtkFloatArray> scales, rotations, reflectivities;
-  scales->SetName("Scale");
-  scales->SetNumberOfComponents(3);
-  scales->SetNumberOfTuples(n);
-  rotations->SetName("Rotation");
-  rotations->SetNumberOfComponents(4);
-  rotations->SetNumberOfTuples(n);
-  reflectivities->SetName("Reflectivity");
-  reflectivities->SetNumberOfTuples(n);
-  vtkNew<vtkCellArray> vertices;
-  for (vtkIdType i = 0; i < n; ++i)
-  {
-    points->SetPoint(i, field.Means[3 * i], field.Means[3 * i + 1], field.Means[3 * i + 2]);
-    for (int k = 0; k < 3; ++k)
-    {
-      scales->SetTypedComponent(i, k, std::exp(field.LogScales[3 * i + k]));
-    }
-    const float* q = &field.Quaternions[4 * i];
-    const float norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
-    for (int k = 0; k < 4; ++k)
-    {
-      rotations->SetTypedComponent(i, k, norm > 0 ? q[k] / norm : (k == 0 ? 1.f : 0.f));
-    }
-    reflectivities->SetValue(i, field.Reflectivities[i]);
-    vertices->InsertNextCell(1, &i);
-  }
-  output->SetPoints(points);
-  output->SetVerts(vertices);
-  output->GetPointData()->AddArray(scales);
-  output->GetPointData()->AddArray(rotations);
-  output->GetPointData()->AddArray(reflectivities);
-  output->GetPointData()->SetActiveScalars("Reflectivity");
+  bigus::FieldModel model;
+  model.ElevationSigma = this->BeamIntegration ? this->ElevationSigma : 0.0;
+  model.Gamma = trainer.GetGamma();
+  model.PixelSpacing = trainer.GetPixelSpacing();
+  bigus::FieldToPolyData(trainer.GetField(), model, output);
+  const vtkIdType n = trainer.GetField().Count();
 
   auto addValue = [&](const char* name, double value) {
     vtkNew<vtkDoubleArray> a;
@@ -218,8 +234,6 @@ int vtkGaussianFieldTrainer::RequestData(
     a->InsertNextValue(text);
     output->GetFieldData()->AddArray(a);
   };
-  addValue("ElevationSigma", this->BeamIntegration ? this->ElevationSigma : 0.0);
-  addValue("Gamma", trainer.GetGamma());
   addValue("Iterations", report.Iterations);
   addValue("TrainingSeconds", report.Seconds);
   addText("StopReason", report.StopReason);
@@ -231,6 +245,10 @@ int vtkGaussianFieldTrainer::RequestData(
     frames->InsertNextValue(f);
   }
   output->GetFieldData()->AddArray(frames);
+  if (history->GetNumberOfTuples() > 0)
+  {
+    output->GetFieldData()->AddArray(history);
+  }
 
   this->NumberOfGaussians = n;
   this->TrainingSeconds = report.Seconds;
@@ -263,6 +281,7 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "TrainingFrameList: " << (this->TrainingFrameList ? this->TrainingFrameList->GetNumberOfIds() : 0)
      << " frames\n";
   os << indent << "Seed: " << this->Seed << "\n";
+  os << indent << "EvaluationInterval: " << this->EvaluationInterval << "\n";
   os << indent << "CheckpointFile: " << (this->CheckpointFile ? this->CheckpointFile : "(none)") << " every "
      << this->CheckpointInterval << " steps\n";
   os << indent << "ResumeFile: " << (this->ResumeFile ? this->ResumeFile : "(none)") << "\n";

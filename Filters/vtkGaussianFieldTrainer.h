@@ -105,6 +105,12 @@ public:
   vtkGetMacro(HoldOutOffset, int);
   void SetTrainingFrameList(vtkIdList* frames);
   ///@}
+  ///@{ Every EvaluationInterval seconds of training (0 = never), render the held-out frames (valid
+  /// frames not trained on) and record their mean masked PSNR: field data "HeldOutPSNR" of the output,
+  /// tuples (seconds since the start, dB). The evaluation time counts towards TimeBudget.
+  vtkSetClampMacro(EvaluationInterval, double, 0.0, 1e9);
+  vtkGetMacro(EvaluationInterval, double);
+  ///@}
   ///@{ Random seed.
   vtkSetMacro(Seed, unsigned int);
   vtkGetMacro(Seed, unsigned int);
@@ -155,6 +161,7 @@ protected:
   int HoldOutOffset = 0;
   vtkIdList* TrainingFrameList = nullptr;
   unsigned int Seed = 1;
+  double EvaluationInterval = 0;
   char* CheckpointFile = nullptr;
   int CheckpointInterval = 0;
   char* ResumeFile = nullptr;

@@ -1,0 +1,132 @@
+#include "bigusGaussianFieldData.h"
+
+#include "vtkCellArray.h"
+#include "vtkDataArray.h"
+#include "vtkDoubleArray.h"
+#include "vtkFieldData.h"
+#include "vtkFloatArray.h"
+#include "vtkNew.h"
+#include "vtkPointData.h"
+#include "vtkPoints.h"
+#include "vtkPolyData.h"
+
+#include <cmath>
+
+namespace bigus
+{
+
+bool FieldFromPolyData(vtkPolyData* data, GaussianField& field, FieldModel& model, std::string* error)
+{
+  auto fail = [&](const std::string& why) {
+    if (error)
+    {
+      *error = "Gaussian field: " + why;
+    }
+    return false;
+  };
+  if (!data || !data->GetPoints() || data->GetNumberOfPoints() == 0)
+  {
+    return fail("no points (one point per Gaussian expected)");
+  }
+  const vtkIdType n = data->GetNumberOfPoints();
+  vtkDataArray* scale = data->GetPointData()->GetArray("Scale");
+  vtkDataArray* rotation = data->GetPointData()->GetArray("Rotation");
+  vtkDataArray* reflectivity = data->GetPointData()->GetArray("Reflectivity");
+  if (!scale || scale->GetNumberOfComponents() != 3 || scale->GetNumberOfTuples() != n)
+  {
+    return fail("point data Scale must hold 3 standard deviations (mm) per point");
+  }
+  if (!rotation || rotation->GetNumberOfComponents() != 4 || rotation->GetNumberOfTuples() != n)
+  {
+    return fail("point data Rotation must hold a quaternion (w, x, y, z) per point");
+  }
+  if (!reflectivity || reflectivity->GetNumberOfComponents() != 1 || reflectivity->GetNumberOfTuples() != n)
+  {
+    return fail("point data Reflectivity must hold one value per point");
+  }
+  field = GaussianField();
+  field.Resize(n);
+  for (vtkIdType i = 0; i < n; ++i)
+  {
+    double p[3];
+    data->GetPoint(i, p);
+    for (int k = 0; k < 3; ++k)
+    {
+      const double s = scale->GetComponent(i, k);
+      if (!(s > 0) || !std::isfinite(s) || !std::isfinite(p[k]))
+      {
+        return fail("point " + std::to_string(i) + " has a non-positive or non-finite Scale or position");
+      }
+      field.Means[3 * i + k] = static_cast<float>(p[k]);
+      field.LogScales[3 * i + k] = static_cast<float>(std::log(s));
+    }
+    for (int k = 0; k < 4; ++k)
+    {
+      field.Quaternions[4 * i + k] = static_cast<float>(rotation->GetComponent(i, k));
+    }
+    field.Reflectivities[i] = static_cast<float>(reflectivity->GetComponent(i, 0));
+  }
+  model = FieldModel();
+  auto value = [&](const char* name, double& out) {
+    vtkDataArray* a = data->GetFieldData() ? data->GetFieldData()->GetArray(name) : nullptr;
+    if (a && a->GetNumberOfTuples() > 0 && std::isfinite(a->GetTuple1(0)))
+    {
+      out = a->GetTuple1(0);
+    }
+  };
+  value("ElevationSigma", model.ElevationSigma);
+  value("Gamma", model.Gamma);
+  value("PixelSpacing", model.PixelSpacing);
+  return true;
+}
+
+void FieldToPolyData(const GaussianField& field, const FieldModel& model, vtkPolyData* data)
+{
+  const vtkIdType n = field.Count();
+  vtkNew<vtkPoints> points;
+  points->SetDataTypeToFloat();
+  points->SetNumberOfPoints(n);
+  vtkNew<vtkFloatArray> scales, rotations, reflectivities;
+  scales->SetName("Scale");
+  scales->SetNumberOfComponents(3);
+  scales->SetNumberOfTuples(n);
+  rotations->SetName("Rotation");
+  rotations->SetNumberOfComponents(4);
+  rotations->SetNumberOfTuples(n);
+  reflectivities->SetName("Reflectivity");
+  reflectivities->SetNumberOfTuples(n);
+  vtkNew<vtkCellArray> vertices;
+  for (vtkIdType i = 0; i < n; ++i)
+  {
+    points->SetPoint(i, field.Means[3 * i], field.Means[3 * i + 1], field.Means[3 * i + 2]);
+    for (int k = 0; k < 3; ++k)
+    {
+      scales->SetTypedComponent(i, k, std::exp(field.LogScales[3 * i + k]));
+    }
+    const float* q = &field.Quaternions[4 * i];
+    const float norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    for (int k = 0; k < 4; ++k)
+    {
+      rotations->SetTypedComponent(i, k, norm > 0 ? q[k] / norm : (k == 0 ? 1.f : 0.f));
+    }
+    reflectivities->SetValue(i, field.Reflectivities[i]);
+    vertices->InsertNextCell(1, &i);
+  }
+  data->Initialize();
+  data->SetPoints(points);
+  data->SetVerts(vertices);
+  data->GetPointData()->AddArray(scales);
+  data->GetPointData()->AddArray(rotations);
+  data->GetPointData()->AddArray(reflectivities);
+  data->GetPointData()->SetActiveScalars("Reflectivity");
+  for (const auto& entry : { std::make_pair("ElevationSigma", model.ElevationSigma), std::make_pair("Gamma", model.Gamma),
+         std::make_pair("PixelSpacing", model.PixelSpacing) })
+  {
+    vtkNew<vtkDoubleArray> a;
+    a->SetName(entry.first);
+    a->InsertNextValue(entry.second);
+    data->GetFieldData()->AddArray(a);
+  }
+}
+
+} // namespace bigus

@@ -1,0 +1,44 @@
+/**
+ * @file bigusGaussianFieldData.h
+ * @brief Conversion between the Gaussian field's vtkPolyData form (DESIGN section 2) and the
+ *        renderer's parameter arrays. Private to BIGUS::Filters.
+ *
+ * vtkPolyData form: points = means (mm), one vertex per Gaussian, point data Scale (3, mm),
+ * Rotation (4, unit quaternion w x y z), Reflectivity (1); field data ElevationSigma (mm), Gamma.
+ * Renderer form: log-scales, so Scale must be positive.
+ */
+#ifndef bigusGaussianFieldData_h
+#define bigusGaussianFieldData_h
+
+#include "bigusTrainer.h"
+
+#include "vtkSmartPointer.h"
+
+#include <string>
+
+class vtkPolyData;
+
+namespace bigus
+{
+
+/// Model constants stored with a field.
+struct FieldModel
+{
+  double ElevationSigma = 0.5; ///< mm
+  double Gamma = 1.0;
+  double PixelSpacing = 0.0;   ///< mm, mean pixel spacing of the training frames (0 = unknown)
+};
+
+/**
+ * Read a field. Returns false with @p error naming the missing or malformed array (no points, Scale
+ * not 3 components, a non-positive or non-finite scale, missing Rotation or Reflectivity).
+ */
+BIGUSFILTERS_EXPORT bool FieldFromPolyData(vtkPolyData* data, GaussianField& field, FieldModel& model, std::string* error);
+
+/// Write a field (points, vertices, Scale, Rotation normalised, Reflectivity, ElevationSigma, Gamma,
+/// PixelSpacing).
+BIGUSFILTERS_EXPORT void FieldToPolyData(const GaussianField& field, const FieldModel& model, vtkPolyData* data);
+
+} // namespace bigus
+
+#endif

@@ -1,0 +1,193 @@
+#include "vtkGaussianFieldSequenceRenderer.h"
+
+#include "bigusGaussianFieldData.h"
+#include "bigusRenderer.h"
+
+#include "vtkDataArray.h"
+#include "vtkFieldData.h"
+#include "vtkFloatArray.h"
+#include "vtkIdList.h"
+#include "vtkImageData.h"
+#include "vtkInformation.h"
+#include "vtkInformationVector.h"
+#include "vtkNew.h"
+#include "vtkObjectFactory.h"
+#include "vtkPointData.h"
+#include "vtkPolyData.h"
+#include "vtkStreamingDemandDrivenPipeline.h"
+#include "vtkUnsignedCharArray.h"
+
+#include <chrono>
+#include <cmath>
+#include <vector>
+
+vtkStandardNewMacro(vtkGaussianFieldSequenceRenderer);
+vtkCxxSetObjectMacro(vtkGaussianFieldSequenceRenderer, FrameList, vtkIdList);
+
+vtkGaussianFieldSequenceRenderer::vtkGaussianFieldSequenceRenderer()
+{
+  this->SetNumberOfInputPorts(2);
+}
+
+vtkGaussianFieldSequenceRenderer::~vtkGaussianFieldSequenceRenderer()
+{
+  this->SetFrameList(nullptr);
+}
+
+int vtkGaussianFieldSequenceRenderer::FillInputPortInformation(int port, vtkInformation* info)
+{
+  info->Set(vtkAlgorithm::INPUT_REQUIRED_DATA_TYPE(), port == 0 ? "vtkPolyData" : "vtkImageData");
+  return 1;
+}
+
+int vtkGaussianFieldSequenceRenderer::RequestInformation(
+  vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector* outputVector)
+{
+  vtkInformation* poseInfo = inputVector[1]->GetInformationObject(0);
+  int extent[6];
+  poseInfo->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT(), extent);
+  if (this->FrameList && this->FrameList->GetNumberOfIds() > 0)
+  {
+    extent[4] = 0;
+    extent[5] = static_cast<int>(this->FrameList->GetNumberOfIds()) - 1;
+  }
+  vtkInformation* outInfo = outputVector->GetInformationObject(0);
+  outInfo->Set(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT(), extent, 6);
+  const double spacing[3] = { 1, 1, 1 }, origin[3] = { 0, 0, 0 };
+  outInfo->Set(vtkDataObject::SPACING(), spacing, 3);
+  outInfo->Set(vtkDataObject::ORIGIN(), origin, 3);
+  vtkDataObject::SetPointDataActiveScalarInfo(outInfo, this->OutputScalarType, 1);
+  return 1;
+}
+
+int vtkGaussianFieldSequenceRenderer::RequestUpdateExtent(
+  vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector*)
+{
+  // Only the poses are needed, but they come with the whole sequence.
+  vtkInformation* poseInfo = inputVector[1]->GetInformationObject(0);
+  poseInfo->Set(vtkStreamingDemandDrivenPipeline::UPDATE_EXTENT(),
+    poseInfo->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT()), 6);
+  return 1;
+}
+
+int vtkGaussianFieldSequenceRenderer::RequestData(
+  vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector* outputVector)
+{
+  vtkPolyData* input = vtkPolyData::GetData(inputVector[0], 0);
+  vtkImageData* sequence = vtkImageData::GetData(inputVector[1], 0);
+  vtkImageData* output = vtkImageData::GetData(outputVector, 0);
+  bigus::GaussianField field;
+  bigus::FieldModel model;
+  std::string error;
+  if (!bigus::FieldFromPolyData(input, field, model, &error))
+  {
+    vtkErrorMacro(<< error);
+    return 0;
+  }
+  int dims[3];
+  sequence->GetDimensions(dims);
+  vtkDataArray* poses = sequence->GetFieldData()->GetArray("ImageToReference");
+  if (!poses || poses->GetNumberOfComponents() != 16 || poses->GetNumberOfTuples() != dims[2])
+  {
+    vtkErrorMacro("input 1 must be a tracked frame sequence with ImageToReference (" << dims[2] << " x 16)");
+    return 0;
+  }
+  std::vector<vtkIdType> frames;
+  if (this->FrameList && this->FrameList->GetNumberOfIds() > 0)
+  {
+    for (vtkIdType k = 0; k < this->FrameList->GetNumberOfIds(); ++k)
+    {
+      const vtkIdType f = this->FrameList->GetId(k);
+      if (f < 0 || f >= dims[2])
+      {
+        vtkErrorMacro("frame " << f << " is outside the " << dims[2] << " frames of the pose sequence");
+        return 0;
+      }
+      frames.push_back(f);
+    }
+  }
+  else
+  {
+    for (vtkIdType f = 0; f < dims[2]; ++f)
+    {
+      frames.push_back(f);
+    }
+  }
+  const int count = static_cast<int>(frames.size());
+  std::vector<bigus::SliceGeometry> slices(count);
+  for (int k = 0; k < count; ++k)
+  {
+    poses->GetTuple(frames[k], slices[k].ImageToReference);
+    slices[k].Width = dims[0];
+    slices[k].Height = dims[1];
+  }
+  bigus::RenderOptions options;
+  options.ElevationSigma = this->ElevationSigma >= 0 ? this->ElevationSigma : model.ElevationSigma;
+  options.Gamma = model.Gamma;
+  options.Cutoff = this->Cutoff;
+  const std::size_t pixels = std::size_t(dims[0]) * dims[1] * count;
+  std::vector<float> S(pixels), I(pixels);
+  auto renderer = bigus::CreateCpuRenderer();
+  const auto start = std::chrono::steady_clock::now();
+  if (!renderer->Forward(field.View(), slices.data(), count, options, S.data(), I.data(), nullptr, &error))
+  {
+    vtkErrorMacro(<< error);
+    return 0;
+  }
+  this->SecondsPerFrame =
+    std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() / std::max(1, count);
+
+  output->SetExtent(0, dims[0] - 1, 0, dims[1] - 1, 0, count - 1);
+  output->SetSpacing(1, 1, 1);
+  output->SetOrigin(0, 0, 0);
+  vtkSmartPointer<vtkDataArray> scalars;
+  if (this->OutputScalarType == VTK_UNSIGNED_CHAR)
+  {
+    auto bytes = vtkSmartPointer<vtkUnsignedCharArray>::New();
+    bytes->SetNumberOfTuples(static_cast<vtkIdType>(pixels));
+    for (std::size_t p = 0; p < pixels; ++p)
+    {
+      bytes->SetValue(p, static_cast<unsigned char>(std::lround(255.0f * std::min(1.0f, std::max(0.0f, I[p])))));
+    }
+    scalars = bytes;
+  }
+  else
+  {
+    auto values = vtkSmartPointer<vtkFloatArray>::New();
+    values->SetNumberOfTuples(static_cast<vtkIdType>(pixels));
+    std::copy(I.begin(), I.end(), values->GetPointer(0));
+    scalars = values;
+  }
+  scalars->SetName("Intensity");
+  output->GetPointData()->SetScalars(scalars);
+  // The chosen frames' per-frame field data, in the output's order.
+  for (int a = 0; a < sequence->GetFieldData()->GetNumberOfArrays(); ++a)
+  {
+    vtkDataArray* source = sequence->GetFieldData()->GetArray(a);
+    if (!source || source->GetNumberOfTuples() != dims[2])
+    {
+      continue;
+    }
+    vtkSmartPointer<vtkDataArray> copy = vtkSmartPointer<vtkDataArray>::Take(source->NewInstance());
+    copy->SetName(source->GetName());
+    copy->SetNumberOfComponents(source->GetNumberOfComponents());
+    copy->SetNumberOfTuples(count);
+    for (int k = 0; k < count; ++k)
+    {
+      copy->SetTuple(k, frames[k], source);
+    }
+    output->GetFieldData()->AddArray(copy);
+  }
+  return 1;
+}
+
+void vtkGaussianFieldSequenceRenderer::PrintSelf(ostream& os, vtkIndent indent)
+{
+  this->Superclass::PrintSelf(os, indent);
+  os << indent << "FrameList: " << (this->FrameList ? this->FrameList->GetNumberOfIds() : 0) << " frames\n";
+  os << indent << "ElevationSigma: " << this->ElevationSigma << (this->ElevationSigma < 0 ? " (the field's)" : "")
+     << "\n";
+  os << indent << "Cutoff: " << this->Cutoff << "\n";
+  os << indent << "OutputScalarType: " << vtkImageScalarTypeNameMacro(this->OutputScalarType) << "\n";
+  os << indent << "SecondsPerFrame: " << this->SecondsPerFrame << "\n";
+}

@@ -1,0 +1,87 @@
+"""The `bigus` command line end to end on the small N-wire fixture: exit codes, one-line errors,
+outputs that exist and read back, and no half-written file when a step fails.
+
+Usage: TestCommandLine.py TESTING_DATA_DIR EXAMPLE_DATA_DIR BIGUS_EXECUTABLE OUTPUT_DIR
+"""
+import json
+import os
+import subprocess
+import sys
+
+import vtk  # noqa: F401
+import bigus
+
+
+def run(*args):
+    result = subprocess.run([BIGUS, *args], capture_output=True, text=True)
+    return result.returncode, result.stdout, result.stderr
+
+
+def main():
+    global BIGUS
+    data, _, BIGUS, out = sys.argv[1:5]
+    os.makedirs(out, exist_ok=True)
+    sweep = os.path.join(data, "nwire-phantom", "NwirePhantomFreehandCropped.igs.mha")
+    xml = os.path.join(data, "nwire-phantom", "PlusDeviceSet_NwirePhantomFreehand_vtkVolumeReconstructorTest2.xml")
+    field = os.path.join(out, "nwire.vtp")
+
+    code, _, err = run("info", os.path.join(out, "no-such-file.mha"))
+    assert code == 2 and "no-such-file" in err, (code, err)
+    code, _, err = run("info", os.path.join(data, "Malformed", "transform_nan_frame3.igs.mha"), "--calibration", xml)
+    assert code == 1 and err.count("\n") == 1 and "frame 3" in err, (code, err)
+    code, out_text, _ = run("info", sweep, "--calibration", xml)
+    assert code == 0 and "frames         20 (20 valid)" in out_text, out_text
+
+    code, out_text, err = run("train", sweep, "--calibration", xml, "-o", field, "--holdout-every", "4",
+                              "--holdout-offset", "2", "--iterations", "40", "--elevation-sigma", "1.0",
+                              "--evaluate-every", "1")
+    assert code == 0, (out_text, err)
+    reader = vtk.vtkXMLPolyDataReader()
+    reader.SetFileName(field)
+    reader.Update()
+    poly = reader.GetOutput()
+    assert poly.GetNumberOfPoints() > 100
+    assert poly.GetPointData().GetArray("Reflectivity") is not None
+    frames = poly.GetFieldData().GetArray("TrainingFrames")
+    assert all(int(frames.GetTuple1(k)) % 4 != 2 for k in range(frames.GetNumberOfTuples()))
+
+    # A failing run leaves the field that is already there untouched.
+    before = open(field, "rb").read()
+    code, _, err = run("train", os.path.join(data, "Malformed", "truncated_body.igs.mha"), "--calibration", xml,
+                       "-o", field)
+    assert code == 1 and err.strip(), (code, err)
+    assert open(field, "rb").read() == before
+
+    rendered = os.path.join(out, "nwire_rendered.igs.mha")
+    code, out_text, err = run("render", field, "--poses", sweep, "--calibration", xml, "--frames", "2", "6", "10",
+                              "-o", rendered)
+    assert code == 0, err
+    back = bigus.vtkUltrasoundSequenceReader()
+    back.SetFileName(rendered)
+    back.Update()
+    assert back.GetOutput().GetDimensions()[2] == 3, back.GetOutput().GetDimensions()
+    truth = bigus.vtkUltrasoundSequenceReader()
+    truth.SetFileName(sweep)
+    truth.SetCalibrationFileName(xml)
+    truth.Update()
+    poses, truth_poses = (r.GetOutput().GetFieldData().GetArray("ImageToReference") for r in (back, truth))
+    for k, f in enumerate((2, 6, 10)):
+        assert poses.GetTuple(k) == truth_poses.GetTuple(f), f
+
+    code, _, err = run("render", field, "--plane", "0", "0", "0", "0", "0", "0", "-o", os.path.join(out, "p.png"))
+    assert code == 1 and "normal" in err, err
+
+    report = os.path.join(out, "report")
+    code, out_text, err = run("evaluate", field, sweep, "--calibration", xml, "--holdout-every", "4",
+                              "--holdout-offset", "2", "--report", report)
+    assert code == 0, err
+    metrics = json.load(open(os.path.join(report, "metrics.json")))
+    assert [f["frame"] for f in metrics["frames"]] == [2, 6, 10, 14, 18], metrics["frames"]
+    assert all(0 < f["psnr"] <= 100 for f in metrics["frames"])
+    for name in ("slice_orthogonal.png", "slice_oblique.png", "psnr_against_time.png"):
+        assert os.path.getsize(os.path.join(report, name)) > 0, name
+    print("bigus info / train / render / evaluate: exit codes, outputs and errors as documented")
+
+
+if __name__ == "__main__":
+    main()
