@@ -20,8 +20,8 @@ struct PatchStatistics
   std::vector<double> SNR;      // mean / std
 };
 
-/// Contrast of the patches that lie wholly inside the mask; a patch enters only when both images give
-/// a positive mean there, so the two lists stay paired.
+/// Contrast of the patches that lie wholly inside the mask and where the truth's mean is positive;
+/// the two lists stay paired.
 void SpecklePatches(const float* a, const float* b, const unsigned char* mask, int width, int height,
   PatchStatistics& pa, PatchStatistics& pb)
 {
@@ -58,13 +58,15 @@ void SpecklePatches(const float* a, const float* b, const unsigned char* mask, i
         mean[k] = s[k] / n;
         sd[k] = std::sqrt(std::max(0.0, s2[k] / n - mean[k] * mean[k]));
       }
-      if (mean[0] <= 0 || mean[1] <= 0)
+      // Patches are chosen by the truth (b) alone: a rendering that is black where the truth has
+      // speckle must lose score there (contrast 0, SNR 0), not have the patch dropped.
+      if (mean[1] <= 0)
       {
         continue;
       }
-      pa.Contrast.push_back(sd[0] / mean[0]);
+      pa.Contrast.push_back(mean[0] > 0 ? sd[0] / mean[0] : 0.0);
       pb.Contrast.push_back(sd[1] / mean[1]);
-      pa.SNR.push_back(sd[0] > 0 ? mean[0] / sd[0] : 1e6);
+      pa.SNR.push_back(sd[0] > 0 ? mean[0] / sd[0] : (mean[0] > 0 ? 1e6 : 0.0));
       pb.SNR.push_back(sd[1] > 0 ? mean[1] / sd[1] : 1e6);
     }
   }
@@ -81,9 +83,10 @@ double Median(std::vector<double> v)
 ImageMetrics CompareImages(const float* rendered, const float* truth, const unsigned char* mask, int width, int height)
 {
   ImageMetrics m;
-  double se = 0, sa = 0, sb = 0, saa = 0, sbb = 0, sab = 0;
+  const std::size_t pixels = std::size_t(width) * height;
+  double se = 0, sa = 0, sb = 0;
   long n = 0;
-  for (std::size_t p = 0; p < std::size_t(width) * height; ++p)
+  for (std::size_t p = 0; p < pixels; ++p)
   {
     if (mask && !mask[p])
     {
@@ -93,9 +96,6 @@ ImageMetrics CompareImages(const float* rendered, const float* truth, const unsi
     se += (a - b) * (a - b);
     sa += a;
     sb += b;
-    saa += a * a;
-    sbb += b * b;
-    sab += a * b;
     ++n;
   }
   if (n == 0)
@@ -104,8 +104,20 @@ ImageMetrics CompareImages(const float* rendered, const float* truth, const unsi
   }
   const double mse = se / n;
   m.PSNR = mse > 0 ? std::min(100.0, 10 * std::log10(1.0 / mse)) : 100.0;
-  const double va = saa / n - (sa / n) * (sa / n), vb = sbb / n - (sb / n) * (sb / n);
-  const double cov = sab / n - (sa / n) * (sb / n);
+  // Two passes (means first): a constant image has exactly zero variance, so NCC is 0 there.
+  const double ma = sa / n, mb = sb / n;
+  double va = 0, vb = 0, cov = 0;
+  for (std::size_t p = 0; p < pixels; ++p)
+  {
+    if (mask && !mask[p])
+    {
+      continue;
+    }
+    const double a = rendered[p] - ma, b = truth[p] - mb;
+    va += a * a;
+    vb += b * b;
+    cov += a * b;
+  }
   m.NCC = va > 0 && vb > 0 ? cov / std::sqrt(va * vb) : 0.0;
   m.SSIM = MeanSSIM(rendered, truth, mask, width, height, false);
 
