@@ -9,6 +9,9 @@
 #include "vtkPointData.h"
 #include "vtkPoints.h"
 #include "vtkPolyData.h"
+#include "vtkUnsignedCharArray.h"
+
+#include <algorithm>
 
 #include <cmath>
 
@@ -78,6 +81,39 @@ bool FieldFromPolyData(vtkPolyData* data, GaussianField& field, FieldModel& mode
   value("Gamma", model.Gamma);
   value("PixelSpacing", model.PixelSpacing);
   return true;
+}
+
+RenderOptions RenderOptionsFor(const FieldModel& model, double elevationSigma, double cutoff)
+{
+  RenderOptions options;
+  options.ElevationSigma = elevationSigma >= 0 ? elevationSigma : model.ElevationSigma;
+  options.Gamma = model.Gamma;
+  options.Cutoff = cutoff;
+  return options;
+}
+
+vtkSmartPointer<vtkDataArray> IntensityArray(const std::vector<float>& I, int scalarType)
+{
+  vtkSmartPointer<vtkDataArray> scalars;
+  if (scalarType == VTK_UNSIGNED_CHAR)
+  {
+    auto bytes = vtkSmartPointer<vtkUnsignedCharArray>::New();
+    bytes->SetNumberOfTuples(static_cast<vtkIdType>(I.size()));
+    for (std::size_t p = 0; p < I.size(); ++p)
+    {
+      bytes->SetValue(p, static_cast<unsigned char>(std::lround(255.0f * std::min(1.0f, std::max(0.0f, I[p])))));
+    }
+    scalars = bytes;
+  }
+  else
+  {
+    auto values = vtkSmartPointer<vtkFloatArray>::New();
+    values->SetNumberOfTuples(static_cast<vtkIdType>(I.size()));
+    std::copy(I.begin(), I.end(), values->GetPointer(0));
+    scalars = values;
+  }
+  scalars->SetName("Intensity");
+  return scalars;
 }
 
 void FieldToPolyData(const GaussianField& field, const FieldModel& model, vtkPolyData* data)

@@ -15,7 +15,9 @@
 #include "vtkSmartPointer.h"
 
 #include <string>
+#include <vector>
 
+class vtkDataArray;
 class vtkPolyData;
 
 namespace bigus
@@ -34,6 +36,14 @@ struct FieldModel
  * not 3 components, a non-positive or non-finite scale, missing Rotation or Reflectivity).
  */
 BIGUSFILTERS_EXPORT bool FieldFromPolyData(vtkPolyData* data, GaussianField& field, FieldModel& model, std::string* error);
+
+/// Rendering settings of a stored field: its gamma and elevation sigma (@p elevationSigma < 0 keeps
+/// the field's), with footprint cutoff @p cutoff.
+BIGUSFILTERS_EXPORT RenderOptions RenderOptionsFor(const FieldModel& model, double elevationSigma, double cutoff);
+
+/// The rendered image I ([0, 1] floats) as point-data scalars "Intensity": VTK_FLOAT as is, or
+/// VTK_UNSIGNED_CHAR as round(255 I).
+BIGUSFILTERS_EXPORT vtkSmartPointer<vtkDataArray> IntensityArray(const std::vector<float>& I, int scalarType);
 
 /// Write a field (points, vertices, Scale, Rotation normalised, Reflectivity, ElevationSigma, Gamma,
 /// PixelSpacing).

@@ -14,7 +14,6 @@
 #include "vtkPointData.h"
 #include "vtkPolyData.h"
 #include "vtkStreamingDemandDrivenPipeline.h"
-#include "vtkUnsignedCharArray.h"
 
 #include <algorithm>
 #include <cmath>
@@ -268,10 +267,7 @@ int vtkGaussianFieldReslice::RequestData(
     slices[k].Width = width;
     slices[k].Height = height;
   }
-  bigus::RenderOptions options;
-  options.ElevationSigma = this->ElevationSigma >= 0 ? this->ElevationSigma : model.ElevationSigma;
-  options.Gamma = model.Gamma;
-  options.Cutoff = this->Cutoff;
+  const bigus::RenderOptions options = bigus::RenderOptionsFor(model, this->ElevationSigma, this->Cutoff);
   const std::size_t pixels = std::size_t(width) * height * depth;
   std::vector<float> S(pixels), I(pixels);
   auto renderer = bigus::CreateCpuRenderer();
@@ -280,25 +276,7 @@ int vtkGaussianFieldReslice::RequestData(
     vtkErrorMacro("ResliceAxes: " << error);
     return 0;
   }
-  if (this->OutputScalarType == VTK_UNSIGNED_CHAR)
-  {
-    vtkNew<vtkUnsignedCharArray> scalars;
-    scalars->SetName("Intensity");
-    scalars->SetNumberOfTuples(static_cast<vtkIdType>(pixels));
-    for (std::size_t p = 0; p < pixels; ++p)
-    {
-      scalars->SetValue(p, static_cast<unsigned char>(std::lround(255.0f * std::min(1.0f, std::max(0.0f, I[p])))));
-    }
-    output->GetPointData()->SetScalars(scalars);
-  }
-  else
-  {
-    vtkNew<vtkFloatArray> scalars;
-    scalars->SetName("Intensity");
-    scalars->SetNumberOfTuples(static_cast<vtkIdType>(pixels));
-    std::copy(I.begin(), I.end(), scalars->GetPointer(0));
-    output->GetPointData()->SetScalars(scalars);
-  }
+  output->GetPointData()->SetScalars(bigus::IntensityArray(I, this->OutputScalarType));
   if (this->OutputScatteringField)
   {
     vtkNew<vtkFloatArray> scattering;

@@ -15,7 +15,6 @@
 #include "vtkPointData.h"
 #include "vtkPolyData.h"
 #include "vtkStreamingDemandDrivenPipeline.h"
-#include "vtkUnsignedCharArray.h"
 
 #include <chrono>
 #include <cmath>
@@ -121,10 +120,7 @@ int vtkGaussianFieldSequenceRenderer::RequestData(
     slices[k].Width = dims[0];
     slices[k].Height = dims[1];
   }
-  bigus::RenderOptions options;
-  options.ElevationSigma = this->ElevationSigma >= 0 ? this->ElevationSigma : model.ElevationSigma;
-  options.Gamma = model.Gamma;
-  options.Cutoff = this->Cutoff;
+  const bigus::RenderOptions options = bigus::RenderOptionsFor(model, this->ElevationSigma, this->Cutoff);
   const std::size_t pixels = std::size_t(dims[0]) * dims[1] * count;
   std::vector<float> S(pixels), I(pixels);
   auto renderer = bigus::CreateCpuRenderer();
@@ -140,26 +136,7 @@ int vtkGaussianFieldSequenceRenderer::RequestData(
   output->SetExtent(0, dims[0] - 1, 0, dims[1] - 1, 0, count - 1);
   output->SetSpacing(1, 1, 1);
   output->SetOrigin(0, 0, 0);
-  vtkSmartPointer<vtkDataArray> scalars;
-  if (this->OutputScalarType == VTK_UNSIGNED_CHAR)
-  {
-    auto bytes = vtkSmartPointer<vtkUnsignedCharArray>::New();
-    bytes->SetNumberOfTuples(static_cast<vtkIdType>(pixels));
-    for (std::size_t p = 0; p < pixels; ++p)
-    {
-      bytes->SetValue(p, static_cast<unsigned char>(std::lround(255.0f * std::min(1.0f, std::max(0.0f, I[p])))));
-    }
-    scalars = bytes;
-  }
-  else
-  {
-    auto values = vtkSmartPointer<vtkFloatArray>::New();
-    values->SetNumberOfTuples(static_cast<vtkIdType>(pixels));
-    std::copy(I.begin(), I.end(), values->GetPointer(0));
-    scalars = values;
-  }
-  scalars->SetName("Intensity");
-  output->GetPointData()->SetScalars(scalars);
+  output->GetPointData()->SetScalars(bigus::IntensityArray(I, this->OutputScalarType));
   // The chosen frames' per-frame field data, in the output's order.
   for (int a = 0; a < sequence->GetFieldData()->GetNumberOfArrays(); ++a)
   {
