@@ -324,18 +324,21 @@ int RunTrain(const TrainOptions& o)
     const double fraction = *static_cast<double*>(data);
     const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - c.Start).count();
     const double eta = fraction > 0 ? elapsed * (1 - fraction) / fraction : 0;
-    (void)caller;
+    auto* t = static_cast<vtkGaussianFieldTrainer*>(caller);
+    char state[160];
+    std::snprintf(state, sizeof(state), "%3.0f%%  iteration %d  loss %.4f  Gaussians %lld  elapsed %.0f s  ETA %.0f s",
+      100 * fraction, t->GetCurrentIteration(), t->GetCurrentLoss(),
+      static_cast<long long>(t->GetCurrentNumberOfGaussians()), elapsed, eta);
     if (c.Terminal)
     {
-      const int width = 30, filled = static_cast<int>(fraction * width);
-      std::printf("\r[%s%s] %3.0f%%  elapsed %4.0f s  ETA %4.0f s", std::string(filled, '#').c_str(),
-        std::string(width - filled, ' ').c_str(), 100 * fraction, elapsed, eta);
+      const int width = 24, filled = static_cast<int>(fraction * width);
+      std::printf("\r[%s%s] %s   ", std::string(filled, '#').c_str(), std::string(width - filled, ' ').c_str(), state);
       std::fflush(stdout);
     }
     else if (static_cast<int>(fraction * 10) > *c.LastDecile)
     {
       *c.LastDecile = static_cast<int>(fraction * 10);
-      std::printf("training %3.0f%%  elapsed %.0f s  ETA %.0f s\n", 100 * fraction, elapsed, eta);
+      std::printf("training %s\n", state);
       std::fflush(stdout);
     }
   });

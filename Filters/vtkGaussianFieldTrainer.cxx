@@ -194,7 +194,10 @@ int vtkGaussianFieldTrainer::RequestData(
     history->InsertNextTuple(row);
   };
   const bool ok = trainer.Run(
-    [&](double fraction, int, double, std::int64_t) {
+    [&](double fraction, int iteration, double loss, std::int64_t gaussians) {
+      this->CurrentIteration = iteration;
+      this->CurrentLoss = loss;
+      this->CurrentNumberOfGaussians = gaussians;
       this->UpdateProgress(fraction);
       if (this->EvaluationInterval > 0 && !heldOut.empty() &&
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() >= nextEvaluation)

@@ -125,6 +125,13 @@ public:
   vtkGetStringMacro(ResumeFile);
   ///@}
 
+  ///@{ State of the run in progress (read them in a ProgressEvent observer): step, loss of the last
+  /// step, number of Gaussians.
+  vtkGetMacro(CurrentIteration, int);
+  vtkGetMacro(CurrentLoss, double);
+  vtkGetMacro(CurrentNumberOfGaussians, vtkIdType);
+  ///@}
+
   ///@{ Results of the last run.
   vtkGetMacro(NumberOfGaussians, vtkIdType);
   vtkGetMacro(TrainingSeconds, double);
@@ -166,6 +173,9 @@ protected:
   int CheckpointInterval = 0;
   char* ResumeFile = nullptr;
 
+  int CurrentIteration = 0;
+  double CurrentLoss = 0;
+  vtkIdType CurrentNumberOfGaussians = 0;
   vtkIdType NumberOfGaussians = 0;
   double TrainingSeconds = 0;
   int CompletedIterations = 0;
