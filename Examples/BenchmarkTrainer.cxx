@@ -178,8 +178,6 @@ int main(int argc, char** argv)
     std::fprintf(stderr, "%s\n", error.c_str());
     return 1;
   }
-  auto renderer = CreateCpuRenderer();
-  std::vector<float> S(framePixels), I(framePixels);
   double trained = 0;
   for (double mark : marks)
   {
@@ -191,14 +189,7 @@ int main(int argc, char** argv)
     trained = mark;
     Mean bigus;
     double renderSeconds = 0;
-    for (int k : heldOut)
-    {
-      const SliceGeometry g = trainer.Slice(k);
-      const auto r0 = std::chrono::steady_clock::now();
-      renderer->Forward(trainer.GetField().View(), &g, 1, trainer.Options(), S.data(), I.data(), nullptr, nullptr);
-      renderSeconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - r0).count() / heldOut.size();
-      bigus.Add(CompareImages(I.data(), &data.Frames[framePixels * k], data.Mask.data(), dims[0], dims[1]), heldOut.size());
-    }
+    bigus.Add(trainer.Evaluate(heldOut, &renderSeconds), 1);
     char name[64], extra[200];
     std::snprintf(name, sizeof(name), "BIGUS after %.0f s", mark);
     std::snprintf(extra, sizeof(extra), "%lld Gaussians, %d steps, %.0f ms/frame render, peak memory %.0f MiB",

@@ -87,6 +87,7 @@ bool Publish(const std::string& temporary, const std::string& path)
 struct SweepOptions
 {
   std::string Sweep, Calibration, Chain;
+  std::vector<int> FrameRange; ///< empty, or first and last frame
 };
 
 /// Reads a sweep; on failure prints the reader's message and returns null.
@@ -101,6 +102,10 @@ vtkSmartPointer<vtkUltrasoundSequenceReader> ReadSweep(const SweepOptions& o)
   if (!o.Chain.empty())
   {
     reader->SetTransformChain(o.Chain.c_str());
+  }
+  if (o.FrameRange.size() == 2)
+  {
+    reader->SetFrameRange(o.FrameRange[0], o.FrameRange[1]);
   }
   reader->Update();
   if (*reader->GetLastErrorText())
@@ -153,29 +158,14 @@ std::vector<int> ChooseFrames(int count, int every, int offset, const std::vecto
 struct InfoOptions
 {
   SweepOptions Sweep;
-  std::vector<int> Frames;
 };
 
 int RunInfo(const InfoOptions& options)
 {
-  vtkNew<vtkUltrasoundSequenceReader> reader;
-  reader->SetFileName(options.Sweep.Sweep.c_str());
-  if (!options.Sweep.Calibration.empty())
+  auto reader = ReadSweep(options.Sweep);
+  if (!reader)
   {
-    reader->SetCalibrationFileName(options.Sweep.Calibration.c_str());
-  }
-  if (!options.Sweep.Chain.empty())
-  {
-    reader->SetTransformChain(options.Sweep.Chain.c_str());
-  }
-  if (options.Frames.size() == 2)
-  {
-    reader->SetFrameRange(options.Frames[0], options.Frames[1]);
-  }
-  reader->Update();
-  if (*reader->GetLastErrorText())
-  {
-    return Fail(reader->GetLastErrorText());
+    return 1;
   }
   vtkImageData* frames = reader->GetOutput();
   int dims[3];
@@ -772,7 +762,7 @@ int main(int argc, char** argv)
     ->required()
     ->check(CLI::ExistingFile);
   AddSweepOptions(infoCommand, info.Sweep, "sweep");
-  infoCommand->add_option("--frames", info.Frames, "First and last frame to read (inclusive)")->expected(2);
+  infoCommand->add_option("--frames", info.Sweep.FrameRange, "First and last frame to read (inclusive)")->expected(2);
 
   TrainOptions train;
   CLI::App* trainCommand = app.add_subcommand("train", "Train a Gaussian scattering field from a tracked sweep");

@@ -148,6 +148,15 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings)
   {
     this->Settings.DensifyEnd = static_cast<int>(0.6 * this->Settings.Iterations);
   }
+  if (!this->Data.TrainFrames.empty())
+  {
+    double spacing = 0;
+    for (int f : this->Data.TrainFrames)
+    {
+      spacing += PixelSpacingOf(this->Data.Poses[f]);
+    }
+    this->PixelSpacing = spacing / this->Data.TrainFrames.size();
+  }
 }
 
 SliceGeometry Trainer::Slice(int frame) const
@@ -182,7 +191,7 @@ bool Trainer::Initialize(std::string* error)
     }
     return false;
   }
-  double sum = 0, spacing = 0;
+  double sum = 0;
   long count = 0;
   for (int f : this->Data.TrainFrames)
   {
@@ -195,7 +204,6 @@ bool Trainer::Initialize(std::string* error)
         ++count;
       }
     }
-    spacing += PixelSpacingOf(this->Data.Poses[f]);
   }
   if (count == 0)
   {
@@ -206,7 +214,6 @@ bool Trainer::Initialize(std::string* error)
     return false;
   }
   this->Gamma = GammaFromMeanIntensity(sum / count);
-  this->PixelSpacing = spacing / this->Data.TrainFrames.size();
   std::mt19937_64 rng(this->Settings.Seed * 7919ULL + 17);
   if (this->Settings.HarrisInitialisation)
   {
@@ -660,6 +667,35 @@ void Trainer::DensifyAndPrune()
   this->SnapshotV = this->AdamV;
 }
 
+ImageMetrics Trainer::Evaluate(const std::vector<int>& frames, double* secondsPerFrame)
+{
+  const std::size_t pixels = std::size_t(this->Data.Width) * this->Data.Height;
+  const RenderOptions o = this->Options();
+  std::vector<float> S(pixels), I(pixels);
+  ImageMetrics mean;
+  double seconds = 0;
+  for (int f : frames)
+  {
+    const SliceGeometry slice = this->Slice(f);
+    const double t0 = Seconds();
+    this->Backend->Forward(this->Field.View(), &slice, 1, o, S.data(), I.data(), nullptr, nullptr);
+    seconds += Seconds() - t0;
+    const ImageMetrics m =
+      CompareImages(I.data(), &this->Data.Frames[pixels * f], this->Data.Mask.data(), this->Data.Width, this->Data.Height);
+    const double n = static_cast<double>(frames.size());
+    mean.PSNR += m.PSNR / n;
+    mean.SSIM += m.SSIM / n;
+    mean.NCC += m.NCC / n;
+    mean.Speckle += m.Speckle / n;
+    mean.Patches += m.Patches;
+  }
+  if (secondsPerFrame)
+  {
+    *secondsPerFrame = frames.empty() ? 0.0 : seconds / frames.size();
+  }
+  return mean;
+}
+
 std::int64_t Trainer::FinalPrune()
 {
   // A Gaussian changes a pixel's scattering field by at most |r| amp, hence its intensity by at most
@@ -968,11 +1004,6 @@ bool Trainer::LoadCheckpoint(const std::string& file, std::string* error)
   this->Attribution = attribution;
   this->SeenCount = seen;
   this->Report.LossHistory = losses;
-  this->PixelSpacing = 0;
-  for (int f : this->Data.TrainFrames)
-  {
-    this->PixelSpacing += PixelSpacingOf(this->Data.Poses[f]) / this->Data.TrainFrames.size();
-  }
   this->Snapshot = this->Field;
   this->SnapshotM = this->AdamM;
   this->SnapshotV = this->AdamV;

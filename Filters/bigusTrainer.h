@@ -11,6 +11,7 @@
 
 #include "bigusFiltersModule.h" // For export macro
 #include "bigusImageLoss.h"
+#include "bigusImageMetrics.h"
 #include "bigusRenderer.h"
 
 #include <array>
@@ -120,6 +121,13 @@ public:
   /// Checkpoint: field, Adam state, schedule and random state (format in bigusTrainer.cxx).
   bool SaveCheckpoint(const std::string& file, std::string* error) const;
   bool LoadCheckpoint(const std::string& file, std::string* error);
+
+  /**
+   * Render @p frames at their poses and compare them with the recorded frames inside the mask
+   * (bigus::CompareImages); returns the mean of each metric. @p secondsPerFrame, if non-null, receives
+   * the mean render time per frame (s).
+   */
+  ImageMetrics Evaluate(const std::vector<int>& frames, double* secondsPerFrame = nullptr);
 
   /// Remove Gaussians whose removal changes no training pixel by more than FinalPruneTolerance.
   std::int64_t FinalPrune();

@@ -1,7 +1,6 @@
 #include "vtkGaussianFieldTrainer.h"
 
 #include "bigusGaussianFieldData.h"
-#include "bigusImageMetrics.h"
 #include "bigusTrainer.h"
 #include "vtkUltrasoundFanMask.h"
 
@@ -178,19 +177,7 @@ int vtkGaussianFieldTrainer::RequestData(
   double nextEvaluation = 0;
   auto evaluate = [&]() {
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    auto renderer = bigus::CreateCpuRenderer();
-    const bigus::TrainingData& d = trainer.GetData();
-    const std::size_t framePixels = std::size_t(d.Width) * d.Height;
-    std::vector<float> S(framePixels), I(framePixels);
-    double psnr = 0;
-    for (int k : heldOut)
-    {
-      const bigus::SliceGeometry g = trainer.Slice(k);
-      renderer->Forward(trainer.GetField().View(), &g, 1, trainer.Options(), S.data(), I.data(), nullptr, nullptr);
-      psnr += bigus::CompareImages(I.data(), &d.Frames[framePixels * k], d.Mask.data(), d.Width, d.Height).PSNR /
-        heldOut.size();
-    }
-    const double row[2] = { seconds, psnr };
+    const double row[2] = { seconds, trainer.Evaluate(heldOut).PSNR };
     history->InsertNextTuple(row);
   };
   const bool ok = trainer.Run(

@@ -75,6 +75,21 @@ bool PrepareSlice(const SliceGeometry& g, const RenderOptions& o, int index, Pre
   return true;
 }
 
+/// Every slice of a call, checked before anything is written.
+bool PrepareSlices(const SliceGeometry* slices, int count, const RenderOptions& o, std::vector<PreparedSlice>& prepared,
+  std::string* error)
+{
+  prepared.resize(count);
+  for (int k = 0; k < count; ++k)
+  {
+    if (!PrepareSlice(slices[k], o, k, prepared[k], error))
+    {
+      return false;
+    }
+  }
+  return true;
+}
+
 GaussianParams LoadGaussian(const FieldView& field, std::int64_t i)
 {
   GaussianParams g;
@@ -435,13 +450,10 @@ public:
   bool Forward(const FieldView& field, const SliceGeometry* slices, int count, const RenderOptions& options,
     float* S, float* I, RenderStats* stats, std::string* error) override
   {
-    std::vector<PreparedSlice> prepared(count);
-    for (int k = 0; k < count; ++k)
+    std::vector<PreparedSlice> prepared;
+    if (!PrepareSlices(slices, count, options, prepared, error))
     {
-      if (!PrepareSlice(slices[k], options, k, prepared[k], error))
-      {
-        return false;
-      }
+      return false;
     }
     const float gamma = static_cast<float>(options.Gamma);
     double t0 = Now();
@@ -483,13 +495,10 @@ public:
     const float* S, const float* dL, bool gradientIsWithRespectToS, FieldGradients& gradients, RenderStats* stats,
     std::string* error) override
   {
-    std::vector<PreparedSlice> prepared(count);
-    for (int k = 0; k < count; ++k)
+    std::vector<PreparedSlice> prepared;
+    if (!PrepareSlices(slices, count, options, prepared, error))
     {
-      if (!PrepareSlice(slices[k], options, k, prepared[k], error))
-      {
-        return false;
-      }
+      return false;
     }
     const double t0 = Now();
     this->Bounds.Compute(field);
