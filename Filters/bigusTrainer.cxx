@@ -182,7 +182,7 @@ RenderOptions Trainer::Options() const
 bool Trainer::Initialize(std::string* error)
 {
   const std::size_t pixels = std::size_t(this->Data.Width) * this->Data.Height;
-  if (this->Data.TrainFrames.empty() || pixels == 0 || this->Data.Mask.size() != pixels ||
+  if (this->Data.TrainFrames.empty() || pixels == 0 || (this->Data.Mask.size() != pixels && this->Data.Mask.size() != pixels * this->Data.Poses.size()) ||
     this->Data.Frames.size() != pixels * this->Data.Poses.size())
   {
     if (error)
@@ -196,9 +196,10 @@ bool Trainer::Initialize(std::string* error)
   for (int f : this->Data.TrainFrames)
   {
     const float* frame = &this->Data.Frames[pixels * f];
+    const unsigned char* mask = this->Data.MaskOf(f);
     for (std::size_t p = 0; p < pixels; ++p)
     {
-      if (this->Data.Mask[p])
+      if (mask[p])
       {
         sum += frame[p];
         ++count;
@@ -298,23 +299,28 @@ void Trainer::InitializeHarris(std::mt19937_64& rng)
   {
     const int f = this->Data.TrainFrames[n];
     const float* frame = &this->Data.Frames[pixels * f];
+    const unsigned char* mask = this->Data.MaskOf(f);
     cv::Mat image(H, W, CV_32F, const_cast<float*>(frame));
     cv::Mat response;
     cv::cornerHarris(image, response, 3, 3, 0.04);
     double positive = 0, masked = 0;
     for (std::size_t p = 0; p < pixels; ++p)
     {
-      if (this->Data.Mask[p])
+      if (mask[p])
       {
         positive += std::max(0.0f, response.at<float>(static_cast<int>(p)));
         masked += 1;
       }
     }
+    if (masked == 0)
+    {
+      continue; // a frame that sees nothing of the scene (volume protocol: a slice outside the data)
+    }
     const double share = this->Settings.UniformShare;
     double running = 0;
     for (std::size_t p = 0; p < pixels; ++p)
     {
-      if (this->Data.Mask[p])
+      if (mask[p])
       {
         const double harris = positive > 0 ? std::max(0.0f, response.at<float>(static_cast<int>(p))) / positive : 0;
         running += (1 - share) * harris + (positive > 0 ? share : 1.0) / masked;
@@ -392,9 +398,10 @@ void Trainer::FitReflectivityScale()
     const SliceGeometry slice = this->Slice(f);
     this->Backend->Forward(this->Field.View(), &slice, 1, o, S.data(), nullptr, nullptr, nullptr);
     const float* frame = &this->Data.Frames[pixels * f];
+    const unsigned char* mask = this->Data.MaskOf(f);
     for (std::size_t p = 0; p < pixels; ++p)
     {
-      if (this->Data.Mask[p])
+      if (mask[p])
       {
         num += S[p] * InvertImage(frame[p], this->Gamma);
         den += double(S[p]) * S[p];
@@ -429,7 +436,7 @@ double Trainer::Step()
   this->I.resize(pixels);
   this->LossGradient.resize(pixels);
   this->Backend->Forward(this->Field.View(), &slice, 1, o, this->S.data(), this->I.data(), nullptr, nullptr);
-  const ImageLossTerms loss = ComputeImageLoss(this->I.data(), &this->Data.Frames[pixels * f], this->Data.Mask.data(),
+  const ImageLossTerms loss = ComputeImageLoss(this->I.data(), &this->Data.Frames[pixels * f], this->Data.MaskOf(f),
     this->Data.Width, this->Data.Height, this->Settings.Loss, this->LossGradient.data());
 
   this->Gradients.assign(11 * n, 0.f); // [N, 3] means, [N, 3] log-scales, [N, 4] quaternions, [N] r
@@ -532,7 +539,7 @@ double Trainer::ValidationLoss()
     const int f = this->Data.TrainFrames[n];
     const SliceGeometry slice = this->Slice(f);
     this->Backend->Forward(this->Field.View(), &slice, 1, o, S.data(), I.data(), nullptr, nullptr);
-    total += ComputeImageLoss(I.data(), &this->Data.Frames[pixels * f], this->Data.Mask.data(), this->Data.Width,
+    total += ComputeImageLoss(I.data(), &this->Data.Frames[pixels * f], this->Data.MaskOf(f), this->Data.Width,
       this->Data.Height, this->Settings.Loss, nullptr)
                .Total;
   }
@@ -681,7 +688,7 @@ ImageMetrics Trainer::Evaluate(const std::vector<int>& frames, double* secondsPe
     this->Backend->Forward(this->Field.View(), &slice, 1, o, S.data(), I.data(), nullptr, nullptr);
     seconds += Seconds() - t0;
     const ImageMetrics m =
-      CompareImages(I.data(), &this->Data.Frames[pixels * f], this->Data.Mask.data(), this->Data.Width, this->Data.Height);
+      CompareImages(I.data(), &this->Data.Frames[pixels * f], this->Data.MaskOf(f), this->Data.Width, this->Data.Height);
     const double n = static_cast<double>(frames.size());
     mean.PSNR += m.PSNR / n;
     mean.SSIM += m.SSIM / n;

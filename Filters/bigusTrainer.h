@@ -31,9 +31,15 @@ struct TrainingData
   int Width = 0, Height = 0;
   std::vector<float> Frames;                     ///< [N, H, W]
   std::vector<std::array<double, 16>> Poses;     ///< [N] ImageToReference, row-major
-  std::vector<unsigned char> Mask;               ///< [H, W] fan mask (1 = imaged)
+  std::vector<unsigned char> Mask;               ///< [H, W] fan mask shared by every frame, or [N, H, W] per frame (1 = imaged)
   std::vector<int> TrainFrames;                  ///< indices into Frames used for training
   int Count() const { return static_cast<int>(this->Poses.size()); }
+  /// The [H, W] mask of frame @p frame (the shared one, or that frame's own).
+  const unsigned char* MaskOf(int frame) const
+  {
+    const std::size_t pixels = std::size_t(this->Width) * this->Height;
+    return this->Mask.data() + (this->Mask.size() == pixels ? 0 : pixels * frame);
+  }
 };
 
 /// A Gaussian field's parameters (float, structure of arrays).

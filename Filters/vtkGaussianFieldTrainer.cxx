@@ -119,13 +119,15 @@ int vtkGaussianFieldTrainer::RequestData(
     mask = estimate->GetOutput();
   }
   vtkDataArray* maskValues = mask->GetPointData()->GetScalars();
-  if (!maskValues || maskValues->GetNumberOfTuples() != framePixels)
+  const vtkIdType maskPixels = maskValues ? maskValues->GetNumberOfTuples() : 0;
+  if (maskPixels != framePixels && maskPixels != framePixels * dims[2])
   {
-    vtkErrorMacro("the fan mask must be a " << dims[0] << " x " << dims[1] << " image");
+    vtkErrorMacro("the fan mask must be a " << dims[0] << " x " << dims[1] << " image or a " << dims[0] << " x "
+                                            << dims[1] << " x " << dims[2] << " per-frame mask sequence");
     return 0;
   }
-  data.Mask.resize(framePixels);
-  for (vtkIdType p = 0; p < framePixels; ++p)
+  data.Mask.resize(maskPixels);
+  for (vtkIdType p = 0; p < maskPixels; ++p)
   {
     data.Mask[p] = maskValues->GetTuple1(p) != 0 ? 1 : 0;
   }

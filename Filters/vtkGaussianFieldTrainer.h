@@ -3,7 +3,8 @@
  * @brief   Trains a beam-integrated Gaussian scattering field from a tracked ultrasound sweep.
  *
  * Input port 0: a tracked frame sequence (DESIGN section 2; e.g. vtkUltrasoundSequenceReader).
- * Input port 1 (optional): its fan mask (vtkUltrasoundFanMask's output); estimated when absent.
+ * Input port 1 (optional): its fan mask (vtkUltrasoundFanMask's output, W x H x 1), or one mask per frame
+ * (W x H x N, e.g. vtkUltrasoundVolumeSweep's port 1); estimated when absent.
  * Output: the Gaussian field as vtkPolyData: one point (mean, mm) and one vertex per Gaussian, point
  * data `Scale` (3 floats, standard deviations in mm along the local axes), `Rotation` (4 floats, unit
  * quaternion w, x, y, z) and `Reflectivity` (signed); field data `ElevationSigma` (mm), `Gamma`,
@@ -51,7 +52,7 @@ public:
   vtkTypeMacro(vtkGaussianFieldTrainer, vtkPolyDataAlgorithm);
   void PrintSelf(ostream& os, vtkIndent indent) override;
 
-  /// Connect the fan mask (W x H x 1 unsigned char) to port 1.
+  /// Connect the fan mask (W x H x 1 unsigned char, or W x H x N: one mask per frame) to port 1.
   void SetMaskConnection(vtkAlgorithmOutput* output) { this->SetInputConnection(1, output); }
 
   ///@{ Elevation beam standard deviation (mm). Default 0.5.

@@ -15,6 +15,7 @@
 #include "vtkStreamingDemandDrivenPipeline.h"
 #include "vtkTable.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -193,16 +194,19 @@ int vtkUltrasoundImageMetrics::RequestData(
     return 0;
   }
 
+  // The mask: one W x H image for every frame, or one per frame (W x H x frames).
   std::vector<unsigned char> mask;
+  std::size_t maskStride = 0; // 0: shared, pixels: per frame
   if (maskImage)
   {
     int maskDims[3];
     maskImage->GetDimensions(maskDims);
     vtkDataArray* maskScalars = maskImage->GetPointData()->GetScalars();
-    if (maskDims[0] != width || maskDims[1] != height || maskDims[2] != 1)
+    if (maskDims[0] != width || maskDims[1] != height || (maskDims[2] != 1 && maskDims[2] != frames))
     {
       vtkErrorMacro("the mask is " << SizeText(maskDims) << " but the frames are " << SizeText(dims)
-                                   << "; the mask must be " << width << " x " << height << " x 1");
+                                   << "; the mask must be " << width << " x " << height << " x 1 or " << width
+                                   << " x " << height << " x " << frames);
       return 0;
     }
     if (!maskScalars || maskScalars->GetNumberOfComponents() != 1)
@@ -210,9 +214,10 @@ int vtkUltrasoundImageMetrics::RequestData(
       vtkErrorMacro("the mask needs one-component scalars");
       return 0;
     }
-    mask.resize(pixels);
+    maskStride = maskDims[2] == 1 ? 0 : pixels;
+    mask.resize(pixels * maskDims[2]);
     bool any = false;
-    for (std::size_t p = 0; p < pixels; ++p)
+    for (std::size_t p = 0; p < mask.size(); ++p)
     {
       mask[p] = maskScalars->GetComponent(vtkIdType(p), 0) != 0;
       any = any || mask[p];
@@ -240,10 +245,14 @@ int vtkUltrasoundImageMetrics::RequestData(
     {
       continue;
     }
+    const unsigned char* frameMask = mask.empty() ? nullptr : mask.data() + maskStride * k;
+    if (frameMask && std::none_of(frameMask, frameMask + pixels, [](unsigned char m) { return m != 0; }))
+    {
+      continue; // this frame's own mask is empty: nothing of it can be compared
+    }
     ReadFrame(scalars, k, pixels, a);
     ReadFrame(truthScalars, k, pixels, b);
-    const bigus::ImageMetrics m =
-      bigus::CompareImages(a.data(), b.data(), mask.empty() ? nullptr : mask.data(), width, height);
+    const bigus::ImageMetrics m = bigus::CompareImages(a.data(), b.data(), frameMask, width, height);
     frameColumn->InsertNextValue(index ? static_cast<int>(index->GetTuple1(k)) : k);
     psnr->InsertNextValue(m.PSNR);
     ssim->InsertNextValue(m.SSIM);

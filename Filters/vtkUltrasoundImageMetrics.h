@@ -8,8 +8,10 @@
  * - port 1: the ground-truth frames, W x H x N as well, usually a tracked frame sequence (DESIGN
  *   section 2) whose field data `FrameValid` and `FrameIndex` are used when present
  *   (SetTruthConnection / SetTruthData);
- * - port 2, optional: the fan mask, a W x H x 1 image such as vtkUltrasoundFanMask's `FanMask`
- *   (SetMaskConnection / SetMaskData); non-zero = imaged pixel. Without it every pixel counts.
+ * - port 2, optional: the fan mask, a W x H x 1 image such as vtkUltrasoundFanMask's `FanMask`, or one
+ *   mask per frame, W x H x N (e.g. vtkUltrasoundSequenceReslice's port 1: where the volume has data)
+ *   (SetMaskConnection / SetMaskData); non-zero = imaged pixel. Without it every pixel counts. A frame
+ *   whose own mask is empty is left out of the table.
  * Scalars have one component: unsigned char (intensity / 255) or float / double already in [0, 1], so
  * that every metric uses data range 1.
  *

@@ -418,6 +418,51 @@ TEST(UltrasoundImageMetrics, OnlyTheMaskedPixelsCount)
   EXPECT_NE(Value(all.Table, "SSIM", 0), Value(clean.Table, "SSIM", 0));
 }
 
+TEST(UltrasoundImageMetrics, PerFrameMasksSelectEachFramesPixels)
+{
+  // A W x H x N mask: frame k is measured with its own mask, exactly as with a W x H x 1 mask equal to
+  // that slice; a frame whose own mask is empty is left out.
+  vtkSmartPointer<vtkImageData> truth = SpineFrames();
+  vtkSmartPointer<vtkImageData> rendered = SpineFrames();
+  for (int k = 0; k < Frames; ++k)
+  {
+    const std::vector<float> b = Blurred(Frame(truth, k));
+    unsigned char* p = Bytes(rendered) + std::size_t(k) * W * H;
+    for (int q = 0; q < W * H; ++q)
+    {
+      p[q] = static_cast<unsigned char>(std::lround(b[q] * 255));
+    }
+  }
+  vtkSmartPointer<vtkImageData> fan = SpineMask();
+  vtkNew<vtkImageData> masks;
+  masks->SetDimensions(W, H, Frames);
+  masks->AllocateScalars(VTK_UNSIGNED_CHAR, 1);
+  for (int k = 0; k < Frames; ++k)
+  {
+    // Frame k keeps the fan rows below a depth that grows with k; the last frame's mask is empty.
+    for (int q = 0; q < W * H; ++q)
+    {
+      Bytes(masks)[std::size_t(k) * W * H + q] = k < Frames - 1 && q / W >= 100 * k ? Bytes(fan)[q] : 0;
+    }
+  }
+  const Result perFrame = Measure(rendered, truth, masks);
+  ASSERT_EQ(perFrame.Table->GetNumberOfRows(), Frames); // Frames - 1 rows and the mean
+  for (int k = 0; k < Frames - 1; ++k)
+  {
+    vtkNew<vtkImageData> one;
+    one->SetDimensions(W, H, 1);
+    one->AllocateScalars(VTK_UNSIGNED_CHAR, 1);
+    std::copy_n(Bytes(masks) + std::size_t(k) * W * H, W * H, Bytes(one));
+    const Result single = Measure(rendered, truth, one);
+    EXPECT_EQ(Value(perFrame.Table, "Frame", k), FirstFrame + k);
+    for (const char* column : { "PSNR", "SSIM", "NCC" })
+    {
+      EXPECT_EQ(Value(perFrame.Table, column, k), Value(single.Table, column, k)) << column << k;
+    }
+  }
+  EXPECT_NE(Value(perFrame.Table, "PSNR", 0), Value(perFrame.Table, "PSNR", 2));
+}
+
 TEST(UltrasoundImageMetrics, FrameValidOnlySkipsInvalidTruthFrames)
 {
   vtkSmartPointer<vtkImageData> truth = SpineFrames();
