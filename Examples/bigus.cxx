@@ -10,6 +10,7 @@
 // Exit codes: 0 success, 1 a bad file or a failed step (one line on stderr), 2 bad arguments.
 // Outputs are written under a temporary name and renamed: an existing file is never left half-written.
 #include "bigusImageMetrics.h"
+#include "bigusPlot.h"
 #include "bigusSliceFrame.h"
 #include "vtkCallbackCommand.h"
 #include "vtkDataArray.h"
@@ -51,6 +52,9 @@
 #include <unistd.h>
 #include <vector>
 
+using bigus::Publish;
+using bigus::TemporaryName;
+
 namespace
 {
 /// One-line failure with exit code 1.
@@ -63,25 +67,6 @@ int Fail(const std::string& what)
 bool EndsWith(const std::string& s, const std::string& suffix)
 {
   return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
-}
-
-/// "name.tmp<pid>.ext": same folder and extension, so that writers that look at the extension work.
-std::string TemporaryName(const std::string& path)
-{
-  const std::size_t slash = path.find_last_of('/');
-  const std::size_t dot = path.find('.', slash == std::string::npos ? 0 : slash + 1);
-  const std::string tag = ".tmp" + std::to_string(::getpid());
-  return dot == std::string::npos ? path + tag : path.substr(0, dot) + tag + path.substr(dot);
-}
-
-bool Publish(const std::string& temporary, const std::string& path)
-{
-  if (std::rename(temporary.c_str(), path.c_str()) != 0)
-  {
-    std::remove(temporary.c_str());
-    return false;
-  }
-  return true;
 }
 
 struct SweepOptions
@@ -539,41 +524,16 @@ struct EvaluateOptions
 /// PNG plot of held-out PSNR (dB) against training time (s), from the field's HeldOutPSNR array.
 bool PlotHistory(vtkDataArray* history, const std::string& path)
 {
-  const int W = 720, H = 440, left = 70, right = 20, top = 40, bottom = 60;
-  cv::Mat plot(H, W, CV_8UC3, cv::Scalar(255, 255, 255));
-  double tMax = 1, pMin = 1e9, pMax = -1e9;
+  bigus::PlotSpec spec;
+  spec.Title = "held-out PSNR against training time";
+  spec.XLabel = "training time (s)";
+  spec.YLabel = "PSNR (dB)";
+  spec.Series.push_back({ "BIGUS", {} });
   for (vtkIdType k = 0; k < history->GetNumberOfTuples(); ++k)
   {
-    tMax = std::max(tMax, history->GetComponent(k, 0));
-    pMin = std::min(pMin, history->GetComponent(k, 1));
-    pMax = std::max(pMax, history->GetComponent(k, 1));
+    spec.Series[0].Points.emplace_back(history->GetComponent(k, 0), history->GetComponent(k, 1));
   }
-  pMin = std::floor(pMin - 1);
-  pMax = std::ceil(pMax + 1);
-  auto at = [&](double t, double p) {
-    return cv::Point(left + static_cast<int>((W - left - right) * t / tMax),
-      H - bottom - static_cast<int>((H - top - bottom) * (p - pMin) / (pMax - pMin)));
-  };
-  cv::line(plot, at(0, pMin), at(tMax, pMin), cv::Scalar(0, 0, 0));
-  cv::line(plot, at(0, pMin), at(0, pMax), cv::Scalar(0, 0, 0));
-  for (int tick = 0; tick <= 4; ++tick)
-  {
-    const double t = tMax * tick / 4, p = pMin + (pMax - pMin) * tick / 4;
-    char label[32];
-    std::snprintf(label, sizeof(label), "%.0f", t);
-    cv::putText(plot, label, at(t, pMin) + cv::Point(-10, 20), cv::FONT_HERSHEY_SIMPLEX, 0.45, cv::Scalar(0, 0, 0));
-    std::snprintf(label, sizeof(label), "%.1f", p);
-    cv::putText(plot, label, at(0, p) + cv::Point(-55, 5), cv::FONT_HERSHEY_SIMPLEX, 0.45, cv::Scalar(0, 0, 0));
-  }
-  for (vtkIdType k = 1; k < history->GetNumberOfTuples(); ++k)
-  {
-    cv::line(plot, at(history->GetComponent(k - 1, 0), history->GetComponent(k - 1, 1)),
-      at(history->GetComponent(k, 0), history->GetComponent(k, 1)), cv::Scalar(200, 80, 0), 2);
-  }
-  cv::putText(plot, "held-out PSNR (dB) against training time (s)", cv::Point(left, 25), cv::FONT_HERSHEY_SIMPLEX, 0.6,
-    cv::Scalar(0, 0, 0));
-  const std::string temporary = TemporaryName(path);
-  return cv::imwrite(temporary, plot) && Publish(temporary, path);
+  return bigus::WritePlot(spec, path);
 }
 
 /// Renders a slice through the centre of frame @p pose (W x H pixels at the frame's spacing) whose

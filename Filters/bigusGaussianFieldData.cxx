@@ -5,6 +5,7 @@
 #include "vtkDoubleArray.h"
 #include "vtkFieldData.h"
 #include "vtkFloatArray.h"
+#include "vtkImageData.h"
 #include "vtkNew.h"
 #include "vtkPointData.h"
 #include "vtkPoints.h"
@@ -163,6 +164,54 @@ void FieldToPolyData(const GaussianField& field, const FieldModel& model, vtkPol
     a->InsertNextValue(entry.second);
     data->GetFieldData()->AddArray(a);
   }
+}
+
+bool TrainingDataFromSequence(vtkImageData* sequence, vtkImageData* mask, TrainingData& data, std::string* error)
+{
+  vtkDataArray* pixels = sequence ? sequence->GetPointData()->GetScalars() : nullptr;
+  vtkDataArray* poses = sequence ? sequence->GetFieldData()->GetArray("ImageToReference") : nullptr;
+  int dims[3] = { 0, 0, 0 };
+  if (sequence)
+  {
+    sequence->GetDimensions(dims);
+  }
+  if (!pixels || pixels->GetNumberOfComponents() != 1 || !poses || poses->GetNumberOfComponents() != 16 ||
+    poses->GetNumberOfTuples() != dims[2])
+  {
+    *error = "a tracked frame sequence needs W x H x N one-component scalars and field data ImageToReference "
+             "with N tuples of 16";
+    return false;
+  }
+  const vtkIdType framePixels = vtkIdType(dims[0]) * dims[1];
+  vtkDataArray* maskValues = mask ? mask->GetPointData()->GetScalars() : nullptr;
+  const vtkIdType maskPixels = maskValues ? maskValues->GetNumberOfTuples() : 0;
+  if (maskPixels != framePixels && maskPixels != framePixels * dims[2])
+  {
+    *error = "the fan mask must be a " + std::to_string(dims[0]) + " x " + std::to_string(dims[1]) +
+      " image or a " + std::to_string(dims[0]) + " x " + std::to_string(dims[1]) + " x " + std::to_string(dims[2]) +
+      " per-frame mask sequence";
+    return false;
+  }
+  data.Width = dims[0];
+  data.Height = dims[1];
+  const double scale = pixels->GetDataType() == VTK_UNSIGNED_CHAR ? 1.0 / 255.0 : 1.0;
+  data.Frames.resize(std::size_t(framePixels) * dims[2]);
+  for (vtkIdType p = 0; p < framePixels * dims[2]; ++p)
+  {
+    data.Frames[p] = static_cast<float>(std::min(1.0, std::max(0.0, pixels->GetComponent(p, 0) * scale)));
+  }
+  data.Poses.resize(dims[2]);
+  for (int k = 0; k < dims[2]; ++k)
+  {
+    poses->GetTuple(k, data.Poses[k].data());
+  }
+  data.Mask.resize(maskPixels);
+  for (vtkIdType p = 0; p < maskPixels; ++p)
+  {
+    data.Mask[p] = maskValues->GetComponent(p, 0) != 0 ? 1 : 0;
+  }
+  data.TrainFrames.clear();
+  return true;
 }
 
 } // namespace bigus

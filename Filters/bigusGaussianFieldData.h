@@ -18,6 +18,7 @@
 #include <vector>
 
 class vtkDataArray;
+class vtkImageData;
 class vtkPolyData;
 
 namespace bigus
@@ -48,6 +49,16 @@ BIGUSFILTERS_EXPORT vtkSmartPointer<vtkDataArray> IntensityArray(const std::vect
 /// Write a field (points, vertices, Scale, Rotation normalised, Reflectivity, ElevationSigma, Gamma,
 /// PixelSpacing).
 BIGUSFILTERS_EXPORT void FieldToPolyData(const GaussianField& field, const FieldModel& model, vtkPolyData* data);
+
+/**
+ * Frames, poses and mask of a tracked frame sequence (DESIGN section 2) as training data: intensities
+ * scaled to [0, 1] (unsigned char / 255, float clamped), ImageToReference per frame, and @p mask (a
+ * W x H x 1 fan mask or a W x H x N per-frame mask; non-zero = imaged). TrainFrames is left empty.
+ * Returns false with @p error when the sequence is not W x H x N one-component scalars with N
+ * ImageToReference tuples of 16, or the mask has neither size.
+ */
+BIGUSFILTERS_EXPORT bool TrainingDataFromSequence(
+  vtkImageData* sequence, vtkImageData* mask, TrainingData& data, std::string* error);
 
 } // namespace bigus
 

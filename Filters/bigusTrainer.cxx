@@ -676,29 +676,47 @@ void Trainer::DensifyAndPrune()
 
 ImageMetrics Trainer::Evaluate(const std::vector<int>& frames, double* secondsPerFrame)
 {
-  const std::size_t pixels = std::size_t(this->Data.Width) * this->Data.Height;
+  return this->EvaluateOn(this->Data, frames, secondsPerFrame);
+}
+
+ImageMetrics Trainer::EvaluateOn(const TrainingData& data, const std::vector<int>& frames, double* secondsPerFrame)
+{
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
   const RenderOptions o = this->Options();
   std::vector<float> S(pixels), I(pixels);
   ImageMetrics mean;
   double seconds = 0;
+  int used = 0;
   for (int f : frames)
   {
-    const SliceGeometry slice = this->Slice(f);
+    const unsigned char* mask = data.MaskOf(f);
+    if (std::none_of(mask, mask + pixels, [](unsigned char m) { return m != 0; }))
+    {
+      continue; // nothing of this frame is imaged (a per-frame mask outside the data)
+    }
+    SliceGeometry slice;
+    std::copy(data.Poses[f].begin(), data.Poses[f].end(), slice.ImageToReference);
+    slice.Width = data.Width;
+    slice.Height = data.Height;
     const double t0 = Seconds();
     this->Backend->Forward(this->Field.View(), &slice, 1, o, S.data(), I.data(), nullptr, nullptr);
     seconds += Seconds() - t0;
-    const ImageMetrics m =
-      CompareImages(I.data(), &this->Data.Frames[pixels * f], this->Data.MaskOf(f), this->Data.Width, this->Data.Height);
-    const double n = static_cast<double>(frames.size());
-    mean.PSNR += m.PSNR / n;
-    mean.SSIM += m.SSIM / n;
-    mean.NCC += m.NCC / n;
-    mean.Speckle += m.Speckle / n;
+    const ImageMetrics m = CompareImages(I.data(), &data.Frames[pixels * f], mask, data.Width, data.Height);
+    mean.PSNR += m.PSNR;
+    mean.SSIM += m.SSIM;
+    mean.NCC += m.NCC;
+    mean.Speckle += m.Speckle;
     mean.Patches += m.Patches;
+    ++used;
   }
+  const double n = std::max(1, used);
+  mean.PSNR /= n;
+  mean.SSIM /= n;
+  mean.NCC /= n;
+  mean.Speckle /= n;
   if (secondsPerFrame)
   {
-    *secondsPerFrame = frames.empty() ? 0.0 : seconds / frames.size();
+    *secondsPerFrame = used == 0 ? 0.0 : seconds / used;
   }
   return mean;
 }

@@ -134,6 +134,9 @@ public:
    * the mean render time per frame (s).
    */
   ImageMetrics Evaluate(const std::vector<int>& frames, double* secondsPerFrame = nullptr);
+  /// The same for @p frames of other data (another frame size, e.g. a test sweep across the training
+  /// frames). Frames whose mask is empty are left out of the means.
+  ImageMetrics EvaluateOn(const TrainingData& data, const std::vector<int>& frames, double* secondsPerFrame = nullptr);
 
   /// Remove Gaussians whose removal changes no training pixel by more than FinalPruneTolerance.
   std::int64_t FinalPrune();

@@ -58,37 +58,24 @@ int vtkGaussianFieldTrainer::RequestData(
   this->GrowthStopReason.clear();
   this->NumberOfGaussians = 0;
 
-  vtkDataArray* pixels = sequence ? sequence->GetPointData()->GetScalars() : nullptr;
-  vtkDataArray* poses = sequence ? sequence->GetFieldData()->GetArray("ImageToReference") : nullptr;
-  vtkDataArray* valid = sequence ? sequence->GetFieldData()->GetArray("FrameValid") : nullptr;
-  int dims[3] = { 0, 0, 0 };
-  if (sequence)
+  vtkSmartPointer<vtkImageData> mask = maskImage;
+  if (!mask && sequence)
   {
-    sequence->GetDimensions(dims);
+    vtkNew<vtkUltrasoundFanMask> estimate;
+    estimate->SetInputData(sequence);
+    estimate->Update();
+    mask = estimate->GetOutput();
   }
-  if (!pixels || pixels->GetNumberOfComponents() != 1 || !poses || poses->GetNumberOfComponents() != 16 ||
-    poses->GetNumberOfTuples() != dims[2])
+  bigus::TrainingData data;
+  std::string error;
+  if (!bigus::TrainingDataFromSequence(sequence, mask, data, &error))
   {
-    vtkErrorMacro("input 0 must be a tracked frame sequence: W x H x N one-component scalars and field data "
-                  "ImageToReference with N tuples of 16");
+    vtkErrorMacro("input: " << error);
     return 0;
   }
-
-  bigus::TrainingData data;
-  data.Width = dims[0];
-  data.Height = dims[1];
-  const vtkIdType framePixels = vtkIdType(dims[0]) * dims[1];
-  const double scale = pixels->GetDataType() == VTK_UNSIGNED_CHAR ? 1.0 / 255.0 : 1.0;
-  data.Frames.resize(std::size_t(framePixels) * dims[2]);
-  for (vtkIdType p = 0; p < framePixels * dims[2]; ++p)
+  vtkDataArray* valid = sequence->GetFieldData()->GetArray("FrameValid");
+  for (int k = 0; k < data.Count(); ++k)
   {
-    data.Frames[p] = static_cast<float>(std::min(1.0, std::max(0.0, pixels->GetComponent(p, 0) * scale)));
-  }
-  for (int k = 0; k < dims[2]; ++k)
-  {
-    std::array<double, 16> m;
-    poses->GetTuple(k, m.data());
-    data.Poses.push_back(m);
     const bool isValid = !valid || valid->GetTuple1(k) != 0;
     bool train = isValid;
     if (this->TrainingFrameList && this->TrainingFrameList->GetNumberOfIds() > 0)
@@ -106,30 +93,8 @@ int vtkGaussianFieldTrainer::RequestData(
   }
   if (data.TrainFrames.empty())
   {
-    vtkErrorMacro("no valid training frames (" << dims[2] << " frames in the input)");
+    vtkErrorMacro("no valid training frames (" << data.Count() << " frames in the input)");
     return 0;
-  }
-
-  vtkSmartPointer<vtkImageData> mask = maskImage;
-  if (!mask)
-  {
-    vtkNew<vtkUltrasoundFanMask> estimate;
-    estimate->SetInputData(sequence);
-    estimate->Update();
-    mask = estimate->GetOutput();
-  }
-  vtkDataArray* maskValues = mask->GetPointData()->GetScalars();
-  const vtkIdType maskPixels = maskValues ? maskValues->GetNumberOfTuples() : 0;
-  if (maskPixels != framePixels && maskPixels != framePixels * dims[2])
-  {
-    vtkErrorMacro("the fan mask must be a " << dims[0] << " x " << dims[1] << " image or a " << dims[0] << " x "
-                                            << dims[1] << " x " << dims[2] << " per-frame mask sequence");
-    return 0;
-  }
-  data.Mask.resize(maskPixels);
-  for (vtkIdType p = 0; p < maskPixels; ++p)
-  {
-    data.Mask[p] = maskValues->GetTuple1(p) != 0 ? 1 : 0;
   }
 
   bigus::TrainerSettings s;
@@ -155,7 +120,6 @@ int vtkGaussianFieldTrainer::RequestData(
   s.CheckpointFile = this->CheckpointFile ? this->CheckpointFile : "";
 
   bigus::Trainer trainer(std::move(data), s);
-  std::string error;
   if (!trainer.Initialize(&error) ||
     (this->ResumeFile && *this->ResumeFile && !trainer.LoadCheckpoint(this->ResumeFile, &error)))
   {
@@ -164,7 +128,7 @@ int vtkGaussianFieldTrainer::RequestData(
   }
   // Held-out frames for the evaluation: valid, not trained on.
   std::vector<int> heldOut;
-  for (int k = 0; k < dims[2]; ++k)
+  for (int k = 0; k < trainer.GetData().Count(); ++k)
   {
     const bool isValid = !valid || valid->GetTuple1(k) != 0;
     if (isValid && !std::binary_search(trainer.GetData().TrainFrames.begin(), trainer.GetData().TrainFrames.end(), k))

@@ -1,0 +1,36 @@
+// Line plots as PNG (OpenCV drawing) for the command line's reports, and the file helpers the
+// command-line tools share: write under a temporary name, then rename.
+#ifndef bigusPlot_h
+#define bigusPlot_h
+
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace bigus
+{
+/// One curve: its points (x, y) are joined in order; a single point is drawn as a marker.
+struct PlotSeries
+{
+  std::string Name;
+  std::vector<std::pair<double, double>> Points;
+};
+
+struct PlotSpec
+{
+  std::string Title, XLabel, YLabel;
+  bool LogX = false; ///< decades on the x axis (every x must be > 0)
+  std::vector<PlotSeries> Series;
+};
+
+/// Draws @p spec (720 x 460 pixels, one colour and marker per series, legend) and writes it as PNG to
+/// @p path through a temporary file. Returns false when it cannot write.
+bool WritePlot(const PlotSpec& spec, const std::string& path);
+
+/// "name.tmp<pid>.ext": same folder and extension, so that writers that look at the extension work.
+std::string TemporaryName(const std::string& path);
+/// Renames @p temporary to @p path; removes the temporary and returns false on failure.
+bool Publish(const std::string& temporary, const std::string& path);
+}
+
+#endif
