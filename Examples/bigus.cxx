@@ -6,9 +6,11 @@
 //   bigus render FIELD.vtp --plane OX OY OZ NX NY NZ [--size W H] [--spacing MM] -o slice.png|.mha
 //   bigus render FIELD.vtp --volume [--spacing MM] -o volume.mha|.vti
 //   bigus evaluate FIELD.vtp SWEEP [--holdout-every K --holdout-offset J | --frames LIST] --report DIR
+//   bigus benchmark [--quick] [--output DIR]
 //
 // Exit codes: 0 success, 1 a bad file or a failed step (one line on stderr), 2 bad arguments.
 // Outputs are written under a temporary name and renamed: an existing file is never left half-written.
+#include "bigusBenchmark.h"
 #include "bigusImageMetrics.h"
 #include "bigusPlot.h"
 #include "bigusSliceFrame.h"
@@ -771,6 +773,16 @@ int main(int argc, char** argv)
   evaluateCommand->add_option("--frames", evaluate.Frames, "Evaluate these frames");
   evaluateCommand->add_option("--report", evaluate.Report, "Folder for metrics.json and side-by-side PNGs")->required();
 
+  bigus::BenchmarkOptions benchmark;
+  benchmark.SourceDirectory = BIGUS_SOURCE_DIR;
+  CLI::App* benchmarkCommand = app.add_subcommand("benchmark",
+    "Speed against error on the bundled sweeps: baselines, volume protocol, capacity, render cutoffs, ablations; "
+    "writes OUTPUT/BENCHMARKS.md and OUTPUT/benchmarks/ (about 45 minutes on 2 cores)");
+  benchmarkCommand->add_option("--output", benchmark.Output, "Folder for BENCHMARKS.md (default: docs)");
+  benchmarkCommand->add_option("--data", benchmark.SourceDirectory, "Project folder holding Examples/Data and Testing/Data")
+    ->check(CLI::ExistingDirectory);
+  benchmarkCommand->add_flag("--quick", benchmark.Quick, "A few minutes: short training, small crops (smoke test)");
+
   try
   {
     app.parse(argc, argv);
@@ -795,6 +807,10 @@ int main(int argc, char** argv)
   if (evaluateCommand->parsed())
   {
     return RunEvaluate(evaluate);
+  }
+  if (benchmarkCommand->parsed())
+  {
+    return bigus::RunBenchmark(benchmark);
   }
   return 2;
 }

@@ -56,7 +56,9 @@ std::string Number(double v)
 
 bool WritePlot(const PlotSpec& spec, const std::string& path)
 {
-  const int W = 720, H = 460, left = 70, right = 20, top = 40, bottom = 60;
+  // The legend sits below the axes, one row per series, so that it never hides a point.
+  const int count = static_cast<int>(spec.Series.size());
+  const int W = 720, left = 70, right = 20, top = 40, bottom = 60 + 18 * count, H = 400 + 18 * count;
   const cv::Scalar black(0, 0, 0), grey(225, 225, 225);
   // BGR, distinguishable in print.
   const cv::Scalar colours[] = { { 180, 90, 0 }, { 0, 120, 230 }, { 40, 160, 40 }, { 30, 30, 200 },
@@ -132,11 +134,10 @@ bool WritePlot(const PlotSpec& spec, const std::string& path)
   }
   cv::rectangle(plot, at(xLow, y1), at(xHigh, y0), black);
   cv::putText(plot, spec.Title, cv::Point(left, 25), cv::FONT_HERSHEY_SIMPLEX, 0.55, black);
-  cv::putText(plot, spec.XLabel, cv::Point(left + (W - left - right) / 2 - 60, H - 18), cv::FONT_HERSHEY_SIMPLEX,
-    0.45, black);
+  cv::putText(plot, spec.XLabel, cv::Point(left + (W - left - right) / 2 - 120, H - bottom + 38),
+    cv::FONT_HERSHEY_SIMPLEX, 0.45, black);
   cv::putText(plot, spec.YLabel, cv::Point(5, top - 8), cv::FONT_HERSHEY_SIMPLEX, 0.42, black);
-  // Curves, markers and the legend (lower right inside the axes: the curves here rise to the right).
-  const int count = static_cast<int>(spec.Series.size());
+  // Curves, markers and the legend.
   for (std::size_t k = 0; k < spec.Series.size(); ++k)
   {
     const PlotSeries& s = spec.Series[k];
@@ -164,7 +165,7 @@ bool WritePlot(const PlotSpec& spec, const std::string& path)
         cv::drawMarker(plot, p, colour, cv::MARKER_DIAMOND, 10, 2);
       }
     }
-    const cv::Point key(W - right - 250, H - bottom - 12 - 18 * (count - 1 - static_cast<int>(k)));
+    const cv::Point key(left, H - bottom + 60 + 18 * static_cast<int>(k));
     cv::line(plot, key, key + cv::Point(22, 0), colour, 2);
     cv::putText(plot, s.Name, key + cv::Point(30, 5), cv::FONT_HERSHEY_SIMPLEX, 0.42, colour);
   }

@@ -23,7 +23,7 @@ struct PlotSpec
   std::vector<PlotSeries> Series;
 };
 
-/// Draws @p spec (720 x 460 pixels, one colour and marker per series, legend) and writes it as PNG to
+/// Draws @p spec (720 pixels wide, one colour and marker per series, legend below) and writes it as PNG to
 /// @p path through a temporary file. Returns false when it cannot write.
 bool WritePlot(const PlotSpec& spec, const std::string& path);
 

@@ -524,8 +524,8 @@ TEST(UltrasoundImageMetrics, InconsistentInputsFailWithBothSizes)
     { image(64, 48, 2, VTK_SHORT, 1), image(64, 48, 2, VTK_SHORT, 1), nullptr, "unsigned char, float or double" },
     { image(64, 48, 2, VTK_FLOAT, 1), image(64, 48, 2, VTK_FLOAT, 1), image(48, 64, 1, VTK_UNSIGNED_CHAR, 1),
       "48 x 64 x 1" },
-    { image(64, 48, 2, VTK_FLOAT, 1), image(64, 48, 2, VTK_FLOAT, 1), image(64, 48, 2, VTK_UNSIGNED_CHAR, 1),
-      "64 x 48 x 2" },
+    { image(64, 48, 2, VTK_FLOAT, 1), image(64, 48, 2, VTK_FLOAT, 1), image(64, 48, 3, VTK_UNSIGNED_CHAR, 1),
+      "64 x 48 x 3" },
     { image(64, 48, 2, VTK_FLOAT, 1), image(64, 48, 2, VTK_FLOAT, 1), image(64, 48, 1, VTK_DOUBLE, 1), "" },
   };
   for (const Case& c : cases)

@@ -1,0 +1,21 @@
+// `bigus benchmark`: speed against error on the bundled sweeps, written to BENCHMARKS.md with plots.
+#ifndef bigusBenchmark_h
+#define bigusBenchmark_h
+
+#include <string>
+
+namespace bigus
+{
+struct BenchmarkOptions
+{
+  std::string Output = "docs";  ///< folder of BENCHMARKS.md; plots and results.json go to Output/benchmarks
+  std::string SourceDirectory;  ///< project root holding Examples/Data and Testing/Data
+  bool Quick = false;           ///< a few minutes instead of about 45 (smoke test)
+};
+
+/// Runs every measurement and writes the report. Returns the process exit code (0, or 1 with a
+/// one-line message on stderr when a data file cannot be read or an output cannot be written).
+int RunBenchmark(const BenchmarkOptions& options);
+}
+
+#endif

@@ -1,0 +1,99 @@
+"""`bigus benchmark --quick` end to end: every section is written, the report's numbers are those of
+results.json, the plots are PNG files, and the frame baselines of the liver sweep match an independent
+computation here (numpy: nearest frame by pose, linear blend of the neighbours in time, masked PSNR).
+
+Usage: TestBenchmarkQuick.py EXAMPLE_DATA_DIR BIGUS_EXECUTABLE OUTPUT_DIR
+"""
+import json
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+import vtk  # noqa: F401
+from vtk.util.numpy_support import vtk_to_numpy
+
+import bigus
+
+
+def masked_psnr(a, b, mask):
+    mse = float(np.mean((a[mask] - b[mask]) ** 2))
+    return min(100.0, 10 * math.log10(1.0 / mse)) if mse > 0 else 100.0
+
+
+def liver_baselines(example_data):
+    reader = bigus.vtkUltrasoundSequenceReader()
+    reader.SetFileName(os.path.join(example_data, "liver", "liver_sweep.igs.mha"))
+    fan = bigus.vtkUltrasoundFanMask()
+    fan.SetInputConnection(reader.GetOutputPort())
+    fan.Update()
+    frames_image = reader.GetOutput()
+    w, h, n = frames_image.GetDimensions()
+    frames = vtk_to_numpy(frames_image.GetPointData().GetScalars()).reshape(n, h, w).astype(np.float64) / 255
+    mask = vtk_to_numpy(fan.GetOutput().GetPointData().GetScalars()).reshape(h, w) != 0
+    fields = frames_image.GetFieldData()
+    poses = vtk_to_numpy(fields.GetArray("ImageToReference")).reshape(n, 4, 4)
+    stamps = vtk_to_numpy(fields.GetArray("Timestamp"))
+    train = [k for k in range(n) if k % 4 != 2]
+    held = [k for k in range(n) if k % 4 == 2]
+    centres = poses @ np.array([w / 2, h / 2, 0, 1])
+    nearest, blend = [], []
+    for k in held:
+        best = min(train, key=lambda t: np.linalg.norm(centres[t, :3] - centres[k, :3]))
+        nearest.append(masked_psnr(frames[best], frames[k], mask))
+        before = max(t for t in train if t < k)
+        after = min((t for t in train if t > k), default=before)
+        weight = 0.0 if after == before else (stamps[k] - stamps[before]) / (stamps[after] - stamps[before])
+        blend.append(masked_psnr((1 - weight) * frames[before] + weight * frames[after], frames[k], mask))
+    return float(np.mean(nearest)), float(np.mean(blend))
+
+
+def main():
+    example_data, executable, out = sys.argv[1:4]
+    os.makedirs(out, exist_ok=True)
+    result = subprocess.run([executable, "benchmark", "--quick", "--output", out], capture_output=True, text=True)
+    assert result.returncode == 0, (result.stdout[-3000:], result.stderr)
+
+    report = open(os.path.join(out, "BENCHMARKS.md")).read()
+    results = json.load(open(os.path.join(out, "benchmarks", "results.json")))
+    for heading in ("## liver", "## spine phantom", "## N-wire phantom", "## Volume protocol",
+                    "### in-between parallel slices", "### oblique slices", "### orthogonal slices",
+                    "## Quality against the number of Gaussians", "## Render speed against render error",
+                    "## Ablations", "### liver", "### spine phantom"):
+        assert heading in report, heading
+    assert results["commit"] and results["machine"] and results["quick"] is True
+
+    # Every BIGUS and baseline row of every sweep is finite and appears in the report as printed.
+    for name, sweep in results["sweeps"].items():
+        rows = sweep["baselines"] + sweep["bigus"]
+        assert len(sweep["baselines"]) == 3 and len(sweep["bigus"]) >= 1, name
+        for row in rows:
+            assert math.isfinite(row["psnr"]) and -1 <= row["ncc"] <= 1, (name, row)
+            assert "| %s | %.1f |" % (row["method"], row["seconds"]) in report, (name, row["method"])
+            assert "| %.2f | %.4f |" % (row["psnr"], row["ssim"]) in report, (name, row["method"])
+    for test, rows in results["volume_protocol"].items():
+        assert len(rows["baselines"]) == 1 and rows["bigus"], test
+    assert len(results["ablations"]["liver"]) == 7 and len(results["ablations"]["spine phantom"]) == 7
+    render = results["render"]
+    assert [r["cutoff"] for r in render] == [3, 4, 5, 6]
+    # A wider footprint cutoff never makes the float renderer further from the naive one by much.
+    assert render[3]["max_error"] < render[0]["max_error"], render
+
+    for png in os.listdir(os.path.join(out, "benchmarks")):
+        if png.endswith(".png"):
+            with open(os.path.join(out, "benchmarks", png), "rb") as f:
+                assert f.read(8) == b"\x89PNG\r\n\x1a\n", png
+            assert "(benchmarks/%s)" % png in report, png
+
+    # The frame baselines against the computation here.
+    nearest, blend = liver_baselines(example_data)
+    rows = {row["method"]: row for row in results["sweeps"]["liver"]["baselines"]}
+    got_nearest = rows["nearest training frame (pose)"]["psnr"]
+    got_blend = rows["blend of bracketing training frames (time)"]["psnr"]
+    print("liver nearest frame %.4f dB (here %.4f), blend %.4f dB (here %.4f)" % (got_nearest, nearest, got_blend, blend))
+    assert abs(got_nearest - nearest) < 1e-3 and abs(got_blend - blend) < 1e-3
+
+
+if __name__ == "__main__":
+    main()
