@@ -6,6 +6,7 @@
 //   bigus render FIELD.vtp --plane OX OY OZ NX NY NZ [--size W H] [--spacing MM] -o slice.png|.mha
 //   bigus render FIELD.vtp --volume [--spacing MM] -o volume.mha|.vti
 //   bigus evaluate FIELD.vtp SWEEP [--holdout-every K --holdout-offset J | --frames LIST] --report DIR
+//   bigus sweep VOLUME -o SWEEP.igs.mha [--mask-output MASK.mha] [--protocol parallel|oblique|orthogonal] ...
 //   bigus benchmark [--quick] [--output DIR]
 //
 // Exit codes: 0 success, 1 a bad file or a failed step (one line on stderr), 2 bad arguments.
@@ -14,7 +15,9 @@
 #include "bigusImageMetrics.h"
 #include "bigusPlot.h"
 #include "bigusSliceFrame.h"
+#include "vtkAlgorithm.h"
 #include "vtkCallbackCommand.h"
+#include "vtkCommand.h"
 #include "vtkDataArray.h"
 #include "vtkFieldData.h"
 #include "vtkGaussianFieldReslice.h"
@@ -24,7 +27,9 @@
 #include "vtkImageData.h"
 #include "vtkLogger.h"
 #include "vtkMatrix4x4.h"
+#include "vtkMetaImageReader.h"
 #include "vtkMetaImageWriter.h"
+#include "vtkNIFTIImageReader.h"
 #include "vtkNew.h"
 #include "vtkOutputWindow.h"
 #include "vtkPointData.h"
@@ -33,6 +38,8 @@
 #include "vtkUltrasoundFanMask.h"
 #include "vtkUltrasoundSequenceReader.h"
 #include "vtkUltrasoundSequenceWriter.h"
+#include "vtkUltrasoundVolumeSweep.h"
+#include "vtkXMLImageDataReader.h"
 #include "vtkXMLImageDataWriter.h"
 #include "vtkXMLPolyDataReader.h"
 #include "vtkXMLPolyDataWriter.h"
@@ -139,6 +146,35 @@ std::vector<int> ChooseFrames(int count, int every, int offset, const std::vecto
   return frames;
 }
 
+/// Reads a fan mask (.mha/.mhd, W x H x 1, or W x H x N: one per frame) for a W x H x N sweep;
+/// on failure prints what is wrong and returns null.
+vtkSmartPointer<vtkImageData> ReadMask(const std::string& file, const int dims[3])
+{
+  std::ifstream probe(file);
+  if (!probe)
+  {
+    Fail(file + ": cannot open the mask");
+    return nullptr;
+  }
+  vtkNew<vtkMetaImageReader> reader;
+  reader->SetFileName(file.c_str());
+  reader->Update();
+  vtkImageData* mask = reader->GetOutput();
+  int size[3] = { 0, 0, 0 };
+  mask->GetDimensions(size);
+  if (!mask->GetPointData()->GetScalars() || mask->GetNumberOfScalarComponents() != 1 || size[0] != dims[0] ||
+    size[1] != dims[1] || (size[2] != 1 && size[2] != dims[2]))
+  {
+    Fail(file + ": the mask must be one-component " + std::to_string(dims[0]) + " x " + std::to_string(dims[1]) +
+      " x 1 or x " + std::to_string(dims[2]) + " (one per frame), not " + std::to_string(size[0]) + " x " +
+      std::to_string(size[1]) + " x " + std::to_string(size[2]));
+    return nullptr;
+  }
+  auto copy = vtkSmartPointer<vtkImageData>::New();
+  copy->DeepCopy(mask);
+  return copy;
+}
+
 // ---------------------------------------------------------------------------------------------
 // info
 
@@ -243,7 +279,7 @@ int RunInfo(const InfoOptions& options)
 struct TrainOptions
 {
   SweepOptions Sweep;
-  std::string Output, Checkpoint, Resume, Backend = "auto";
+  std::string Output, Checkpoint, Resume, Mask, Backend = "auto";
   int HoldOutEvery = 0, HoldOutOffset = 0, Iterations = 3000, Threads = 0;
   double TimeBudget = 0, ElevationSigma = 1.0, EvaluationInterval = 0;
   long long MaxGaussians = 200000;
@@ -267,6 +303,15 @@ int RunTrain(const TrainOptions& o)
   }
   vtkNew<vtkGaussianFieldTrainer> trainer;
   trainer->SetInputConnection(reader->GetOutputPort());
+  if (!o.Mask.empty())
+  {
+    auto mask = ReadMask(o.Mask, reader->GetOutput()->GetDimensions());
+    if (!mask)
+    {
+      return 1;
+    }
+    trainer->SetInputData(1, mask);
+  }
   trainer->SetHoldOutEvery(o.HoldOutEvery);
   trainer->SetHoldOutOffset(o.HoldOutOffset);
   trainer->SetIterations(o.Iterations);
@@ -517,7 +562,7 @@ int RunRender(const RenderOptionsCli& o)
 
 struct EvaluateOptions
 {
-  std::string Field, Report;
+  std::string Field, Report, Mask;
   SweepOptions Sweep;
   int HoldOutEvery = 0, HoldOutOffset = 0;
   std::vector<int> Frames;
@@ -583,10 +628,28 @@ int RunEvaluate(const EvaluateOptions& o)
   {
     return Fail("evaluate: no valid frame chosen");
   }
-  vtkNew<vtkUltrasoundFanMask> fan;
-  fan->SetInputConnection(reader->GetOutputPort());
-  fan->Update();
-  const auto* mask = static_cast<unsigned char*>(fan->GetOutput()->GetScalarPointer());
+  vtkSmartPointer<vtkImageData> maskImage;
+  if (!o.Mask.empty())
+  {
+    if (!(maskImage = ReadMask(o.Mask, dims)))
+    {
+      return 1;
+    }
+  }
+  else
+  {
+    vtkNew<vtkUltrasoundFanMask> fan;
+    fan->SetInputConnection(reader->GetOutputPort());
+    fan->Update();
+    maskImage = fan->GetOutput();
+  }
+  // One mask for every frame, or one per frame; as 0 / 1 bytes.
+  std::vector<unsigned char> masks(maskImage->GetNumberOfPoints());
+  for (std::size_t p = 0; p < masks.size(); ++p)
+  {
+    masks[p] = maskImage->GetPointData()->GetScalars()->GetComponent(vtkIdType(p), 0) != 0;
+  }
+  const std::size_t maskStride = masks.size() == std::size_t(dims[0]) * dims[1] ? 0 : std::size_t(dims[0]) * dims[1];
   vtkNew<vtkGaussianFieldSequenceRenderer> renderer;
   renderer->SetInputData(field);
   renderer->SetPoseConnection(reader->GetOutputPort());
@@ -625,7 +688,8 @@ int RunEvaluate(const EvaluateOptions& o)
       truthFrame[p] = static_cast<float>(truthPixels->GetTuple1(vtkIdType(pixels * k + p)) * scale);
     }
     const float* image = renderedPixels + pixels * n;
-    const bigus::ImageMetrics m = bigus::CompareImages(image, truthFrame.data(), mask, dims[0], dims[1]);
+    const bigus::ImageMetrics m =
+      bigus::CompareImages(image, truthFrame.data(), masks.data() + maskStride * k, dims[0], dims[1]);
     report["frames"].push_back(
       { { "frame", k }, { "psnr", m.PSNR }, { "ssim", m.SSIM }, { "ncc", m.NCC }, { "speckle", m.Speckle } });
     sums[0] += m.PSNR;
@@ -699,6 +763,132 @@ int RunEvaluate(const EvaluateOptions& o)
   return 0;
 }
 
+// ---------------------------------------------------------------------------------------------
+// sweep: the volume protocol
+
+struct SweepFromVolumeOptions
+{
+  std::string Volume, Output, MaskOutput, Protocol = "parallel";
+  int Frames = 160, Axis = 2;
+  double Offset = 0, Tilt = 30, Spacing = 0;
+  unsigned Seed = 1;
+};
+
+/// A 3D volume from .mha/.mhd (MetaIO), .nii/.nii.gz (NIfTI) or .vti (VTK XML); null after a message.
+vtkSmartPointer<vtkImageData> ReadVolume(const std::string& file)
+{
+  std::ifstream probe(file);
+  if (!probe)
+  {
+    Fail(file + ": cannot open the volume");
+    return nullptr;
+  }
+  vtkSmartPointer<vtkAlgorithm> reader;
+  if (EndsWith(file, ".mha") || EndsWith(file, ".mhd"))
+  {
+    auto r = vtkSmartPointer<vtkMetaImageReader>::New();
+    r->SetFileName(file.c_str());
+    reader = r;
+  }
+  else if (EndsWith(file, ".nii") || EndsWith(file, ".nii.gz"))
+  {
+    auto r = vtkSmartPointer<vtkNIFTIImageReader>::New();
+    r->SetFileName(file.c_str());
+    reader = r;
+  }
+  else if (EndsWith(file, ".vti"))
+  {
+    auto r = vtkSmartPointer<vtkXMLImageDataReader>::New();
+    r->SetFileName(file.c_str());
+    reader = r;
+  }
+  else
+  {
+    Fail(file + ": unknown volume format (expected .mha, .mhd, .nii, .nii.gz or .vti)");
+    return nullptr;
+  }
+  reader->Update();
+  vtkImageData* volume = vtkImageData::SafeDownCast(reader->GetOutputDataObject(0));
+  int dims[3] = { 0, 0, 0 };
+  if (volume)
+  {
+    volume->GetDimensions(dims);
+  }
+  if (!volume || !volume->GetPointData()->GetScalars() || dims[0] < 2 || dims[1] < 2 || dims[2] < 2)
+  {
+    Fail(file + ": not a 3D volume with scalars (at least 2 voxels along every axis)");
+    return nullptr;
+  }
+  auto copy = vtkSmartPointer<vtkImageData>::New();
+  copy->DeepCopy(volume);
+  return copy;
+}
+
+int RunSweepFromVolume(const SweepFromVolumeOptions& o)
+{
+  auto volume = ReadVolume(o.Volume);
+  if (!volume)
+  {
+    return 1;
+  }
+  vtkNew<vtkUltrasoundVolumeSweep> sweep;
+  sweep->SetInputData(volume);
+  sweep->SetProtocol(o.Protocol == "oblique" ? vtkUltrasoundVolumeSweep::OBLIQUE
+      : o.Protocol == "orthogonal"           ? vtkUltrasoundVolumeSweep::ORTHOGONAL
+                                             : vtkUltrasoundVolumeSweep::PARALLEL);
+  sweep->SetSweepAxis(o.Axis);
+  sweep->SetNumberOfFrames(o.Frames);
+  sweep->SetOffset(o.Offset);
+  sweep->SetMaximumTiltAngle(o.Tilt);
+  sweep->SetSeed(o.Seed);
+  sweep->SetPixelSpacing(o.Spacing);
+  vtkNew<vtkCallbackCommand> onError; // the filter's own message, on one line
+  std::string message;
+  onError->SetClientData(&message);
+  onError->SetCallback([](vtkObject*, unsigned long, void* client, void* data) {
+    // "ERROR: In <file>, line <n>\n<class> (<address>): <message>\n\n": keep the message.
+    std::string text = static_cast<const char*>(data);
+    const std::size_t start = text.rfind("): ");
+    text = start == std::string::npos ? text : text.substr(start + 3);
+    text.erase(std::remove(text.begin(), text.end(), '\n'), text.end());
+    *static_cast<std::string*>(client) = text;
+  });
+  sweep->AddObserver(vtkCommand::ErrorEvent, onError);
+  sweep->Update();
+  if (!message.empty() || sweep->GetOutput()->GetNumberOfPoints() == 0)
+  {
+    return Fail("sweep: " + (message.empty() ? std::string("no frames") : message));
+  }
+  const std::string temporary = TemporaryName(o.Output);
+  vtkNew<vtkUltrasoundSequenceWriter> writer;
+  writer->SetInputConnection(sweep->GetOutputPort());
+  writer->SetFileName(temporary.c_str());
+  if (!writer->Write() || !Publish(temporary, o.Output))
+  {
+    std::remove(temporary.c_str());
+    return Fail(o.Output + ": cannot write the sweep");
+  }
+  if (!o.MaskOutput.empty())
+  {
+    const std::string maskTemporary = TemporaryName(o.MaskOutput);
+    vtkNew<vtkMetaImageWriter> maskWriter;
+    maskWriter->SetInputData(sweep->GetMaskOutput());
+    maskWriter->SetFileName(maskTemporary.c_str());
+    maskWriter->SetCompression(true);
+    maskWriter->Write();
+    if (maskWriter->GetErrorCode() != 0 || !Publish(maskTemporary, o.MaskOutput))
+    {
+      std::remove(maskTemporary.c_str());
+      return Fail(o.MaskOutput + ": cannot write the mask");
+    }
+  }
+  const int* size = sweep->GetFrameSize();
+  std::printf("sweep          %s: %d %s frames of %d x %d pixels, %.4f mm apart (build %.2f s)%s%s\n", o.Output.c_str(),
+    o.Frames, o.Protocol.c_str(), size[0], size[1], sweep->GetSliceSpacing(), sweep->GetSecondsToBuild(),
+    o.MaskOutput.empty() ? "" : "; per-frame mask ", o.MaskOutput.c_str());
+  return 0;
+}
+
 void AddSweepOptions(CLI::App* command, SweepOptions& o, const char* what)
 {
   command->add_option("--calibration", o.Calibration, "PLUS device-set configuration XML (ImageToProbe)")
@@ -731,6 +921,7 @@ int main(int argc, char** argv)
   trainCommand->add_option("SWEEP", train.Sweep.Sweep, "Sequence metafile")->required()->check(CLI::ExistingFile);
   trainCommand->add_option("-o,--output", train.Output, "Field to write (.vtp)")->required();
   AddSweepOptions(trainCommand, train.Sweep, "sweep");
+  trainCommand->add_option("--mask", train.Mask, "Fan mask .mha (W x H x 1, or W x H x N per frame; default: estimated)");
   trainCommand->add_option("--holdout-every", train.HoldOutEvery, "Hold out frames with index % K == J (0: none)");
   trainCommand->add_option("--holdout-offset", train.HoldOutOffset, "J of --holdout-every");
   trainCommand->add_option("--time-budget", train.TimeBudget, "Wall-clock budget for training, seconds (0: none)");
@@ -771,7 +962,27 @@ int main(int argc, char** argv)
   evaluateCommand->add_option("--holdout-every", evaluate.HoldOutEvery, "Evaluate frames with index % K == J");
   evaluateCommand->add_option("--holdout-offset", evaluate.HoldOutOffset, "J of --holdout-every");
   evaluateCommand->add_option("--frames", evaluate.Frames, "Evaluate these frames");
+  evaluateCommand->add_option("--mask", evaluate.Mask, "Fan mask .mha (W x H x 1, or W x H x N per frame; default: estimated)");
   evaluateCommand->add_option("--report", evaluate.Report, "Folder for metrics.json and side-by-side PNGs")->required();
+
+  SweepFromVolumeOptions sweep;
+  CLI::App* sweepCommand =
+    app.add_subcommand("sweep", "Build a tracked sweep with exact poses from a 3D volume (the volume protocol)");
+  sweepCommand->add_option("VOLUME", sweep.Volume, "Volume: .mha, .mhd, .nii, .nii.gz or .vti")
+    ->required()
+    ->check(CLI::ExistingFile);
+  sweepCommand->add_option("-o,--output", sweep.Output, "Sweep to write (.igs.mha)")->required();
+  sweepCommand->add_option("--mask-output", sweep.MaskOutput, "Per-frame mask to write (.mha, W x H x N)");
+  sweepCommand->add_option("--protocol", sweep.Protocol, "parallel, oblique or orthogonal")
+    ->check(CLI::IsMember({ "parallel", "oblique", "orthogonal" }))
+    ->capture_default_str();
+  sweepCommand->add_option("--frames", sweep.Frames, "Number of slices (the paper: 160 and 80)")->capture_default_str();
+  sweepCommand->add_option("--axis", sweep.Axis, "Axis the parallel slices step along (0, 1, 2)")->capture_default_str();
+  sweepCommand->add_option("--offset", sweep.Offset, "Shift in slice spacings, [0, 1): 0.5 = in-between slices")
+    ->capture_default_str();
+  sweepCommand->add_option("--tilt", sweep.Tilt, "Oblique: largest tilt, degrees")->capture_default_str();
+  sweepCommand->add_option("--seed", sweep.Seed, "Oblique: random seed")->capture_default_str();
+  sweepCommand->add_option("--spacing", sweep.Spacing, "Pixel spacing, mm (0: the volume's)")->capture_default_str();
 
   bigus::BenchmarkOptions benchmark;
   benchmark.SourceDirectory = BIGUS_SOURCE_DIR;
@@ -807,6 +1018,10 @@ int main(int argc, char** argv)
   if (evaluateCommand->parsed())
   {
     return RunEvaluate(evaluate);
+  }
+  if (sweepCommand->parsed())
+  {
+    return RunSweepFromVolume(sweep);
   }
   if (benchmarkCommand->parsed())
   {

@@ -376,6 +376,10 @@ bool TrainWithMarks(const TrainingData& data, const TrainerSettings& settings, c
     r.PeakMiB = PeakMemoryMiB();
     r.Note = std::to_string(trainer.GetIteration()) + " steps";
     onMark(mark, r, trainer);
+    if (trainer.GetIteration() >= settings.Iterations)
+    {
+      break; // the schedule ended before the later marks: they would repeat this row
+    }
   }
   return true;
 }
@@ -604,6 +608,10 @@ int RunBenchmark(const BenchmarkOptions& options)
     if (!ok)
     {
       return Fail(sweep.Name + ": " + error);
+    }
+    if (si < 2 && !std::isfinite(fullRowAtAblationTime[si].Seconds))
+    {
+      fullRowAtAblationTime[si] = bigus.back(); // the schedule ended before the ablation time
     }
     md << "\n## " << sweep.Name << "\n\n`" << sweep.File.substr(root.size() + 1) << "`: " << sweep.Description
        << ".\n\n"

@@ -6,6 +6,7 @@
 #include "vtkFieldData.h"
 #include "vtkFloatArray.h"
 #include "vtkImageData.h"
+#include "vtkIntArray.h"
 #include "vtkNew.h"
 #include "vtkPointData.h"
 #include "vtkPoints.h"
@@ -212,6 +213,39 @@ bool TrainingDataFromSequence(vtkImageData* sequence, vtkImageData* mask, Traini
   }
   data.TrainFrames.clear();
   return true;
+}
+
+void CopyFrameFieldData(vtkFieldData* in, vtkIdType frameCount, const std::vector<vtkIdType>& frames, vtkFieldData* out)
+{
+  const vtkIdType count = static_cast<vtkIdType>(frames.size());
+  for (int a = 0; a < in->GetNumberOfArrays(); ++a)
+  {
+    vtkDataArray* source = in->GetArray(a);
+    if (!source || !source->GetName() || source->GetNumberOfTuples() != frameCount)
+    {
+      continue;
+    }
+    vtkSmartPointer<vtkDataArray> copy = vtkSmartPointer<vtkDataArray>::Take(source->NewInstance());
+    copy->SetName(source->GetName());
+    copy->SetNumberOfComponents(source->GetNumberOfComponents());
+    copy->SetNumberOfTuples(count);
+    for (vtkIdType m = 0; m < count; ++m)
+    {
+      copy->SetTuple(m, frames[m], source);
+    }
+    out->AddArray(copy);
+  }
+  if (!out->GetArray("FrameIndex"))
+  {
+    vtkNew<vtkIntArray> index;
+    index->SetName("FrameIndex");
+    index->SetNumberOfTuples(count);
+    for (vtkIdType m = 0; m < count; ++m)
+    {
+      index->SetValue(m, static_cast<int>(frames[m]));
+    }
+    out->AddArray(index);
+  }
 }
 
 } // namespace bigus

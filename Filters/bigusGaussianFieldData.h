@@ -13,11 +13,13 @@
 #include "bigusTrainer.h"
 
 #include "vtkSmartPointer.h"
+#include "vtkType.h"
 
 #include <string>
 #include <vector>
 
 class vtkDataArray;
+class vtkFieldData;
 class vtkImageData;
 class vtkPolyData;
 
@@ -59,6 +61,15 @@ BIGUSFILTERS_EXPORT void FieldToPolyData(const GaussianField& field, const Field
  */
 BIGUSFILTERS_EXPORT bool TrainingDataFromSequence(
   vtkImageData* sequence, vtkImageData* mask, TrainingData& data, std::string* error);
+
+/**
+ * The per-frame field data of a tracked sequence for chosen frames, in their order: every named
+ * array of @p in with @p frameCount tuples (ImageToReference, Timestamp, FrameValid, FrameIndex, ...)
+ * is copied to @p out with tuple m = tuple frames[m]; FrameIndex (int, the frame's index in the input)
+ * is added when @p in has none. Used by every filter that outputs one frame per chosen input frame.
+ */
+BIGUSFILTERS_EXPORT void CopyFrameFieldData(
+  vtkFieldData* in, vtkIdType frameCount, const std::vector<vtkIdType>& frames, vtkFieldData* out);
 
 } // namespace bigus
 

@@ -137,24 +137,7 @@ int vtkGaussianFieldSequenceRenderer::RequestData(
   output->SetSpacing(1, 1, 1);
   output->SetOrigin(0, 0, 0);
   output->GetPointData()->SetScalars(bigus::IntensityArray(I, this->OutputScalarType));
-  // The chosen frames' per-frame field data, in the output's order.
-  for (int a = 0; a < sequence->GetFieldData()->GetNumberOfArrays(); ++a)
-  {
-    vtkDataArray* source = sequence->GetFieldData()->GetArray(a);
-    if (!source || source->GetNumberOfTuples() != dims[2])
-    {
-      continue;
-    }
-    vtkSmartPointer<vtkDataArray> copy = vtkSmartPointer<vtkDataArray>::Take(source->NewInstance());
-    copy->SetName(source->GetName());
-    copy->SetNumberOfComponents(source->GetNumberOfComponents());
-    copy->SetNumberOfTuples(count);
-    for (int k = 0; k < count; ++k)
-    {
-      copy->SetTuple(k, frames[k], source);
-    }
-    output->GetFieldData()->AddArray(copy);
-  }
+  bigus::CopyFrameFieldData(sequence->GetFieldData(), dims[2], frames, output->GetFieldData());
   return 1;
 }
 

@@ -1,5 +1,7 @@
 #include "vtkUltrasoundFrameInterpolator.h"
 
+#include "bigusGaussianFieldData.h"
+
 #include "vtkDataArray.h"
 #include "vtkDoubleArray.h"
 #include "vtkFieldData.h"
@@ -339,35 +341,7 @@ int vtkUltrasoundFrameInterpolator::RequestData(
   output->SetSpacing(1, 1, 1);
   output->SetOrigin(0, 0, 0);
   output->GetPointData()->SetScalars(intensity);
-  // The targets' per-frame field data, in the output's order.
-  for (int a = 0; a < fields->GetNumberOfArrays(); ++a)
-  {
-    vtkDataArray* source = fields->GetArray(a);
-    if (!source || source->GetNumberOfTuples() != frames || !source->GetName())
-    {
-      continue;
-    }
-    vtkSmartPointer<vtkDataArray> copy = vtkSmartPointer<vtkDataArray>::Take(source->NewInstance());
-    copy->SetName(source->GetName());
-    copy->SetNumberOfComponents(source->GetNumberOfComponents());
-    copy->SetNumberOfTuples(vtkIdType(count));
-    for (std::size_t m = 0; m < count; ++m)
-    {
-      copy->SetTuple(vtkIdType(m), targets[m], source);
-    }
-    output->GetFieldData()->AddArray(copy);
-  }
-  if (!output->GetFieldData()->GetArray("FrameIndex"))
-  {
-    vtkNew<vtkIntArray> index;
-    index->SetName("FrameIndex");
-    index->SetNumberOfTuples(vtkIdType(count));
-    for (std::size_t m = 0; m < count; ++m)
-    {
-      index->SetValue(vtkIdType(m), static_cast<int>(targets[m]));
-    }
-    output->GetFieldData()->AddArray(index);
-  }
+  bigus::CopyFrameFieldData(fields, frames, targets, output->GetFieldData());
   vtkNew<vtkIntArray> used;
   used->SetName("SourceFrames");
   used->SetNumberOfComponents(2);

@@ -8,7 +8,6 @@
 #include "vtkImageData.h"
 #include "vtkInformation.h"
 #include "vtkInformationVector.h"
-#include "vtkIntArray.h"
 #include "vtkMatrix3x3.h"
 #include "vtkMatrix4x4.h"
 #include "vtkObjectFactory.h"
@@ -423,35 +422,7 @@ int vtkUltrasoundSequenceReslice::RequestData(
   output->GetPointData()->SetScalars(bigus::IntensityArray(values, this->OutputScalarType));
   maskOutput->GetPointData()->SetScalars(mask);
 
-  // The chosen frames' per-frame field data, in the output's order.
-  for (int a = 0; a < sequence->GetFieldData()->GetNumberOfArrays(); ++a)
-  {
-    vtkDataArray* source = sequence->GetFieldData()->GetArray(a);
-    if (!source || !source->GetName() || source->GetNumberOfTuples() != frameCount)
-    {
-      continue;
-    }
-    vtkSmartPointer<vtkDataArray> copy = vtkSmartPointer<vtkDataArray>::Take(source->NewInstance());
-    copy->SetName(source->GetName());
-    copy->SetNumberOfComponents(source->GetNumberOfComponents());
-    copy->SetNumberOfTuples(count);
-    for (int k = 0; k < count; ++k)
-    {
-      copy->SetTuple(k, frames[k], source);
-    }
-    output->GetFieldData()->AddArray(copy);
-  }
-  if (!output->GetFieldData()->GetArray("FrameIndex"))
-  {
-    auto index = vtkSmartPointer<vtkIntArray>::New();
-    index->SetName("FrameIndex");
-    index->SetNumberOfTuples(count);
-    for (int k = 0; k < count; ++k)
-    {
-      index->SetValue(k, static_cast<int>(frames[k]));
-    }
-    output->GetFieldData()->AddArray(index);
-  }
+  bigus::CopyFrameFieldData(sequence->GetFieldData(), frameCount, frames, output->GetFieldData());
   return 1;
 }
 

@@ -80,7 +80,43 @@ def main():
     assert all(0 < f["psnr"] <= 100 for f in metrics["frames"])
     for name in ("slice_orthogonal.png", "slice_oblique.png", "psnr_against_time.png"):
         assert os.path.getsize(os.path.join(report, name)) > 0, name
-    print("bigus info / train / render / evaluate: exit codes, outputs and errors as documented")
+
+    # The volume protocol: a sweep of the PLUS reconstruction with exact poses and per-frame masks,
+    # trained on and evaluated with those masks.
+    volume = os.path.join(data, "spine-phantom", "SpinePhantomFreehandReconstructed.mha")
+    parallel = os.path.join(out, "volume_parallel.igs.mha")
+    parallel_mask = os.path.join(out, "volume_parallel_mask.mha")
+    code, out_text, err = run("sweep", volume, "--frames", "26", "-o", parallel, "--mask-output", parallel_mask)
+    assert code == 0, err
+    code, _, err = run("sweep", volume, "--protocol", "oblique", "--tilt", "120", "-o", os.path.join(out, "o.igs.mha"))
+    assert code == 1 and "tilt" in err.lower() and err.count("\n") == 1, err
+    code, _, err = run("sweep", os.path.join(data, "spine-phantom", "LICENSE"), "-o", os.path.join(out, "o.igs.mha"))
+    assert code == 1 and "format" in err, err
+    back = bigus.vtkUltrasoundSequenceReader()
+    back.SetFileName(parallel)
+    back.Update()
+    dims = back.GetOutput().GetDimensions()
+    mha = vtk.vtkMetaImageReader()
+    mha.SetFileName(volume)
+    mha.Update()
+    vdims, spacing, origin = mha.GetOutput().GetDimensions(), mha.GetOutput().GetSpacing(), mha.GetOutput().GetOrigin()
+    # Slices along z, every 4th voxel plane (26 slices of 104 planes): columns along x, rows along y.
+    assert dims == (vdims[0], vdims[1], 26), (dims, vdims)
+    poses = back.GetOutput().GetFieldData().GetArray("ImageToReference")
+    for k in (0, 13, 25):
+        m = poses.GetTuple(k)
+        assert abs(m[0] - spacing[0]) < 1e-9 and abs(m[5] - spacing[1]) < 1e-9, m
+        assert abs(m[11] - (origin[2] + 4 * k * spacing[2])) < 1e-6, (k, m[11])
+    field = os.path.join(out, "volume.vtp")
+    code, out_text, err = run("train", parallel, "--mask", parallel_mask, "-o", field, "--holdout-every", "2",
+                              "--holdout-offset", "1", "--iterations", "30", "--elevation-sigma", "1.0")
+    assert code == 0, err
+    code, _, err = run("train", parallel, "--mask", os.path.join(out, "nwire_rendered.igs.mha"), "-o", field)
+    assert code == 1 and "mask" in err, err
+    code, out_text, err = run("evaluate", field, parallel, "--mask", parallel_mask, "--frames", "1", "13",
+                              "--report", os.path.join(out, "volume_report"))
+    assert code == 0, err
+    print("bigus info / train / render / evaluate / sweep: exit codes, outputs and errors as documented")
 
 
 if __name__ == "__main__":
