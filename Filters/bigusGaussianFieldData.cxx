@@ -5,6 +5,7 @@
 #include "vtkDoubleArray.h"
 #include "vtkFieldData.h"
 #include "vtkFloatArray.h"
+#include "vtkIdList.h"
 #include "vtkImageData.h"
 #include "vtkIntArray.h"
 #include "vtkNew.h"
@@ -212,6 +213,31 @@ bool TrainingDataFromSequence(vtkImageData* sequence, vtkImageData* mask, Traini
     data.Mask[p] = maskValues->GetComponent(p, 0) != 0 ? 1 : 0;
   }
   data.TrainFrames.clear();
+  return true;
+}
+
+bool ChosenFrames(vtkIdList* list, vtkIdType frameCount, std::vector<vtkIdType>& frames, std::string* error)
+{
+  frames.clear();
+  if (!list || list->GetNumberOfIds() == 0)
+  {
+    for (vtkIdType f = 0; f < frameCount; ++f)
+    {
+      frames.push_back(f);
+    }
+    return true;
+  }
+  for (vtkIdType k = 0; k < list->GetNumberOfIds(); ++k)
+  {
+    const vtkIdType f = list->GetId(k);
+    if (f < 0 || f >= frameCount)
+    {
+      *error = "frame " + std::to_string(f) + " is outside the " + std::to_string(frameCount) +
+        " frames of the pose sequence";
+      return false;
+    }
+    frames.push_back(f);
+  }
   return true;
 }
 

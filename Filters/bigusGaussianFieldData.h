@@ -20,6 +20,7 @@
 
 class vtkDataArray;
 class vtkFieldData;
+class vtkIdList;
 class vtkImageData;
 class vtkPolyData;
 
@@ -61,6 +62,14 @@ BIGUSFILTERS_EXPORT void FieldToPolyData(const GaussianField& field, const Field
  */
 BIGUSFILTERS_EXPORT bool TrainingDataFromSequence(
   vtkImageData* sequence, vtkImageData* mask, TrainingData& data, std::string* error);
+
+/**
+ * The frames a sequence filter works on: those of @p list (indices into a sequence of @p frameCount
+ * frames, in the list's order), or every frame when @p list is null or empty. Returns false with
+ * @p error ("frame F is outside the N frames of the pose sequence") for an index out of range.
+ */
+BIGUSFILTERS_EXPORT bool ChosenFrames(
+  vtkIdList* list, vtkIdType frameCount, std::vector<vtkIdType>& frames, std::string* error);
 
 /**
  * The per-frame field data of a tracked sequence for chosen frames, in their order: every named

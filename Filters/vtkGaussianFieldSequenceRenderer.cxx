@@ -92,25 +92,10 @@ int vtkGaussianFieldSequenceRenderer::RequestData(
     return 0;
   }
   std::vector<vtkIdType> frames;
-  if (this->FrameList && this->FrameList->GetNumberOfIds() > 0)
+  if (!bigus::ChosenFrames(this->FrameList, dims[2], frames, &error))
   {
-    for (vtkIdType k = 0; k < this->FrameList->GetNumberOfIds(); ++k)
-    {
-      const vtkIdType f = this->FrameList->GetId(k);
-      if (f < 0 || f >= dims[2])
-      {
-        vtkErrorMacro("frame " << f << " is outside the " << dims[2] << " frames of the pose sequence");
-        return 0;
-      }
-      frames.push_back(f);
-    }
-  }
-  else
-  {
-    for (vtkIdType f = 0; f < dims[2]; ++f)
-    {
-      frames.push_back(f);
-    }
+    vtkErrorMacro(<< error);
+    return 0;
   }
   const int count = static_cast<int>(frames.size());
   std::vector<bigus::SliceGeometry> slices(count);

@@ -327,25 +327,11 @@ int vtkUltrasoundSequenceReslice::RequestData(
     return 0;
   }
   std::vector<vtkIdType> frames;
-  if (this->FrameList && this->FrameList->GetNumberOfIds() > 0)
+  std::string error;
+  if (!bigus::ChosenFrames(this->FrameList, frameCount, frames, &error))
   {
-    for (vtkIdType k = 0; k < this->FrameList->GetNumberOfIds(); ++k)
-    {
-      const vtkIdType f = this->FrameList->GetId(k);
-      if (f < 0 || f >= frameCount)
-      {
-        vtkErrorMacro("frame " << f << " is outside the " << frameCount << " frames of the pose sequence");
-        return 0;
-      }
-      frames.push_back(f);
-    }
-  }
-  else
-  {
-    for (vtkIdType f = 0; f < frameCount; ++f)
-    {
-      frames.push_back(f);
-    }
+    vtkErrorMacro(<< error);
+    return 0;
   }
   const int count = static_cast<int>(frames.size());
   vtkDataArray* frameValid = sequence->GetFieldData()->GetArray("FrameValid");
