@@ -178,37 +178,18 @@ void Print(const std::string& where, const Row& r)
 }
 
 /// Mean metrics of predicted frames (M frames, [M, H, W], intensities times @p scale) against @p frames
-/// of @p data, inside each frame's mask; frames whose mask is empty are left out.
+/// of @p data, inside each frame's mask (bigus::MeanFrameMetrics).
 ImageMetrics Score(const float* predicted, double scale, const TrainingData& data, const std::vector<int>& frames)
 {
   const std::size_t pixels = std::size_t(data.Width) * data.Height;
   std::vector<float> image(pixels);
-  ImageMetrics mean;
-  int used = 0;
-  for (std::size_t m = 0; m < frames.size(); ++m)
-  {
-    const unsigned char* mask = data.MaskOf(frames[m]);
-    if (std::none_of(mask, mask + pixels, [](unsigned char v) { return v != 0; }))
-    {
-      continue;
-    }
+  return MeanFrameMetrics(data, frames, [&](std::size_t m, int) {
     for (std::size_t p = 0; p < pixels; ++p)
     {
       image[p] = static_cast<float>(predicted[pixels * m + p] * scale);
     }
-    const ImageMetrics q = CompareImages(image.data(), &data.Frames[pixels * frames[m]], mask, data.Width, data.Height);
-    mean.PSNR += q.PSNR;
-    mean.SSIM += q.SSIM;
-    mean.NCC += q.NCC;
-    mean.Speckle += q.Speckle;
-    ++used;
-  }
-  const double n = std::max(1, used);
-  mean.PSNR /= n;
-  mean.SSIM /= n;
-  mean.NCC /= n;
-  mean.Speckle /= n;
-  return mean;
+    return image.data();
+  });
 }
 
 vtkSmartPointer<vtkIdList> IdList(const std::vector<int>& frames)

@@ -681,19 +681,11 @@ ImageMetrics Trainer::Evaluate(const std::vector<int>& frames, double* secondsPe
 
 ImageMetrics Trainer::EvaluateOn(const TrainingData& data, const std::vector<int>& frames, double* secondsPerFrame)
 {
-  const std::size_t pixels = std::size_t(data.Width) * data.Height;
   const RenderOptions o = this->Options();
-  std::vector<float> S(pixels), I(pixels);
-  ImageMetrics mean;
+  std::vector<float> S(std::size_t(data.Width) * data.Height), I(S.size());
   double seconds = 0;
-  int used = 0;
-  for (int f : frames)
-  {
-    const unsigned char* mask = data.MaskOf(f);
-    if (std::none_of(mask, mask + pixels, [](unsigned char m) { return m != 0; }))
-    {
-      continue; // nothing of this frame is imaged (a per-frame mask outside the data)
-    }
+  int rendered = 0;
+  const ImageMetrics mean = MeanFrameMetrics(data, frames, [&](std::size_t, int f) {
     SliceGeometry slice;
     std::copy(data.Poses[f].begin(), data.Poses[f].end(), slice.ImageToReference);
     slice.Width = data.Width;
@@ -701,12 +693,36 @@ ImageMetrics Trainer::EvaluateOn(const TrainingData& data, const std::vector<int
     const double t0 = Seconds();
     this->Backend->Forward(this->Field.View(), &slice, 1, o, S.data(), I.data(), nullptr, nullptr);
     seconds += Seconds() - t0;
-    const ImageMetrics m = CompareImages(I.data(), &data.Frames[pixels * f], mask, data.Width, data.Height);
-    mean.PSNR += m.PSNR;
-    mean.SSIM += m.SSIM;
-    mean.NCC += m.NCC;
-    mean.Speckle += m.Speckle;
-    mean.Patches += m.Patches;
+    ++rendered;
+    return I.data();
+  });
+  if (secondsPerFrame)
+  {
+    *secondsPerFrame = rendered == 0 ? 0.0 : seconds / rendered;
+  }
+  return mean;
+}
+
+ImageMetrics MeanFrameMetrics(const TrainingData& data, const std::vector<int>& frames,
+  const std::function<const float*(std::size_t, int)>& image)
+{
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
+  ImageMetrics mean;
+  int used = 0;
+  for (std::size_t m = 0; m < frames.size(); ++m)
+  {
+    const int f = frames[m];
+    const unsigned char* mask = data.MaskOf(f);
+    if (std::none_of(mask, mask + pixels, [](unsigned char v) { return v != 0; }))
+    {
+      continue; // nothing of this frame is imaged (a per-frame mask outside the data)
+    }
+    const ImageMetrics q = CompareImages(image(m, f), &data.Frames[pixels * f], mask, data.Width, data.Height);
+    mean.PSNR += q.PSNR;
+    mean.SSIM += q.SSIM;
+    mean.NCC += q.NCC;
+    mean.Speckle += q.Speckle;
+    mean.Patches += q.Patches;
     ++used;
   }
   const double n = std::max(1, used);
@@ -714,10 +730,6 @@ ImageMetrics Trainer::EvaluateOn(const TrainingData& data, const std::vector<int
   mean.SSIM /= n;
   mean.NCC /= n;
   mean.Speckle /= n;
-  if (secondsPerFrame)
-  {
-    *secondsPerFrame = used == 0 ? 0.0 : seconds / used;
-  }
   return mean;
 }
 

@@ -184,6 +184,14 @@ private:
   std::vector<float> S, I, LossGradient, Gradients;
 };
 
+/**
+ * Mean metrics (bigus::CompareImages) of one [H, W] image per frame against @p frames of @p data, each
+ * inside that frame's mask; frames whose mask is empty are left out of the means (and @p image is not
+ * called for them). @p image(m, f) gives the image for the m-th entry f of @p frames.
+ */
+BIGUSFILTERS_EXPORT ImageMetrics MeanFrameMetrics(const TrainingData& data, const std::vector<int>& frames,
+  const std::function<const float*(std::size_t, int)>& image);
+
 /// Quaternion (w, x, y, z) of the rotation whose columns are the unit vectors u, v, n.
 std::array<double, 4> QuaternionFromAxes(const double u[3], const double v[3], const double n[3]);
 
