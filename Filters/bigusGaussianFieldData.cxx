@@ -7,11 +7,13 @@
 #include "vtkFloatArray.h"
 #include "vtkIdList.h"
 #include "vtkImageData.h"
+#include "vtkInformation.h"
 #include "vtkIntArray.h"
 #include "vtkNew.h"
 #include "vtkPointData.h"
 #include "vtkPoints.h"
 #include "vtkPolyData.h"
+#include "vtkStreamingDemandDrivenPipeline.h"
 #include "vtkUnsignedCharArray.h"
 
 #include <algorithm>
@@ -239,6 +241,22 @@ bool ChosenFrames(vtkIdList* list, vtkIdType frameCount, std::vector<vtkIdType>&
     frames.push_back(f);
   }
   return true;
+}
+
+void SetFrameSequenceInformation(vtkInformation* poseInfo, vtkIdList* list, int scalarType, vtkInformation* outInfo)
+{
+  int extent[6];
+  poseInfo->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT(), extent);
+  if (list && list->GetNumberOfIds() > 0)
+  {
+    extent[4] = 0;
+    extent[5] = static_cast<int>(list->GetNumberOfIds()) - 1;
+  }
+  const double spacing[3] = { 1, 1, 1 }, origin[3] = { 0, 0, 0 };
+  outInfo->Set(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT(), extent, 6);
+  outInfo->Set(vtkDataObject::SPACING(), spacing, 3);
+  outInfo->Set(vtkDataObject::ORIGIN(), origin, 3);
+  vtkDataObject::SetPointDataActiveScalarInfo(outInfo, scalarType, 1);
 }
 
 void CopyFrameFieldData(vtkFieldData* in, vtkIdType frameCount, const std::vector<vtkIdType>& frames, vtkFieldData* out)

@@ -21,6 +21,7 @@
 class vtkDataArray;
 class vtkFieldData;
 class vtkIdList;
+class vtkInformation;
 class vtkImageData;
 class vtkPolyData;
 
@@ -70,6 +71,14 @@ BIGUSFILTERS_EXPORT bool TrainingDataFromSequence(
  */
 BIGUSFILTERS_EXPORT bool ChosenFrames(
   vtkIdList* list, vtkIdType frameCount, std::vector<vtkIdType>& frames, std::string* error);
+
+/**
+ * Pipeline information of a sequence filter's output that has one frame per chosen frame of the pose
+ * sequence described by @p poseInfo: W x H from the pose sequence, one slice per entry of @p list (all
+ * frames when null or empty), spacing 1, origin 0, one-component scalars of @p scalarType.
+ */
+BIGUSFILTERS_EXPORT void SetFrameSequenceInformation(
+  vtkInformation* poseInfo, vtkIdList* list, int scalarType, vtkInformation* outInfo);
 
 /**
  * The per-frame field data of a tracked sequence for chosen frames, in their order: every named

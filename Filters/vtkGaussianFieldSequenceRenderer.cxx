@@ -42,20 +42,8 @@ int vtkGaussianFieldSequenceRenderer::FillInputPortInformation(int port, vtkInfo
 int vtkGaussianFieldSequenceRenderer::RequestInformation(
   vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector* outputVector)
 {
-  vtkInformation* poseInfo = inputVector[1]->GetInformationObject(0);
-  int extent[6];
-  poseInfo->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT(), extent);
-  if (this->FrameList && this->FrameList->GetNumberOfIds() > 0)
-  {
-    extent[4] = 0;
-    extent[5] = static_cast<int>(this->FrameList->GetNumberOfIds()) - 1;
-  }
-  vtkInformation* outInfo = outputVector->GetInformationObject(0);
-  outInfo->Set(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT(), extent, 6);
-  const double spacing[3] = { 1, 1, 1 }, origin[3] = { 0, 0, 0 };
-  outInfo->Set(vtkDataObject::SPACING(), spacing, 3);
-  outInfo->Set(vtkDataObject::ORIGIN(), origin, 3);
-  vtkDataObject::SetPointDataActiveScalarInfo(outInfo, this->OutputScalarType, 1);
+  bigus::SetFrameSequenceInformation(inputVector[1]->GetInformationObject(0), this->FrameList,
+    this->OutputScalarType, outputVector->GetInformationObject(0));
   return 1;
 }
 

@@ -213,23 +213,10 @@ int vtkUltrasoundSequenceReslice::FillInputPortInformation(int, vtkInformation* 
 int vtkUltrasoundSequenceReslice::RequestInformation(
   vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector* outputVector)
 {
-  vtkInformation* poseInfo = inputVector[1]->GetInformationObject(0);
-  int extent[6];
-  poseInfo->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT(), extent);
-  if (this->FrameList && this->FrameList->GetNumberOfIds() > 0)
-  {
-    extent[4] = 0;
-    extent[5] = static_cast<int>(this->FrameList->GetNumberOfIds()) - 1;
-  }
-  const double spacing[3] = { 1, 1, 1 }, origin[3] = { 0, 0, 0 };
   for (int port = 0; port < 2; ++port)
   {
-    vtkInformation* outInfo = outputVector->GetInformationObject(port);
-    outInfo->Set(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT(), extent, 6);
-    outInfo->Set(vtkDataObject::SPACING(), spacing, 3);
-    outInfo->Set(vtkDataObject::ORIGIN(), origin, 3);
-    vtkDataObject::SetPointDataActiveScalarInfo(
-      outInfo, port == 0 ? this->OutputScalarType : VTK_UNSIGNED_CHAR, 1);
+    bigus::SetFrameSequenceInformation(inputVector[1]->GetInformationObject(0), this->FrameList,
+      port == 0 ? this->OutputScalarType : VTK_UNSIGNED_CHAR, outputVector->GetInformationObject(port));
   }
   return 1;
 }
