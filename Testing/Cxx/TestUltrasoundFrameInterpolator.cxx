@@ -3,7 +3,6 @@
 #include "bigusTestUtilities.h"
 
 #include "vtkDataArray.h"
-#include "vtkDoubleArray.h"
 #include "vtkExecutive.h"
 #include "vtkFieldData.h"
 #include "vtkFloatArray.h"
@@ -13,7 +12,6 @@
 #include "vtkPointData.h"
 #include "vtkUltrasoundFrameInterpolator.h"
 #include "vtkUltrasoundSequenceReader.h"
-#include "vtkUnsignedCharArray.h"
 
 #include <gtest/gtest.h>
 
@@ -36,44 +34,6 @@ using Matrix = std::array<double, 16>;
 Matrix Translation(double tx, double ty, double tz)
 {
   return { 1, 0, 0, tx, 0, 1, 0, ty, 0, 0, 1, tz, 0, 0, 0, 1 };
-}
-
-/// A tracked sequence of W x H float frames with the given poses and timestamps; pixel (i, j) of
-/// frame k has value(k, i, j). No FrameIndex array (the filter then adds its own).
-vtkSmartPointer<vtkImageData> Sequence(int w, int h, const std::vector<Matrix>& poses, const std::vector<double>& times,
-  const std::function<float(int, int, int)>& value)
-{
-  const int n = static_cast<int>(poses.size());
-  auto image = vtkSmartPointer<vtkImageData>::New();
-  image->SetDimensions(w, h, n);
-  image->AllocateScalars(VTK_FLOAT, 1);
-  auto* p = static_cast<float*>(image->GetScalarPointer());
-  vtkNew<vtkDoubleArray> pose, stamp;
-  pose->SetName("ImageToReference");
-  pose->SetNumberOfComponents(16);
-  pose->SetNumberOfTuples(n);
-  stamp->SetName("Timestamp");
-  stamp->SetNumberOfTuples(n);
-  vtkNew<vtkUnsignedCharArray> valid;
-  valid->SetName("FrameValid");
-  valid->SetNumberOfTuples(n);
-  for (int k = 0; k < n; ++k)
-  {
-    for (int j = 0; j < h; ++j)
-    {
-      for (int i = 0; i < w; ++i)
-      {
-        p[(std::size_t(k) * h + j) * w + i] = value(k, i, j);
-      }
-    }
-    pose->SetTuple(k, poses[k].data());
-    stamp->SetValue(k, times[k]);
-    valid->SetValue(k, 1);
-  }
-  image->GetFieldData()->AddArray(pose);
-  image->GetFieldData()->AddArray(stamp);
-  image->GetFieldData()->AddArray(valid);
-  return image;
 }
 
 vtkSmartPointer<vtkIdList> Ids(std::initializer_list<vtkIdType> ids)
@@ -110,7 +70,7 @@ vtkSmartPointer<vtkImageData> LinearSweep()
   {
     poses.push_back(Translation(0, 0, 0.4 * k));
   }
-  return Sequence(12, 10, poses, Times, LinearInTime);
+  return bigus_test::TrackedSequence(12, 10, poses, Times, LinearInTime);
 }
 }
 
@@ -185,7 +145,7 @@ TEST(FrameInterpolator, NearestPoseUsesTheImageCentre)
     Translation(0, 0, 4),   // 4
     Translation(40, 0, 0),  // 5: target, nearest frame 1 (37 mm)
   };
-  auto sweep = Sequence(20, 10, poses, { 0, 1, 2, 3, 4, 5 }, [](int k, int, int) { return float(k); });
+  auto sweep = bigus_test::TrackedSequence(20, 10, poses, { 0, 1, 2, 3, 4, 5 }, [](int k, int, int) { return float(k); });
   vtkNew<vtkUltrasoundFrameInterpolator> interpolator;
   interpolator->SetInputData(sweep);
   interpolator->SetTrainingFrames(Ids({ 1, 2, 4 }));

@@ -4,7 +4,6 @@
 
 #include "vtkCallbackCommand.h"
 #include "vtkCommand.h"
-#include "vtkDoubleArray.h"
 #include "vtkExecutive.h"
 #include "vtkFieldData.h"
 #include "vtkFloatArray.h"
@@ -18,7 +17,6 @@
 #include "vtkUltrasoundCalibration.h"
 #include "vtkUltrasoundSequenceReader.h"
 #include "vtkUltrasoundVolumeCompounder.h"
-#include "vtkUnsignedCharArray.h"
 #include "vtkUnsignedIntArray.h"
 
 #include <gtest/gtest.h>
@@ -70,42 +68,18 @@ std::array<double, 3> PixelToMm(const Matrix& m, double i, double j)
   return { m[0] * i + m[1] * j + m[3], m[4] * i + m[5] * j + m[7], m[8] * i + m[9] * j + m[11] };
 }
 
-/// A tracked sequence (DESIGN section 2) of W x H float frames: pixel (i, j) of frame k has
+/// A tracked sequence of W x H float frames 0.05 s apart: pixel (i, j) of frame k has
 /// value(k, mm position of the pixel).
 vtkSmartPointer<vtkImageData> Sequence(int w, int h, const std::vector<Matrix>& poses,
   const std::function<float(int, const std::array<double, 3>&)>& value)
 {
-  const int n = static_cast<int>(poses.size());
-  auto image = vtkSmartPointer<vtkImageData>::New();
-  image->SetDimensions(w, h, n);
-  image->AllocateScalars(VTK_FLOAT, 1);
-  auto* p = static_cast<float*>(image->GetScalarPointer());
-  vtkNew<vtkDoubleArray> pose, stamp;
-  pose->SetName("ImageToReference");
-  pose->SetNumberOfComponents(16);
-  pose->SetNumberOfTuples(n);
-  stamp->SetName("Timestamp");
-  stamp->SetNumberOfTuples(n);
-  vtkNew<vtkUnsignedCharArray> valid;
-  valid->SetName("FrameValid");
-  valid->SetNumberOfTuples(n);
-  for (int k = 0; k < n; ++k)
+  std::vector<double> times;
+  for (std::size_t k = 0; k < poses.size(); ++k)
   {
-    for (int j = 0; j < h; ++j)
-    {
-      for (int i = 0; i < w; ++i)
-      {
-        p[(std::size_t(k) * h + j) * w + i] = value(k, PixelToMm(poses[k], i, j));
-      }
-    }
-    pose->SetTuple(k, poses[k].data());
-    stamp->SetValue(k, 0.05 * k);
-    valid->SetValue(k, 1);
+    times.push_back(0.05 * k);
   }
-  image->GetFieldData()->AddArray(pose);
-  image->GetFieldData()->AddArray(stamp);
-  image->GetFieldData()->AddArray(valid);
-  return image;
+  return bigus_test::TrackedSequence(
+    w, h, poses, times, [&](int k, int i, int j) { return value(k, PixelToMm(poses[k], i, j)); });
 }
 
 const float* Values(vtkImageData* volume)

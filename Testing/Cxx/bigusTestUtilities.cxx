@@ -1,9 +1,12 @@
 #include "bigusTestUtilities.h"
 
 #include "vtkDataArray.h"
+#include "vtkDoubleArray.h"
 #include "vtkFieldData.h"
 #include "vtkImageData.h"
+#include "vtkNew.h"
 #include "vtkObject.h"
+#include "vtkUnsignedCharArray.h"
 
 #include <fstream>
 #include <sstream>
@@ -23,6 +26,42 @@ std::string ExamplePath(const std::string& relative)
 std::string OutputPath(const std::string& name)
 {
   return std::string(BIGUS_TEST_OUTPUT) + "/" + name;
+}
+
+vtkSmartPointer<vtkImageData> TrackedSequence(int w, int h, const std::vector<std::array<double, 16>>& poses,
+  const std::vector<double>& times, const std::function<float(int, int, int)>& value)
+{
+  const int n = static_cast<int>(poses.size());
+  auto image = vtkSmartPointer<vtkImageData>::New();
+  image->SetDimensions(w, h, n);
+  image->AllocateScalars(VTK_FLOAT, 1);
+  auto* p = static_cast<float*>(image->GetScalarPointer());
+  vtkNew<vtkDoubleArray> pose, stamp;
+  pose->SetName("ImageToReference");
+  pose->SetNumberOfComponents(16);
+  pose->SetNumberOfTuples(n);
+  stamp->SetName("Timestamp");
+  stamp->SetNumberOfTuples(n);
+  vtkNew<vtkUnsignedCharArray> valid;
+  valid->SetName("FrameValid");
+  valid->SetNumberOfTuples(n);
+  for (int k = 0; k < n; ++k)
+  {
+    for (int j = 0; j < h; ++j)
+    {
+      for (int i = 0; i < w; ++i)
+      {
+        p[(std::size_t(k) * h + j) * w + i] = value(k, i, j);
+      }
+    }
+    pose->SetTuple(k, poses[k].data());
+    stamp->SetValue(k, times[k]);
+    valid->SetValue(k, 1);
+  }
+  image->GetFieldData()->AddArray(pose);
+  image->GetFieldData()->AddArray(stamp);
+  image->GetFieldData()->AddArray(valid);
+  return image;
 }
 
 std::array<double, 16> Pose(vtkImageData* sequence, int k)

@@ -6,6 +6,7 @@
 #include "vtkSmartPointer.h"
 
 #include <array>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -24,6 +25,14 @@ std::string OutputPath(const std::string& name);
 
 /// Row-major ImageToReference of frame k of a tracked sequence.
 std::array<double, 16> Pose(vtkImageData* sequence, int k);
+
+/**
+ * A tracked frame sequence (DESIGN section 2) of W x H float frames with the given poses (row-major
+ * ImageToReference) and timestamps (s), FrameValid 1 and no FrameIndex; pixel (i, j) of frame k has
+ * value(k, i, j).
+ */
+vtkSmartPointer<vtkImageData> TrackedSequence(int w, int h, const std::vector<std::array<double, 16>>& poses,
+  const std::vector<double>& times, const std::function<float(int, int, int)>& value);
 
 /// Collects the messages of vtkErrorMacro / vtkWarningMacro of the objects it observes.
 class MessageCollector : public vtkCommand
