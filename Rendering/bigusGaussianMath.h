@@ -90,6 +90,9 @@ struct Footprint
   double Amplitude;   ///< amp (unitless, <= 1)
   double Elevation;   ///< m_z, mm
   double ElevationVar;///< P2[z,z], mm^2
+  double CutoffSquared; ///< k^2 - m_z^2 / P2[z,z]: the footprint keeps the pixels p with
+                        ///< (p - c)^T conic (p - c) <= CutoffSquared, i.e. within k of the centre in the
+                        ///< 3D Mahalanobis distance of the beam-convolved Gaussian (DESIGN section 3)
   bool Visible;       ///< false when culled in elevation or degenerate
 };
 
@@ -145,7 +148,10 @@ BIGUS_HD void QuaternionToMatrixBackward(const double q[4], const double G[3][3]
 /**
  * Beam-integrated footprint of Gaussian @p g on the slice @p frame (DESIGN section 3).
  * @param sigmaE  elevation beam standard deviation, mm (0 = thin plane, the UltraGauss ablation).
- * @param cutoff  k: culled when |m_z| > k sqrt(P2[z,z]).
+ * @param cutoff  k: culled when |m_z| > k sqrt(P2[z,z]); a visible footprint keeps the pixels within k
+ *                of the beam-convolved Gaussian's centre in 3D Mahalanobis distance (CutoffSquared), so a
+ *                Gaussian far from the plane covers a smaller disc: every dropped contribution is at most
+ *                |r| exp(-k^2 / 2), the bound the elevation cull alone gives.
  * @param cache   filled with what the backward pass needs (may be null).
  */
 BIGUS_HD Footprint SetupFootprint(
@@ -278,7 +284,9 @@ BIGUS_HD Footprint SetupFootprint(
   const double shift = -c.m[2] / c.Pzz2;
   f.Center[0] = c.m[0] + shift * c.P[0][2];
   f.Center[1] = c.m[1] + shift * c.P[1][2];
-  f.Amplitude = std::exp(-0.5 * c.m[2] * c.m[2] / c.Pzz2) / std::sqrt(1.0 + s2 * c.LambdaZZ);
+  const double elevationForm = c.m[2] * c.m[2] / c.Pzz2;
+  f.Amplitude = std::exp(-0.5 * elevationForm) / std::sqrt(1.0 + s2 * c.LambdaZZ);
+  f.CutoffSquared = cutoff * cutoff - elevationForm;
   f.Visible = true;
   return f;
 }
