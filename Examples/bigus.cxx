@@ -73,6 +73,36 @@ int Fail(const std::string& what)
   return 1;
 }
 
+/**
+ * The last error a watched VTK object reported, on one line. VTK's output window is silenced (main),
+ * so the command line reports a filter's own message ("ERROR: In <file>, line <n>\n<class>
+ * (<address>): <message>\n\n" keeps <message>) instead of its own guess.
+ */
+class FilterError
+{
+public:
+  FilterError()
+  {
+    this->Callback->SetClientData(&this->Text);
+    this->Callback->SetCallback([](vtkObject*, unsigned long, void* client, void* data) {
+      std::string text = static_cast<const char*>(data);
+      const std::size_t start = text.rfind("): ");
+      text = start == std::string::npos ? text : text.substr(start + 3);
+      text.erase(std::remove(text.begin(), text.end(), '\n'), text.end());
+      *static_cast<std::string*>(client) = text;
+    });
+  }
+  FilterError(const FilterError&) = delete;
+  FilterError& operator=(const FilterError&) = delete;
+  void Watch(vtkObject* object) { object->AddObserver(vtkCommand::ErrorEvent, this->Callback); }
+  /// The message, or @p fallback when none was reported.
+  std::string Or(const std::string& fallback) const { return this->Text.empty() ? fallback : this->Text; }
+  std::string Text;
+
+private:
+  vtkNew<vtkCallbackCommand> Callback;
+};
+
 bool EndsWith(const std::string& s, const std::string& suffix)
 {
   return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
@@ -365,6 +395,8 @@ int RunTrain(const TrainOptions& o)
     }
   });
   trainer->AddObserver(vtkCommand::ProgressEvent, progress);
+  FilterError error;
+  error.Watch(trainer);
   trainer->Update();
   if (terminal)
   {
@@ -372,7 +404,7 @@ int RunTrain(const TrainOptions& o)
   }
   if (trainer->GetNumberOfGaussians() == 0)
   {
-    return Fail("training failed (see the message above)");
+    return Fail("training failed: " + error.Or("no field"));
   }
   const std::string temporary = TemporaryName(o.Output);
   vtkNew<vtkXMLPolyDataWriter> writer;
@@ -478,10 +510,12 @@ int RunRender(const RenderOptionsCli& o)
       frames->InsertNextId(f);
     }
     renderer->SetFrameList(frames);
+    FilterError error;
+    error.Watch(renderer);
     renderer->Update();
     if (renderer->GetOutput()->GetNumberOfPoints() == 0)
     {
-      return Fail("rendering failed (see the message above)");
+      return Fail("rendering failed: " + error.Or("no frames"));
     }
     vtkNew<vtkUltrasoundSequenceWriter> writer;
     writer->SetInputConnection(renderer->GetOutputPort());
@@ -542,10 +576,12 @@ int RunRender(const RenderOptionsCli& o)
   {
     reslice->SetOutputScalarTypeToUnsignedChar();
   }
+  FilterError error;
+  error.Watch(reslice);
   reslice->Update();
   if (reslice->GetOutput()->GetNumberOfPoints() == 0)
   {
-    return Fail("rendering failed (see the message above)");
+    return Fail("rendering failed: " + error.Or("empty slice"));
   }
   if (WriteImage(reslice->GetOutput(), o.Output) != 0)
   {
@@ -659,11 +695,13 @@ int RunEvaluate(const EvaluateOptions& o)
     list->InsertNextId(k);
   }
   renderer->SetFrameList(list);
+  FilterError error;
+  error.Watch(renderer);
   renderer->Update();
   vtkImageData* rendered = renderer->GetOutput();
   if (rendered->GetNumberOfPoints() == 0)
   {
-    return Fail("rendering failed (see the message above)");
+    return Fail("rendering failed: " + error.Or("no frames"));
   }
   if (::mkdir(o.Report.c_str(), 0755) != 0 && errno != EEXIST)
   {
@@ -842,22 +880,12 @@ int RunSweepFromVolume(const SweepFromVolumeOptions& o)
   sweep->SetMaximumTiltAngle(o.Tilt);
   sweep->SetSeed(o.Seed);
   sweep->SetPixelSpacing(o.Spacing);
-  vtkNew<vtkCallbackCommand> onError; // the filter's own message, on one line
-  std::string message;
-  onError->SetClientData(&message);
-  onError->SetCallback([](vtkObject*, unsigned long, void* client, void* data) {
-    // "ERROR: In <file>, line <n>\n<class> (<address>): <message>\n\n": keep the message.
-    std::string text = static_cast<const char*>(data);
-    const std::size_t start = text.rfind("): ");
-    text = start == std::string::npos ? text : text.substr(start + 3);
-    text.erase(std::remove(text.begin(), text.end(), '\n'), text.end());
-    *static_cast<std::string*>(client) = text;
-  });
-  sweep->AddObserver(vtkCommand::ErrorEvent, onError);
+  FilterError error;
+  error.Watch(sweep);
   sweep->Update();
-  if (!message.empty() || sweep->GetOutput()->GetNumberOfPoints() == 0)
+  if (!error.Text.empty() || sweep->GetOutput()->GetNumberOfPoints() == 0)
   {
-    return Fail("sweep: " + (message.empty() ? std::string("no frames") : message));
+    return Fail("sweep: " + error.Or("no frames"));
   }
   const std::string temporary = TemporaryName(o.Output);
   vtkNew<vtkUltrasoundSequenceWriter> writer;

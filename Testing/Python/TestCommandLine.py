@@ -51,6 +51,10 @@ def main():
                        "-o", field)
     assert code == 1 and err.strip(), (code, err)
     assert open(field, "rb").read() == before
+    # The trainer's own reason reaches the user on one line.
+    code, _, err = run("train", sweep, "--calibration", xml, "-o", field, "--holdout-every", "1")
+    assert code == 1 and err.count("\n") == 1 and "no valid training frames" in err, (code, err)
+    assert open(field, "rb").read() == before
 
     rendered = os.path.join(out, "nwire_rendered.igs.mha")
     code, out_text, err = run("render", field, "--poses", sweep, "--calibration", xml, "--frames", "2", "6", "10",
