@@ -312,7 +312,7 @@ struct TrainOptions
   std::string Output, Checkpoint, Resume, Mask, Backend = "auto";
   int HoldOutEvery = 0, HoldOutOffset = 0, Iterations = 3000, Threads = 0;
   double TimeBudget = 0, ElevationSigma = 1.0, EvaluationInterval = 0;
-  long long MaxGaussians = 200000;
+  long long MaxGaussians = 400000, InitialGaussians = 0;
   unsigned Seed = 1;
 };
 
@@ -347,6 +347,7 @@ int RunTrain(const TrainOptions& o)
   trainer->SetIterations(o.Iterations);
   trainer->SetTimeBudget(o.TimeBudget);
   trainer->SetMaximumGaussians(o.MaxGaussians);
+  trainer->SetInitialGaussians(o.InitialGaussians);
   trainer->SetElevationSigma(o.ElevationSigma);
   trainer->SetSeed(o.Seed);
   trainer->SetEvaluationInterval(o.EvaluationInterval);
@@ -416,8 +417,10 @@ int RunTrain(const TrainOptions& o)
     std::remove(temporary.c_str());
     return Fail(o.Output + ": cannot write the field");
   }
-  std::printf("field          %s: %lld Gaussians after %d iterations in %.1f s (stop: %s; growth: %s)\n",
-    o.Output.c_str(), static_cast<long long>(trainer->GetNumberOfGaussians()), trainer->GetCompletedIterations(),
+  vtkDataArray* seeds = trainer->GetOutput()->GetFieldData()->GetArray("InitialGaussians");
+  std::printf("field          %s: %lld Gaussians (from %lld seeds) after %d iterations in %.1f s (stop: %s; growth: %s)\n",
+    o.Output.c_str(), static_cast<long long>(trainer->GetNumberOfGaussians()),
+    seeds ? static_cast<long long>(seeds->GetTuple1(0)) : 0LL, trainer->GetCompletedIterations(),
     trainer->GetTrainingSeconds(), trainer->GetStopReason(), trainer->GetGrowthStopReason());
   return 0;
 }
@@ -955,6 +958,10 @@ int main(int argc, char** argv)
   trainCommand->add_option("--time-budget", train.TimeBudget, "Wall-clock budget for training, seconds (0: none)");
   trainCommand->add_option("--iterations", train.Iterations, "Optimisation steps")->capture_default_str();
   trainCommand->add_option("--max-gaussians", train.MaxGaussians, "Hard maximum of Gaussians")->capture_default_str();
+  trainCommand->add_option("--initial-gaussians", train.InitialGaussians,
+    "Seeds (0: one per 200 fan pixels of the training frames, 20,000 to half the maximum)")
+    ->capture_default_str()
+    ->check(CLI::NonNegativeNumber);
   trainCommand->add_option("--elevation-sigma", train.ElevationSigma, "Elevation beam sigma, mm (FWHM / 2.355)")
     ->capture_default_str();
   trainCommand->add_option("--backend", train.Backend, "auto, cpu or cuda")

@@ -488,7 +488,7 @@ int RunBenchmark(const BenchmarkOptions& options)
   const std::vector<double> volumeMarks = quick ? std::vector<double>{ 5 } : std::vector<double>{ 30, 60, 180 };
   const double ablationSeconds = quick ? 4 : 60;
   const std::vector<long long> caps = quick ? std::vector<long long>{ 2000, 4000 }
-                                            : std::vector<long long>{ 5000, 10000, 20000, 40000 };
+                                            : std::vector<long long>{ 10000, 40000, 160000 };
   const int crop = quick ? 32 : 128;
 
   const std::string commit = CommandOutput("git -C '" + root + "' rev-parse --short HEAD 2>/dev/null");
@@ -798,8 +798,8 @@ int RunBenchmark(const BenchmarkOptions& options)
       }
     }
     Row adaptive = fullRowAtAblationTime[0];
-    adaptive.Method = "adaptive stop (default: start at " + std::to_string(defaults.InitialGaussians) + ", margin " +
-      Format("%.1f", 100 * defaults.GrowthMargin) + " %)";
+    adaptive.Method = "adaptive stop (default: automatic seeds, margin " + Format("%.1f", 100 * defaults.GrowthMargin) +
+      " %, cap " + std::to_string(defaults.MaximumGaussians) + ")";
     rows.push_back(adaptive);
     md << "\n## Quality against the number of Gaussians (liver, " << Format("%.0f", ablationSeconds)
        << " s of training each)\n\n"

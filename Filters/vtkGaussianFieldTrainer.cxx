@@ -190,6 +190,7 @@ int vtkGaussianFieldTrainer::RequestData(
     a->InsertNextValue(text);
     output->GetFieldData()->AddArray(a);
   };
+  addValue("InitialGaussians", static_cast<double>(report.InitialGaussians));
   addValue("Iterations", report.Iterations);
   addValue("TrainingSeconds", report.Seconds);
   addText("StopReason", report.StopReason);
