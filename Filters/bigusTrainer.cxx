@@ -217,18 +217,19 @@ bool Trainer::Initialize(std::string* error)
   this->Gamma = GammaFromMeanIntensity(sum / count);
   // Capacity follows the data: more fan pixels to explain, more seeds (measured on the liver at 120 s
   // of training: 20k seeds 32.5 dB held-out PSNR, 60k 33.0, 100k 33.3, 200k 33.7).
-  this->Report.InitialGaussians = this->Settings.InitialGaussians > 0
+  const std::int64_t seeds = this->Settings.InitialGaussians > 0
     ? this->Settings.InitialGaussians
     : std::max<std::int64_t>(std::min<std::int64_t>(20000, this->Settings.MaximumGaussians / 2),
         std::min<std::int64_t>(count / 200, this->Settings.MaximumGaussians / 2));
+  this->Report.InitialGaussians = seeds;
   std::mt19937_64 rng(this->Settings.Seed * 7919ULL + 17);
   if (this->Settings.HarrisInitialisation)
   {
-    this->InitializeHarris(rng);
+    this->InitializeHarris(seeds, rng);
   }
   else
   {
-    this->InitializeRandom(rng);
+    this->InitializeRandom(seeds, rng);
   }
   this->FitReflectivityScale();
   this->ResizeState(this->Field.Count());
@@ -287,13 +288,12 @@ double InvertImage(double intensity, double gamma)
 }
 }
 
-void Trainer::InitializeHarris(std::mt19937_64& rng)
+void Trainer::InitializeHarris(std::int64_t total, std::mt19937_64& rng)
 {
   // Seeds in proportion to the positive Harris response inside the mask, plus a uniform share
   // (DESIGN section 4): structure (edges, corners, bright speckle) gets Gaussians first.
   const int W = this->Data.Width, H = this->Data.Height;
   const std::size_t pixels = std::size_t(W) * H;
-  const std::int64_t total = this->Report.InitialGaussians;
   const int frames = static_cast<int>(this->Data.TrainFrames.size());
   const double inPlane = this->Settings.InitialScalePixels * this->PixelSpacing;
   const double elevation = this->Settings.ElevationSigma > 0 && this->Settings.BeamIntegration
@@ -346,7 +346,7 @@ void Trainer::InitializeHarris(std::mt19937_64& rng)
   }
 }
 
-void Trainer::InitializeRandom(std::mt19937_64& rng)
+void Trainer::InitializeRandom(std::int64_t total, std::mt19937_64& rng)
 {
   // Ablation: seeds uniform in the bounding box of every training frame's corners.
   double lo[3] = { 1e300, 1e300, 1e300 }, hi[3] = { -1e300, -1e300, -1e300 };
@@ -368,7 +368,7 @@ void Trainer::InitializeRandom(std::mt19937_64& rng)
   }
   const double scale = this->Settings.InitialScalePixels * this->PixelSpacing;
   this->Field = GaussianField();
-  for (std::int64_t s = 0; s < this->Report.InitialGaussians; ++s)
+  for (std::int64_t s = 0; s < total; ++s)
   {
     for (int k = 0; k < 3; ++k)
     {

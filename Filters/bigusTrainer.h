@@ -156,8 +156,9 @@ public:
   RenderOptions Options() const;
 
 private:
-  void InitializeHarris(std::mt19937_64& rng);
-  void InitializeRandom(std::mt19937_64& rng);
+  /// @p total seeds, drawn from the Harris response / uniformly (the ablation).
+  void InitializeHarris(std::int64_t total, std::mt19937_64& rng);
+  void InitializeRandom(std::int64_t total, std::mt19937_64& rng);
   void FitReflectivityScale();
   void DensifyAndPrune();
   double ValidationLoss();

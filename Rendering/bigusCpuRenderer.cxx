@@ -312,24 +312,24 @@ struct TileFrame
  * the in-plane offset of column q and dy the row's, the form a dx^2 + 2 b dx dy + c dy^2 <= k2 holds
  * for dx between (-b dy -+ sqrt(a k2 - det dy^2)) / a (det = ac - b^2). The span is widened by a pixel
  * on each side and slightly in k2 so that float rounding never drops a pixel the exact test keeps;
- * the caller still tests every pixel. Returns [first, last) clipped to [lo, hi), empty when the row
+ * the caller still tests every pixel. Returns [first, end) clipped to [lo, hi), empty when the row
  * misses the ellipse.
  */
 inline void RowSpan(float a, float b, float det, float k2, float dy, float x0, float P0, int lo, int hi, int& first,
-  int& last)
+  int& end)
 {
   const float disc = a * (k2 * 1.001f + 1e-6f) - det * dy * dy;
   if (!(disc >= 0))
   {
-    first = last = lo;
+    first = end = lo;
     return;
   }
   const float root = std::sqrt(disc);
   const float q0 = ((-b * dy - root) / a - x0) / P0, q1 = ((-b * dy + root) / a - x0) / P0;
   // fmax / fmin also map a NaN bound (a degenerate conic) to the whole range.
   first = std::max(lo, static_cast<int>(std::fmax(std::floor(q0), float(lo - 1))) - 1);
-  last = std::min(hi, static_cast<int>(std::fmin(std::ceil(q1), float(hi + 1))) + 2);
-  last = std::max(first, last);
+  end = std::min(hi, static_cast<int>(std::fmin(std::ceil(q1), float(hi + 1))) + 2);
+  end = std::max(first, end);
 }
 
 /**

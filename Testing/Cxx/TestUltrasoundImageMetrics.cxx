@@ -195,6 +195,23 @@ std::vector<float> Blurred(const std::vector<float>& frame)
     cv::Size(0, 0), 2.0);
   return out;
 }
+
+/// The spine frames, each blurred (Blurred) and rounded back to 8 bits.
+vtkSmartPointer<vtkImageData> BlurredSpineFrames()
+{
+  vtkSmartPointer<vtkImageData> truth = SpineFrames();
+  vtkSmartPointer<vtkImageData> blurred = SpineFrames();
+  for (int k = 0; k < Frames; ++k)
+  {
+    const std::vector<float> b = Blurred(Frame(truth, k));
+    unsigned char* p = Bytes(blurred) + std::size_t(k) * W * H;
+    for (int q = 0; q < W * H; ++q)
+    {
+      p[q] = static_cast<unsigned char>(std::lround(b[q] * 255));
+    }
+  }
+  return blurred;
+}
 }
 
 TEST(UltrasoundImageMetrics, IdenticalSequencesScorePerfectly)
@@ -361,16 +378,7 @@ TEST(UltrasoundImageMetrics, OnlyTheMaskedPixelsCount)
   vtkSmartPointer<vtkImageData> truth = SpineFrames();
   vtkSmartPointer<vtkImageData> mask = SpineMask();
   // Rendered = truth blurred, so that every metric is away from its perfect value.
-  vtkSmartPointer<vtkImageData> rendered = SpineFrames();
-  for (int k = 0; k < Frames; ++k)
-  {
-    const std::vector<float> b = Blurred(Frame(truth, k));
-    unsigned char* p = Bytes(rendered) + std::size_t(k) * W * H;
-    for (int q = 0; q < W * H; ++q)
-    {
-      p[q] = static_cast<unsigned char>(std::lround(b[q] * 255));
-    }
-  }
+  vtkSmartPointer<vtkImageData> rendered = BlurredSpineFrames();
   // Pixels outside the mask: "near" ones lie within the 11 x 11 SSIM window of a masked pixel.
   cv::Mat m(H, W, CV_8U, Bytes(mask)), reach;
   cv::dilate(m, reach, cv::Mat::ones(11, 11, CV_8U));
@@ -423,16 +431,7 @@ TEST(UltrasoundImageMetrics, PerFrameMasksSelectEachFramesPixels)
   // A W x H x N mask: frame k is measured with its own mask, exactly as with a W x H x 1 mask equal to
   // that slice; a frame whose own mask is empty is left out.
   vtkSmartPointer<vtkImageData> truth = SpineFrames();
-  vtkSmartPointer<vtkImageData> rendered = SpineFrames();
-  for (int k = 0; k < Frames; ++k)
-  {
-    const std::vector<float> b = Blurred(Frame(truth, k));
-    unsigned char* p = Bytes(rendered) + std::size_t(k) * W * H;
-    for (int q = 0; q < W * H; ++q)
-    {
-      p[q] = static_cast<unsigned char>(std::lround(b[q] * 255));
-    }
-  }
+  vtkSmartPointer<vtkImageData> rendered = BlurredSpineFrames();
   vtkSmartPointer<vtkImageData> fan = SpineMask();
   vtkNew<vtkImageData> masks;
   masks->SetDimensions(W, H, Frames);
