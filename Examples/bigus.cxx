@@ -378,6 +378,10 @@ int RunTrain(const TrainOptions& o)
     const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - c.Start).count();
     const double eta = fraction > 0 ? elapsed * (1 - fraction) / fraction : 0;
     auto* t = static_cast<vtkGaussianFieldTrainer*>(caller);
+    if (t->GetCurrentIteration() == 0)
+    {
+      return; // the pipeline's own 0 % and 100 % events, also sent when training fails before a step
+    }
     char state[160];
     std::snprintf(state, sizeof(state), "%3.0f%%  iteration %d  loss %.4f  Gaussians %lld  elapsed %.0f s  ETA %.0f s",
       100 * fraction, t->GetCurrentIteration(), t->GetCurrentLoss(),

@@ -9,6 +9,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -46,18 +47,6 @@ void Apply(const std::array<double, 16>& m, double i, double j, double out[3])
   {
     out[r] = m[4 * r] * i + m[4 * r + 1] * j + m[4 * r + 3];
   }
-}
-
-bool AllFinite(const std::vector<float>& v)
-{
-  for (float x : v)
-  {
-    if (!std::isfinite(x))
-    {
-      return false;
-    }
-  }
-  return true;
 }
 }
 
@@ -467,55 +456,68 @@ double Trainer::Step()
     ++this->Iteration;
     return std::numeric_limits<double>::quiet_NaN();
   };
-  if (!std::isfinite(loss.Total) || !AllFinite(this->Gradients))
+  if (!std::isfinite(loss.Total))
   {
     return rollBack();
   }
 
+  // Adam (Kingma and Ba 2015, algorithm 1), one pass over the Gaussians that also keeps every
+  // parameter in its meaningful range (unit quaternions, scales between 1 um and 10 cm) and checks
+  // that the gradient and the result are finite.
   const int t = this->Iteration + 1;
   const double c1 = 1 - std::pow(AdamBeta1, t), c2 = 1 - std::pow(AdamBeta2, t);
   const double scale = this->LearningRateScale;
-  auto adam = [&](std::vector<float>& p, std::vector<float>& m, std::vector<float>& v, const float* g, double lr) {
-    const std::int64_t size = static_cast<std::int64_t>(p.size());
-    vtkSMPTools::For(0, size, 65536, [&](std::int64_t b, std::int64_t e) {
-      for (std::int64_t k = b; k < e; ++k)
+  const double rates[4] = { scale * this->MeanLearningRateAt(this->Iteration),
+    scale * this->Settings.LogScaleLearningRate, scale * this->Settings.QuaternionLearningRate,
+    scale * this->Settings.ReflectivityLearningRate };
+  const float lo = static_cast<float>(std::log(MinimumScaleMm)), hi = static_cast<float>(std::log(MaximumScaleMm));
+  GaussianField& F = this->Field;
+  std::atomic<bool> finite(true);
+  vtkSMPTools::For(0, n, 4096, [&](std::int64_t begin, std::int64_t end) {
+    bool ok = true;
+    auto adam = [&](std::vector<float>& p, std::vector<float>& m, std::vector<float>& v, const float* g,
+                  std::int64_t first, int count, double lr) {
+      for (std::int64_t k = first; k < first + count; ++k)
       {
         const double gk = g[k];
+        ok = ok && std::isfinite(g[k]);
         m[k] = static_cast<float>(AdamBeta1 * m[k] + (1 - AdamBeta1) * gk);
         v[k] = static_cast<float>(AdamBeta2 * v[k] + (1 - AdamBeta2) * gk * gk);
         p[k] -= static_cast<float>(lr * (m[k] / c1) / (std::sqrt(v[k] / c2) + AdamEpsilon));
       }
-    });
-  };
-  adam(this->Field.Means, this->AdamM.Means, this->AdamV.Means, grads.Means,
-    scale * this->MeanLearningRateAt(this->Iteration));
-  adam(this->Field.LogScales, this->AdamM.LogScales, this->AdamV.LogScales, grads.LogScales,
-    scale * this->Settings.LogScaleLearningRate);
-  adam(this->Field.Quaternions, this->AdamM.Quaternions, this->AdamV.Quaternions, grads.Quaternions,
-    scale * this->Settings.QuaternionLearningRate);
-  adam(this->Field.Reflectivities, this->AdamM.Reflectivities, this->AdamV.Reflectivities, grads.Reflectivities,
-    scale * this->Settings.ReflectivityLearningRate);
-  // Keep parameters in their meaningful range: unit quaternions, scales between 1 um and 10 cm.
-  const float lo = static_cast<float>(std::log(MinimumScaleMm)), hi = static_cast<float>(std::log(MaximumScaleMm));
-  for (std::int64_t i = 0; i < n; ++i)
-  {
-    float* q = &this->Field.Quaternions[4 * i];
-    const float norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
-    if (norm > 1e-12f)
+    };
+    for (std::int64_t i = begin; i < end; ++i)
     {
-      for (int k = 0; k < 4; ++k)
+      adam(F.Means, this->AdamM.Means, this->AdamV.Means, grads.Means, 3 * i, 3, rates[0]);
+      adam(F.LogScales, this->AdamM.LogScales, this->AdamV.LogScales, grads.LogScales, 3 * i, 3, rates[1]);
+      adam(F.Quaternions, this->AdamM.Quaternions, this->AdamV.Quaternions, grads.Quaternions, 4 * i, 4, rates[2]);
+      adam(F.Reflectivities, this->AdamM.Reflectivities, this->AdamV.Reflectivities, grads.Reflectivities, i, 1,
+        rates[3]);
+      float* q = &F.Quaternions[4 * i];
+      const float norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+      if (norm > 1e-12f)
       {
-        q[k] /= norm;
+        for (int k = 0; k < 4; ++k)
+        {
+          q[k] /= norm;
+        }
       }
+      float* l = &F.LogScales[3 * i];
+      const float* m = &F.Means[3 * i];
+      for (int k = 0; k < 3; ++k)
+      {
+        l[k] = std::min(hi, std::max(lo, l[k]));
+        ok = ok && std::isfinite(m[k]) && std::isfinite(l[k]);
+      }
+      ok = ok && std::isfinite(q[0]) && std::isfinite(q[1]) && std::isfinite(q[2]) && std::isfinite(q[3]) &&
+        std::isfinite(F.Reflectivities[i]);
     }
-    for (int k = 0; k < 3; ++k)
+    if (!ok)
     {
-      float& l = this->Field.LogScales[3 * i + k];
-      l = std::min(hi, std::max(lo, l));
+      finite.store(false, std::memory_order_relaxed);
     }
-  }
-  if (!AllFinite(this->Field.Means) || !AllFinite(this->Field.LogScales) || !AllFinite(this->Field.Quaternions) ||
-    !AllFinite(this->Field.Reflectivities))
+  });
+  if (!finite.load())
   {
     return rollBack();
   }

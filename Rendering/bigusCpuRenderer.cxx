@@ -193,15 +193,16 @@ double EffectiveSigma(const RenderOptions& o)
 
 /// Phase 1 for one slice: the visible splats, in Gaussian index order.
 void SetupSlice(const FieldView& field, const CullBounds& bounds, const PreparedSlice& s,
-  const RenderOptions& o, std::vector<Splat>& splats)
+  const RenderOptions& o, std::vector<std::vector<Splat>>& perChunk, std::vector<Splat>& splats)
 {
   const double sigmaE = EffectiveSigma(o);
   const std::int64_t chunks = (field.Count + ChunkSize - 1) / ChunkSize;
-  std::vector<std::vector<Splat>> perChunk(chunks);
+  perChunk.resize(chunks);
   vtkSMPTools::For(0, chunks, 1, [&](std::int64_t begin, std::int64_t end) {
     for (std::int64_t chunk = begin; chunk < end; ++chunk)
     {
       std::vector<Splat>& out = perChunk[chunk];
+      out.clear();
       const std::int64_t last = std::min(field.Count, (chunk + 1) * ChunkSize);
       for (std::int64_t i = chunk * ChunkSize; i < last; ++i)
       {
@@ -240,9 +241,9 @@ void SetupSlice(const FieldView& field, const CullBounds& bounds, const Prepared
     }
   });
   splats.clear();
-  for (const auto& chunk : perChunk)
+  for (std::int64_t chunk = 0; chunk < chunks; ++chunk)
   {
-    splats.insert(splats.end(), chunk.begin(), chunk.end());
+    splats.insert(splats.end(), perChunk[chunk].begin(), perChunk[chunk].end());
   }
 }
 
@@ -423,7 +424,7 @@ constexpr int Lanes = 8;
  * sum[5]: sum dL/dS e; sum[6]: attribution sum |dL/dS| |w| e. Columns are processed in groups of
  * Lanes with one partial sum per lane (vectorisable without reassociation, deterministic order).
  */
-BIGUS_TARGET_CLONES void FootprintSums(const float* gS, int width, const int box[4], float dcx, float dcy, float a,
+BIGUS_TARGET_CLONES std::int64_t FootprintSums(const float* gS, int width, const int box[4], float dcx, float dcy, float a,
   float b, float c, const float axes[4], float w, float P0, float P1, float P2, float cutoffSquared, double sum[7])
 {
   for (int q = 0; q < 7; ++q)
@@ -432,6 +433,7 @@ BIGUS_TARGET_CLONES void FootprintSums(const float* gS, int width, const int box
   }
   const float absW = std::abs(w);
   const float det = a * c - b * b;
+  std::int64_t evaluations = 0;
   for (int row = box[2]; row <= box[3]; ++row)
   {
     const float dy = (row - box[2]) * P2 - dcy;
@@ -439,6 +441,7 @@ BIGUS_TARGET_CLONES void FootprintSums(const float* gS, int width, const int box
     int first, end; // columns relative to box[0], [first, end)
     RowSpan(a, b, det, cutoffSquared, dy, xrow, P0, 0, box[1] - box[0] + 1, first, end);
     const int last = end - 1;
+    evaluations += end - first;
     const float* g = gS + std::int64_t(row - box[2]) * width + box[0];
     alignas(64) float part[7][Lanes] = {};
     for (int base = first; base <= last; base += Lanes)
@@ -472,6 +475,7 @@ BIGUS_TARGET_CLONES void FootprintSums(const float* gS, int width, const int box
       }
     }
   }
+  return evaluations;
 }
 
 class CpuRenderer : public Renderer
@@ -494,7 +498,7 @@ public:
     for (int k = 0; k < count; ++k)
     {
       const PreparedSlice& s = prepared[k];
-      SetupSlice(field, this->Bounds, s, options, this->Splats);
+      SetupSlice(field, this->Bounds, s, options, this->ChunkSplats, this->Splats);
       BinSplats(this->Splats, s, this->TileStart, this->Entries);
       const double t1 = Now();
       const std::int64_t evals = RasterSlice(this->Splats, s, this->TileStart, this->Entries, S + offset);
@@ -536,7 +540,7 @@ public:
     this->Bounds.Compute(field);
     const double sigmaE = EffectiveSigma(options);
     std::int64_t offset = 0;
-    std::vector<float> gS;
+    std::vector<float>& gS = this->ScatteringGradient;
     for (int k = 0; k < count; ++k)
     {
       const PreparedSlice& s = prepared[k];
@@ -582,10 +586,9 @@ public:
           const float axes[4] = { static_cast<float>(f.Axes[0]), static_cast<float>(f.Axes[1]),
             static_cast<float>(f.Axes[2]), static_cast<float>(f.Axes[3]) };
           double sum[7];
-          FootprintSums(gS.data() + std::int64_t(box[2]) * s.Width, s.Width, box, dcx, dcy, a, b, c, axes, w, P0, P1,
+          counter[1] += FootprintSums(gS.data() + std::int64_t(box[2]) * s.Width, s.Width, box, dcx, dcy, a, b, c, axes, w, P0, P1,
             P2, static_cast<float>(f.CutoffSquared), sum);
           counter[0] += 1;
-          counter[1] += std::int64_t(box[1] - box[0] + 1) * (box[3] - box[2] + 1);
           if (gradients.VisibleCount)
           {
             gradients.VisibleCount[i] += 1;
@@ -643,8 +646,12 @@ public:
   }
 
 private:
+  // Work buffers kept between calls (a training step renders and differentiates the same field size
+  // again and again; fresh allocations cost page faults every step).
   CullBounds Bounds;
+  std::vector<std::vector<Splat>> ChunkSplats;
   std::vector<Splat> Splats;
+  std::vector<float> ScatteringGradient;
   std::vector<std::int64_t> TileStart;
   std::vector<std::int32_t> Entries;
 };

@@ -69,7 +69,8 @@ struct RenderStats
 {
   std::int64_t GaussiansVisible = 0;  ///< Gaussians kept after elevation culling
   std::int64_t TileEntries = 0;       ///< (Gaussian, tile) pairs after binning
-  std::int64_t PixelEvaluations = 0;  ///< Gaussian-pixel pairs evaluated (inside bounding boxes)
+  std::int64_t PixelEvaluations = 0;  ///< Gaussian-pixel pairs evaluated: forward, inside the bounding boxes;
+                                      ///< backward, inside the row spans of the cutoff ellipses
   double SetupSeconds = 0;            ///< phase 1 (transform, cull, set up) and binning
   double RasterSeconds = 0;           ///< phase 2 (per-tile evaluation) and the image map, or the backward pass
 };

@@ -52,8 +52,9 @@ def main():
     assert code == 1 and err.strip(), (code, err)
     assert open(field, "rb").read() == before
     # The trainer's own reason reaches the user on one line.
-    code, _, err = run("train", sweep, "--calibration", xml, "-o", field, "--holdout-every", "1")
+    code, out_text, err = run("train", sweep, "--calibration", xml, "-o", field, "--holdout-every", "1")
     assert code == 1 and err.count("\n") == 1 and "no valid training frames" in err, (code, err)
+    assert "training " not in out_text, out_text  # no progress line for a run that never took a step
     assert open(field, "rb").read() == before
 
     rendered = os.path.join(out, "nwire_rendered.igs.mha")
