@@ -52,6 +52,7 @@
 #include <string>
 #include <sys/stat.h>
 #include <thread>
+#include <utility>
 #include <vector>
 
 namespace bigus
@@ -645,9 +646,10 @@ int RunBenchmark(const BenchmarkOptions& options)
        << (last.Quality.PSNR > best->Quality.PSNR ? "BIGUS ahead by " : "BIGUS behind by ")
        << Format("%.2f", std::abs(last.Quality.PSNR - best->Quality.PSNR)) << " dB).\n";
     md << "\nFor scale, the held-out frames themselves blurred in plane (Gaussian, sigma in pixels) score";
+    const char* separator = " ";
     for (const auto& [sigma, q] : BlurredTruth(sweep, { 0.5, 1.0, 1.5, 2.0 }))
     {
-      md << (sigma == 0.5 ? " " : ", ") << Format("%.2f", q.PSNR) << " dB (SSIM " << Format("%.3f", q.SSIM)
+      md << std::exchange(separator, ", ") << Format("%.2f", q.PSNR) << " dB (SSIM " << Format("%.3f", q.SSIM)
          << ") at " << Format("%.1f", sigma);
       j["blurred_truth"].push_back({ { "sigma_pixels", sigma }, { "psnr", q.PSNR }, { "ssim", q.SSIM } });
     }

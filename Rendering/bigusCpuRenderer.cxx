@@ -423,9 +423,10 @@ constexpr int Lanes = 8;
  * form (@p axes, as phase 2), the gradient terms from the conic (a, b, c). sum[0..1]: dL/dcentre; sum[2..4]: dL/dconic;
  * sum[5]: sum dL/dS e; sum[6]: attribution sum |dL/dS| |w| e. Columns are processed in groups of
  * Lanes with one partial sum per lane (vectorisable without reassociation, deterministic order).
+ * Returns the number of pixels in the row spans (RenderStats::PixelEvaluations).
  */
-BIGUS_TARGET_CLONES std::int64_t FootprintSums(const float* gS, int width, const int box[4], float dcx, float dcy, float a,
-  float b, float c, const float axes[4], float w, float P0, float P1, float P2, float cutoffSquared, double sum[7])
+BIGUS_TARGET_CLONES std::int64_t FootprintSums(const float* gS, int width, const int box[4], float dcx, float dcy,
+  float a, float b, float c, const float axes[4], float w, float P0, float P1, float P2, float cutoffSquared, double sum[7])
 {
   for (int q = 0; q < 7; ++q)
   {
@@ -586,8 +587,8 @@ public:
           const float axes[4] = { static_cast<float>(f.Axes[0]), static_cast<float>(f.Axes[1]),
             static_cast<float>(f.Axes[2]), static_cast<float>(f.Axes[3]) };
           double sum[7];
-          counter[1] += FootprintSums(gS.data() + std::int64_t(box[2]) * s.Width, s.Width, box, dcx, dcy, a, b, c, axes, w, P0, P1,
-            P2, static_cast<float>(f.CutoffSquared), sum);
+          counter[1] += FootprintSums(gS.data() + std::int64_t(box[2]) * s.Width, s.Width, box, dcx, dcy, a, b, c,
+            axes, w, P0, P1, P2, static_cast<float>(f.CutoffSquared), sum);
           counter[0] += 1;
           if (gradients.VisibleCount)
           {
