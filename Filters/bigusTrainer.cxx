@@ -89,6 +89,24 @@ void GaussianField::Compact(const std::vector<unsigned char>& keep)
   this->Resize(out);
 }
 
+namespace
+{
+/// Keeps the entries of @p v whose flag in @p keep is non-zero, in order.
+template <typename T>
+void CompactVector(std::vector<T>& v, const std::vector<unsigned char>& keep)
+{
+  std::size_t out = 0;
+  for (std::size_t i = 0; i < v.size(); ++i)
+  {
+    if (keep[i])
+    {
+      v[out++] = v[i];
+    }
+  }
+  v.resize(out);
+}
+}
+
 std::array<double, 4> QuaternionFromAxes(const double u[3], const double v[3], const double n[3])
 {
   // Rotation matrix with columns u, v, n; Shepperd's method picks the largest pivot for stability.
@@ -791,7 +809,10 @@ std::int64_t Trainer::FinalPrune()
     this->Field.Compact(keep);
     this->AdamM.Compact(keep);
     this->AdamV.Compact(keep);
-    this->ResizeState(this->Field.Count());
+    // The EA-D accumulators follow their Gaussians: a run that goes on after this prune (the
+    // benchmark's time marks) must densify and prune by the scores of the right ones.
+    CompactVector(this->Attribution, keep);
+    CompactVector(this->SeenCount, keep);
   }
   return removed;
 }

@@ -16,7 +16,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <fstream>
 #include <cstdio>
 #include <random>
@@ -274,6 +276,80 @@ TEST(Trainer, ResumingFromACheckpointGivesTheSameField)
   std::ofstream(checkpoint + ".bad") << "not a checkpoint";
   EXPECT_FALSE(second.LoadCheckpoint(checkpoint + ".bad", &error));
   EXPECT_NE(error.find("bad magic"), std::string::npos) << error;
+}
+
+namespace
+{
+/// The parts of a checkpoint file (format in bigusTrainer.cxx) that say which Gaussian is which and
+/// what EA-D has accumulated for it.
+struct CheckpointScores
+{
+  std::vector<float> Means, Attribution;
+  std::vector<std::int32_t> SeenCount;
+};
+
+bool ReadCheckpointScores(const std::string& file, CheckpointScores& out)
+{
+  std::ifstream in(file, std::ios::binary);
+  in.seekg(8 + 4 + 8 + 8 + 4 + 8 + 4 + 4); // magic to rolled-back steps
+  std::uint32_t textLength = 0;
+  in.read(reinterpret_cast<char*>(&textLength), sizeof(textLength));
+  in.seekg(textLength, std::ios::cur);
+  std::int64_t n = 0;
+  in.read(reinterpret_cast<char*>(&n), sizeof(n));
+  out.Means.resize(3 * n);
+  in.read(reinterpret_cast<char*>(out.Means.data()), 3 * n * sizeof(float));
+  in.seekg((8 * n + 2 * 11 * n) * sizeof(float), std::ios::cur); // rest of the field, Adam moments
+  out.Attribution.resize(n);
+  out.SeenCount.resize(n);
+  in.read(reinterpret_cast<char*>(out.Attribution.data()), n * sizeof(float));
+  in.read(reinterpret_cast<char*>(out.SeenCount.data()), n * sizeof(std::int32_t));
+  return static_cast<bool>(in);
+}
+}
+
+TEST(Trainer, FinalPruneKeepsTheDensificationScoresWithTheirGaussians)
+{
+  // A run that goes on after a final prune (the benchmark stops and evaluates at time marks) must
+  // densify and prune by the scores of the Gaussians that remain: compare the checkpoint written just
+  // before the prune with one written just after it.
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(200, 7), 0.5, heldOut);
+  const std::string before = std::string(BIGUS_TEST_OUTPUT) + "/before-prune.ckpt";
+  const std::string after = std::string(BIGUS_TEST_OUTPUT) + "/after-prune.ckpt";
+  TrainerSettings s = ShortSettings();
+  s.CheckpointFile = before;
+  s.CheckpointInterval = 150; // after the densification at 100, with scores accumulated since
+  s.FinalPruneTolerance = 0.02; // prunes a good share of this small field
+  Trainer trainer(data, s);
+  std::string error;
+  ASSERT_TRUE(trainer.Initialize(&error)) << error;
+  ASSERT_TRUE(trainer.Run(nullptr, [&]() { return trainer.GetIteration() >= 150; }, &error)) << error;
+  ASSERT_TRUE(trainer.SaveCheckpoint(after, &error)) << error;
+
+  CheckpointScores a, b;
+  ASSERT_TRUE(ReadCheckpointScores(before, a));
+  ASSERT_TRUE(ReadCheckpointScores(after, b));
+  const std::size_t na = a.SeenCount.size(), nb = b.SeenCount.size();
+  ASSERT_EQ(trainer.GetReport().PrunedAtEnd, static_cast<std::int64_t>(na - nb));
+  ASSERT_GT(trainer.GetReport().PrunedAtEnd, 0) << "the test needs a prune";
+  ASSERT_GT(nb, 0u);
+  // The prune keeps the order: walk both lists and match each remaining Gaussian by its mean.
+  std::size_t i = 0, scored = 0;
+  for (std::size_t j = 0; j < nb; ++j, ++i)
+  {
+    while (i < na && !std::equal(&a.Means[3 * i], &a.Means[3 * i] + 3, &b.Means[3 * j]))
+    {
+      ++i;
+    }
+    ASSERT_LT(i, na) << "Gaussian " << j << " after the prune is not one from before it";
+    EXPECT_EQ(b.Attribution[j], a.Attribution[i]) << "Gaussian " << j << " (was " << i << ")";
+    EXPECT_EQ(b.SeenCount[j], a.SeenCount[i]) << "Gaussian " << j << " (was " << i << ")";
+    scored += a.SeenCount[i] > 0;
+  }
+  EXPECT_GT(scored, nb / 2) << "most remaining Gaussians were seen since the last densification";
+  std::remove(before.c_str());
+  std::remove(after.c_str());
 }
 
 TEST(Trainer, EveryAblationSwitchRuns)
