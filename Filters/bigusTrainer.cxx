@@ -71,40 +71,31 @@ void GaussianField::Resize(std::int64_t n)
   this->Reflectivities.resize(n, 0.f);
 }
 
-void GaussianField::Compact(const std::vector<unsigned char>& keep)
-{
-  std::int64_t out = 0;
-  for (std::int64_t i = 0; i < this->Count(); ++i)
-  {
-    if (!keep[i])
-    {
-      continue;
-    }
-    std::copy_n(&this->Means[3 * i], 3, &this->Means[3 * out]);
-    std::copy_n(&this->LogScales[3 * i], 3, &this->LogScales[3 * out]);
-    std::copy_n(&this->Quaternions[4 * i], 4, &this->Quaternions[4 * out]);
-    this->Reflectivities[out] = this->Reflectivities[i];
-    ++out;
-  }
-  this->Resize(out);
-}
-
 namespace
 {
-/// Keeps the entries of @p v whose flag in @p keep is non-zero, in order.
+/// Keeps the groups of @p stride entries of @p v (group i = Gaussian i) whose flag in @p keep is
+/// non-zero, in order.
 template <typename T>
-void CompactVector(std::vector<T>& v, const std::vector<unsigned char>& keep)
+void CompactVector(std::vector<T>& v, const std::vector<unsigned char>& keep, std::size_t stride = 1)
 {
   std::size_t out = 0;
-  for (std::size_t i = 0; i < v.size(); ++i)
+  for (std::size_t i = 0; i < v.size() / stride; ++i)
   {
     if (keep[i])
     {
-      v[out++] = v[i];
+      std::copy_n(&v[stride * i], stride, &v[stride * out++]);
     }
   }
-  v.resize(out);
+  v.resize(stride * out);
 }
+}
+
+void GaussianField::Compact(const std::vector<unsigned char>& keep)
+{
+  CompactVector(this->Means, keep, 3);
+  CompactVector(this->LogScales, keep, 3);
+  CompactVector(this->Quaternions, keep, 4);
+  CompactVector(this->Reflectivities, keep);
 }
 
 std::array<double, 4> QuaternionFromAxes(const double u[3], const double v[3], const double n[3])
