@@ -98,6 +98,56 @@ void GaussianField::Compact(const std::vector<unsigned char>& keep)
   CompactVector(this->Reflectivities, keep);
 }
 
+std::int64_t DensifyGaussian(GaussianField& field, std::int64_t i, bool large)
+{
+  const float* l = &field.LogScales[3 * i];
+  const int major = static_cast<int>(std::max_element(l, l + 3) - l);
+  const double s = std::exp(double(l[major]));
+  double q[4] = { field.Quaternions[4 * i], field.Quaternions[4 * i + 1], field.Quaternions[4 * i + 2],
+    field.Quaternions[4 * i + 3] };
+  const double qn = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+  for (double& v : q)
+  {
+    v /= qn > 0 ? qn : 1;
+  }
+  double R[3][3];
+  QuaternionToMatrix(q, R);
+  // Split: children at +-s/2 with scale sqrt(3/4) s along the axis keep the parent's variance along it
+  // (s^2/4 + 3 s^2/4) and, with r / (2 sqrt(3/4)) each, its integral r prod(s).
+  const double shrink = large ? std::sqrt(0.75) : 1.0;
+  const double offset = large ? 0.5 * s : 0.1 * s;
+  const float reflectivity = static_cast<float>(field.Reflectivities[i] / (2 * shrink));
+  const std::int64_t child = field.Count();
+  field.Resize(child + 1);
+  field.LogScales[3 * i + major] += static_cast<float>(std::log(shrink));
+  field.CopyGaussian(i, child);
+  for (int k = 0; k < 3; ++k)
+  {
+    const double axis = R[k][major];
+    field.Means[3 * child + k] = static_cast<float>(field.Means[3 * i + k] - offset * axis);
+    field.Means[3 * i + k] = static_cast<float>(field.Means[3 * i + k] + offset * axis);
+  }
+  field.Reflectivities[i] = reflectivity;
+  field.Reflectivities[child] = reflectivity;
+  return child;
+}
+
+void GaussianField::CopyGaussian(std::int64_t from, std::int64_t to)
+{
+  std::copy_n(&this->Means[3 * from], 3, &this->Means[3 * to]);
+  std::copy_n(&this->LogScales[3 * from], 3, &this->LogScales[3 * to]);
+  std::copy_n(&this->Quaternions[4 * from], 4, &this->Quaternions[4 * to]);
+  this->Reflectivities[to] = this->Reflectivities[from];
+}
+
+void GaussianField::ZeroGaussian(std::int64_t i)
+{
+  std::fill_n(&this->Means[3 * i], 3, 0.f);
+  std::fill_n(&this->LogScales[3 * i], 3, 0.f);
+  std::fill_n(&this->Quaternions[4 * i], 4, 0.f);
+  this->Reflectivities[i] = 0.f;
+}
+
 std::array<double, 4> QuaternionFromAxes(const double u[3], const double v[3], const double n[3])
 {
   // Rotation matrix with columns u, v, n; Shepperd's method picks the largest pivot for stability.
@@ -441,7 +491,7 @@ double Trainer::Step()
   this->LossGradient.resize(pixels);
   this->Backend->Forward(this->Field.View(), &slice, 1, o, this->S.data(), this->I.data(), nullptr, nullptr);
   const ImageLossTerms loss = ComputeImageLoss(this->I.data(), &this->Data.Frames[pixels * f], this->Data.MaskOf(f),
-    this->Data.Width, this->Data.Height, this->Settings.Loss, this->LossGradient.data());
+    this->Data.Width, this->Data.Height, this->Settings.Loss, this->LossGradient.data(), false, &this->LossWorkspace);
 
   this->Gradients.assign(11 * n, 0.f); // [N, 3] means, [N, 3] log-scales, [N, 4] quaternions, [N] r
   FieldGradients grads;
@@ -557,7 +607,7 @@ double Trainer::ValidationLoss()
     const SliceGeometry slice = this->Slice(f);
     this->Backend->Forward(this->Field.View(), &slice, 1, o, S.data(), I.data(), nullptr, nullptr);
     total += ComputeImageLoss(I.data(), &this->Data.Frames[pixels * f], this->Data.MaskOf(f), this->Data.Width,
-      this->Data.Height, this->Settings.Loss, nullptr)
+      this->Data.Height, this->Settings.Loss, nullptr, false, &this->LossWorkspace)
                .Total;
   }
   return total / std::max(1, used);
@@ -611,61 +661,30 @@ void Trainer::DensifyAndPrune()
         " Gaussians reached (iteration " + std::to_string(this->Iteration) + ")";
     }
   }
-  // Split large ones along their major axis, clone small ones (offset along the major axis so the
-  // two copies do not receive identical gradients); the reflectivity is shared between the children.
   const double splitScale = this->Settings.SplitScalePixels * this->PixelSpacing;
-  GaussianField& F = this->Field;
-  for (std::int64_t i = 0; i < n; ++i)
-  {
-    if (!split[i])
-    {
-      continue;
-    }
-    const float* l = &F.LogScales[3 * i];
-    const int major = static_cast<int>(std::max_element(l, l + 3) - l);
-    const double s = std::exp(double(l[major]));
-    double R[3][3];
-    double q[4] = { F.Quaternions[4 * i], F.Quaternions[4 * i + 1], F.Quaternions[4 * i + 2], F.Quaternions[4 * i + 3] };
-    const double qn = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
-    for (double& v : q)
-    {
-      v /= qn > 0 ? qn : 1;
-    }
-    QuaternionToMatrix(q, R);
-    const bool large = s > splitScale;
-    const double offset = large ? 0.5 * s : 0.1 * s;
-    const std::int64_t child = F.Count();
-    F.Resize(child + 1);
-    std::copy_n(&F.LogScales[3 * i], 3, &F.LogScales[3 * child]);
-    std::copy_n(&F.Quaternions[4 * i], 4, &F.Quaternions[4 * child]);
-    for (int k = 0; k < 3; ++k)
-    {
-      const double axis = R[k][major];
-      F.Means[3 * child + k] = static_cast<float>(F.Means[3 * i + k] - offset * axis);
-      F.Means[3 * i + k] = static_cast<float>(F.Means[3 * i + k] + offset * axis);
-      if (large)
-      {
-        F.LogScales[3 * i + k] -= static_cast<float>(std::log(1.6));
-        F.LogScales[3 * child + k] = F.LogScales[3 * i + k];
-      }
-    }
-    F.Reflectivities[i] *= 0.5f;
-    F.Reflectivities[child] = F.Reflectivities[i];
-  }
-  // Children and split parents start with fresh optimiser moments; the others keep theirs.
-  this->AdamM.Resize(F.Count());
-  this->AdamV.Resize(F.Count());
   for (std::int64_t i = 0; i < n; ++i)
   {
     if (split[i])
     {
-      for (GaussianField* moments : { &this->AdamM, &this->AdamV })
-      {
-        std::fill_n(&moments->Means[3 * i], 3, 0.f);
-        std::fill_n(&moments->LogScales[3 * i], 3, 0.f);
-        std::fill_n(&moments->Quaternions[4 * i], 4, 0.f);
-        moments->Reflectivities[i] = 0.f;
-      }
+      const float* l = &this->Field.LogScales[3 * i];
+      DensifyGaussian(this->Field, i, std::exp(double(*std::max_element(l, l + 3))) > splitScale);
+    }
+  }
+  GaussianField& F = this->Field;
+  // Children and densified parents: no first moment (the parent's direction of travel is not
+  // theirs), but the parent's second moment. With a zero second moment too, Adam (Kingma and Ba 2015,
+  // algorithm 1, bias-corrected by the global step) would turn the next gradient g into a step of
+  // 0.1 g / sqrt(0.001 g^2) = 3.2 learning rates, carried on by the decaying first moment to about
+  // 30 in all: a kick of several pixels that undoes the fit.
+  this->AdamM.Resize(F.Count());
+  this->AdamV.Resize(F.Count());
+  for (std::int64_t i = 0, child = n; i < n; ++i)
+  {
+    if (split[i])
+    {
+      this->AdamM.ZeroGaussian(i);
+      this->AdamM.ZeroGaussian(child);
+      this->AdamV.CopyGaussian(i, child++);
     }
   }
   // Prune negligible and never-seen Gaussians (not the ones just made).

@@ -51,6 +51,10 @@ struct GaussianField
   void Resize(std::int64_t n);
   /// Keeps the Gaussians whose flag is non-zero, in order.
   void Compact(const std::vector<unsigned char>& keep);
+  /// Gaussian @p to takes every parameter of Gaussian @p from.
+  void CopyGaussian(std::int64_t from, std::int64_t to);
+  /// Sets every parameter of Gaussian @p i to 0 (optimiser moments).
+  void ZeroGaussian(std::int64_t i);
 };
 
 struct TrainerSettings
@@ -187,6 +191,7 @@ private:
   TrainerReport Report;
   // Scratch
   std::vector<float> S, I, LossGradient, Gradients;
+  ImageLossWorkspace LossWorkspace;
 };
 
 /**
@@ -196,6 +201,16 @@ private:
  */
 BIGUSFILTERS_EXPORT ImageMetrics MeanFrameMetrics(const TrainingData& data, const std::vector<int>& frames,
   const std::function<const float*(std::size_t, int)>& image);
+
+/**
+ * EA-D densification of Gaussian @p i (DESIGN section 4): appends one child and returns its index.
+ * @p large: split along the major axis (largest scale s) into two Gaussians at +-s/2 whose scale along
+ * that axis is sqrt(3/4) s and whose reflectivities are r / (2 sqrt(3/4)): the pair keeps the parent's
+ * integral r s1 s2 s3 and its variance along the axis (moment matching), so the rendered frames barely
+ * change (peak 0.98 r) while the children can move apart. Otherwise cloned: the same scales, offsets of
+ * +-s/10 along the major axis (so that the copies do not get identical gradients), r / 2 each.
+ */
+BIGUSFILTERS_EXPORT std::int64_t DensifyGaussian(GaussianField& field, std::int64_t i, bool large);
 
 /// Quaternion (w, x, y, z) of the rotation whose columns are the unit vectors u, v, n.
 std::array<double, 4> QuaternionFromAxes(const double u[3], const double v[3], const double n[3]);

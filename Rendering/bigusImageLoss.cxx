@@ -5,8 +5,13 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "vtkSMPTools.h"
+
 #include <algorithm>
 #include <cmath>
+#include <initializer_list>
+#include <utility>
+#include <vector>
 
 namespace bigus
 {
@@ -19,103 +24,139 @@ constexpr double C1 = 0.01 * 0.01;
 constexpr double C2 = 0.03 * 0.03;
 
 /// Gaussian window filter with zero padding: self-adjoint, so it is also its own gradient.
-cv::Mat Filter(const cv::Mat& in)
+void Filter(const cv::Mat& in, cv::Mat& out)
 {
   const cv::Mat kernel = cv::getGaussianKernel(Window, WindowSigma, in.depth());
-  cv::Mat out;
   cv::sepFilter2D(in, out, in.depth(), kernel, kernel, cv::Point(-1, -1), 0, cv::BORDER_CONSTANT);
-  return out;
 }
 
-template <typename T>
-cv::Mat MaskOf(const unsigned char* mask, int width, int height)
+/// Filters in[k] into out[k] for every k, the images on different threads (each filter is serial).
+void FilterAll(std::initializer_list<std::pair<const cv::Mat*, cv::Mat*>> pairs)
 {
-  if (!mask)
-  {
-    return cv::Mat(height, width, cv::DataType<T>::depth, cv::Scalar(1.0));
-  }
-  cv::Mat m(height, width, CV_8U, const_cast<unsigned char*>(mask));
-  cv::Mat nonZero = m != 0;
-  cv::Mat out;
-  nonZero.convertTo(out, cv::DataType<T>::depth, 1.0 / 255.0);
-  return out;
-}
-
-template <typename T>
-cv::Mat Image(const float* data, int width, int height)
-{
-  cv::Mat view(height, width, CV_32F, const_cast<float*>(data));
-  cv::Mat out;
-  view.convertTo(out, cv::DataType<T>::depth);
-  return out;
-}
-
-/// SSIM map of X and Y and, if @p gradX is non-null, d(sum_p g(p) SSIM(p))/dX for the weights g.
-/// SSIM(p) = A1 A2 / (B1 B2), A1 = 2 m1 m2 + C1, A2 = 2 (sxy - m1 m2) + C2, B1 = m1^2 + m2^2 + C1,
-/// B2 = sxx - m1^2 + syy - m2^2 + C2 with m1 = G*X, m2 = G*Y, sxx = G*X^2, syy = G*Y^2, sxy = G*XY.
-/// dSSIM/dm1 = 2 m2 (A2 - A1) / (B1 B2) - 2 m1 SSIM (1/B1 - 1/B2), dSSIM/dsxx = -SSIM / B2,
-/// dSSIM/dsxy = 2 A1 / (B1 B2); then dX = G*(g dSSIM/dm1) + 2 X G*(g dSSIM/dsxx) + Y G*(g dSSIM/dsxy).
-template <typename T>
-cv::Mat SsimMap(const cv::Mat& X, const cv::Mat& Y, const cv::Mat& g, cv::Mat* gradX)
-{
-  const cv::Mat m1 = Filter(X), m2 = Filter(Y);
-  const cv::Mat sxx = Filter(X.mul(X)), syy = Filter(Y.mul(Y)), sxy = Filter(X.mul(Y));
-  const int depth = cv::DataType<T>::depth;
-  cv::Mat map(X.size(), depth);
-  cv::Mat dm1, dsxx, dsxy;
-  if (gradX)
-  {
-    dm1.create(X.size(), depth);
-    dsxx.create(X.size(), depth);
-    dsxy.create(X.size(), depth);
-  }
-  for (int j = 0; j < X.rows; ++j)
-  {
-    const T* pm1 = m1.ptr<T>(j);
-    const T* pm2 = m2.ptr<T>(j);
-    const T* pxx = sxx.ptr<T>(j);
-    const T* pyy = syy.ptr<T>(j);
-    const T* pxy = sxy.ptr<T>(j);
-    T* out = map.ptr<T>(j);
-    const T* w = gradX ? g.ptr<T>(j) : nullptr;
-    T* d1 = gradX ? dm1.ptr<T>(j) : nullptr;
-    T* dxx = gradX ? dsxx.ptr<T>(j) : nullptr;
-    T* dxy = gradX ? dsxy.ptr<T>(j) : nullptr;
-    for (int i = 0; i < X.cols; ++i)
+  const std::vector<std::pair<const cv::Mat*, cv::Mat*>> list(pairs);
+  vtkSMPTools::For(0, static_cast<int>(list.size()), 1, [&](int begin, int end) {
+    for (int k = begin; k < end; ++k)
     {
-      const double a = pm1[i], b = pm2[i];
-      const double A1 = 2 * a * b + C1;
-      const double A2 = 2 * (pxy[i] - a * b) + C2;
-      const double B1 = a * a + b * b + C1;
-      const double B2 = pxx[i] - a * a + pyy[i] - b * b + C2;
-      const double s = A1 * A2 / (B1 * B2);
-      out[i] = static_cast<T>(s);
-      if (w)
-      {
-        d1[i] = static_cast<T>(w[i] * (2 * b * (A2 - A1) / (B1 * B2) - 2 * a * s * (1 / B1 - 1 / B2)));
-        dxx[i] = static_cast<T>(w[i] * (-s / B2));
-        dxy[i] = static_cast<T>(w[i] * (2 * A1 / (B1 * B2)));
-      }
+      Filter(*list[k].first, *list[k].second);
+    }
+  });
+}
+
+/// The images of one evaluation, in T: masked inputs, their products, the filtered moments and the
+/// gradient maps. Kept in an ImageLossWorkspace between calls.
+template <typename T>
+struct Scratch
+{
+  cv::Mat X, Y, XX, YY, XY, M1, M2, Sxx, Syy, Sxy, D1, Dxx, Dxy, F1, Fxx, Fxy, Grad;
+  void Create(int width, int height)
+  {
+    for (cv::Mat* m : { &X, &Y, &XX, &YY, &XY, &M1, &M2, &Sxx, &Syy, &Sxy, &D1, &Dxx, &Dxy, &F1, &Fxx, &Fxy, &Grad })
+    {
+      m->create(height, width, cv::DataType<T>::depth); // reallocates only when the size changes
     }
   }
-  if (gradX)
+};
+
+/// Sum over rows of per-row sums, in row order: the same result whatever the number of threads.
+double SumRows(const std::vector<double>& rows)
+{
+  double total = 0;
+  for (double v : rows)
   {
-    *gradX = Filter(dm1) + 2 * X.mul(Filter(dsxx)) + Y.mul(Filter(dsxy));
+    total += v;
   }
-  return map;
+  return total;
+}
+
+/**
+ * SSIM map of w.X and w.Y (their products already in w.XX, w.YY, w.XY); returns its sum over the
+ * masked pixels. With @p gradientWeight g != 0 it also fills w.D1, w.Dxx, w.Dxy so that
+ * d(g sum_{p in mask} SSIM(p))/dX = G*D1 + 2 X G*Dxx + Y G*Dxy:
+ * SSIM(p) = A1 A2 / (B1 B2), A1 = 2 m1 m2 + C1, A2 = 2 (sxy - m1 m2) + C2, B1 = m1^2 + m2^2 + C1,
+ * B2 = sxx - m1^2 + syy - m2^2 + C2 with m1 = G*X, m2 = G*Y, sxx = G*X^2, syy = G*Y^2, sxy = G*XY.
+ * dSSIM/dm1 = 2 m2 (A2 - A1) / (B1 B2) - 2 m1 SSIM (1/B1 - 1/B2), dSSIM/dsxx = -SSIM / B2,
+ * dSSIM/dsxy = 2 A1 / (B1 B2).
+ */
+template <typename T>
+double SsimSum(Scratch<T>& w, const unsigned char* mask, double gradientWeight)
+{
+  FilterAll({ { &w.X, &w.M1 }, { &w.Y, &w.M2 }, { &w.XX, &w.Sxx }, { &w.YY, &w.Syy }, { &w.XY, &w.Sxy } });
+  const int width = w.X.cols;
+  std::vector<double> rows(w.X.rows, 0.0);
+  vtkSMPTools::For(0, w.X.rows, 16, [&](int first, int last) {
+    for (int j = first; j < last; ++j)
+    {
+      const T* pm1 = w.M1.template ptr<T>(j);
+      const T* pm2 = w.M2.template ptr<T>(j);
+      const T* pxx = w.Sxx.template ptr<T>(j);
+      const T* pyy = w.Syy.template ptr<T>(j);
+      const T* pxy = w.Sxy.template ptr<T>(j);
+      T* d1 = w.D1.template ptr<T>(j);
+      T* dxx = w.Dxx.template ptr<T>(j);
+      T* dxy = w.Dxy.template ptr<T>(j);
+      const unsigned char* mr = mask ? mask + std::size_t(j) * width : nullptr;
+      double sum = 0;
+      for (int i = 0; i < width; ++i)
+      {
+        const double a = pm1[i], b = pm2[i];
+        const double A1 = 2 * a * b + C1;
+        const double A2 = 2 * (pxy[i] - a * b) + C2;
+        const double B1 = a * a + b * b + C1;
+        const double B2 = pxx[i] - a * a + pyy[i] - b * b + C2;
+        const double s = A1 * A2 / (B1 * B2);
+        const double g = (!mr || mr[i]) ? gradientWeight : 0.0;
+        sum += (!mr || mr[i]) ? s : 0.0;
+        if (gradientWeight != 0)
+        {
+          d1[i] = static_cast<T>(g * (2 * b * (A2 - A1) / (B1 * B2) - 2 * a * s * (1 / B1 - 1 / B2)));
+          dxx[i] = static_cast<T>(g * (-s / B2));
+          dxy[i] = static_cast<T>(g * (2 * A1 / (B1 * B2)));
+        }
+      }
+      rows[j] = sum;
+    }
+  });
+  return SumRows(rows);
+}
+
+/// w.X = x, w.Y = y (each times the mask when @p maskImages) and their products; returns the number
+/// of masked pixels.
+template <typename T>
+long Prepare(Scratch<T>& w, const float* x, const float* y, const unsigned char* mask, int width, int height,
+  bool maskImages)
+{
+  w.Create(width, height);
+  vtkSMPTools::For(0, height, 16, [&](int first, int last) {
+    for (int j = first; j < last; ++j)
+    {
+      T* X = w.X.template ptr<T>(j);
+      T* Y = w.Y.template ptr<T>(j);
+      T* XX = w.XX.template ptr<T>(j);
+      T* YY = w.YY.template ptr<T>(j);
+      T* XY = w.XY.template ptr<T>(j);
+      const std::size_t row = std::size_t(j) * width;
+      for (int i = 0; i < width; ++i)
+      {
+        const T m = (!maskImages || !mask || mask[row + i]) ? T(1) : T(0);
+        X[i] = m * static_cast<T>(x[row + i]);
+        Y[i] = m * static_cast<T>(y[row + i]);
+        XX[i] = X[i] * X[i];
+        YY[i] = Y[i] * Y[i];
+        XY[i] = X[i] * Y[i];
+      }
+    }
+  });
+  return mask ? static_cast<long>(cv::countNonZero(cv::Mat(height, width, CV_8U, const_cast<unsigned char*>(mask))))
+              : long(width) * height;
 }
 
 template <typename T>
 ImageLossTerms Compute(const float* rendered, const float* target, const unsigned char* mask, int width, int height,
-  const ImageLossWeights& weights, float* gradient)
+  const ImageLossWeights& weights, float* gradient, Scratch<T>& w)
 {
   ImageLossTerms terms;
   const int depth = cv::DataType<T>::depth;
-  const cv::Mat m = MaskOf<T>(mask, width, height);
-  const cv::Mat x = Image<T>(rendered, width, height);
-  const cv::Mat y = Image<T>(target, width, height);
-  terms.MaskedPixels = static_cast<long>(cv::countNonZero(m));
-  cv::Mat grad(height, width, depth, cv::Scalar(0.0));
+  terms.MaskedPixels = Prepare(w, rendered, target, mask, width, height, true);
   if (terms.MaskedPixels == 0)
   {
     if (gradient)
@@ -125,36 +166,49 @@ ImageLossTerms Compute(const float* rendered, const float* target, const unsigne
     return terms;
   }
   const double K = static_cast<double>(terms.MaskedPixels);
+  auto inMask = [mask, width](int j, int i) { return !mask || mask[std::size_t(j) * width + i]; };
 
-  if (weights.L1 != 0)
-  {
-    double sum = 0;
-    const T step = static_cast<T>(weights.L1 / K);
-    for (int j = 0; j < height; ++j)
+  // L1 (sum and gradient) while the gradient image is initialised; X and Y are already masked.
+  std::vector<double> rows(height, 0.0);
+  const T step = static_cast<T>(weights.L1 / K);
+  vtkSMPTools::For(0, height, 16, [&](int first, int last) {
+    for (int j = first; j < last; ++j)
     {
-      const T* xr = x.ptr<T>(j);
-      const T* yr = y.ptr<T>(j);
-      const T* mr = m.ptr<T>(j);
-      T* gr = grad.ptr<T>(j);
+      const T* X = w.X.template ptr<T>(j);
+      const T* Y = w.Y.template ptr<T>(j);
+      T* g = w.Grad.template ptr<T>(j);
+      double sum = 0;
       for (int i = 0; i < width; ++i)
       {
-        const T r = xr[i] - yr[i];
-        sum += mr[i] * std::abs(double(r));
-        gr[i] += mr[i] * step * static_cast<T>((r > 0) - (r < 0));
+        const T r = X[i] - Y[i];
+        sum += std::abs(double(r));
+        g[i] = (weights.L1 != 0 && inMask(j, i)) ? step * static_cast<T>((r > 0) - (r < 0)) : T(0);
       }
+      rows[j] = sum;
     }
-    terms.L1 = sum / K;
-  }
+  });
+  terms.L1 = weights.L1 != 0 ? SumRows(rows) / K : 0.0;
   if (weights.DSSIM != 0)
   {
-    const cv::Mat X = x.mul(m), Y = y.mul(m);
-    const cv::Mat g = (-weights.DSSIM / K) * m; // d(total)/d(SSIM(p))
-    cv::Mat dX;
-    const cv::Mat map = SsimMap<T>(X, Y, g, gradient ? &dX : nullptr);
-    terms.DSSIM = 1.0 - cv::sum(map.mul(m))[0] / K;
+    terms.DSSIM = 1.0 - SsimSum(w, mask, gradient ? -weights.DSSIM / K : 0.0) / K;
     if (gradient)
     {
-      grad += dX.mul(m);
+      FilterAll({ { &w.D1, &w.F1 }, { &w.Dxx, &w.Fxx }, { &w.Dxy, &w.Fxy } });
+      vtkSMPTools::For(0, height, 16, [&](int first, int last) {
+        for (int j = first; j < last; ++j)
+        {
+          const T* X = w.X.template ptr<T>(j);
+          const T* Y = w.Y.template ptr<T>(j);
+          const T* f1 = w.F1.template ptr<T>(j);
+          const T* fxx = w.Fxx.template ptr<T>(j);
+          const T* fxy = w.Fxy.template ptr<T>(j);
+          T* g = w.Grad.template ptr<T>(j);
+          for (int i = 0; i < width; ++i)
+          {
+            g[i] += inMask(j, i) ? f1[i] + 2 * X[i] * fxx[i] + Y[i] * fxy[i] : T(0);
+          }
+        }
+      });
     }
   }
   if (weights.FFL != 0)
@@ -164,7 +218,7 @@ ImageLossTerms Compute(const float* rendered, const float* target, const unsigne
     const int pw = cv::getOptimalDFTSize(width), ph = cv::getOptimalDFTSize(height);
     const double N = double(pw) * ph;
     cv::Mat r;
-    cv::copyMakeBorder((x - y).mul(m), r, 0, ph - height, 0, pw - width, cv::BORDER_CONSTANT, cv::Scalar(0));
+    cv::copyMakeBorder(w.X - w.Y, r, 0, ph - height, 0, pw - width, cv::BORDER_CONSTANT, cv::Scalar(0));
     cv::Mat F;
     cv::dft(r, F, cv::DFT_COMPLEX_OUTPUT);
     cv::Mat planes[2];
@@ -173,62 +227,76 @@ ImageLossTerms Compute(const float* rendered, const float* target, const unsigne
     cv::magnitude(planes[0], planes[1], magnitude);
     double largest = 0;
     cv::minMaxLoc(magnitude, nullptr, &largest);
-    cv::Mat w;
+    cv::Mat fw;
     if (largest > 0)
     {
-      cv::pow(magnitude / largest, weights.FFLAlpha, w);
+      cv::pow(magnitude / largest, weights.FFLAlpha, fw);
     }
     else
     {
-      w = cv::Mat::zeros(magnitude.size(), depth);
+      fw = cv::Mat::zeros(magnitude.size(), depth);
     }
-    terms.FFL = cv::sum(w.mul(magnitude.mul(magnitude)))[0] / (N * N);
+    terms.FFL = cv::sum(fw.mul(magnitude.mul(magnitude)))[0] / (N * N);
     if (gradient)
     {
       // d/dr of (1/N^2) sum_k w_k |F_k|^2 = (2/N^2) Re(unscaled inverse DFT of w F), w held constant.
       cv::Mat wF;
-      cv::Mat weighted[2] = { planes[0].mul(w), planes[1].mul(w) };
+      cv::Mat weighted[2] = { planes[0].mul(fw), planes[1].mul(fw) };
       cv::merge(weighted, 2, wF);
       cv::Mat back;
       cv::dft(wF, back, cv::DFT_INVERSE | cv::DFT_COMPLEX_OUTPUT);
       cv::Mat parts[2];
       cv::split(back, parts);
-      grad += (weights.FFL * 2.0 / (N * N)) * parts[0](cv::Rect(0, 0, width, height)).mul(m);
+      cv::Mat m;
+      if (mask)
+      {
+        cv::Mat(height, width, CV_8U, const_cast<unsigned char*>(mask)).convertTo(m, depth);
+        cv::min(m, 1, m);
+      }
+      else
+      {
+        m = cv::Mat(height, width, depth, cv::Scalar(1.0));
+      }
+      w.Grad += (weights.FFL * 2.0 / (N * N)) * parts[0](cv::Rect(0, 0, width, height)).mul(m);
     }
   }
   terms.Total = weights.L1 * terms.L1 + weights.DSSIM * terms.DSSIM + weights.FFL * terms.FFL;
   if (gradient)
   {
     cv::Mat out(height, width, CV_32F, gradient);
-    grad.convertTo(out, CV_32F);
+    w.Grad.convertTo(out, CV_32F);
   }
   return terms;
 }
 }
 
-ImageLossTerms ComputeImageLoss(const float* rendered, const float* target, const unsigned char* mask, int width,
-  int height, const ImageLossWeights& weights, float* gradient, bool doublePrecision)
+struct ImageLossWorkspace::Internals
 {
-  return doublePrecision ? Compute<double>(rendered, target, mask, width, height, weights, gradient)
-                         : Compute<float>(rendered, target, mask, width, height, weights, gradient);
+  Scratch<float> Float;
+  Scratch<double> Double;
+};
+
+ImageLossWorkspace::ImageLossWorkspace()
+  : Data(new Internals)
+{
+}
+
+ImageLossWorkspace::~ImageLossWorkspace() = default;
+
+ImageLossTerms ComputeImageLoss(const float* rendered, const float* target, const unsigned char* mask, int width,
+  int height, const ImageLossWeights& weights, float* gradient, bool doublePrecision, ImageLossWorkspace* workspace)
+{
+  ImageLossWorkspace local;
+  ImageLossWorkspace::Internals& w = *(workspace ? workspace : &local)->Data;
+  return doublePrecision ? Compute<double>(rendered, target, mask, width, height, weights, gradient, w.Double)
+                         : Compute<float>(rendered, target, mask, width, height, weights, gradient, w.Float);
 }
 
 double MeanSSIM(const float* x, const float* y, const unsigned char* mask, int width, int height, bool maskImages)
 {
-  const cv::Mat m = MaskOf<double>(mask, width, height);
-  const double K = cv::countNonZero(m);
-  if (K == 0)
-  {
-    return 0;
-  }
-  cv::Mat X = Image<double>(x, width, height), Y = Image<double>(y, width, height);
-  if (maskImages)
-  {
-    X = X.mul(m);
-    Y = Y.mul(m);
-  }
-  const cv::Mat map = SsimMap<double>(X, Y, cv::Mat(), nullptr);
-  return cv::sum(map.mul(m))[0] / K;
+  Scratch<double> w;
+  const long K = Prepare(w, x, y, mask, width, height, maskImages);
+  return K == 0 ? 0.0 : SsimSum(w, mask, 0.0) / K;
 }
 
 } // namespace bigus

@@ -19,6 +19,8 @@
 
 #include "bigusRenderingModule.h" // For export macro
 
+#include <memory>
+
 namespace bigus
 {
 
@@ -39,15 +41,33 @@ struct ImageLossTerms
 };
 
 /**
+ * Scratch images that ComputeImageLoss reuses from one call to the next on frames of one size (a
+ * training step evaluates such a frame again and again; fresh images cost page faults every call).
+ * One workspace per thread.
+ */
+class BIGUSRENDERING_EXPORT ImageLossWorkspace
+{
+public:
+  ImageLossWorkspace();
+  ~ImageLossWorkspace();
+  ImageLossWorkspace(const ImageLossWorkspace&) = delete;
+  ImageLossWorkspace& operator=(const ImageLossWorkspace&) = delete;
+  struct Internals;
+  std::unique_ptr<Internals> Data;
+};
+
+/**
  * Evaluate the loss of @p rendered against @p target inside @p mask (may be null = every pixel).
  * @param gradient  if non-null, receives dTotal/d(rendered) [H, W] (zero outside the mask).
  * @param doublePrecision  evaluate in double (tests, metrics) instead of float (training: about twice
  *        as fast; sums are accumulated in double either way).
+ * @param workspace  scratch kept between calls (null: allocated for this call).
+ * Multi-threaded over rows (vtkSMPTools); the result does not depend on the number of threads.
  * @return the terms; Total is 0 with MaskedPixels 0 when the mask is empty.
  */
 BIGUSRENDERING_EXPORT ImageLossTerms ComputeImageLoss(const float* rendered, const float* target,
   const unsigned char* mask, int width, int height, const ImageLossWeights& weights, float* gradient,
-  bool doublePrecision = false);
+  bool doublePrecision = false, ImageLossWorkspace* workspace = nullptr);
 
 /**
  * Mean SSIM over the masked pixels, in double (same definition as the D-SSIM term, without the mask

@@ -185,6 +185,69 @@ bool AllFinite(const GaussianField& f)
 }
 }
 
+namespace
+{
+/// Scattering field S of @p field on every frame of the synthetic sweep, frame after frame.
+std::vector<float> RenderSweep(const GaussianField& field, double sigmaE)
+{
+  auto renderer = CreateCpuRenderer();
+  RenderOptions o;
+  o.ElevationSigma = sigmaE;
+  o.Gamma = 1.0;
+  std::vector<float> all, S(W * H);
+  for (int k = 0; k < 60; ++k)
+  {
+    SliceGeometry g;
+    const std::array<double, 16> pose = SweepPose(k);
+    std::copy(pose.begin(), pose.end(), g.ImageToReference);
+    g.Width = W;
+    g.Height = H;
+    EXPECT_TRUE(renderer->Forward(field.View(), &g, 1, o, S.data(), nullptr, nullptr, nullptr));
+    all.insert(all.end(), S.begin(), S.end());
+  }
+  return all;
+}
+}
+
+// Densification must not change what the field renders, only how finely it can change: the rendered
+// sweep before and after splitting (or cloning) one elongated, tilted Gaussian is compared pixel by
+// pixel. (A split that also shrank the other axes and halved r lost about three quarters of the
+// Gaussian's integral and would fail by far.)
+TEST(Trainer, DensifyingAGaussianKeepsTheRenderedFrames)
+{
+  for (bool large : { true, false })
+  {
+    GaussianField field;
+    field.Means = { 9.6f, 9.6f, 0.0f };
+    field.LogScales = { std::log(2.0f), std::log(0.8f), std::log(1.0f) };
+    const double angle = 0.6; // rotation about (1, 1, 1) / sqrt(3): no axis lies in a frame
+    field.Quaternions = { static_cast<float>(std::cos(angle / 2)),
+      static_cast<float>(std::sin(angle / 2) / std::sqrt(3.0)), static_cast<float>(std::sin(angle / 2) / std::sqrt(3.0)),
+      static_cast<float>(std::sin(angle / 2) / std::sqrt(3.0)) };
+    field.Reflectivities = { 0.8f };
+    const std::vector<float> before = RenderSweep(field, 0.5);
+    GaussianField densified = field;
+    EXPECT_EQ(DensifyGaussian(densified, 0, large), 1);
+    ASSERT_EQ(densified.Count(), 2);
+    const float* a = &densified.Means[0];
+    const float* b = &densified.Means[3];
+    const double apart = std::sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) + (a[2] - b[2]) * (a[2] - b[2]));
+    EXPECT_NEAR(apart, large ? 2.0 : 0.4, 1e-5) << "children sit at +-s/2 (split) or +-s/10 (clone) along the major axis";
+    const std::vector<float> after = RenderSweep(densified, 0.5);
+    double peak = 0, largest = 0, sumBefore = 0, sumAfter = 0;
+    for (std::size_t p = 0; p < before.size(); ++p)
+    {
+      peak = std::max(peak, std::abs(double(before[p])));
+      largest = std::max(largest, std::abs(double(after[p]) - before[p]));
+      sumBefore += before[p];
+      sumAfter += after[p];
+    }
+    ASSERT_GT(peak, 0.3) << "the sweep passes through the Gaussian";
+    EXPECT_LT(largest, 0.04 * peak) << (large ? "split" : "clone");
+    EXPECT_NEAR(sumAfter, sumBefore, 0.01 * sumBefore) << (large ? "split" : "clone") << ": the integral is kept";
+  }
+}
+
 TEST(Trainer, SameSeedGivesTheSameField)
 {
   std::vector<int> heldOut;
