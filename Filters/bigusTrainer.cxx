@@ -29,6 +29,7 @@ constexpr double AdamEpsilon = 1e-12;
 constexpr int SnapshotInterval = 100;
 constexpr double MinimumScaleMm = 1e-3;
 constexpr double MaximumScaleMm = 100.0;
+constexpr double SplitShrink = 1.6; // every scale of a split Gaussian is divided by this
 
 double Seconds()
 {
@@ -112,14 +113,16 @@ std::int64_t DensifyGaussian(GaussianField& field, std::int64_t i, bool large)
   }
   double R[3][3];
   QuaternionToMatrix(q, R);
-  // Split: children at +-s/2 with scale sqrt(3/4) s along the axis keep the parent's variance along it
-  // (s^2/4 + 3 s^2/4) and, with r / (2 sqrt(3/4)) each, its integral r prod(s).
-  const double shrink = large ? std::sqrt(0.75) : 1.0;
+  // Split: children at +-s/2, every scale divided by 1.6 (as in 3D Gaussian splatting, Kerbl et al.
+  // 2023): smaller Gaussians resolve finer detail and render faster. r / 2 each.
   const double offset = large ? 0.5 * s : 0.1 * s;
-  const float reflectivity = static_cast<float>(field.Reflectivities[i] / (2 * shrink));
+  const float reflectivity = 0.5f * field.Reflectivities[i];
   const std::int64_t child = field.Count();
   field.Resize(child + 1);
-  field.LogScales[3 * i + major] += static_cast<float>(std::log(shrink));
+  for (int k = 0; large && k < 3; ++k)
+  {
+    field.LogScales[3 * i + k] -= static_cast<float>(std::log(SplitShrink));
+  }
   field.CopyGaussian(i, child);
   for (int k = 0; k < 3; ++k)
   {
@@ -671,20 +674,19 @@ void Trainer::DensifyAndPrune()
     }
   }
   GaussianField& F = this->Field;
-  // Children and densified parents: no first moment (the parent's direction of travel is not
-  // theirs), but the parent's second moment. With a zero second moment too, Adam (Kingma and Ba 2015,
-  // algorithm 1, bias-corrected by the global step) would turn the next gradient g into a step of
-  // 0.1 g / sqrt(0.001 g^2) = 3.2 learning rates, carried on by the decaying first moment to about
-  // 30 in all: a kick of several pixels that undoes the fit.
+  // Children and split parents start with fresh optimiser moments; the others keep theirs. Their
+  // first steps are large (Adam with the global step's bias correction: 0.1 g / sqrt(0.001 g^2) = 3.2
+  // learning rates, carried on by the first moment), which costs a dip in PSNR right after a
+  // densification but lets the children move apart: inheriting the parent's second moment removed the
+  // dip but ended lower (liver, 10 minutes: 37.1 against 37.5 dB held out, 37.4 against 39.0 trained).
   this->AdamM.Resize(F.Count());
   this->AdamV.Resize(F.Count());
-  for (std::int64_t i = 0, child = n; i < n; ++i)
+  for (std::int64_t i = 0; i < n; ++i)
   {
     if (split[i])
     {
       this->AdamM.ZeroGaussian(i);
-      this->AdamM.ZeroGaussian(child);
-      this->AdamV.CopyGaussian(i, child++);
+      this->AdamV.ZeroGaussian(i);
     }
   }
   // Prune negligible and never-seen Gaussians (not the ones just made).

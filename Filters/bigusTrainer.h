@@ -204,11 +204,14 @@ BIGUSFILTERS_EXPORT ImageMetrics MeanFrameMetrics(const TrainingData& data, cons
 
 /**
  * EA-D densification of Gaussian @p i (DESIGN section 4): appends one child and returns its index.
- * @p large: split along the major axis (largest scale s) into two Gaussians at +-s/2 whose scale along
- * that axis is sqrt(3/4) s and whose reflectivities are r / (2 sqrt(3/4)): the pair keeps the parent's
- * integral r s1 s2 s3 and its variance along the axis (moment matching), so the rendered frames barely
- * change (peak 0.98 r) while the children can move apart. Otherwise cloned: the same scales, offsets of
- * +-s/10 along the major axis (so that the copies do not get identical gradients), r / 2 each.
+ * The pair sits at +-s/2 (@p large: split) or +-s/10 (clone) along the major axis (largest scale s),
+ * with r / 2 each. A clone keeps the scales, so the pair renders as the parent did and the offset only
+ * keeps the copies from getting identical gradients. A split divides every scale by 1.6, as 3D
+ * Gaussian splatting does (Kerbl et al. 2023): smaller children resolve finer detail and render
+ * faster; the render loses part of the parent's integral, which the next steps restore. (A
+ * moment-matched split, r / sqrt(3) each and only the major scale times sqrt(3/4), keeps the render
+ * but gave 37.3 against 37.6 dB held-out PSNR after 10 minutes on the liver sweep, one run each: its
+ * larger children made steps 10 % slower.)
  */
 BIGUSFILTERS_EXPORT std::int64_t DensifyGaussian(GaussianField& field, std::int64_t i, bool large);
 

@@ -282,6 +282,8 @@ ImageLossWorkspace::ImageLossWorkspace()
 }
 
 ImageLossWorkspace::~ImageLossWorkspace() = default;
+ImageLossWorkspace::ImageLossWorkspace(ImageLossWorkspace&&) noexcept = default;
+ImageLossWorkspace& ImageLossWorkspace::operator=(ImageLossWorkspace&&) noexcept = default;
 
 ImageLossTerms ComputeImageLoss(const float* rendered, const float* target, const unsigned char* mask, int width,
   int height, const ImageLossWeights& weights, float* gradient, bool doublePrecision, ImageLossWorkspace* workspace)

@@ -52,6 +52,8 @@ public:
   ~ImageLossWorkspace();
   ImageLossWorkspace(const ImageLossWorkspace&) = delete;
   ImageLossWorkspace& operator=(const ImageLossWorkspace&) = delete;
+  ImageLossWorkspace(ImageLossWorkspace&&) noexcept;
+  ImageLossWorkspace& operator=(ImageLossWorkspace&&) noexcept;
   struct Internals;
   std::unique_ptr<Internals> Data;
 };
