@@ -99,11 +99,12 @@ void GaussianField::Compact(const std::vector<unsigned char>& keep)
   CompactVector(this->Reflectivities, keep);
 }
 
-std::int64_t DensifyGaussian(GaussianField& field, std::int64_t i, bool large)
+std::int64_t DensifyGaussian(GaussianField& field, std::int64_t i, double splitScale)
 {
   const float* l = &field.LogScales[3 * i];
   const int major = static_cast<int>(std::max_element(l, l + 3) - l);
   const double s = std::exp(double(l[major]));
+  const bool large = s > splitScale;
   double q[4] = { field.Quaternions[4 * i], field.Quaternions[4 * i + 1], field.Quaternions[4 * i + 2],
     field.Quaternions[4 * i + 3] };
   const double qn = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
@@ -669,8 +670,7 @@ void Trainer::DensifyAndPrune()
   {
     if (split[i])
     {
-      const float* l = &this->Field.LogScales[3 * i];
-      DensifyGaussian(this->Field, i, std::exp(double(*std::max_element(l, l + 3))) > splitScale);
+      DensifyGaussian(this->Field, i, splitScale);
     }
   }
   GaussianField& F = this->Field;

@@ -204,7 +204,8 @@ BIGUSFILTERS_EXPORT ImageMetrics MeanFrameMetrics(const TrainingData& data, cons
 
 /**
  * EA-D densification of Gaussian @p i (DESIGN section 4): appends one child and returns its index.
- * The pair sits at +-s/2 (@p large: split) or +-s/10 (clone) along the major axis (largest scale s),
+ * Split when its largest scale s exceeds @p splitScale (mm), cloned otherwise. The pair sits at +-s/2
+ * (split) or +-s/10 (clone) along the major axis,
  * with r / 2 each. A clone keeps the scales, so the pair renders as the parent did and the offset only
  * keeps the copies from getting identical gradients. A split divides every scale by 1.6, as 3D
  * Gaussian splatting does (Kerbl et al. 2023): smaller children resolve finer detail and render
@@ -213,7 +214,7 @@ BIGUSFILTERS_EXPORT ImageMetrics MeanFrameMetrics(const TrainingData& data, cons
  * but gave 37.3 against 37.6 dB held-out PSNR after 10 minutes on the liver sweep, one run each: its
  * larger children made steps 10 % slower.)
  */
-BIGUSFILTERS_EXPORT std::int64_t DensifyGaussian(GaussianField& field, std::int64_t i, bool large);
+BIGUSFILTERS_EXPORT std::int64_t DensifyGaussian(GaussianField& field, std::int64_t i, double splitScale);
 
 /// Quaternion (w, x, y, z) of the rotation whose columns are the unit vectors u, v, n.
 std::array<double, 4> QuaternionFromAxes(const double u[3], const double v[3], const double n[3]);

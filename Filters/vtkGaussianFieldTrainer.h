@@ -16,9 +16,9 @@
  * means, log-scales, quaternions and reflectivities, loss = L1 + D-SSIM + focal frequency loss on the
  * masked pixels, error-attributed densification (the top DensifyPercentile of the attribution score
  * sum_p |dL/dS(p)| w_i(p) is split or cloned (bigus::DensifyGaussian); negligible and never-seen
- * Gaussians pruned), growth that
- * stops when a validation subset of the training frames stops improving, and a final prune of every
- * Gaussian whose removal changes no training pixel by more than 1/512.
+ * Gaussians pruned), growth that stops when a validation subset of the training frames stops
+ * improving, and a final prune of every Gaussian whose removal changes no training pixel by more than
+ * 1/512.
  *
  * Defaults and why:
  * - ElevationSigma 0.5 mm: the elevation beam of abdominal and linear probes is about 1 to 3 mm wide

@@ -247,17 +247,9 @@ ImageLossTerms Compute(const float* rendered, const float* target, const unsigne
       cv::dft(wF, back, cv::DFT_INVERSE | cv::DFT_COMPLEX_OUTPUT);
       cv::Mat parts[2];
       cv::split(back, parts);
-      cv::Mat m;
-      if (mask)
-      {
-        cv::Mat(height, width, CV_8U, const_cast<unsigned char*>(mask)).convertTo(m, depth);
-        cv::min(m, 1, m);
-      }
-      else
-      {
-        m = cv::Mat(height, width, depth, cv::Scalar(1.0));
-      }
-      w.Grad += (weights.FFL * 2.0 / (N * N)) * parts[0](cv::Rect(0, 0, width, height)).mul(m);
+      const cv::Mat fflGradient = (weights.FFL * 2.0 / (N * N)) * parts[0](cv::Rect(0, 0, width, height));
+      cv::add(w.Grad, fflGradient, w.Grad,
+        mask ? cv::Mat(height, width, CV_8U, const_cast<unsigned char*>(mask)) : cv::noArray());
     }
   }
   terms.Total = weights.L1 * terms.L1 + weights.DSSIM * terms.DSSIM + weights.FFL * terms.FFL;
