@@ -310,10 +310,21 @@ struct TrainOptions
 {
   SweepOptions Sweep;
   std::string Output, Checkpoint, Resume, Mask, Backend = "auto";
-  int HoldOutEvery = 0, HoldOutOffset = 0, Iterations = 3000, Threads = 0;
-  double TimeBudget = 0, ElevationSigma = 1.0, EvaluationInterval = 0;
-  long long MaxGaussians = 400000, InitialGaussians = 0;
-  unsigned Seed = 1;
+  int HoldOutEvery = 0, HoldOutOffset = 0, Iterations = 0, Threads = 0;
+  double TimeBudget = 0, ElevationSigma = 0, EvaluationInterval = 0;
+  long long MaxGaussians = 0, InitialGaussians = 0;
+  unsigned Seed = 0;
+
+  /// The filter's own defaults, so that `bigus train` and vtkGaussianFieldTrainer agree.
+  TrainOptions()
+  {
+    vtkNew<vtkGaussianFieldTrainer> defaults;
+    this->Iterations = defaults->GetIterations();
+    this->ElevationSigma = defaults->GetElevationSigma();
+    this->MaxGaussians = defaults->GetMaximumGaussians();
+    this->InitialGaussians = defaults->GetInitialGaussians();
+    this->Seed = defaults->GetSeed();
+  }
 };
 
 int RunTrain(const TrainOptions& o)
