@@ -1,7 +1,8 @@
 // bigus: command-line front end of BIGUS-VTK.
 //
 //   bigus info SWEEP [--calibration XML] [--transform CHAIN] [--frames FIRST LAST]
-//   bigus train SWEEP -o FIELD.vtp [--holdout-every K --holdout-offset J] [--time-budget S] [--iterations N] ...
+//   bigus train SWEEP -o FIELD.vtp [--holdout-every K --holdout-offset J | --frames LIST] [--time-budget S]
+//               [--iterations N] ...
 //   bigus render FIELD.vtp --poses SWEEP [--frames LIST] -o OUT.igs.mha
 //   bigus render FIELD.vtp --plane OX OY OZ NX NY NZ [--size W H] [--spacing MM] -o slice.png|.mha
 //   bigus render FIELD.vtp --volume [--spacing MM] -o volume.mha|.vti
@@ -311,6 +312,7 @@ struct TrainOptions
   SweepOptions Sweep;
   std::string Output, Checkpoint, Resume, Mask, Backend = "auto";
   int HoldOutEvery = 0, HoldOutOffset = 0, Iterations = 0, Threads = 0;
+  std::vector<int> Frames; ///< explicit training frames (empty: the hold-out rule)
   double TimeBudget = 0, ElevationSigma = 0, EvaluationInterval = 0;
   long long MaxGaussians = 0, InitialGaussians = 0;
   unsigned Seed = 0;
@@ -355,6 +357,21 @@ int RunTrain(const TrainOptions& o)
   }
   trainer->SetHoldOutEvery(o.HoldOutEvery);
   trainer->SetHoldOutOffset(o.HoldOutOffset);
+  if (!o.Frames.empty())
+  {
+    const int count = reader->GetOutput()->GetDimensions()[2];
+    vtkNew<vtkIdList> frames;
+    for (int k : o.Frames)
+    {
+      if (k < 0 || k >= count)
+      {
+        return Fail("--frames: frame " + std::to_string(k) + " is outside " + o.Sweep.Sweep + " (frames 0 to " +
+          std::to_string(count - 1) + ")");
+      }
+      frames->InsertUniqueId(k);
+    }
+    trainer->SetTrainingFrameList(frames);
+  }
   trainer->SetIterations(o.Iterations);
   trainer->SetTimeBudget(o.TimeBudget);
   trainer->SetMaximumGaussians(o.MaxGaussians);
@@ -970,6 +987,8 @@ int main(int argc, char** argv)
   trainCommand->add_option("--mask", train.Mask, "Fan mask .mha (W x H x 1, or W x H x N per frame; default: estimated)");
   trainCommand->add_option("--holdout-every", train.HoldOutEvery, "Hold out frames with index % K == J (0: none)");
   trainCommand->add_option("--holdout-offset", train.HoldOutOffset, "J of --holdout-every");
+  trainCommand->add_option("--frames", train.Frames, "Train on these frames only (indices); the others are held out")
+    ->excludes("--holdout-every");
   trainCommand->add_option("--time-budget", train.TimeBudget, "Wall-clock budget for training, seconds (0: none)");
   trainCommand->add_option("--iterations", train.Iterations, "Optimisation steps")->capture_default_str();
   trainCommand->add_option("--max-gaussians", train.MaxGaussians, "Hard maximum of Gaussians")->capture_default_str();

@@ -44,6 +44,18 @@
  *   liver is about 1.6 times faster, and the rendered intensity changes by at most ~1e-3.
  * - Densify every 200 steps from step 200 to 60 % of the iterations, top 5 % by attribution.
  *
+ * What limits held-out quality (measured on the liver sweep, hold-out i mod 4 == 2, sigma 0.3 mm):
+ * - Steps per frame. In 10 minutes on 2 cores the full sweep (105 training frames) gets about 73
+ *   steps per training frame and ends near 37.4 dB. On 20 of its frames (40 to 59: 15 train, 5 held
+ *   out) the same 10 minutes give about 530 steps per frame and 40.5 dB held out (36.7, 37.6, 39.0 at
+ *   1, 2, 5 minutes), still rising: the full sweep needs several times the compute (`bigus benchmark`
+ *   shows both).
+ * - Not the tracking: a test-time search of each held-out pose (elevation +-0.4 mm, in-plane +-0.6 px)
+ *   found the recorded pose best for all 5 held-out frames of that sub-sweep.
+ * - Between-frame fit: there the training frames reached 44.3 dB and the held-out 40.5, below the blend
+ *   of the two bracketing frames (42.7 dB for frames 43 ms apart). The field overfits each frame's
+ *   speckle rather than interpolating it; runs repeat to within about 0.4 dB.
+ *
  * Stopping: Iterations, TimeBudget (s) or ConvergenceTolerance, whichever first; AbortExecute is
  * honoured and UpdateProgress called. Checkpoints (CheckpointFile every CheckpointInterval steps)
  * hold the field and the optimiser state; ResumeFile continues a stopped run (same settings).

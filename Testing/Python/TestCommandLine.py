@@ -56,6 +56,21 @@ def main():
     assert code == 1 and err.count("\n") == 1 and "no valid training frames" in err, (code, err)
     assert "training " not in out_text, out_text  # no progress line for a run that never took a step
     assert open(field, "rb").read() == before
+    # An explicit list of training frames: one outside the sweep is named; a good list is what is trained on.
+    code, _, err = run("train", sweep, "--calibration", xml, "-o", field, "--frames", "0", "25")
+    assert code == 1 and err.count("\n") == 1 and "frame 25" in err and "0 to 19" in err, (code, err)
+    assert open(field, "rb").read() == before
+    code, _, err = run("train", sweep, "--calibration", xml, "-o", field, "--frames", "1", "3", "0",
+                       "--holdout-every", "4")
+    assert code == 2 and "excludes" in err, (code, err)
+    listed = os.path.join(out, "nwire_listed.vtp")
+    code, _, err = run("train", sweep, "--calibration", xml, "-o", listed, "--frames", "1", "3", "0",
+                       "--iterations", "5", "--elevation-sigma", "1.0")
+    assert code == 0, err
+    reader.SetFileName(listed)
+    reader.Update()
+    frames = reader.GetOutput().GetFieldData().GetArray("TrainingFrames")
+    assert sorted(int(frames.GetTuple1(k)) for k in range(frames.GetNumberOfTuples())) == [0, 1, 3]
 
     rendered = os.path.join(out, "nwire_rendered.igs.mha")
     code, out_text, err = run("render", field, "--poses", sweep, "--calibration", xml, "--frames", "2", "6", "10",
