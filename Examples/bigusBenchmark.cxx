@@ -357,6 +357,82 @@ std::vector<std::pair<double, ImageMetrics>> BlurredTruth(const Sweep& sweep, co
   return out;
 }
 
+/// Where a trained field's held-out error comes from: its fit of the training frames, and its render at
+/// a held-out pose against the blend of its own renders at the bracketing training frames.
+struct ErrorSources
+{
+  double Seconds = NaN;
+  ImageMetrics Training;       ///< renders at the training poses against the recorded frames
+  ImageMetrics HeldOut;        ///< renders at the held-out poses (the BIGUS row)
+  ImageMetrics BlendedRenders; ///< the blend baseline run on the field's renders instead of the recording
+};
+
+/// PSNR (dB, data range 1) of the sum of the mean squared errors of two predictions given by their PSNR.
+double PsnrOfSummedErrors(double psnrA, double psnrB)
+{
+  return -10 * std::log10(std::pow(10.0, -psnrA / 10) + std::pow(10.0, -psnrB / 10));
+}
+
+ErrorSources MeasureErrorSources(const Sweep& sweep, Trainer& trainer, const Row& bigusRow)
+{
+  const TrainingData& data = sweep.Data;
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
+  // The renders at every training pose in a float copy of the sweep (same poses and timestamps), so
+  // that vtkUltrasoundFrameInterpolator blends them exactly as it blends the recording for the baseline.
+  vtkNew<vtkImageData> renders;
+  renders->SetDimensions(sweep.Frames->GetDimensions());
+  renders->AllocateScalars(VTK_FLOAT, 1);
+  renders->GetFieldData()->ShallowCopy(sweep.Frames->GetFieldData());
+  float* image = static_cast<float*>(renders->GetScalarPointer());
+  std::fill_n(image, pixels * data.Count(), 0.f);
+  for (int f : data.TrainFrames)
+  {
+    trainer.RenderFrame(data, f, image + pixels * f);
+  }
+  ErrorSources e;
+  e.Seconds = bigusRow.Seconds;
+  e.HeldOut = bigusRow.Quality;
+  e.Training = MeanFrameMetrics(data, data.TrainFrames, [&](std::size_t, int f) { return image + pixels * f; });
+  vtkNew<vtkUltrasoundFrameInterpolator> blend;
+  blend->SetInputData(renders);
+  blend->SetTrainingFrames(IdList(data.TrainFrames));
+  blend->SetTargetFrames(IdList(sweep.HeldOut));
+  blend->SetModeToTemporalBlend();
+  blend->Update();
+  e.BlendedRenders =
+    Score(static_cast<float*>(blend->GetOutput()->GetScalarPointer()), 1.0, data, sweep.HeldOut);
+  return e;
+}
+
+/// The report's account of where the held-out error comes from, one row per time mark, also added to
+/// the sweep's JSON @p j; @p blend is the blend baseline's row on the recording.
+std::string ErrorSourcesSection(const Row& blend, const std::vector<ErrorSources>& sources, nlohmann::json& j)
+{
+  std::ostringstream md;
+  md << "\nWhere the held-out error comes from (see the conventions above; the blend of the recorded frames "
+     << "scores " << Format("%.2f", blend.Quality.PSNR) << " dB):\n\n"
+     << "| time (s) | training frames PSNR (dB) | held-out PSNR (dB) | blended renders PSNR (dB) | fit + blend (dB) |\n"
+     << "|---|---|---|---|---|\n";
+  for (const ErrorSources& e : sources)
+  {
+    const double estimate = PsnrOfSummedErrors(e.Training.PSNR, blend.Quality.PSNR);
+    md << "| " << Format("%.1f", e.Seconds) << " | " << Format("%.2f", e.Training.PSNR) << " | "
+       << Format("%.2f", e.HeldOut.PSNR) << " | " << Format("%.2f", e.BlendedRenders.PSNR) << " | "
+       << Format("%.2f", estimate) << " |\n";
+    j["error_sources"].push_back({ { "seconds", e.Seconds }, { "training_psnr", e.Training.PSNR },
+      { "training_ssim", e.Training.SSIM }, { "held_out_psnr", e.HeldOut.PSNR },
+      { "blended_renders_psnr", e.BlendedRenders.PSNR }, { "fit_plus_blend_psnr", estimate } });
+  }
+  const ErrorSources& last = sources.back();
+  const double gain = last.HeldOut.PSNR - last.BlendedRenders.PSNR;
+  md << "\nAfter " << Format("%.0f", last.Seconds) << " s, rendering the held-out pose scores "
+     << Format("%.2f", std::abs(gain)) << " dB " << (gain >= 0 ? "above" : "below")
+     << " blending the field's own renders at the bracketing training frames, and the held-out PSNR is "
+     << Format("%.2f", std::abs(last.HeldOut.PSNR - PsnrOfSummedErrors(last.Training.PSNR, blend.Quality.PSNR)))
+     << " dB from the fit + blend estimate.\n";
+  return md.str();
+}
+
 /// Trains with @p settings, evaluating @p heldOut at each of @p marks (cumulative training seconds);
 /// @p onMark is called with the mark, its row (measured time) and the trainer. Returns false on a
 /// training error.
@@ -576,7 +652,14 @@ int RunBenchmark(const BenchmarkOptions& options)
      << "stops while held-out frames are evaluated. A baseline's time is its preparation (compounding) "
      << "and its ms per frame is the time to produce one held-out frame; BIGUS's ms per frame is the render "
      << "time of one held-out frame. Peak MiB is the process's peak resident memory during that run "
-     << "(frames of every sweep included).\n";
+     << "(frames of every sweep included).\n\n"
+     << "Where the held-out error comes from (a table per sweep): the field rendered at its training poses "
+     << "(training frames) and at the held-out poses (held-out) against the recording, and the blend baseline "
+     << "run on the field's renders instead of the recording (blended renders: its renders at the two bracketing "
+     << "training frames, blended in time). If the field's views between training frames were as good an "
+     << "interpolation as blending the recorded frames, its held-out error would be its training error plus the "
+     << "blend's error: fit + blend adds the two mean squared errors (MSE = 10^(-PSNR / 10), from mean PSNRs, so "
+     << "approximate).\n";
   report.Json["date"] = date;
   report.Json["commit"] = commit + (dirty ? "+dirty" : "");
   report.Json["machine"] = machine;
@@ -611,12 +694,16 @@ int RunBenchmark(const BenchmarkOptions& options)
       std::sort(marks.begin(), marks.end());
     }
     std::vector<Row> bigus;
+    std::vector<ErrorSources> sources;
     const bool ok = TrainWithMarks(sweep.Data, s, marks, sweep.HeldOut, "BIGUS",
       [&](double mark, const Row& r, Trainer& trainer) {
         Print(sweep.Name, r);
         if (std::find(sweep.Marks.begin(), sweep.Marks.end(), mark) != sweep.Marks.end())
         {
           bigus.push_back(r);
+          sources.push_back(MeasureErrorSources(sweep, trainer, r));
+          // Its renders are freed again: the next row's peak memory is the training's own.
+          ResetPeakMemory();
         }
         if (mark == ablationSeconds && si < 2)
         {
@@ -671,6 +758,7 @@ int RunBenchmark(const BenchmarkOptions& options)
       j["blurred_truth"].push_back({ { "sigma_pixels", sigma }, { "psnr", q.PSNR }, { "ssim", q.SSIM } });
     }
     md << ": a prediction at one of these scores is as close to the recording as the recording blurred that much.\n";
+    md << ErrorSourcesSection(baselines[1], sources, j); // Baselines(): nearest, blend, compounded
     report.Json["sweeps"][sweep.Name] = j;
     if (!report.Plot(TimePlot(sweep.Name + ": held-out PSNR against time", baselines, bigus),
           "psnr_time_" + std::to_string(si) + ".png"))

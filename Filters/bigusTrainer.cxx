@@ -719,19 +719,12 @@ ImageMetrics Trainer::Evaluate(const std::vector<int>& frames, double* secondsPe
 
 ImageMetrics Trainer::EvaluateOn(const TrainingData& data, const std::vector<int>& frames, double* secondsPerFrame)
 {
-  // At the render filters' cutoff, whatever the training cutoff: the metrics of the images a user gets.
-  RenderOptions o = this->Options();
-  o.Cutoff = RenderOptions().Cutoff;
-  std::vector<float> S(std::size_t(data.Width) * data.Height), I(S.size());
+  std::vector<float> I(std::size_t(data.Width) * data.Height);
   double seconds = 0;
   int rendered = 0;
   const ImageMetrics mean = MeanFrameMetrics(data, frames, [&](std::size_t, int f) {
-    SliceGeometry slice;
-    std::copy(data.Poses[f].begin(), data.Poses[f].end(), slice.ImageToReference);
-    slice.Width = data.Width;
-    slice.Height = data.Height;
     const double t0 = Seconds();
-    this->Backend->Forward(this->Field.View(), &slice, 1, o, S.data(), I.data(), nullptr, nullptr);
+    this->RenderFrame(data, f, I.data());
     seconds += Seconds() - t0;
     ++rendered;
     return I.data();
@@ -741,6 +734,18 @@ ImageMetrics Trainer::EvaluateOn(const TrainingData& data, const std::vector<int
     *secondsPerFrame = rendered == 0 ? 0.0 : seconds / rendered;
   }
   return mean;
+}
+
+void Trainer::RenderFrame(const TrainingData& data, int frame, float* image)
+{
+  RenderOptions o = this->Options();
+  o.Cutoff = RenderOptions().Cutoff;
+  SliceGeometry slice;
+  std::copy(data.Poses[frame].begin(), data.Poses[frame].end(), slice.ImageToReference);
+  slice.Width = data.Width;
+  slice.Height = data.Height;
+  this->S.resize(std::size_t(data.Width) * data.Height);
+  this->Backend->Forward(this->Field.View(), &slice, 1, o, this->S.data(), image, nullptr, nullptr);
 }
 
 ImageMetrics MeanFrameMetrics(const TrainingData& data, const std::vector<int>& frames,

@@ -145,6 +145,10 @@ public:
   /// The same for @p frames of other data (another frame size, e.g. a test sweep across the training
   /// frames). Frames whose mask is empty are left out of the means.
   ImageMetrics EvaluateOn(const TrainingData& data, const std::vector<int>& frames, double* secondsPerFrame = nullptr);
+  /// Intensities in [0, 1] of the field rendered at the pose of frame @p frame of @p data, at the render
+  /// filters' cutoff whatever the training cutoff (the images a user gets), into @p image ([H, W] of
+  /// @p data).
+  void RenderFrame(const TrainingData& data, int frame, float* image);
 
   /// Remove Gaussians whose removal changes no training pixel by more than FinalPruneTolerance.
   std::int64_t FinalPrune();

@@ -72,6 +72,21 @@ def main():
             assert math.isfinite(row["psnr"]) and -1 <= row["ncc"] <= 1, (name, row)
             assert "| %s | %.1f |" % (row["method"], row["seconds"]) in report, (name, row["method"])
             assert "| %.2f | %.4f |" % (row["psnr"], row["ssim"]) in report, (name, row["method"])
+    # Where the held-out error comes from: one row per BIGUS row, the same held-out PSNR, and the fit + blend
+    # estimate is the PSNR of the summed mean squared errors of the training frames and the blend baseline.
+    assert "Where the held-out error comes from" in report
+    for name, sweep in results["sweeps"].items():
+        blend_psnr = sweep["baselines"][1]["psnr"]
+        assert len(sweep["error_sources"]) == len(sweep["bigus"]), name
+        for row, source in zip(sweep["bigus"], sweep["error_sources"]):
+            assert source["seconds"] == row["seconds"] and source["held_out_psnr"] == row["psnr"], (name, source)
+            for key in ("training_psnr", "blended_renders_psnr"):
+                assert math.isfinite(source[key]) and source[key] > 5, (name, source)
+            summed = 10 ** (-source["training_psnr"] / 10) + 10 ** (-blend_psnr / 10)
+            assert abs(source["fit_plus_blend_psnr"] + 10 * math.log10(summed)) < 1e-9, (name, source)
+            assert "| %.1f | %.2f | %.2f | %.2f | %.2f |" % (
+                source["seconds"], source["training_psnr"], source["held_out_psnr"],
+                source["blended_renders_psnr"], source["fit_plus_blend_psnr"]) in report, (name, source)
     for test, rows in results["volume_protocol"].items():
         assert len(rows["baselines"]) == 1 and rows["bigus"], test
     assert len(results["ablations"]["liver"]) == 7 and len(results["ablations"]["spine phantom"]) == 7
