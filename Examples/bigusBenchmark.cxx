@@ -5,7 +5,8 @@
 //   i mod 4 == 2 held out): held-out PSNR, SSIM, NCC and speckle score of BIGUS after several training
 //   times, next to the classical baselines (nearest training frame by pose, blend of the bracketing
 //   training frames, PLUS-style compounded volume resliced trilinearly) with their own times, and
-//   the same on 20 frames of the liver (about 7 times the steps per training frame in the same time);
+//   the same on 20 frames of the liver (about 7 times the steps per training frame in the same time),
+//   and where the held-out error comes from (training-frame PSNR, the blend of the field's own renders);
 // - the volume protocol on the PLUS reconstruction of the spine phantom: train on parallel slices,
 //   test on in-between, oblique and orthogonal slices;
 // - quality against the number of Gaussians (capped runs against the adaptive stop);
