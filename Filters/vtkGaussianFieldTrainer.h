@@ -56,12 +56,13 @@
  *   of the two bracketing frames (42.5 dB for frames 43 ms apart); runs repeat to within about 0.4 dB.
  * - The field's view at a held-out pose is no better than blending its own renders at the two
  *   bracketing training frames (40.3 against 40.5 dB there; 37.4 against 37.5 after 1,100 steps), so
- *   the held-out error is close to the training error plus the blend's error: 10^(-44.2/10) +
- *   10^(-42.5/10) gives 40.2 dB, 40.3 measured. Held-out PSNR therefore stays below the blend of the
- *   recorded frames however well the training frames are fitted (`bigus benchmark` reports this split
- *   for every sweep). With training frames further apart (liver, every 4th frame, 2.2 mm apart at
- *   mid-depth; held out i mod 4 == 2) it is the same: after 5 minutes the training frames scored 38.3 dB,
- *   the held-out 33.9 (fit + blend estimate 34.3) against 36.6 for the blend.
+ *   the held-out error is close to the training error plus the blend's error:
+ *   -10 log10(10^(-44.2/10) + 10^(-42.5/10)) = 40.2 dB, 40.3 measured. Held-out PSNR therefore stays
+ *   below the blend of the recorded frames however well the training frames are fitted (`bigus
+ *   benchmark` reports this split for every sweep). With training frames further apart (liver, every
+ *   4th frame, 2.2 mm apart at mid-depth; held out i mod 4 == 2) it is the same: after 5 minutes the
+ *   training frames scored 38.3 dB, the held-out 33.9 (fit + blend estimate 34.3) against 36.6 for the
+ *   blend.
  *
  * Stopping: Iterations, TimeBudget (s) or ConvergenceTolerance, whichever first; AbortExecute is
  * honoured and UpdateProgress called. Checkpoints (CheckpointFile every CheckpointInterval steps)
