@@ -359,15 +359,9 @@ int RunTrain(const TrainOptions& o)
   trainer->SetHoldOutOffset(o.HoldOutOffset);
   if (!o.Frames.empty())
   {
-    const int count = reader->GetOutput()->GetDimensions()[2];
     vtkNew<vtkIdList> frames;
     for (int k : o.Frames)
     {
-      if (k < 0 || k >= count)
-      {
-        return Fail("--frames: frame " + std::to_string(k) + " is outside " + o.Sweep.Sweep + " (frames 0 to " +
-          std::to_string(count - 1) + ")");
-      }
       frames->InsertUniqueId(k);
     }
     trainer->SetTrainingFrameList(frames);

@@ -73,6 +73,12 @@ int vtkGaussianFieldTrainer::RequestData(
     vtkErrorMacro("input: " << error);
     return 0;
   }
+  std::vector<vtkIdType> listed;
+  if (!bigus::ChosenFrames(this->TrainingFrameList, data.Count(), listed, &error))
+  {
+    vtkErrorMacro("TrainingFrameList: " << error);
+    return 0;
+  }
   vtkDataArray* valid = sequence->GetFieldData()->GetArray("FrameValid");
   for (int k = 0; k < data.Count(); ++k)
   {

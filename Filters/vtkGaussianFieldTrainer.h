@@ -134,7 +134,8 @@ public:
   vtkGetMacro(DensifyPercentile, double);
   ///@}
   ///@{ Which frames to train on: all valid frames except those with index % HoldOutEvery ==
-  /// HoldOutOffset (HoldOutEvery 0 = none), or the explicit list when one is set.
+  /// HoldOutOffset (HoldOutEvery 0 = none), or the explicit list when one is set (an index outside
+  /// the input fails the request).
   vtkSetClampMacro(HoldOutEvery, int, 0, VTK_INT_MAX);
   vtkGetMacro(HoldOutEvery, int);
   vtkSetClampMacro(HoldOutOffset, int, 0, VTK_INT_MAX);

@@ -1,11 +1,13 @@
 // The trainer: self-consistency on a synthetic sweep rendered from a known field, determinism,
 // checkpoint/resume, ablation switches, and a short run on the real spine-phantom sweep.
+#include "bigusTestUtilities.h"
 #include "bigusTrainer.h"
 
 #include "vtkCallbackCommand.h"
 #include "vtkDataArray.h"
 #include "vtkDoubleArray.h"
 #include "vtkGaussianFieldTrainer.h"
+#include "vtkIdList.h"
 #include "vtkPointData.h"
 #include "vtkPolyData.h"
 #include "vtkFieldData.h"
@@ -673,4 +675,20 @@ TEST(GaussianFieldTrainer, PipelineOutputsTheFieldOfTheDataModel)
   aborted->Update();
   EXPECT_STREQ(aborted->GetStopReason(), "aborted");
   EXPECT_LT(aborted->GetCompletedIterations(), 100);
+
+  // An explicit frame list with a frame the input does not have fails the request and names the frame.
+  vtkNew<vtkGaussianFieldTrainer> listed;
+  listed->SetInputData(sequence);
+  listed->SetIterations(5);
+  vtkNew<vtkIdList> list;
+  list->InsertNextId(0);
+  list->InsertNextId(data.Count());
+  listed->SetTrainingFrameList(list);
+  vtkNew<bigus_test::MessageCollector> messages;
+  messages->Watch(listed);
+  listed->Update();
+  EXPECT_EQ(listed->GetOutput()->GetNumberOfPoints(), 0);
+  ASSERT_EQ(messages->Errors.size(), 1u);
+  EXPECT_NE(messages->Errors[0].find("frame " + std::to_string(data.Count()) + " is outside"), std::string::npos)
+    << messages->Errors[0];
 }
