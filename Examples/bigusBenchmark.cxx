@@ -414,9 +414,10 @@ std::string ErrorSourcesSection(const Row& blend, const std::vector<ErrorSources
      << "scores " << Format("%.2f", blend.Quality.PSNR) << " dB):\n\n"
      << "| time (s) | training frames PSNR (dB) | held-out PSNR (dB) | blended renders PSNR (dB) | fit + blend (dB) |\n"
      << "|---|---|---|---|---|\n";
+  double estimate = NaN;
   for (const ErrorSources& e : sources)
   {
-    const double estimate = PsnrOfSummedErrors(e.Training.PSNR, blend.Quality.PSNR);
+    estimate = PsnrOfSummedErrors(e.Training.PSNR, blend.Quality.PSNR);
     md << "| " << Format("%.1f", e.Seconds) << " | " << Format("%.2f", e.Training.PSNR) << " | "
        << Format("%.2f", e.HeldOut.PSNR) << " | " << Format("%.2f", e.BlendedRenders.PSNR) << " | "
        << Format("%.2f", estimate) << " |\n";
@@ -429,8 +430,7 @@ std::string ErrorSourcesSection(const Row& blend, const std::vector<ErrorSources
   md << "\nAfter " << Format("%.0f", last.Seconds) << " s, rendering the held-out pose scores "
      << Format("%.2f", std::abs(gain)) << " dB " << (gain >= 0 ? "above" : "below")
      << " blending the field's own renders at the bracketing training frames, and the held-out PSNR is "
-     << Format("%.2f", std::abs(last.HeldOut.PSNR - PsnrOfSummedErrors(last.Training.PSNR, blend.Quality.PSNR)))
-     << " dB from the fit + blend estimate.\n";
+     << Format("%.2f", std::abs(last.HeldOut.PSNR - estimate)) << " dB from the fit + blend estimate.\n";
   return md.str();
 }
 
