@@ -1,7 +1,7 @@
 /**
  * @file bigusGaussianFieldData.h
  * @brief Conversion between the Gaussian field's vtkPolyData form (DESIGN section 2) and the
- *        renderer's parameter arrays. Private to BIGUS::Filters.
+ *        renderer's parameter arrays. Installed with BIGUS::Filters, not wrapped.
  *
  * vtkPolyData form: points = means (mm), one vertex per Gaussian, point data Scale (3, mm),
  * Rotation (4, unit quaternion w x y z), Reflectivity (1); field data ElevationSigma (mm), Gamma.
@@ -10,6 +10,7 @@
 #ifndef bigusGaussianFieldData_h
 #define bigusGaussianFieldData_h
 
+#include "bigusFiltersModule.h" // For export macro
 #include "bigusTrainer.h"
 
 #include "vtkSmartPointer.h"

@@ -21,7 +21,7 @@
 #ifndef bigusImageMetrics_h
 #define bigusImageMetrics_h
 
-#include "bigusRenderingModule.h" // For export macro
+#include "bigusTrainingModule.h" // For export macro
 
 namespace bigus
 {
@@ -39,7 +39,7 @@ struct ImageMetrics
 constexpr double SpeckleWassersteinScale = 0.1;
 
 /// All metrics of @p rendered against @p truth inside @p mask.
-BIGUSRENDERING_EXPORT ImageMetrics CompareImages(
+BIGUSTRAINING_EXPORT ImageMetrics CompareImages(
   const float* rendered, const float* truth, const unsigned char* mask, int width, int height);
 
 } // namespace bigus

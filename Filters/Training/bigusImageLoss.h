@@ -17,7 +17,7 @@
 #ifndef bigusImageLoss_h
 #define bigusImageLoss_h
 
-#include "bigusRenderingModule.h" // For export macro
+#include "bigusTrainingModule.h" // For export macro
 
 #include <memory>
 
@@ -45,7 +45,7 @@ struct ImageLossTerms
  * training step evaluates such a frame again and again; fresh images cost page faults every call).
  * One workspace per thread.
  */
-class BIGUSRENDERING_EXPORT ImageLossWorkspace
+class BIGUSTRAINING_EXPORT ImageLossWorkspace
 {
 public:
   ImageLossWorkspace();
@@ -67,7 +67,7 @@ public:
  * Multi-threaded over rows (vtkSMPTools); the result does not depend on the number of threads.
  * @return the terms; Total is 0 with MaskedPixels 0 when the mask is empty.
  */
-BIGUSRENDERING_EXPORT ImageLossTerms ComputeImageLoss(const float* rendered, const float* target,
+BIGUSTRAINING_EXPORT ImageLossTerms ComputeImageLoss(const float* rendered, const float* target,
   const unsigned char* mask, int width, int height, const ImageLossWeights& weights, float* gradient,
   bool doublePrecision = false, ImageLossWorkspace* workspace = nullptr);
 
@@ -75,7 +75,7 @@ BIGUSRENDERING_EXPORT ImageLossTerms ComputeImageLoss(const float* rendered, con
  * Mean SSIM over the masked pixels, in double (same definition as the D-SSIM term, without the mask
  * applied to the images when @p maskImages is false: the form used for evaluation metrics).
  */
-BIGUSRENDERING_EXPORT double MeanSSIM(
+BIGUSTRAINING_EXPORT double MeanSSIM(
   const float* x, const float* y, const unsigned char* mask, int width, int height, bool maskImages);
 
 } // namespace bigus

@@ -4,12 +4,12 @@
  *        (Harris or uniform random), Adam, losses, error-attributed densification (EA-D), adaptive
  *        growth stop, final pruning, NaN roll-back, checkpoints. vtkGaussianFieldTrainer wraps it.
  *
- * Private to BIGUS::Filters. Deterministic for a given seed and thread count on the CPU backend.
+ * Part of BIGUS::Training (public, not wrapped for Python). Deterministic for a given seed and thread count on the CPU backend.
  */
 #ifndef bigusTrainer_h
 #define bigusTrainer_h
 
-#include "bigusFiltersModule.h" // For export macro
+#include "bigusTrainingModule.h" // For export macro
 #include "bigusImageLoss.h"
 #include "bigusImageMetrics.h"
 #include "bigusRenderer.h"
@@ -113,7 +113,7 @@ struct TrainerReport
   std::vector<double> LossHistory;  ///< loss of every step
 };
 
-class BIGUSFILTERS_EXPORT Trainer
+class BIGUSTRAINING_EXPORT Trainer
 {
 public:
   Trainer(TrainingData data, const TrainerSettings& settings);
@@ -203,7 +203,7 @@ private:
  * inside that frame's mask; frames whose mask is empty are left out of the means (and @p image is not
  * called for them). @p image(m, f) gives the image for the m-th entry f of @p frames.
  */
-BIGUSFILTERS_EXPORT ImageMetrics MeanFrameMetrics(const TrainingData& data, const std::vector<int>& frames,
+BIGUSTRAINING_EXPORT ImageMetrics MeanFrameMetrics(const TrainingData& data, const std::vector<int>& frames,
   const std::function<const float*(std::size_t, int)>& image);
 
 /**
@@ -218,7 +218,7 @@ BIGUSFILTERS_EXPORT ImageMetrics MeanFrameMetrics(const TrainingData& data, cons
  * but gave 37.3 against 37.6 dB held-out PSNR after 10 minutes on the liver sweep, one run each: its
  * larger children made steps 10 % slower.)
  */
-BIGUSFILTERS_EXPORT std::int64_t DensifyGaussian(GaussianField& field, std::int64_t i, double splitScale);
+BIGUSTRAINING_EXPORT std::int64_t DensifyGaussian(GaussianField& field, std::int64_t i, double splitScale);
 
 /// Quaternion (w, x, y, z) of the rotation whose columns are the unit vectors u, v, n.
 std::array<double, 4> QuaternionFromAxes(const double u[3], const double v[3], const double n[3]);

@@ -1,0 +1,121 @@
+// The backend registry (see bigusBackend.h).
+#include "bigusBackend.h"
+
+#include <algorithm>
+#include <mutex>
+
+namespace bigus
+{
+
+namespace
+{
+struct Entry
+{
+  std::string Name;
+  RendererFactory Factory;
+  int Priority;
+};
+
+std::unique_ptr<Renderer> MakeCpuRenderer(std::string*)
+{
+  return CreateCpuRenderer();
+}
+
+/// The registry, with "cpu" in it from the start (a function-local static: no initialisation order
+/// problem with backends that register from their own static initialisers).
+std::vector<Entry>& Registry(std::unique_lock<std::mutex>& lock)
+{
+  static std::mutex mutex;
+  static std::vector<Entry> entries{ { "cpu", &MakeCpuRenderer, 0 } };
+  lock = std::unique_lock<std::mutex>(mutex);
+  return entries;
+}
+}
+
+void RegisterBackend(const std::string& name, RendererFactory factory, int priority)
+{
+  std::unique_lock<std::mutex> lock;
+  std::vector<Entry>& entries = Registry(lock);
+  entries.erase(
+    std::remove_if(entries.begin(), entries.end(), [&](const Entry& e) { return e.Name == name; }), entries.end());
+  entries.push_back({ name, factory, priority });
+  std::stable_sort(
+    entries.begin(), entries.end(), [](const Entry& a, const Entry& b) { return a.Priority > b.Priority; });
+}
+
+std::vector<std::string> AvailableBackends()
+{
+  std::unique_lock<std::mutex> lock;
+  std::vector<std::string> names;
+  for (const Entry& e : Registry(lock))
+  {
+    names.push_back(e.Name);
+  }
+  return names;
+}
+
+std::string ResolveBackend(const std::string& name, std::string* error)
+{
+  const std::vector<std::string> names = AvailableBackends();
+  if (name.empty() || name == "auto")
+  {
+    return names.front();
+  }
+  if (std::find(names.begin(), names.end(), name) != names.end())
+  {
+    return name;
+  }
+  if (error)
+  {
+    std::string list;
+    for (const std::string& n : names)
+    {
+      list += (list.empty() ? "" : ", ") + n;
+    }
+    *error = "backend '" + name + "' is not available in this build; available: auto, " + list;
+  }
+  return std::string();
+}
+
+std::unique_ptr<Renderer> CreateRenderer(const std::string& name, std::string* error, std::string* notice)
+{
+  const std::string resolved = ResolveBackend(name, error);
+  if (resolved.empty())
+  {
+    return nullptr;
+  }
+  std::vector<Entry> candidates;
+  {
+    std::unique_lock<std::mutex> lock;
+    for (const Entry& e : Registry(lock))
+    {
+      // "auto" tries every backend in priority order; an explicit name only itself.
+      if (e.Name == resolved || (name.empty() || name == "auto"))
+      {
+        candidates.push_back(e);
+      }
+    }
+  }
+  std::string skipped;
+  for (const Entry& e : candidates)
+  {
+    std::string why;
+    std::unique_ptr<Renderer> renderer = e.Factory(&why);
+    if (renderer)
+    {
+      if (notice && !skipped.empty())
+      {
+        *notice = skipped + "; using " + e.Name;
+      }
+      return renderer;
+    }
+    skipped += (skipped.empty() ? "" : "; ") + ("backend '" + e.Name + "' cannot be used: " + why);
+  }
+  if (error)
+  {
+    *error = skipped;
+  }
+  return nullptr;
+}
+
+} // namespace bigus

@@ -1,0 +1,53 @@
+/**
+ * @file bigusBackend.h
+ * @brief The one place a rendering backend is chosen (DESIGN section 5): a registry of renderer
+ *        factories by name. Every filter, the trainer and every command create their renderer here.
+ *
+ * Names: "cpu" (always registered, bigus::CreateCpuRenderer) and any backend that registers itself
+ * (BIGUS::Cuda registers "cuda" when it is built and a device is usable). "auto" is the available
+ * backend of highest priority, so "cuda" wherever it registered and "cpu" otherwise.
+ */
+#ifndef bigusBackend_h
+#define bigusBackend_h
+
+#include "bigusRenderer.h"
+#include "bigusRenderingModule.h" // For export macro
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace bigus
+{
+
+/// Makes a renderer; null with @p error set when the backend cannot run here (no device, ...).
+using RendererFactory = std::unique_ptr<Renderer> (*)(std::string* error);
+
+/**
+ * Registers (or replaces) backend @p name. @p priority orders "auto": the highest wins ("cpu" has 0).
+ * Called once by a backend module when it is loaded.
+ */
+BIGUSRENDERING_EXPORT void RegisterBackend(const std::string& name, RendererFactory factory, int priority);
+
+/// The registered backend names, highest priority first ("cpu" is always among them).
+BIGUSRENDERING_EXPORT std::vector<std::string> AvailableBackends();
+
+/**
+ * The backend that @p name selects: @p name itself when it is registered, the highest-priority one
+ * for "auto" (or an empty name). Returns an empty string with @p error ("backend 'cuda' is not
+ * available in this build; available: cpu") for an unknown or unbuilt backend.
+ */
+BIGUSRENDERING_EXPORT std::string ResolveBackend(const std::string& name, std::string* error);
+
+/**
+ * A renderer of backend @p name ("auto", "cpu", "cuda", ...); its GetName() says which one. An
+ * explicit name gives that backend or null with @p error naming it and why it cannot be used (no
+ * silent fallback). "auto" tries the backends in priority order; when one is skipped (a CUDA build
+ * on a machine without a device) @p notice, if given, says which and why, for the caller to show.
+ */
+BIGUSRENDERING_EXPORT std::unique_ptr<Renderer> CreateRenderer(
+  const std::string& name, std::string* error, std::string* notice = nullptr);
+
+} // namespace bigus
+
+#endif
