@@ -374,7 +374,8 @@ double PsnrOfSummedErrors(double psnrA, double psnrB)
   return -10 * std::log10(std::pow(10.0, -psnrA / 10) + std::pow(10.0, -psnrB / 10));
 }
 
-ErrorSources MeasureErrorSources(const Sweep& sweep, Trainer& trainer, const Row& bigusRow)
+/// Fills @p e; false with @p error when the field cannot be rendered at a training pose.
+bool MeasureErrorSources(const Sweep& sweep, Trainer& trainer, const Row& bigusRow, ErrorSources& e, std::string* error)
 {
   const TrainingData& data = sweep.Data;
   const std::size_t pixels = std::size_t(data.Width) * data.Height;
@@ -388,9 +389,11 @@ ErrorSources MeasureErrorSources(const Sweep& sweep, Trainer& trainer, const Row
   std::fill_n(image, pixels * data.Count(), 0.f);
   for (int f : data.TrainFrames)
   {
-    trainer.RenderFrame(data, f, image + pixels * f);
+    if (!trainer.RenderFrame(data, f, image + pixels * f, error))
+    {
+      return false;
+    }
   }
-  ErrorSources e;
   e.Seconds = bigusRow.Seconds;
   e.HeldOut = bigusRow.Quality;
   e.Training = MeanFrameMetrics(data, data.TrainFrames, [&](std::size_t, int f) { return image + pixels * f; });
@@ -402,7 +405,7 @@ ErrorSources MeasureErrorSources(const Sweep& sweep, Trainer& trainer, const Row
   blend->Update();
   e.BlendedRenders =
     Score(static_cast<float*>(blend->GetOutput()->GetScalarPointer()), 1.0, data, sweep.HeldOut);
-  return e;
+  return true;
 }
 
 /// The report's account of where the held-out error comes from, one row per time mark, also added to
@@ -435,11 +438,12 @@ std::string ErrorSourcesSection(const Row& blend, const std::vector<ErrorSources
 }
 
 /// Trains with @p settings, evaluating @p heldOut at each of @p marks (cumulative training seconds);
-/// @p onMark is called with the mark, its row (measured time) and the trainer. Returns false on a
+/// @p onMark is called with the mark, its row (measured time) and the trainer, and returns false (with
+/// @p error) when its own measurement fails. The field is not pruned at the marks (Trainer::Train). Returns false on a
 /// training error.
 bool TrainWithMarks(const TrainingData& data, const TrainerSettings& settings, const std::vector<double>& marks,
   const std::vector<int>& heldOut, const std::string& method,
-  const std::function<void(double, const Row&, Trainer&)>& onMark, std::string* error)
+  const std::function<bool(double, const Row&, Trainer&)>& onMark, std::string* error)
 {
   ResetPeakMemory();
   Trainer trainer(data, settings);
@@ -455,7 +459,7 @@ bool TrainWithMarks(const TrainingData& data, const TrainerSettings& settings, c
     const double start = Now();
     const double slice = mark - trained;
     if (slice > 0 && trainer.GetIteration() < settings.Iterations &&
-      !trainer.Run(nullptr, [&]() { return Now() - start >= slice; }, error))
+      !trainer.Train(nullptr, [&]() { return Now() - start >= slice; }, error))
     {
       return false;
     }
@@ -464,12 +468,18 @@ bool TrainWithMarks(const TrainingData& data, const TrainerSettings& settings, c
     r.Method = method;
     r.Seconds = trained;
     double secondsPerFrame = 0;
-    r.Quality = trainer.Evaluate(heldOut, &secondsPerFrame);
+    if (!trainer.Evaluate(heldOut, r.Quality, error, &secondsPerFrame))
+    {
+      return false;
+    }
     r.MsPerFrame = 1e3 * secondsPerFrame;
     r.Gaussians = trainer.GetField().Count();
     r.PeakMiB = PeakMemoryMiB();
     r.Note = std::to_string(trainer.GetIteration()) + " steps";
-    onMark(mark, r, trainer);
+    if (!onMark(mark, r, trainer))
+    {
+      return false;
+    }
     if (trainer.GetIteration() >= settings.Iterations)
     {
       break; // the schedule ended before the later marks: they would repeat this row
@@ -702,7 +712,11 @@ int RunBenchmark(const BenchmarkOptions& options)
         if (std::find(sweep.Marks.begin(), sweep.Marks.end(), mark) != sweep.Marks.end())
         {
           bigus.push_back(r);
-          sources.push_back(MeasureErrorSources(sweep, trainer, r));
+          sources.emplace_back();
+          if (!MeasureErrorSources(sweep, trainer, r, sources.back(), &error))
+          {
+            return false;
+          }
           // Its renders are freed again: the next row's peak memory is the training's own.
           ResetPeakMemory();
         }
@@ -715,6 +729,7 @@ int RunBenchmark(const BenchmarkOptions& options)
           liverField = trainer.GetField();
           liverOptions = trainer.Options();
         }
+        return true;
       },
       &error);
     if (!ok)
@@ -870,11 +885,15 @@ int RunBenchmark(const BenchmarkOptions& options)
         {
           Row r = mark;
           double secondsPerFrame = 0;
-          r.Quality = trainer.EvaluateOn(testData[t], testList[t], &secondsPerFrame);
+          if (!trainer.EvaluateOn(testData[t], testList[t], r.Quality, &error, &secondsPerFrame))
+          {
+            return false;
+          }
           r.MsPerFrame = 1e3 * secondsPerFrame;
           bigusRows[t].push_back(r);
           Print("volume", r);
         }
+        return true;
       },
       &error);
     if (!ok)
@@ -931,6 +950,7 @@ int RunBenchmark(const BenchmarkOptions& options)
         [&](double, const Row& r, Trainer&) {
           rows.push_back(r);
           Print("capacity", r);
+          return true;
         },
         &error);
       if (!ok)
@@ -1056,7 +1076,11 @@ int RunBenchmark(const BenchmarkOptions& options)
       a.Change(s);
       Row row;
       const bool ok = TrainWithMarks(sweep.Data, s, { ablationSeconds }, sweep.HeldOut, a.Name,
-        [&](double, const Row& r, Trainer&) { row = r; }, &error);
+        [&](double, const Row& r, Trainer&) {
+          row = r;
+          return true;
+        },
+        &error);
       if (!ok)
       {
         return Fail("ablation " + a.Name + ": " + error);

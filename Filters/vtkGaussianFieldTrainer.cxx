@@ -2,6 +2,7 @@
 
 #include "bigusGaussianFieldData.h"
 #include "bigusTrainer.h"
+#include "bigusTrainingEngine.h"
 #include "vtkUltrasoundFanMask.h"
 
 #include "vtkDataArray.h"
@@ -29,6 +30,7 @@ vtkCxxSetObjectMacro(vtkGaussianFieldTrainer, TrainingFrameList, vtkIdList);
 vtkGaussianFieldTrainer::vtkGaussianFieldTrainer()
 {
   this->SetNumberOfInputPorts(2);
+  this->SetBackend("auto");
 }
 
 vtkGaussianFieldTrainer::~vtkGaussianFieldTrainer()
@@ -36,6 +38,7 @@ vtkGaussianFieldTrainer::~vtkGaussianFieldTrainer()
   this->SetTrainingFrameList(nullptr);
   this->SetCheckpointFile(nullptr);
   this->SetResumeFile(nullptr);
+  this->SetBackend(nullptr);
 }
 
 int vtkGaussianFieldTrainer::FillInputPortInformation(int port, vtkInformation* info)
@@ -57,6 +60,7 @@ int vtkGaussianFieldTrainer::RequestData(
   this->StopReason.clear();
   this->GrowthStopReason.clear();
   this->NumberOfGaussians = 0;
+  this->BackendInUse.clear();
 
   vtkSmartPointer<vtkImageData> mask = maskImage;
   if (!mask && sequence)
@@ -125,7 +129,20 @@ int vtkGaussianFieldTrainer::RequestData(
   s.CheckpointInterval = this->CheckpointInterval;
   s.CheckpointFile = this->CheckpointFile ? this->CheckpointFile : "";
 
-  bigus::Trainer trainer(std::move(data), s);
+  std::string notice;
+  std::unique_ptr<bigus::TrainingEngine> engine =
+    bigus::CreateTrainingEngine(this->Backend ? this->Backend : "auto", &error, &notice);
+  if (!engine)
+  {
+    vtkErrorMacro("Backend: " << error);
+    return 0;
+  }
+  if (!notice.empty())
+  {
+    vtkWarningMacro("Backend auto: " << notice);
+  }
+  this->BackendInUse = engine->GetName();
+  bigus::Trainer trainer(std::move(data), s, std::move(engine));
   if (!trainer.Initialize(&error) ||
     (this->ResumeFile && *this->ResumeFile && !trainer.LoadCheckpoint(this->ResumeFile, &error)))
   {
@@ -147,10 +164,18 @@ int vtkGaussianFieldTrainer::RequestData(
   history->SetNumberOfComponents(2);
   const auto start = std::chrono::steady_clock::now();
   double nextEvaluation = 0;
+  std::string evaluationError; // a held-out frame the renderer refused stops the run
   auto evaluate = [&]() {
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    const double row[2] = { seconds, trainer.Evaluate(heldOut).PSNR };
+    bigus::ImageMetrics metrics;
+    if (!trainer.Evaluate(heldOut, metrics, &evaluationError))
+    {
+      evaluationError = "held-out evaluation: " + evaluationError;
+      return false;
+    }
+    const double row[2] = { seconds, metrics.PSNR };
     history->InsertNextTuple(row);
+    return true;
   };
   const bool ok = trainer.Run(
     [&](double fraction, int iteration, double loss, std::int64_t gaussians) {
@@ -158,21 +183,21 @@ int vtkGaussianFieldTrainer::RequestData(
       this->CurrentLoss = loss;
       this->CurrentNumberOfGaussians = gaussians;
       this->UpdateProgress(fraction);
-      if (this->EvaluationInterval > 0 && !heldOut.empty() &&
+      if (this->EvaluationInterval > 0 && !heldOut.empty() && evaluationError.empty() &&
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() >= nextEvaluation)
       {
         evaluate();
         nextEvaluation += this->EvaluationInterval;
       }
     },
-    [this]() { return this->AbortExecute != 0; }, &error);
-  if (ok && this->EvaluationInterval > 0 && !heldOut.empty())
+    [&]() { return this->AbortExecute != 0 || !evaluationError.empty(); }, &error);
+  if (ok && evaluationError.empty() && this->EvaluationInterval > 0 && !heldOut.empty())
   {
     evaluate();
   }
-  if (!ok)
+  if (!ok || !evaluationError.empty())
   {
-    vtkErrorMacro(<< error);
+    vtkErrorMacro(<< (ok ? evaluationError : error));
     return 0;
   }
 
@@ -201,6 +226,7 @@ int vtkGaussianFieldTrainer::RequestData(
   addValue("TrainingSeconds", report.Seconds);
   addText("StopReason", report.StopReason);
   addText("GrowthStopReason", report.GrowthStopReason);
+  addText("Backend", this->BackendInUse);
   vtkNew<vtkIntArray> frames;
   frames->SetName("TrainingFrames");
   for (int f : trainer.GetData().TrainFrames)
@@ -248,5 +274,7 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "CheckpointFile: " << (this->CheckpointFile ? this->CheckpointFile : "(none)") << " every "
      << this->CheckpointInterval << " steps\n";
   os << indent << "ResumeFile: " << (this->ResumeFile ? this->ResumeFile : "(none)") << "\n";
+  os << indent << "Backend: " << (this->Backend ? this->Backend : "(none)") << " (last run: "
+     << (this->BackendInUse.empty() ? "none" : this->BackendInUse) << ")\n";
   os << indent << "NumberOfGaussians: " << this->NumberOfGaussians << ", StopReason: " << this->StopReason << "\n";
 }

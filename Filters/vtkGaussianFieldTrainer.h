@@ -152,6 +152,16 @@ public:
   vtkSetMacro(Seed, unsigned int);
   vtkGetMacro(Seed, unsigned int);
   ///@}
+  ///@{ Backend that runs the training steps: "auto" (default: the fastest available, CUDA where it
+  /// is built and a device is usable, else the CPU), "cpu" or "cuda", chosen through the one backend
+  /// registry (bigus::CreateTrainingEngine). An unavailable backend fails the request with an error
+  /// that names it and the available ones. GetBackendInUse() says which one the last run used (also
+  /// stored as the output's field data `Backend`).
+  vtkSetStringMacro(Backend);
+  vtkGetStringMacro(Backend);
+  const char* GetBackendInUse() const { return this->BackendInUse.c_str(); }
+  ///@}
+
   ///@{ Checkpoints: written every CheckpointInterval steps (0 = never) to CheckpointFile;
   /// ResumeFile continues from one.
   vtkSetStringMacro(CheckpointFile);
@@ -209,6 +219,8 @@ protected:
   char* CheckpointFile = nullptr;
   int CheckpointInterval = 0;
   char* ResumeFile = nullptr;
+  char* Backend = nullptr;
+  std::string BackendInUse;
 
   int CurrentIteration = 0;
   double CurrentLoss = 0;

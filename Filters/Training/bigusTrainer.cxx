@@ -23,9 +23,6 @@ namespace bigus
 
 namespace
 {
-constexpr double AdamBeta1 = 0.9;
-constexpr double AdamBeta2 = 0.999;
-constexpr double AdamEpsilon = 1e-12;
 constexpr int SnapshotInterval = 100;
 constexpr double MinimumScaleMm = 1e-3;
 constexpr double MaximumScaleMm = 100.0;
@@ -52,52 +49,6 @@ void Apply(const std::array<double, 16>& m, double i, double j, double out[3])
 }
 
 // ------------------------------------------------------------------------------------------------
-
-FieldView GaussianField::View() const
-{
-  FieldView v;
-  v.Count = this->Count();
-  v.Means = this->Means.data();
-  v.LogScales = this->LogScales.data();
-  v.Quaternions = this->Quaternions.data();
-  v.Reflectivities = this->Reflectivities.data();
-  return v;
-}
-
-void GaussianField::Resize(std::int64_t n)
-{
-  this->Means.resize(3 * n, 0.f);
-  this->LogScales.resize(3 * n, 0.f);
-  this->Quaternions.resize(4 * n, 0.f);
-  this->Reflectivities.resize(n, 0.f);
-}
-
-namespace
-{
-/// Keeps the groups of @p stride entries of @p v (group i = Gaussian i) whose flag in @p keep is
-/// non-zero, in order.
-template <typename T>
-void CompactVector(std::vector<T>& v, const std::vector<unsigned char>& keep, std::size_t stride = 1)
-{
-  std::size_t out = 0;
-  for (std::size_t i = 0; i < v.size() / stride; ++i)
-  {
-    if (keep[i])
-    {
-      std::copy_n(&v[stride * i], stride, &v[stride * out++]);
-    }
-  }
-  v.resize(stride * out);
-}
-}
-
-void GaussianField::Compact(const std::vector<unsigned char>& keep)
-{
-  CompactVector(this->Means, keep, 3);
-  CompactVector(this->LogScales, keep, 3);
-  CompactVector(this->Quaternions, keep, 4);
-  CompactVector(this->Reflectivities, keep);
-}
 
 std::int64_t DensifyGaussian(GaussianField& field, std::int64_t i, double splitScale)
 {
@@ -134,22 +85,6 @@ std::int64_t DensifyGaussian(GaussianField& field, std::int64_t i, double splitS
   field.Reflectivities[i] = reflectivity;
   field.Reflectivities[child] = reflectivity;
   return child;
-}
-
-void GaussianField::CopyGaussian(std::int64_t from, std::int64_t to)
-{
-  std::copy_n(&this->Means[3 * from], 3, &this->Means[3 * to]);
-  std::copy_n(&this->LogScales[3 * from], 3, &this->LogScales[3 * to]);
-  std::copy_n(&this->Quaternions[4 * from], 4, &this->Quaternions[4 * to]);
-  this->Reflectivities[to] = this->Reflectivities[from];
-}
-
-void GaussianField::ZeroGaussian(std::int64_t i)
-{
-  std::fill_n(&this->Means[3 * i], 3, 0.f);
-  std::fill_n(&this->LogScales[3 * i], 3, 0.f);
-  std::fill_n(&this->Quaternions[4 * i], 4, 0.f);
-  this->Reflectivities[i] = 0.f;
 }
 
 std::array<double, 4> QuaternionFromAxes(const double u[3], const double v[3], const double n[3])
@@ -190,35 +125,32 @@ double PixelSpacingOf(const std::array<double, 16>& pose)
 
 // ------------------------------------------------------------------------------------------------
 
-Trainer::Trainer(TrainingData data, const TrainerSettings& settings)
-  : Data(std::move(data))
+Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique_ptr<TrainingEngine> engine)
+  : Data(new TrainingData(std::move(data)))
   , Settings(settings)
-  , Backend(CreateCpuRenderer())
-  , Random(settings.Seed)
+  , Engine(engine ? std::move(engine) : CreateCpuTrainingEngine(CreateCpuRenderer()))
 {
+  this->State.Random.seed(settings.Seed);
+  this->Settings.FramesPerStep = std::max(1, this->Settings.FramesPerStep);
   if (this->Settings.DensifyEnd < 0)
   {
     this->Settings.DensifyEnd = static_cast<int>(0.6 * this->Settings.Iterations);
   }
-  if (!this->Data.TrainFrames.empty())
+  if (!this->Data->TrainFrames.empty())
   {
     double spacing = 0;
-    for (int f : this->Data.TrainFrames)
+    for (int f : this->Data->TrainFrames)
     {
-      spacing += PixelSpacingOf(this->Data.Poses[f]);
+      spacing += PixelSpacingOf(this->Data->Poses[f]);
     }
-    this->PixelSpacing = spacing / this->Data.TrainFrames.size();
+    this->PixelSpacing = spacing / this->Data->TrainFrames.size();
   }
+  this->Engine->SetData(this->Data.get(), nullptr);
 }
 
-SliceGeometry Trainer::Slice(int frame) const
-{
-  SliceGeometry g;
-  std::copy(this->Data.Poses[frame].begin(), this->Data.Poses[frame].end(), g.ImageToReference);
-  g.Width = this->Data.Width;
-  g.Height = this->Data.Height;
-  return g;
-}
+Trainer::~Trainer() = default;
+Trainer::Trainer(Trainer&&) noexcept = default;
+Trainer& Trainer::operator=(Trainer&&) noexcept = default;
 
 RenderOptions Trainer::Options() const
 {
@@ -231,11 +163,46 @@ RenderOptions Trainer::Options() const
   return o;
 }
 
+bool Trainer::PullState(std::string* error) const
+{
+  if (!this->HostCurrent && !this->Engine->Pull(this->State.Gaussians, error))
+  {
+    return false;
+  }
+  this->HostCurrent = true;
+  return true;
+}
+
+bool Trainer::PushState(std::string* error)
+{
+  this->HostCurrent = true;
+  return this->Engine->Push(this->State.Gaussians, error);
+}
+
+const GaussianField& Trainer::GetField() const
+{
+  return this->GetState().Gaussians.Field;
+}
+
+const TrainingState& Trainer::GetState() const
+{
+  std::string error;
+  if (!this->PullState(&error))
+  {
+    // Only a device engine can fail here, and its last good host copy is the best answer left.
+    std::fprintf(stderr, "bigus: cannot read the field back from the %s engine: %s\n", this->Engine->GetName(),
+      error.c_str());
+  }
+  return this->State;
+}
+
 bool Trainer::Initialize(std::string* error)
 {
-  const std::size_t pixels = std::size_t(this->Data.Width) * this->Data.Height;
-  if (this->Data.TrainFrames.empty() || pixels == 0 || (this->Data.Mask.size() != pixels && this->Data.Mask.size() != pixels * this->Data.Poses.size()) ||
-    this->Data.Frames.size() != pixels * this->Data.Poses.size())
+  const TrainingData& data = *this->Data;
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
+  if (data.TrainFrames.empty() || pixels == 0 ||
+    (data.Mask.size() != pixels && data.Mask.size() != pixels * data.Poses.size()) ||
+    data.Frames.size() != pixels * data.Poses.size())
   {
     if (error)
     {
@@ -243,12 +210,33 @@ bool Trainer::Initialize(std::string* error)
     }
     return false;
   }
+  // Every training pose must be one the renderer accepts, or the run would stop at its first step.
+  const double shearLimit = RenderOptions().MaximumShearAngle;
+  for (int f : data.TrainFrames)
+  {
+    SliceFrame frame;
+    const PoseStatus status = ComputeSliceFrame(data.Poses[f].data(), shearLimit, frame);
+    if (status != PoseStatus::Ok)
+    {
+      if (error)
+      {
+        char detail[120] = "";
+        if (status == PoseStatus::Sheared)
+        {
+          std::snprintf(detail, sizeof(detail), " by %.2f degrees; the renderer accepts at most %.2f",
+            frame.shearDegrees, shearLimit);
+        }
+        *error = "training frame " + std::to_string(f) + ": ImageToReference " + PoseStatusText(status) + detail;
+      }
+      return false;
+    }
+  }
   double sum = 0;
   long count = 0;
-  for (int f : this->Data.TrainFrames)
+  for (int f : data.TrainFrames)
   {
-    const float* frame = &this->Data.Frames[pixels * f];
-    const unsigned char* mask = this->Data.MaskOf(f);
+    const float* frame = &data.Frames[pixels * f];
+    const unsigned char* mask = data.MaskOf(f);
     for (std::size_t p = 0; p < pixels; ++p)
     {
       if (mask[p])
@@ -275,37 +263,24 @@ bool Trainer::Initialize(std::string* error)
         std::min<std::int64_t>(count / 200, this->Settings.MaximumGaussians / 2));
   this->Report.InitialGaussians = seeds;
   std::mt19937_64 rng(this->Settings.Seed * 7919ULL + 17);
+  GaussianField& field = this->State.Gaussians.Field;
   if (this->Settings.HarrisInitialisation)
   {
-    this->InitializeHarris(seeds, rng);
+    this->InitializeHarris(seeds, rng, field);
   }
   else
   {
-    this->InitializeRandom(seeds, rng);
+    this->InitializeRandom(seeds, rng, field);
   }
-  this->FitReflectivityScale();
-  this->ResizeState(this->Field.Count());
-  this->Snapshot = this->Field;
-  this->SnapshotM = this->AdamM;
-  this->SnapshotV = this->AdamV;
-  return true;
+  return this->FitReflectivityScale(error);
 }
 
-void Trainer::SetField(const GaussianField& field)
+bool Trainer::SetField(const GaussianField& field, std::string* error)
 {
-  this->Field = field;
-  this->ResizeState(field.Count());
-  this->Snapshot = this->Field;
-  this->SnapshotM = this->AdamM;
-  this->SnapshotV = this->AdamV;
-}
-
-void Trainer::ResizeState(std::int64_t n)
-{
-  this->AdamM.Resize(n);
-  this->AdamV.Resize(n);
-  this->Attribution.resize(n, 0.f);
-  this->SeenCount.resize(n, 0);
+  this->State.Gaussians = OptimizerState();
+  this->State.Gaussians.Field = field;
+  this->State.Gaussians.ResizeToField();
+  return this->PushState(error);
 }
 
 namespace
@@ -340,24 +315,24 @@ double InvertImage(double intensity, double gamma)
 }
 }
 
-void Trainer::InitializeHarris(std::int64_t total, std::mt19937_64& rng)
+void Trainer::InitializeHarris(std::int64_t total, std::mt19937_64& rng, GaussianField& field)
 {
   // Seeds in proportion to the positive Harris response inside the mask, plus a uniform share
   // (DESIGN section 4): structure (edges, corners, bright speckle) gets Gaussians first.
-  const int W = this->Data.Width, H = this->Data.Height;
+  const int W = this->Data->Width, H = this->Data->Height;
   const std::size_t pixels = std::size_t(W) * H;
-  const int frames = static_cast<int>(this->Data.TrainFrames.size());
+  const int frames = static_cast<int>(this->Data->TrainFrames.size());
   const double inPlane = this->Settings.InitialScalePixels * this->PixelSpacing;
   const double elevation = this->Settings.ElevationSigma > 0 && this->Settings.BeamIntegration
     ? this->Settings.ElevationSigma
     : this->PixelSpacing;
-  this->Field = GaussianField();
+  field = GaussianField();
   std::vector<double> cumulative(pixels);
   for (int n = 0; n < frames; ++n)
   {
-    const int f = this->Data.TrainFrames[n];
-    const float* frame = &this->Data.Frames[pixels * f];
-    const unsigned char* mask = this->Data.MaskOf(f);
+    const int f = this->Data->TrainFrames[n];
+    const float* frame = &this->Data->Frames[pixels * f];
+    const unsigned char* mask = this->Data->MaskOf(f);
     cv::Mat image(H, W, CV_32F, const_cast<float*>(frame));
     cv::Mat response;
     cv::cornerHarris(image, response, 3, 3, 0.04);
@@ -393,23 +368,23 @@ void Trainer::InitializeHarris(std::int64_t total, std::mt19937_64& rng)
       const std::size_t pixel = std::min(p, pixels - 1);
       const double i = double(pixel % W) + Uniform(rng) - 0.5;
       const double j = double(pixel / W) + Uniform(rng) - 0.5;
-      AddSeed(this->Field, this->Data.Poses[f], i, j, inPlane, elevation, InvertImage(frame[pixel], this->Gamma));
+      AddSeed(field, this->Data->Poses[f], i, j, inPlane, elevation, InvertImage(frame[pixel], this->Gamma));
     }
   }
 }
 
-void Trainer::InitializeRandom(std::int64_t total, std::mt19937_64& rng)
+void Trainer::InitializeRandom(std::int64_t total, std::mt19937_64& rng, GaussianField& field)
 {
   // Ablation: seeds uniform in the bounding box of every training frame's corners.
   double lo[3] = { 1e300, 1e300, 1e300 }, hi[3] = { -1e300, -1e300, -1e300 };
-  for (int f : this->Data.TrainFrames)
+  for (int f : this->Data->TrainFrames)
   {
-    for (double i : { 0.0, this->Data.Width - 1.0 })
+    for (double i : { 0.0, this->Data->Width - 1.0 })
     {
-      for (double j : { 0.0, this->Data.Height - 1.0 })
+      for (double j : { 0.0, this->Data->Height - 1.0 })
       {
         double p[3];
-        Apply(this->Data.Poses[f], i, j, p);
+        Apply(this->Data->Poses[f], i, j, p);
         for (int k = 0; k < 3; ++k)
         {
           lo[k] = std::min(lo[k], p[k]);
@@ -419,13 +394,13 @@ void Trainer::InitializeRandom(std::int64_t total, std::mt19937_64& rng)
     }
   }
   const double scale = this->Settings.InitialScalePixels * this->PixelSpacing;
-  this->Field = GaussianField();
+  field = GaussianField();
   for (std::int64_t s = 0; s < total; ++s)
   {
     for (int k = 0; k < 3; ++k)
     {
-      this->Field.Means.push_back(static_cast<float>(lo[k] + (hi[k] - lo[k]) * Uniform(rng)));
-      this->Field.LogScales.push_back(static_cast<float>(std::log(scale)));
+      field.Means.push_back(static_cast<float>(lo[k] + (hi[k] - lo[k]) * Uniform(rng)));
+      field.LogScales.push_back(static_cast<float>(std::log(scale)));
     }
     double q[4], n2 = 0;
     for (double& v : q)
@@ -435,28 +410,36 @@ void Trainer::InitializeRandom(std::int64_t total, std::mt19937_64& rng)
     }
     for (double v : q)
     {
-      this->Field.Quaternions.push_back(static_cast<float>(v / std::sqrt(n2)));
+      field.Quaternions.push_back(static_cast<float>(v / std::sqrt(n2)));
     }
-    this->Field.Reflectivities.push_back(static_cast<float>(InvertImage(0.5, this->Gamma)));
+    field.Reflectivities.push_back(static_cast<float>(InvertImage(0.5, this->Gamma)));
   }
 }
 
-void Trainer::FitReflectivityScale()
+bool Trainer::FitReflectivityScale(std::string* error)
 {
   // Overlapping seeds add up: one least-squares factor c on every reflectivity makes the rendered
   // scattering field match -ln(1 - I) / gamma of a few training frames.
-  const std::size_t pixels = std::size_t(this->Data.Width) * this->Data.Height;
-  const int frames = static_cast<int>(this->Data.TrainFrames.size());
+  const TrainingData& data = *this->Data;
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
+  const int frames = static_cast<int>(data.TrainFrames.size());
   const RenderOptions o = this->Options();
+  if (!this->PushState(error))
+  {
+    return false;
+  }
   std::vector<float> S(pixels);
   double num = 0, den = 0;
   for (int n = 0; n < std::min(frames, 5); ++n)
   {
-    const int f = this->Data.TrainFrames[(n * frames) / std::min(frames, 5)];
-    const SliceGeometry slice = this->Slice(f);
-    this->Backend->Forward(this->Field.View(), &slice, 1, o, S.data(), nullptr, nullptr, nullptr);
-    const float* frame = &this->Data.Frames[pixels * f];
-    const unsigned char* mask = this->Data.MaskOf(f);
+    const int f = data.TrainFrames[(n * frames) / std::min(frames, 5)];
+    const SliceGeometry slice = data.Slice(f);
+    if (!this->Engine->Render(&slice, 1, o, S.data(), nullptr, error))
+    {
+      return false;
+    }
+    const float* frame = &data.Frames[pixels * f];
+    const unsigned char* mask = data.MaskOf(f);
     for (std::size_t p = 0; p < pixels; ++p)
     {
       if (mask[p])
@@ -467,13 +450,15 @@ void Trainer::FitReflectivityScale()
     }
   }
   const double c = den > 0 ? num / den : 1.0;
-  if (std::isfinite(c) && c > 0)
+  if (!std::isfinite(c) || c <= 0)
   {
-    for (float& r : this->Field.Reflectivities)
-    {
-      r = static_cast<float>(r * c);
-    }
+    return true;
   }
+  for (float& r : this->State.Gaussians.Field.Reflectivities)
+  {
+    r = static_cast<float>(r * c);
+  }
+  return this->PushState(error);
 }
 
 double Trainer::MeanLearningRateAt(int iteration) const
@@ -483,175 +468,126 @@ double Trainer::MeanLearningRateAt(int iteration) const
     std::pow(this->Settings.MeanLearningRateFinal / this->Settings.MeanLearningRate, t);
 }
 
-double Trainer::Step()
+StepStatus Trainer::Step(double* loss, std::string* error)
 {
-  const std::size_t pixels = std::size_t(this->Data.Width) * this->Data.Height;
-  const std::int64_t n = this->Field.Count();
-  const int f = this->Data.TrainFrames[static_cast<std::size_t>(Uniform(this->Random) * this->Data.TrainFrames.size())];
-  const SliceGeometry slice = this->Slice(f);
-  const RenderOptions o = this->Options();
-  this->S.resize(pixels);
-  this->I.resize(pixels);
-  this->LossGradient.resize(pixels);
-  this->Backend->Forward(this->Field.View(), &slice, 1, o, this->S.data(), this->I.data(), nullptr, nullptr);
-  const ImageLossTerms loss = ComputeImageLoss(this->I.data(), &this->Data.Frames[pixels * f], this->Data.MaskOf(f),
-    this->Data.Width, this->Data.Height, this->Settings.Loss, this->LossGradient.data(), false, &this->LossWorkspace);
-
-  this->Gradients.assign(11 * n, 0.f); // [N, 3] means, [N, 3] log-scales, [N, 4] quaternions, [N] r
-  FieldGradients grads;
-  grads.Means = this->Gradients.data();
-  grads.LogScales = this->Gradients.data() + 3 * n;
-  grads.Quaternions = this->Gradients.data() + 6 * n;
-  grads.Reflectivities = this->Gradients.data() + 10 * n;
-  grads.Attribution = this->Attribution.data();
-  grads.VisibleCount = this->SeenCount.data();
-  this->Backend->Backward(this->Field.View(), &slice, 1, o, this->S.data(), this->LossGradient.data(), false, grads,
-    nullptr, nullptr);
-
-  // Never keep a non-finite step in the field: back to the last good state, half the rates.
-  auto rollBack = [this]() {
-    this->Field = this->Snapshot;
-    this->AdamM = this->SnapshotM;
-    this->AdamV = this->SnapshotV;
-    this->ResizeState(this->Field.Count());
-    this->LearningRateScale *= 0.5;
-    this->Report.RolledBackSteps += 1;
-    ++this->Iteration;
-    return std::numeric_limits<double>::quiet_NaN();
-  };
-  if (!std::isfinite(loss.Total))
+  TrainingState& state = this->State;
+  const std::vector<int>& train = this->Data->TrainFrames;
+  std::vector<int> frames(this->Settings.FramesPerStep);
+  for (int& f : frames)
   {
-    return rollBack();
+    f = train[static_cast<std::size_t>(Uniform(state.Random) * train.size())];
   }
-
-  // Adam (Kingma and Ba 2015, algorithm 1), one pass over the Gaussians that also keeps every
-  // parameter in its meaningful range (unit quaternions, scales between 1 um and 10 cm) and checks
-  // that the gradient and the result are finite.
-  const int t = this->Iteration + 1;
-  const double c1 = 1 - std::pow(AdamBeta1, t), c2 = 1 - std::pow(AdamBeta2, t);
-  const double scale = this->LearningRateScale;
-  const double rates[4] = { scale * this->MeanLearningRateAt(this->Iteration),
-    scale * this->Settings.LogScaleLearningRate, scale * this->Settings.QuaternionLearningRate,
-    scale * this->Settings.ReflectivityLearningRate };
-  const float lo = static_cast<float>(std::log(MinimumScaleMm)), hi = static_cast<float>(std::log(MaximumScaleMm));
-  GaussianField& F = this->Field;
-  std::atomic<bool> finite(true);
-  vtkSMPTools::For(0, n, 4096, [&](std::int64_t begin, std::int64_t end) {
-    bool ok = true;
-    auto adam = [&](std::vector<float>& p, std::vector<float>& m, std::vector<float>& v, const float* g,
-                  std::int64_t first, int count, double lr) {
-      for (std::int64_t k = first; k < first + count; ++k)
-      {
-        const double gk = g[k];
-        ok = ok && std::isfinite(g[k]);
-        m[k] = static_cast<float>(AdamBeta1 * m[k] + (1 - AdamBeta1) * gk);
-        v[k] = static_cast<float>(AdamBeta2 * v[k] + (1 - AdamBeta2) * gk * gk);
-        p[k] -= static_cast<float>(lr * (m[k] / c1) / (std::sqrt(v[k] / c2) + AdamEpsilon));
-      }
-    };
-    for (std::int64_t i = begin; i < end; ++i)
-    {
-      adam(F.Means, this->AdamM.Means, this->AdamV.Means, grads.Means, 3 * i, 3, rates[0]);
-      adam(F.LogScales, this->AdamM.LogScales, this->AdamV.LogScales, grads.LogScales, 3 * i, 3, rates[1]);
-      adam(F.Quaternions, this->AdamM.Quaternions, this->AdamV.Quaternions, grads.Quaternions, 4 * i, 4, rates[2]);
-      adam(F.Reflectivities, this->AdamM.Reflectivities, this->AdamV.Reflectivities, grads.Reflectivities, i, 1,
-        rates[3]);
-      float* q = &F.Quaternions[4 * i];
-      const float norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
-      if (norm > 1e-12f)
-      {
-        for (int k = 0; k < 4; ++k)
-        {
-          q[k] /= norm;
-        }
-      }
-      float* l = &F.LogScales[3 * i];
-      const float* m = &F.Means[3 * i];
-      for (int k = 0; k < 3; ++k)
-      {
-        l[k] = std::min(hi, std::max(lo, l[k]));
-        ok = ok && std::isfinite(m[k]) && std::isfinite(l[k]);
-      }
-      ok = ok && std::isfinite(q[0]) && std::isfinite(q[1]) && std::isfinite(q[2]) && std::isfinite(q[3]) &&
-        std::isfinite(F.Reflectivities[i]);
-    }
-    if (!ok)
-    {
-      finite.store(false, std::memory_order_relaxed);
-    }
-  });
-  if (!finite.load())
+  StepRequest request;
+  request.Frames = frames.data();
+  request.Count = static_cast<int>(frames.size());
+  request.Iteration = state.Iteration;
+  const double scale = state.LearningRateScale;
+  request.MeanRate = scale * this->MeanLearningRateAt(state.Iteration);
+  request.LogScaleRate = scale * this->Settings.LogScaleLearningRate;
+  request.QuaternionRate = scale * this->Settings.QuaternionLearningRate;
+  request.ReflectivityRate = scale * this->Settings.ReflectivityLearningRate;
+  request.MinimumLogScale = std::log(MinimumScaleMm);
+  request.MaximumLogScale = std::log(MaximumScaleMm);
+  request.Options = this->Options();
+  request.Loss = this->Settings.Loss;
+  this->HostCurrent = false;
+  const StepStatus status = this->Engine->Step(request, loss, error);
+  if (status == StepStatus::Failed)
   {
-    return rollBack();
+    return status;
   }
-  ++this->Iteration;
-  if (this->Iteration % SnapshotInterval == 0)
+  ++state.Iteration;
+  if (status == StepStatus::NonFinite)
   {
-    this->Snapshot = this->Field;
-    this->SnapshotM = this->AdamM;
-    this->SnapshotV = this->AdamV;
+    // Never keep a non-finite step in the field: back to the last good state, half the rates.
+    this->Engine->Restore();
+    state.LearningRateScale *= 0.5;
+    state.RolledBackSteps += 1;
+    *loss = std::numeric_limits<double>::quiet_NaN();
+    return status;
   }
-  this->Report.LossHistory.push_back(loss.Total);
-  return loss.Total;
+  if (state.Iteration % SnapshotInterval == 0)
+  {
+    this->Engine->Snapshot();
+  }
+  state.LossHistory.push_back(*loss);
+  return status;
 }
 
-double Trainer::ValidationLoss()
+bool Trainer::ValidationLoss(double& loss, std::string* error)
 {
   // Every 8th training frame (at most 8): the growth decision must not depend on one lucky frame.
-  const std::size_t pixels = std::size_t(this->Data.Width) * this->Data.Height;
+  const TrainingData& data = *this->Data;
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
   const RenderOptions o = this->Options();
   std::vector<float> S(pixels), I(pixels);
+  ImageLossWorkspace workspace;
   double total = 0;
   int used = 0;
-  const int frames = static_cast<int>(this->Data.TrainFrames.size());
+  const int frames = static_cast<int>(data.TrainFrames.size());
   const int stride = std::max(1, frames / 8);
   for (int n = 0; n < frames && used < 8; n += stride, ++used)
   {
-    const int f = this->Data.TrainFrames[n];
-    const SliceGeometry slice = this->Slice(f);
-    this->Backend->Forward(this->Field.View(), &slice, 1, o, S.data(), I.data(), nullptr, nullptr);
-    total += ComputeImageLoss(I.data(), &this->Data.Frames[pixels * f], this->Data.MaskOf(f), this->Data.Width,
-      this->Data.Height, this->Settings.Loss, nullptr, false, &this->LossWorkspace)
+    const int f = data.TrainFrames[n];
+    const SliceGeometry slice = data.Slice(f);
+    if (!this->Engine->Render(&slice, 1, o, S.data(), I.data(), error))
+    {
+      return false;
+    }
+    total += ComputeImageLoss(I.data(), &data.Frames[pixels * f], data.MaskOf(f), data.Width, data.Height,
+      this->Settings.Loss, nullptr, false, &workspace)
                .Total;
   }
-  return total / std::max(1, used);
+  loss = total / std::max(1, used);
+  return true;
 }
 
-void Trainer::DensifyAndPrune()
+bool Trainer::DensifyAndPrune(std::string* error)
 {
-  const std::int64_t n = this->Field.Count();
-  if (this->Growing)
+  TrainingState& state = this->State;
+  if (state.Growing)
   {
-    const double validation = this->ValidationLoss();
-    if (this->BestValidationLoss < 0 || validation < this->BestValidationLoss * (1 - this->Settings.GrowthMargin))
+    double validation = 0;
+    if (!this->ValidationLoss(validation, error))
     {
-      this->BestValidationLoss = validation;
-      this->StalledGrowthSteps = 0;
+      return false;
     }
-    else if (++this->StalledGrowthSteps >= 2)
+    if (state.BestValidationLoss < 0 || validation < state.BestValidationLoss * (1 - this->Settings.GrowthMargin))
     {
-      this->Growing = false;
+      state.BestValidationLoss = validation;
+      state.StalledGrowthSteps = 0;
+    }
+    else if (++state.StalledGrowthSteps >= 2)
+    {
+      state.Growing = false;
       char why[200];
       std::snprintf(why, sizeof(why),
         "validation loss improved by less than %.2g %% over two densification intervals (iteration %d)",
-        100 * this->Settings.GrowthMargin, this->Iteration);
+        100 * this->Settings.GrowthMargin, state.Iteration);
       this->Report.GrowthStopReason = why;
     }
   }
+  if (!this->PullState(error))
+  {
+    return false;
+  }
+  OptimizerState& G = state.Gaussians;
+  GaussianField& F = G.Field;
+  const std::int64_t n = F.Count();
   std::vector<unsigned char> split(n, 0);
   std::int64_t added = 0;
-  if (this->Growing)
+  if (state.Growing)
   {
     std::vector<std::int64_t> order(n);
     std::iota(order.begin(), order.end(), 0);
-    std::stable_sort(order.begin(), order.end(),
-      [&](std::int64_t a, std::int64_t b) { return this->Attribution[a] > this->Attribution[b]; });
+    std::stable_sort(
+      order.begin(), order.end(), [&](std::int64_t a, std::int64_t b) { return G.Attribution[a] > G.Attribution[b]; });
     const std::int64_t room = this->Settings.MaximumGaussians - n;
     const std::int64_t wanted = static_cast<std::int64_t>(n * this->Settings.DensifyPercentile / 100.0);
     added = std::max<std::int64_t>(0, std::min(room, wanted));
     for (std::int64_t k = 0; k < added; ++k)
     {
-      if (this->Attribution[order[k]] <= 0)
+      if (G.Attribution[order[k]] <= 0)
       {
         added = k;
         break;
@@ -660,9 +596,9 @@ void Trainer::DensifyAndPrune()
     }
     if (room <= wanted)
     {
-      this->Growing = false;
+      state.Growing = false;
       this->Report.GrowthStopReason = "hard maximum of " + std::to_string(this->Settings.MaximumGaussians) +
-        " Gaussians reached (iteration " + std::to_string(this->Iteration) + ")";
+        " Gaussians reached (iteration " + std::to_string(state.Iteration) + ")";
     }
   }
   const double splitScale = this->Settings.SplitScalePixels * this->PixelSpacing;
@@ -670,82 +606,88 @@ void Trainer::DensifyAndPrune()
   {
     if (split[i])
     {
-      DensifyGaussian(this->Field, i, splitScale);
+      DensifyGaussian(F, i, splitScale);
     }
   }
-  GaussianField& F = this->Field;
   // Children and split parents start with fresh optimiser moments; the others keep theirs. Their
   // first steps are large (Adam with the global step's bias correction: 0.1 g / sqrt(0.001 g^2) = 3.2
   // learning rates, carried on by the first moment), which costs a dip in PSNR right after a
   // densification but lets the children move apart: inheriting the parent's second moment removed the
   // dip but ended lower (liver, 10 minutes: 37.1 against 37.5 dB held out, 37.4 against 39.0 trained).
-  this->AdamM.Resize(F.Count());
-  this->AdamV.Resize(F.Count());
+  G.ResizeToField();
   for (std::int64_t i = 0; i < n; ++i)
   {
     if (split[i])
     {
-      this->AdamM.ZeroGaussian(i);
-      this->AdamV.ZeroGaussian(i);
+      G.FirstMoment.ZeroGaussian(i);
+      G.SecondMoment.ZeroGaussian(i);
     }
   }
   // Prune negligible and never-seen Gaussians (not the ones just made).
-  this->SeenCount.resize(F.Count(), 1);
   std::vector<unsigned char> keep(F.Count(), 1);
   for (std::int64_t i = 0; i < n; ++i)
   {
-    if (!split[i] && (std::abs(F.Reflectivities[i]) < this->Settings.PruneReflectivity || this->SeenCount[i] == 0))
+    if (!split[i] && (std::abs(F.Reflectivities[i]) < this->Settings.PruneReflectivity || G.SeenCount[i] == 0))
     {
       keep[i] = 0;
     }
   }
   if (std::count(keep.begin(), keep.end(), 1) > 0)
   {
-    F.Compact(keep);
-    this->AdamM.Compact(keep);
-    this->AdamV.Compact(keep);
+    G.Compact(keep);
   }
-  this->Attribution.assign(F.Count(), 0.f);
-  this->SeenCount.assign(F.Count(), 0);
-  this->Snapshot = F;
-  this->SnapshotM = this->AdamM;
-  this->SnapshotV = this->AdamV;
+  G.Attribution.assign(F.Count(), 0.f);
+  G.SeenCount.assign(F.Count(), 0);
+  return this->PushState(error);
 }
 
-ImageMetrics Trainer::Evaluate(const std::vector<int>& frames, double* secondsPerFrame)
+bool Trainer::Evaluate(
+  const std::vector<int>& frames, ImageMetrics& metrics, std::string* error, double* secondsPerFrame)
 {
-  return this->EvaluateOn(this->Data, frames, secondsPerFrame);
+  return this->EvaluateOn(*this->Data, frames, metrics, error, secondsPerFrame);
 }
 
-ImageMetrics Trainer::EvaluateOn(const TrainingData& data, const std::vector<int>& frames, double* secondsPerFrame)
+bool Trainer::EvaluateOn(const TrainingData& data, const std::vector<int>& frames, ImageMetrics& metrics,
+  std::string* error, double* secondsPerFrame)
 {
   std::vector<float> I(std::size_t(data.Width) * data.Height);
   double seconds = 0;
   int rendered = 0;
+  bool ok = true;
   const ImageMetrics mean = MeanFrameMetrics(data, frames, [&](std::size_t, int f) {
     const double t0 = Seconds();
-    this->RenderFrame(data, f, I.data());
+    ok = ok && this->RenderFrame(data, f, I.data(), error);
     seconds += Seconds() - t0;
     ++rendered;
     return I.data();
   });
+  if (!ok)
+  {
+    return false;
+  }
+  metrics = mean;
   if (secondsPerFrame)
   {
     *secondsPerFrame = rendered == 0 ? 0.0 : seconds / rendered;
   }
-  return mean;
+  return true;
 }
 
-void Trainer::RenderFrame(const TrainingData& data, int frame, float* image)
+bool Trainer::RenderFrame(const TrainingData& data, int frame, float* image, std::string* error)
 {
   RenderOptions o = this->Options();
   o.Cutoff = RenderOptions().Cutoff;
-  SliceGeometry slice;
-  std::copy(data.Poses[frame].begin(), data.Poses[frame].end(), slice.ImageToReference);
-  slice.Width = data.Width;
-  slice.Height = data.Height;
+  const SliceGeometry slice = data.Slice(frame);
   this->S.resize(std::size_t(data.Width) * data.Height);
-  this->Backend->Forward(this->Field.View(), &slice, 1, o, this->S.data(), image, nullptr, nullptr);
+  if (!this->Engine->Render(&slice, 1, o, this->S.data(), image, error))
+  {
+    if (error)
+    {
+      *error = "frame " + std::to_string(frame) + ": " + *error;
+    }
+    return false;
+  }
+  return true;
 }
 
 ImageMetrics MeanFrameMetrics(const TrainingData& data, const std::vector<int>& frames,
@@ -778,20 +720,25 @@ ImageMetrics MeanFrameMetrics(const TrainingData& data, const std::vector<int>& 
   return mean;
 }
 
-std::int64_t Trainer::FinalPrune()
+std::int64_t Trainer::FinalPrune(std::string* error)
 {
   // A Gaussian changes a pixel's scattering field by at most |r| amp, hence its intensity by at most
   // gamma |r| amp (dI/dS <= gamma): remove it when that stays below the tolerance on every training frame.
-  const std::int64_t n = this->Field.Count();
+  if (!this->PullState(error))
+  {
+    return -1;
+  }
+  const GaussianField& field = this->State.Gaussians.Field;
+  const std::int64_t n = field.Count();
   const RenderOptions o = this->Options();
   const double sigmaE = o.BeamIntegration ? o.ElevationSigma : 0.0;
   std::vector<unsigned char> keep(n, 0);
   std::vector<SliceFrameD> frames;
-  for (int f : this->Data.TrainFrames)
+  for (int f : this->Data->TrainFrames)
   {
     SliceFrameD frame;
     double pixel[3];
-    ComputeRenderingFrame(this->Data.Poses[f].data(), 90, frame.F, frame.Origin, pixel);
+    ComputeRenderingFrame(this->Data->Poses[f].data(), 90, frame.F, frame.Origin, pixel);
     frames.push_back(frame);
   }
   vtkSMPTools::For(0, n, 256, [&](std::int64_t b, std::int64_t e) {
@@ -800,14 +747,14 @@ std::int64_t Trainer::FinalPrune()
       GaussianParams g;
       for (int k = 0; k < 3; ++k)
       {
-        g.Mean[k] = this->Field.Means[3 * i + k];
-        g.LogScale[k] = this->Field.LogScales[3 * i + k];
+        g.Mean[k] = field.Means[3 * i + k];
+        g.LogScale[k] = field.LogScales[3 * i + k];
       }
       for (int k = 0; k < 4; ++k)
       {
-        g.Quaternion[k] = this->Field.Quaternions[4 * i + k];
+        g.Quaternion[k] = field.Quaternions[4 * i + k];
       }
-      g.Reflectivity = this->Field.Reflectivities[i];
+      g.Reflectivity = field.Reflectivities[i];
       const double r = o.NonNegativeReflectivity ? std::max(g.Reflectivity, 0.0) : std::abs(g.Reflectivity);
       for (const SliceFrameD& frame : frames)
       {
@@ -823,21 +770,19 @@ std::int64_t Trainer::FinalPrune()
   const std::int64_t removed = n - std::count(keep.begin(), keep.end(), 1);
   if (removed > 0)
   {
-    this->Field.Compact(keep);
-    this->AdamM.Compact(keep);
-    this->AdamV.Compact(keep);
-    // The EA-D accumulators follow their Gaussians: a run that goes on after this prune (the
-    // benchmark's time marks) must densify and prune by the scores of the right ones.
-    CompactVector(this->Attribution, keep);
-    CompactVector(this->SeenCount, keep);
+    this->State.Gaussians.Compact(keep);
+    if (!this->PushState(error))
+    {
+      return -1;
+    }
   }
   return removed;
 }
 
-bool Trainer::Run(const std::function<void(double, int, double, std::int64_t)>& progress,
+bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>& progress,
   const std::function<bool()>& abort, std::string* error)
 {
-  if (this->Field.Count() == 0)
+  if (this->GetField().Count() == 0)
   {
     if (error)
     {
@@ -847,11 +792,13 @@ bool Trainer::Run(const std::function<void(double, int, double, std::int64_t)>& 
   }
   const double start = Seconds();
   const TrainerSettings& s = this->Settings;
+  const TrainingState& state = this->State;
   this->Report.StopReason = "iterations";
   double recent = 0;
   int recentCount = 0;
   double previousWindow = -1;
-  while (this->Iteration < s.Iterations)
+  bool ok = true;
+  while (state.Iteration < s.Iterations)
   {
     if (abort && abort())
     {
@@ -863,24 +810,32 @@ bool Trainer::Run(const std::function<void(double, int, double, std::int64_t)>& 
       this->Report.StopReason = "time budget";
       break;
     }
-    const double loss = this->Step();
+    double loss = 0;
+    if (this->Step(&loss, error) == StepStatus::Failed)
+    {
+      ok = false;
+      break;
+    }
     if (std::isfinite(loss))
     {
       recent += loss;
       ++recentCount;
     }
-    if (this->LearningRateScale < 1e-6)
+    if (state.LearningRateScale < 1e-6)
     {
       if (error)
       {
         *error = "every step produces NaN or Inf, even with learning rates divided by 1e6";
       }
-      return false;
+      ok = false;
+      break;
     }
-    const int it = this->Iteration;
-    if (s.Densify && it >= s.DensifyStart && it <= s.DensifyEnd && it % s.DensifyInterval == 0)
+    const int it = state.Iteration;
+    if (s.Densify && it >= s.DensifyStart && it <= s.DensifyEnd && it % s.DensifyInterval == 0 &&
+      !this->DensifyAndPrune(error))
     {
-      this->DensifyAndPrune();
+      ok = false;
+      break;
     }
     if (s.ConvergenceTolerance > 0 && it % 200 == 0 && recentCount > 0)
     {
@@ -897,7 +852,8 @@ bool Trainer::Run(const std::function<void(double, int, double, std::int64_t)>& 
     if (s.CheckpointInterval > 0 && !s.CheckpointFile.empty() && it % s.CheckpointInterval == 0 &&
       !this->SaveCheckpoint(s.CheckpointFile, error))
     {
-      return false;
+      ok = false;
+      break;
     }
     if (progress && (it % 10 == 0 || it == s.Iterations))
     {
@@ -906,193 +862,64 @@ bool Trainer::Run(const std::function<void(double, int, double, std::int64_t)>& 
       {
         fraction = std::max(fraction, (Seconds() - start) / s.TimeBudget);
       }
-      progress(std::min(1.0, fraction), it, std::isfinite(loss) ? loss : 0.0, this->Field.Count());
+      progress(std::min(1.0, fraction), it, std::isfinite(loss) ? loss : 0.0, state.Gaussians.Count());
     }
   }
-  if (this->Report.GrowthStopReason.empty() && (!s.Densify || this->Iteration > s.DensifyEnd))
-  {
-    this->Report.GrowthStopReason = s.Densify ? "densification schedule ended" : "densification off";
-  }
-  this->Report.PrunedAtEnd = this->FinalPrune();
-  this->Report.Iterations = this->Iteration;
-  this->Report.Seconds = Seconds() - start;
-  this->Report.Gaussians = this->Field.Count();
+  this->Report.Iterations = state.Iteration;
+  this->Report.Seconds += Seconds() - start;
   this->Report.Gamma = this->Gamma;
-  const std::size_t h = this->Report.LossHistory.size();
+  const std::size_t h = state.LossHistory.size();
   double last = 0;
   for (std::size_t k = h - std::min<std::size_t>(h, 50); k < h; ++k)
   {
-    last += this->Report.LossHistory[k];
+    last += state.LossHistory[k];
   }
   this->Report.LastLoss = h ? last / std::min<std::size_t>(h, 50) : 0;
-  return true;
+  this->Report.Gaussians = this->GetField().Count();
+  return ok;
 }
 
-// ------------------------------------------------------------------------------------------------
-// Checkpoint file, little-endian binary:
-//   "BIGUSCK1" | int32 iteration | float64 learning-rate scale | float64 gamma | int32 growing |
-//   float64 best validation loss | int32 stalled growth steps | int32 rolled-back steps |
-//   uint32 length + text of the random engine state | int64 N |
-//   field, Adam first moments, Adam second moments: each [N,3] means, [N,3] log-scales, [N,4]
-//   quaternions, [N] reflectivities as float32 | [N] float32 attribution | [N] int32 seen counts |
-//   int64 H + H float64 loss history.
-// The settings are not stored: resume with the same settings. Written to FILE.tmp, then renamed.
-
-namespace
+bool Trainer::Finish(std::string* error)
 {
-template <typename T>
-void Put(std::ostream& out, const T& value)
-{
-  out.write(reinterpret_cast<const char*>(&value), sizeof(T));
-}
-template <typename T>
-void PutVector(std::ostream& out, const std::vector<T>& v)
-{
-  out.write(reinterpret_cast<const char*>(v.data()), static_cast<std::streamsize>(v.size() * sizeof(T)));
-}
-template <typename T>
-bool Get(std::istream& in, T& value)
-{
-  return static_cast<bool>(in.read(reinterpret_cast<char*>(&value), sizeof(T)));
-}
-template <typename T>
-bool GetVector(std::istream& in, std::vector<T>& v, std::size_t n)
-{
-  v.resize(n);
-  return static_cast<bool>(in.read(reinterpret_cast<char*>(v.data()), static_cast<std::streamsize>(n * sizeof(T))));
-}
-void WriteField(std::ostream& out, const GaussianField& f)
-{
-  PutVector(out, f.Means);
-  PutVector(out, f.LogScales);
-  PutVector(out, f.Quaternions);
-  PutVector(out, f.Reflectivities);
-}
-bool ReadField(std::istream& in, GaussianField& f, std::int64_t n)
-{
-  return GetVector(in, f.Means, 3 * n) && GetVector(in, f.LogScales, 3 * n) && GetVector(in, f.Quaternions, 4 * n) &&
-    GetVector(in, f.Reflectivities, n);
-}
-}
-
-bool Trainer::SaveCheckpoint(const std::string& file, std::string* error) const
-{
-  const std::string temporary = file + ".tmp";
+  const double start = Seconds();
+  const TrainerSettings& s = this->Settings;
+  if (this->Report.GrowthStopReason.empty() && (!s.Densify || this->State.Iteration > s.DensifyEnd))
   {
-    std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
-    out.write("BIGUSCK1", 8);
-    Put(out, std::int32_t(this->Iteration));
-    Put(out, this->LearningRateScale);
-    Put(out, this->Gamma);
-    Put(out, std::int32_t(this->Growing));
-    Put(out, this->BestValidationLoss);
-    Put(out, std::int32_t(this->StalledGrowthSteps));
-    Put(out, std::int32_t(this->Report.RolledBackSteps));
-    std::ostringstream state;
-    state << this->Random;
-    const std::string text = state.str();
-    Put(out, std::uint32_t(text.size()));
-    out.write(text.data(), static_cast<std::streamsize>(text.size()));
-    Put(out, std::int64_t(this->Field.Count()));
-    WriteField(out, this->Field);
-    WriteField(out, this->AdamM);
-    WriteField(out, this->AdamV);
-    PutVector(out, this->Attribution);
-    PutVector(out, this->SeenCount);
-    Put(out, std::int64_t(this->Report.LossHistory.size()));
-    PutVector(out, this->Report.LossHistory);
-    out.close();
-    if (!out)
-    {
-      std::remove(temporary.c_str());
-      if (error)
-      {
-        *error = file + ": cannot write the checkpoint";
-      }
-      return false;
-    }
+    this->Report.GrowthStopReason = s.Densify ? "densification schedule ended" : "densification off";
   }
-  if (std::rename(temporary.c_str(), file.c_str()) != 0)
+  const std::int64_t pruned = this->FinalPrune(error);
+  if (pruned < 0)
   {
-    std::remove(temporary.c_str());
-    if (error)
-    {
-      *error = file + ": cannot replace the checkpoint";
-    }
     return false;
   }
+  this->Report.PrunedAtEnd = pruned;
+  this->Report.Gaussians = this->GetField().Count();
+  this->Report.Seconds += Seconds() - start;
   return true;
+}
+
+bool Trainer::Run(const std::function<void(double, int, double, std::int64_t)>& progress,
+  const std::function<bool()>& abort, std::string* error)
+{
+  return this->Train(progress, abort, error) && this->Finish(error);
+}
+
+bool Trainer::SaveCheckpoint(const std::string& file, std::string* error)
+{
+  return this->PullState(error) && this->State.Save(file, this->Gamma, error);
 }
 
 bool Trainer::LoadCheckpoint(const std::string& file, std::string* error)
 {
-  std::ifstream in(file, std::ios::binary);
-  auto fail = [&](const std::string& what) {
-    if (error)
-    {
-      *error = file + ": " + what;
-    }
+  TrainingState loaded;
+  double gamma = this->Gamma;
+  if (!loaded.Load(file, gamma, error))
+  {
     return false;
-  };
-  if (!in)
-  {
-    return fail("cannot open the checkpoint");
   }
-  char magic[8];
-  if (!in.read(magic, 8) || std::memcmp(magic, "BIGUSCK1", 8) != 0)
-  {
-    return fail("not a BIGUS checkpoint (bad magic)");
-  }
-  std::int32_t iteration, growing, stalled, rolled;
-  double scale, gamma, best;
-  std::uint32_t length;
-  if (!Get(in, iteration) || !Get(in, scale) || !Get(in, gamma) || !Get(in, growing) || !Get(in, best) ||
-    !Get(in, stalled) || !Get(in, rolled) || !Get(in, length) || length > (1u << 20))
-  {
-    return fail("truncated header");
-  }
-  std::string text(length, '\0');
-  std::int64_t n = 0;
-  if (!in.read(&text[0], length) || !Get(in, n) || n < 0 || n > (std::int64_t(1) << 32))
-  {
-    return fail("truncated header");
-  }
-  GaussianField field, m, v;
-  std::vector<float> attribution;
-  std::vector<int> seen;
-  std::int64_t history = 0;
-  std::vector<double> losses;
-  if (!ReadField(in, field, n) || !ReadField(in, m, n) || !ReadField(in, v, n) || !GetVector(in, attribution, n) ||
-    !GetVector(in, seen, n) || !Get(in, history) || history < 0 || history > (std::int64_t(1) << 32) ||
-    !GetVector(in, losses, static_cast<std::size_t>(history)))
-  {
-    return fail("truncated data (" + std::to_string(n) + " Gaussians announced)");
-  }
-  std::istringstream state(text);
-  std::mt19937_64 random;
-  state >> random;
-  if (!state)
-  {
-    return fail("corrupt random state");
-  }
-  this->Iteration = iteration;
-  this->LearningRateScale = scale;
+  this->State = std::move(loaded);
   this->Gamma = gamma;
-  this->Growing = growing != 0;
-  this->BestValidationLoss = best;
-  this->StalledGrowthSteps = stalled;
-  this->Report.RolledBackSteps = rolled;
-  this->Random = random;
-  this->Field = field;
-  this->AdamM = m;
-  this->AdamV = v;
-  this->Attribution = attribution;
-  this->SeenCount = seen;
-  this->Report.LossHistory = losses;
-  this->Snapshot = this->Field;
-  this->SnapshotM = this->AdamM;
-  this->SnapshotV = this->AdamV;
-  return true;
+  return this->PushState(error);
 }
 
 } // namespace bigus

@@ -13,6 +13,7 @@
 #include "bigusImageLoss.h"
 #include "bigusImageMetrics.h"
 #include "bigusRenderer.h"
+#include "bigusTrainingEngine.h"
 
 #include <array>
 #include <cstdint>
@@ -24,38 +25,6 @@
 
 namespace bigus
 {
-
-/// The frames a trainer learns from. Intensities in [0, 1].
-struct TrainingData
-{
-  int Width = 0, Height = 0;
-  std::vector<float> Frames;                     ///< [N, H, W]
-  std::vector<std::array<double, 16>> Poses;     ///< [N] ImageToReference, row-major
-  std::vector<unsigned char> Mask;               ///< [H, W] fan mask shared by every frame, or [N, H, W] per frame (1 = imaged)
-  std::vector<int> TrainFrames;                  ///< indices into Frames used for training
-  int Count() const { return static_cast<int>(this->Poses.size()); }
-  /// The [H, W] mask of frame @p frame (the shared one, or that frame's own).
-  const unsigned char* MaskOf(int frame) const
-  {
-    const std::size_t pixels = std::size_t(this->Width) * this->Height;
-    return this->Mask.data() + (this->Mask.size() == pixels ? 0 : pixels * frame);
-  }
-};
-
-/// A Gaussian field's parameters (float, structure of arrays).
-struct GaussianField
-{
-  std::vector<float> Means, LogScales, Quaternions, Reflectivities; ///< [N,3], [N,3], [N,4], [N]
-  std::int64_t Count() const { return static_cast<std::int64_t>(this->Reflectivities.size()); }
-  FieldView View() const;
-  void Resize(std::int64_t n);
-  /// Keeps the Gaussians whose flag is non-zero, in order.
-  void Compact(const std::vector<unsigned char>& keep);
-  /// Gaussian @p to takes every parameter of Gaussian @p from.
-  void CopyGaussian(std::int64_t from, std::int64_t to);
-  /// Sets every parameter of Gaussian @p i to 0 (optimiser moments).
-  void ZeroGaussian(std::int64_t i);
-};
 
 struct TrainerSettings
 {
@@ -75,6 +44,7 @@ struct TrainerSettings
   // Optimisation
   int Iterations = 3000;
   double TimeBudget = 0;             ///< seconds of training; 0 = no limit
+  int FramesPerStep = 1;             ///< training frames rendered per step (the batch); losses are averaged
   double MeanLearningRate = 0.02;    ///< mm per step at the start ...
   double MeanLearningRateFinal = 0.002; ///< ... decaying exponentially to this at Iterations
   double LogScaleLearningRate = 0.01;
@@ -109,93 +79,115 @@ struct TrainerReport
   std::int64_t PrunedAtEnd = 0;
   double Gamma = 0;
   double LastLoss = 0;              ///< mean loss of the last 50 steps
-  int RolledBackSteps = 0;
-  std::vector<double> LossHistory;  ///< loss of every step
 };
 
+/**
+ * The training loop. It owns the schedule (frames drawn per step, learning rates, densification,
+ * growth stop, roll-back, checkpoints, final prune) and keeps a host copy of the TrainingState; the
+ * step itself runs in the TrainingEngine given to it, which owns the per-Gaussian state between
+ * steps (bigusTrainingEngine.h). Host-side work pulls the state from the engine and pushes it back.
+ */
 class BIGUSTRAINING_EXPORT Trainer
 {
 public:
-  Trainer(TrainingData data, const TrainerSettings& settings);
-
-  /// Initial field (Harris or random) and gamma. Returns false with @p error on bad data.
-  bool Initialize(std::string* error);
-  /// Start from a given field instead (gamma still from the data).
-  void SetField(const GaussianField& field);
+  /// @p engine runs the steps; null means the CPU engine (CreateTrainingEngine("cpu")).
+  Trainer(TrainingData data, const TrainerSettings& settings, std::unique_ptr<TrainingEngine> engine = nullptr);
+  ~Trainer();
+  Trainer(Trainer&&) noexcept;
+  Trainer& operator=(Trainer&&) noexcept;
 
   /**
-   * Train until Iterations, TimeBudget, convergence or @p abort. @p progress(fraction, iteration,
-   * loss, gaussians) is called every few steps. Returns false with @p error on an unrecoverable problem.
+   * Initial field (Harris or random) and gamma. Returns false with @p error on bad data: no training
+   * frame, inconsistent sizes, an empty mask, or a training pose the renderer rejects ("frame 12:
+   * ImageToReference is sheared by 7.2 degrees ...": the renderer accepts at most
+   * RenderOptions::MaximumShearAngle, the reader's default limit).
    */
+  bool Initialize(std::string* error);
+  /// Start from a given field instead (gamma still from the data).
+  bool SetField(const GaussianField& field, std::string* error);
+
+  /**
+   * Train until Iterations, TimeBudget (counted from this call), convergence or @p abort; the field is
+   * not pruned (Finish does that), so training may go on with another call. @p progress(fraction,
+   * iteration, loss, gaussians) is called every few steps. Returns false with @p error on an
+   * unrecoverable problem (a step the renderer refuses, every step non-finite, a checkpoint not written).
+   */
+  bool Train(const std::function<void(double, int, double, std::int64_t)>& progress,
+    const std::function<bool()>& abort, std::string* error);
+  /// Ends a run: the final prune (FinalPrune) and the report's totals. Returns false with @p error when
+  /// the engine fails.
+  bool Finish(std::string* error);
+  /// Train, then Finish.
   bool Run(const std::function<void(double, int, double, std::int64_t)>& progress, const std::function<bool()>& abort,
     std::string* error);
-  /// One optimisation step (no densification); returns the loss, or NaN if the step was rolled back.
-  double Step();
+  /**
+   * One optimisation step (no densification) on FramesPerStep frames drawn at random. @p loss receives
+   * its loss (NaN when the step was rolled back: StepStatus::NonFinite). StepStatus::Failed, with
+   * @p error, when the engine could not render or differentiate a frame.
+   */
+  StepStatus Step(double* loss, std::string* error);
 
-  /// Checkpoint: field, Adam state, schedule and random state (format in bigusTrainer.cxx).
-  bool SaveCheckpoint(const std::string& file, std::string* error) const;
+  /// Checkpoint: the whole TrainingState and gamma (format in bigusTrainingEngine.h).
+  bool SaveCheckpoint(const std::string& file, std::string* error);
   bool LoadCheckpoint(const std::string& file, std::string* error);
 
   /**
    * Render @p frames at their poses and compare them with the recorded frames inside the mask
-   * (bigus::CompareImages); returns the mean of each metric. @p secondsPerFrame, if non-null, receives
-   * the mean render time per frame (s).
+   * (bigus::MeanFrameMetrics); @p metrics receives the mean of each metric. @p secondsPerFrame, if
+   * non-null, receives the mean render time per frame (s). Returns false with @p error when a frame
+   * cannot be rendered.
    */
-  ImageMetrics Evaluate(const std::vector<int>& frames, double* secondsPerFrame = nullptr);
+  bool Evaluate(const std::vector<int>& frames, ImageMetrics& metrics, std::string* error,
+    double* secondsPerFrame = nullptr);
   /// The same for @p frames of other data (another frame size, e.g. a test sweep across the training
   /// frames). Frames whose mask is empty are left out of the means.
-  ImageMetrics EvaluateOn(const TrainingData& data, const std::vector<int>& frames, double* secondsPerFrame = nullptr);
+  bool EvaluateOn(const TrainingData& data, const std::vector<int>& frames, ImageMetrics& metrics, std::string* error,
+    double* secondsPerFrame = nullptr);
   /// Intensities in [0, 1] of the field rendered at the pose of frame @p frame of @p data, at the render
   /// filters' cutoff whatever the training cutoff (the images a user gets), into @p image ([H, W] of
-  /// @p data).
-  void RenderFrame(const TrainingData& data, int frame, float* image);
+  /// @p data). Returns false with @p error for a pose the renderer rejects.
+  bool RenderFrame(const TrainingData& data, int frame, float* image, std::string* error);
 
-  /// Remove Gaussians whose removal changes no training pixel by more than FinalPruneTolerance.
-  std::int64_t FinalPrune();
+  /// Remove Gaussians whose removal changes no training pixel by more than FinalPruneTolerance;
+  /// returns how many (-1 with @p error when the engine fails).
+  std::int64_t FinalPrune(std::string* error);
 
-  const GaussianField& GetField() const { return this->Field; }
+  /// The current field (pulled from the engine when steps ran since the last pull).
+  const GaussianField& GetField() const;
+  /// The whole training state, pulled likewise.
+  const TrainingState& GetState() const;
   double GetGamma() const { return this->Gamma; }
   /// Mean in-plane pixel spacing of the training frames, mm.
   double GetPixelSpacing() const { return this->PixelSpacing; }
   const TrainerReport& GetReport() const { return this->Report; }
-  int GetIteration() const { return this->Iteration; }
-  const TrainingData& GetData() const { return this->Data; }
-  SliceGeometry Slice(int frame) const;
+  int GetIteration() const { return this->State.Iteration; }
+  const TrainingData& GetData() const { return *this->Data; }
+  const TrainingEngine& GetEngine() const { return *this->Engine; }
+  SliceGeometry Slice(int frame) const { return this->Data->Slice(frame); }
   RenderOptions Options() const;
 
 private:
-  /// @p total seeds, drawn from the Harris response / uniformly (the ablation).
-  void InitializeHarris(std::int64_t total, std::mt19937_64& rng);
-  void InitializeRandom(std::int64_t total, std::mt19937_64& rng);
-  void FitReflectivityScale();
-  void DensifyAndPrune();
-  double ValidationLoss();
+  /// @p total seeds, drawn from the Harris response / uniformly (the ablation), into @p field.
+  void InitializeHarris(std::int64_t total, std::mt19937_64& rng, GaussianField& field);
+  void InitializeRandom(std::int64_t total, std::mt19937_64& rng, GaussianField& field);
+  bool FitReflectivityScale(std::string* error);
+  bool DensifyAndPrune(std::string* error);
+  bool ValidationLoss(double& loss, std::string* error);
   double MeanLearningRateAt(int iteration) const;
-  void ResizeState(std::int64_t n);
+  /// The host state becomes the engine's (a no-op when nothing changed since the last pull).
+  bool PullState(std::string* error) const;
+  /// The engine takes the host state.
+  bool PushState(std::string* error);
 
-  TrainingData Data;
+  std::unique_ptr<TrainingData> Data; // on the heap: the engine keeps a pointer to it
   TrainerSettings Settings;
-  std::unique_ptr<Renderer> Backend;
-  GaussianField Field;
+  std::unique_ptr<TrainingEngine> Engine;
+  mutable TrainingState State;  // host copy, current when HostCurrent
+  mutable bool HostCurrent = true;
   double Gamma = 1;
   double PixelSpacing = 1; // mean in-plane pixel spacing of the training frames, mm
-  // Adam state, same layout as the field
-  GaussianField AdamM, AdamV;
-  int Iteration = 0;
-  double LearningRateScale = 1; // halved on every roll-back
-  std::mt19937_64 Random;
-  // EA-D accumulators since the last densification
-  std::vector<float> Attribution;
-  std::vector<int> SeenCount;
-  bool Growing = true;
-  double BestValidationLoss = -1;
-  int StalledGrowthSteps = 0;
-  // Last known-good field for roll-back
-  GaussianField Snapshot, SnapshotM, SnapshotV;
   TrainerReport Report;
-  // Scratch
-  std::vector<float> S, I, LossGradient, Gradients;
-  ImageLossWorkspace LossWorkspace;
+  std::vector<float> S; // scratch for RenderFrame
 };
 
 /**

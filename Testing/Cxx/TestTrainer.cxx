@@ -116,7 +116,9 @@ double HeldOutPsnr(const Trainer& trainer, const std::vector<int>& heldOut)
   for (int k : heldOut)
   {
     const SliceGeometry g = trainer.Slice(k);
-    renderer->Forward(trainer.GetField().View(), &g, 1, trainer.Options(), S.data(), I.data(), nullptr, nullptr);
+    std::string error;
+    EXPECT_TRUE(renderer->Forward(trainer.GetField().View(), &g, 1, trainer.Options(), S.data(), I.data(), nullptr, &error))
+      << error;
     total += Psnr(I.data(), &trainer.GetData().Frames[std::size_t(W) * H * k], W * H);
   }
   return total / heldOut.size();
@@ -355,78 +357,182 @@ TEST(Trainer, ResumingFromACheckpointGivesTheSameField)
   EXPECT_NE(error.find("bad magic"), std::string::npos) << error;
 }
 
-namespace
+TEST(Trainer, CheckpointHoldsTheWholeTrainingState)
 {
-/// The parts of a checkpoint file (format in bigusTrainer.cxx) that say which Gaussian is which and
-/// what EA-D has accumulated for it.
-struct CheckpointScores
-{
-  std::vector<float> Means, Attribution;
-  std::vector<std::int32_t> SeenCount;
-};
-
-bool ReadCheckpointScores(const std::string& file, CheckpointScores& out)
-{
-  std::ifstream in(file, std::ios::binary);
-  in.seekg(8 + 4 + 8 + 8 + 4 + 8 + 4 + 4); // magic to rolled-back steps
-  std::uint32_t textLength = 0;
-  in.read(reinterpret_cast<char*>(&textLength), sizeof(textLength));
-  in.seekg(textLength, std::ios::cur);
-  std::int64_t n = 0;
-  in.read(reinterpret_cast<char*>(&n), sizeof(n));
-  out.Means.resize(3 * n);
-  in.read(reinterpret_cast<char*>(out.Means.data()), 3 * n * sizeof(float));
-  in.seekg((8 * n + 2 * 11 * n) * sizeof(float), std::ios::cur); // rest of the field, Adam moments
-  out.Attribution.resize(n);
-  out.SeenCount.resize(n);
-  in.read(reinterpret_cast<char*>(out.Attribution.data()), n * sizeof(float));
-  in.read(reinterpret_cast<char*>(out.SeenCount.data()), n * sizeof(std::int32_t));
-  return static_cast<bool>(in);
-}
-}
-
-TEST(Trainer, FinalPruneKeepsTheDensificationScoresWithTheirGaussians)
-{
-  // A run that goes on after a final prune (the benchmark stops and evaluates at time marks) must
-  // densify and prune by the scores of the Gaussians that remain: compare the checkpoint written just
-  // before the prune with one written just after it.
+  // Save and Load are inverse: every member of the state survives the file, bit for bit, and a
+  // truncated file is refused without touching the state it was read into.
   std::vector<int> heldOut;
   const TrainingData data = SyntheticSweep(KnownField(200, 7), 0.5, heldOut);
-  const std::string before = std::string(BIGUS_TEST_OUTPUT) + "/before-prune.ckpt";
-  const std::string after = std::string(BIGUS_TEST_OUTPUT) + "/after-prune.ckpt";
-  TrainerSettings s = ShortSettings();
-  s.CheckpointFile = before;
-  s.CheckpointInterval = 150; // after the densification at 100, with scores accumulated since
-  s.FinalPruneTolerance = 0.02; // prunes a good share of this small field
-  Trainer trainer(data, s);
+  Trainer trainer(data, ShortSettings());
   std::string error;
   ASSERT_TRUE(trainer.Initialize(&error)) << error;
-  ASSERT_TRUE(trainer.Run(nullptr, [&]() { return trainer.GetIteration() >= 150; }, &error)) << error;
-  ASSERT_TRUE(trainer.SaveCheckpoint(after, &error)) << error;
+  ASSERT_TRUE(trainer.Train(nullptr, [&]() { return trainer.GetIteration() >= 150; }, &error)) << error;
+  const std::string file = std::string(BIGUS_TEST_OUTPUT) + "/state.ckpt";
+  ASSERT_TRUE(trainer.SaveCheckpoint(file, &error)) << error;
+  const TrainingState& saved = trainer.GetState();
+  ASSERT_GT(std::count_if(saved.Gaussians.SeenCount.begin(), saved.Gaussians.SeenCount.end(), [](int c) { return c > 0; }), 0)
+    << "the accumulators must hold something for the test to mean anything";
 
-  CheckpointScores a, b;
-  ASSERT_TRUE(ReadCheckpointScores(before, a));
-  ASSERT_TRUE(ReadCheckpointScores(after, b));
-  const std::size_t na = a.SeenCount.size(), nb = b.SeenCount.size();
-  ASSERT_EQ(trainer.GetReport().PrunedAtEnd, static_cast<std::int64_t>(na - nb));
-  ASSERT_GT(trainer.GetReport().PrunedAtEnd, 0) << "the test needs a prune";
-  ASSERT_GT(nb, 0u);
-  // The prune keeps the order: walk both lists and match each remaining Gaussian by its mean.
-  std::size_t i = 0, scored = 0;
-  for (std::size_t j = 0; j < nb; ++j, ++i)
+  TrainingState loaded;
+  double gamma = 0;
+  ASSERT_TRUE(loaded.Load(file, gamma, &error)) << error;
+  EXPECT_EQ(gamma, trainer.GetGamma());
+  EXPECT_EQ(loaded.Iteration, saved.Iteration);
+  EXPECT_EQ(loaded.LearningRateScale, saved.LearningRateScale);
+  EXPECT_EQ(loaded.Growing, saved.Growing);
+  EXPECT_EQ(loaded.BestValidationLoss, saved.BestValidationLoss);
+  EXPECT_EQ(loaded.StalledGrowthSteps, saved.StalledGrowthSteps);
+  EXPECT_EQ(loaded.RolledBackSteps, saved.RolledBackSteps);
+  EXPECT_EQ(loaded.LossHistory, saved.LossHistory);
+  EXPECT_TRUE(loaded.Random == saved.Random);
+  for (const auto& pair : { std::make_pair(&loaded.Gaussians.Field, &saved.Gaussians.Field),
+         std::make_pair(&loaded.Gaussians.FirstMoment, &saved.Gaussians.FirstMoment),
+         std::make_pair(&loaded.Gaussians.SecondMoment, &saved.Gaussians.SecondMoment) })
   {
-    while (i < na && !std::equal(&a.Means[3 * i], &a.Means[3 * i] + 3, &b.Means[3 * j]))
-    {
-      ++i;
-    }
-    ASSERT_LT(i, na) << "Gaussian " << j << " after the prune is not one from before it";
-    EXPECT_EQ(b.Attribution[j], a.Attribution[i]) << "Gaussian " << j << " (was " << i << ")";
-    EXPECT_EQ(b.SeenCount[j], a.SeenCount[i]) << "Gaussian " << j << " (was " << i << ")";
-    scored += a.SeenCount[i] > 0;
+    ExpectSameField(*pair.first, *pair.second);
   }
-  EXPECT_GT(scored, nb / 2) << "most remaining Gaussians were seen since the last densification";
-  std::remove(before.c_str());
-  std::remove(after.c_str());
+  EXPECT_EQ(loaded.Gaussians.Attribution, saved.Gaussians.Attribution);
+  EXPECT_EQ(loaded.Gaussians.SeenCount, saved.Gaussians.SeenCount);
+
+  // Truncated: refused, and the state read into stays as it was.
+  std::ifstream in(file, std::ios::binary);
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::ofstream(file + ".cut", std::ios::binary) << bytes.substr(0, bytes.size() / 2);
+  const int before = loaded.Iteration;
+  EXPECT_FALSE(loaded.Load(file + ".cut", gamma, &error));
+  EXPECT_NE(error.find("truncated"), std::string::npos) << error;
+  EXPECT_EQ(loaded.Iteration, before);
+  std::remove(file.c_str());
+  std::remove((file + ".cut").c_str());
+}
+
+TEST(Trainer, CompactingTheStateKeepsEachGaussiansMomentsAndScoresWithIt)
+{
+  // Pruning (densification's and the final one) compacts the field, its Adam moments and the EA-D
+  // accumulators together: tag every entry with its Gaussian's index and check the survivors.
+  OptimizerState state;
+  const int n = 10;
+  state.Field.Resize(n);
+  state.ResizeToField();
+  for (int i = 0; i < n; ++i)
+  {
+    state.Field.Means[3 * i] = static_cast<float>(i);
+    state.FirstMoment.Reflectivities[i] = static_cast<float>(10 * i);
+    state.SecondMoment.Quaternions[4 * i + 3] = static_cast<float>(100 * i);
+    state.Attribution[i] = static_cast<float>(1000 * i);
+    state.SeenCount[i] = 7 * i;
+  }
+  std::vector<unsigned char> keep(n, 0);
+  keep[1] = keep[4] = keep[9] = 1;
+  state.Compact(keep);
+  ASSERT_EQ(state.Count(), 3);
+  const int kept[3] = { 1, 4, 9 };
+  for (int j = 0; j < 3; ++j)
+  {
+    EXPECT_EQ(state.Field.Means[3 * j], kept[j]);
+    EXPECT_EQ(state.FirstMoment.Reflectivities[j], 10 * kept[j]);
+    EXPECT_EQ(state.SecondMoment.Quaternions[4 * j + 3], 100 * kept[j]);
+    EXPECT_EQ(state.Attribution[j], 1000 * kept[j]);
+    EXPECT_EQ(state.SeenCount[j], 7 * kept[j]);
+  }
+}
+
+TEST(Trainer, TrainingInStagesEqualsOneRunAndOnlyFinishPrunes)
+{
+  // Train() stops at a condition without pruning, so a run trained in stages (the benchmark's time
+  // marks) is the run trained at once, and Finish() alone removes Gaussians.
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(200, 6), 0.5, heldOut);
+  TrainerSettings s = ShortSettings();
+  s.FinalPruneTolerance = 0.02; // prunes a good share of this small field
+  std::string error;
+  Trainer once(data, s);
+  ASSERT_TRUE(once.Initialize(&error)) << error;
+  ASSERT_TRUE(once.Train(nullptr, nullptr, &error)) << error;
+  Trainer staged(data, s);
+  ASSERT_TRUE(staged.Initialize(&error)) << error;
+  for (int stop : { 70, 150, 230 })
+  {
+    ASSERT_TRUE(staged.Train(nullptr, [&]() { return staged.GetIteration() >= stop; }, &error)) << error;
+    EXPECT_EQ(staged.GetReport().PrunedAtEnd, 0);
+  }
+  ASSERT_TRUE(staged.Train(nullptr, nullptr, &error)) << error;
+  ExpectSameField(once.GetField(), staged.GetField());
+  const std::int64_t before = staged.GetField().Count();
+  ASSERT_TRUE(staged.Finish(&error)) << error;
+  EXPECT_GT(staged.GetReport().PrunedAtEnd, 0);
+  EXPECT_EQ(staged.GetField().Count(), before - staged.GetReport().PrunedAtEnd);
+}
+
+TEST(Trainer, APoseTheRendererRejectsFailsTheRunWithItsMessage)
+{
+  // A sweep read with a looser shear limit than the renderer's (the reader's MaximumShearAngle at 10
+  // degrees) used to train on the previous frame's buffers; now Initialize names the frame.
+  std::vector<int> heldOut;
+  TrainingData data = SyntheticSweep(KnownField(100, 5), 0.5, heldOut);
+  const int bad = data.TrainFrames[3];
+  const double shear = 8.0 * M_PI / 180.0; // the second image axis tilted 8 degrees towards the first
+  std::array<double, 16>& m = data.Poses[bad];
+  for (int r = 0; r < 3; ++r)
+  {
+    m[4 * r + 1] = std::cos(shear) * m[4 * r + 1] + std::sin(shear) * m[4 * r];
+  }
+  Trainer trainer(data, ShortSettings());
+  std::string error;
+  EXPECT_FALSE(trainer.Initialize(&error));
+  EXPECT_NE(error.find("training frame " + std::to_string(bad)), std::string::npos) << error;
+  EXPECT_NE(error.find("shear"), std::string::npos) << error;
+
+  // The renderer's own refusal reaches Step's caller too (a field pushed past Initialize's check).
+  TrainingData alone = data;
+  alone.TrainFrames = { bad };
+  Trainer direct(alone, ShortSettings());
+  ASSERT_TRUE(direct.SetField(KnownField(50, 2), &error)) << error;
+  double loss = 0;
+  EXPECT_EQ(direct.Step(&loss, &error), StepStatus::Failed);
+  EXPECT_NE(error.find("shear"), std::string::npos) << error;
+}
+
+TEST(Trainer, AnUnavailableBackendIsAClearError)
+{
+  std::string error;
+  EXPECT_EQ(CreateTrainingEngine("no-such-backend", &error), nullptr);
+  EXPECT_NE(error.find("no-such-backend"), std::string::npos) << error;
+  EXPECT_NE(error.find("cpu"), std::string::npos) << "the message lists what is available: " << error;
+  auto cpu = CreateTrainingEngine("cpu", &error);
+  ASSERT_NE(cpu, nullptr) << error;
+  EXPECT_STREQ(cpu->GetName(), "cpu");
+  auto automatic = CreateTrainingEngine("auto", &error);
+  ASSERT_NE(automatic, nullptr) << error;
+
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(150, 9), 0.5, heldOut);
+  vtkNew<vtkImageData> sequence;
+  sequence->SetDimensions(W, H, data.Count());
+  sequence->AllocateScalars(VTK_FLOAT, 1);
+  std::copy(data.Frames.begin(), data.Frames.end(), static_cast<float*>(sequence->GetScalarPointer()));
+  vtkNew<vtkDoubleArray> poses;
+  poses->SetName("ImageToReference");
+  poses->SetNumberOfComponents(16);
+  for (const auto& p : data.Poses)
+  {
+    poses->InsertNextTuple(p.data());
+  }
+  sequence->GetFieldData()->AddArray(poses);
+  vtkNew<vtkGaussianFieldTrainer> filter;
+  filter->SetInputData(sequence);
+  filter->SetIterations(10);
+  filter->SetBackend("no-such-backend");
+  filter->GlobalWarningDisplayOff();
+  filter->Update();
+  EXPECT_EQ(filter->GetOutput()->GetNumberOfPoints(), 0);
+  filter->SetBackend("cpu");
+  filter->Update();
+  EXPECT_GT(filter->GetOutput()->GetNumberOfPoints(), 0);
+  EXPECT_STREQ(filter->GetBackendInUse(), "cpu");
+  vtkAbstractArray* used = filter->GetOutput()->GetFieldData()->GetAbstractArray("Backend");
+  ASSERT_NE(used, nullptr);
+  EXPECT_EQ(used->GetVariantValue(0).ToString(), "cpu");
 }
 
 TEST(Trainer, EveryAblationSwitchRuns)
@@ -452,7 +558,7 @@ TEST(Trainer, EveryAblationSwitchRuns)
     std::string error;
     ASSERT_TRUE(trainer.Initialize(&error)) << names[variant] << ": " << error;
     ASSERT_TRUE(trainer.Run(nullptr, nullptr, &error)) << names[variant] << ": " << error;
-    const std::vector<double>& h = trainer.GetReport().LossHistory;
+    const std::vector<double>& h = trainer.GetState().LossHistory;
     ASSERT_GE(h.size(), 100u) << names[variant];
     double early = 0, late = 0;
     for (int k = 0; k < 20; ++k)
@@ -479,10 +585,11 @@ TEST(Trainer, DivergingStepsAreRolledBackNeverWrittenIntoTheField)
   ASSERT_TRUE(trainer.Initialize(&error));
   for (int k = 0; k < 60; ++k)
   {
-    trainer.Step();
+    double loss = 0;
+    ASSERT_NE(trainer.Step(&loss, &error), StepStatus::Failed) << error;
     ASSERT_TRUE(AllFinite(trainer.GetField())) << "step " << k;
   }
-  EXPECT_GT(trainer.GetReport().RolledBackSteps, 0);
+  EXPECT_GT(trainer.GetState().RolledBackSteps, 0);
 }
 
 namespace
@@ -556,12 +663,13 @@ TEST(Trainer, SpinePhantomShortRunLearnsAndBeatsTheNearestFrameOnHeldOutFrames)
 
   // The masked training loss goes down on average: the mean of the last fifth of the steps is below
   // the mean of the first fifth.
-  const std::size_t fifth = r.LossHistory.size() / 5;
+  const std::vector<double>& losses = trainer.GetState().LossHistory;
+  const std::size_t fifth = losses.size() / 5;
   double first = 0, last = 0;
   for (std::size_t k = 0; k < fifth; ++k)
   {
-    first += r.LossHistory[k] / fifth;
-    last += r.LossHistory[r.LossHistory.size() - 1 - k] / fifth;
+    first += losses[k] / fifth;
+    last += losses[losses.size() - 1 - k] / fifth;
   }
   EXPECT_LT(last, first);
 

@@ -1,0 +1,210 @@
+// The CPU training engine: the step (forward, image loss, backward, Adam) on the host, multi-threaded
+// with vtkSMPTools, over any renderer with host buffers. See bigusTrainingEngine.h.
+#include "bigusTrainingEngine.h"
+
+#include "vtkSMPTools.h"
+
+#include <atomic>
+#include <cmath>
+#include <limits>
+
+namespace bigus
+{
+
+namespace
+{
+constexpr double AdamBeta1 = 0.9;
+constexpr double AdamBeta2 = 0.999;
+constexpr double AdamEpsilon = 1e-12;
+
+class CpuTrainingEngine : public TrainingEngine
+{
+public:
+  explicit CpuTrainingEngine(std::unique_ptr<Renderer> renderer)
+    : Backend(std::move(renderer))
+  {
+  }
+
+  const char* GetName() const override { return this->Backend->GetName(); }
+
+  bool SetData(const TrainingData* data, std::string*) override
+  {
+    this->Data = data;
+    return true;
+  }
+
+  bool Push(const OptimizerState& state, std::string*) override
+  {
+    this->State = state;
+    this->State.ResizeToField();
+    this->Snapshot();
+    return true;
+  }
+
+  bool Pull(OptimizerState& state, std::string*) override
+  {
+    state = this->State;
+    return true;
+  }
+
+  bool PullField(GaussianField& field, std::string*) override
+  {
+    field = this->State.Field;
+    return true;
+  }
+
+  void Snapshot() override
+  {
+    this->Saved = this->State.Field;
+    this->SavedFirst = this->State.FirstMoment;
+    this->SavedSecond = this->State.SecondMoment;
+  }
+
+  void Restore() override
+  {
+    this->State.Field = this->Saved;
+    this->State.FirstMoment = this->SavedFirst;
+    this->State.SecondMoment = this->SavedSecond;
+    this->State.ResizeToField();
+  }
+
+  bool Render(const SliceGeometry* slices, int count, const RenderOptions& options, float* S, float* I,
+    std::string* error) override
+  {
+    return this->Backend->Forward(this->State.Field.View(), slices, count, options, S, I, nullptr, error);
+  }
+
+  StepStatus Step(const StepRequest& request, double* loss, std::string* error) override;
+
+private:
+  /// Adam (Kingma and Ba 2015, algorithm 1) on every Gaussian in one pass that also keeps each
+  /// parameter in its meaningful range (unit quaternions, clamped log-scales); false when a gradient
+  /// or an updated parameter is not finite.
+  bool Adam(const StepRequest& request);
+
+  std::unique_ptr<Renderer> Backend;
+  const TrainingData* Data = nullptr;
+  OptimizerState State;
+  GaussianField Saved, SavedFirst, SavedSecond; // last known-good field and moments
+  // Scratch, kept between steps
+  std::vector<float> S, I, LossGradient, Gradients;
+  ImageLossWorkspace LossWorkspace;
+};
+
+StepStatus CpuTrainingEngine::Step(const StepRequest& request, double* loss, std::string* error)
+{
+  const TrainingData& data = *this->Data;
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
+  const std::int64_t n = this->State.Count();
+  this->S.resize(pixels);
+  this->I.resize(pixels);
+  this->LossGradient.resize(pixels);
+  this->Gradients.assign(11 * n, 0.f); // [N, 3] means, [N, 3] log-scales, [N, 4] quaternions, [N] r
+  FieldGradients grads;
+  grads.Means = this->Gradients.data();
+  grads.LogScales = this->Gradients.data() + 3 * n;
+  grads.Quaternions = this->Gradients.data() + 6 * n;
+  grads.Reflectivities = this->Gradients.data() + 10 * n;
+  grads.Attribution = this->State.Attribution.data();
+  grads.VisibleCount = this->State.SeenCount.data();
+  double total = 0;
+  for (int b = 0; b < request.Count; ++b)
+  {
+    const int f = request.Frames[b];
+    const SliceGeometry slice = data.Slice(f);
+    if (!this->Backend->Forward(this->State.Field.View(), &slice, 1, request.Options, this->S.data(), this->I.data(),
+          nullptr, error))
+    {
+      return StepStatus::Failed;
+    }
+    const ImageLossTerms terms = ComputeImageLoss(this->I.data(), &data.Frames[pixels * f], data.MaskOf(f), data.Width,
+      data.Height, request.Loss, this->LossGradient.data(), false, &this->LossWorkspace);
+    total += terms.Total;
+    if (request.Count > 1)
+    {
+      for (float& g : this->LossGradient)
+      {
+        g /= static_cast<float>(request.Count);
+      }
+    }
+    if (!this->Backend->Backward(this->State.Field.View(), &slice, 1, request.Options, this->S.data(),
+          this->LossGradient.data(), false, grads, nullptr, error))
+    {
+      return StepStatus::Failed;
+    }
+  }
+  *loss = total / request.Count;
+  if (!std::isfinite(*loss))
+  {
+    return StepStatus::NonFinite;
+  }
+  return this->Adam(request) ? StepStatus::Done : StepStatus::NonFinite;
+}
+
+bool CpuTrainingEngine::Adam(const StepRequest& request)
+{
+  const std::int64_t n = this->State.Count();
+  const int t = request.Iteration + 1;
+  const double c1 = 1 - std::pow(AdamBeta1, t), c2 = 1 - std::pow(AdamBeta2, t);
+  const float lo = static_cast<float>(request.MinimumLogScale), hi = static_cast<float>(request.MaximumLogScale);
+  const float* gMeans = this->Gradients.data();
+  const float* gLogScales = gMeans + 3 * n;
+  const float* gQuaternions = gMeans + 6 * n;
+  const float* gReflectivities = gMeans + 10 * n;
+  GaussianField& F = this->State.Field;
+  GaussianField& M = this->State.FirstMoment;
+  GaussianField& V = this->State.SecondMoment;
+  std::atomic<bool> finite(true);
+  vtkSMPTools::For(0, n, 4096, [&](std::int64_t begin, std::int64_t end) {
+    bool ok = true;
+    auto adam = [&](std::vector<float>& p, std::vector<float>& m, std::vector<float>& v, const float* g,
+                  std::int64_t first, int count, double lr) {
+      for (std::int64_t k = first; k < first + count; ++k)
+      {
+        const double gk = g[k];
+        ok = ok && std::isfinite(g[k]);
+        m[k] = static_cast<float>(AdamBeta1 * m[k] + (1 - AdamBeta1) * gk);
+        v[k] = static_cast<float>(AdamBeta2 * v[k] + (1 - AdamBeta2) * gk * gk);
+        p[k] -= static_cast<float>(lr * (m[k] / c1) / (std::sqrt(v[k] / c2) + AdamEpsilon));
+      }
+    };
+    for (std::int64_t i = begin; i < end; ++i)
+    {
+      adam(F.Means, M.Means, V.Means, gMeans, 3 * i, 3, request.MeanRate);
+      adam(F.LogScales, M.LogScales, V.LogScales, gLogScales, 3 * i, 3, request.LogScaleRate);
+      adam(F.Quaternions, M.Quaternions, V.Quaternions, gQuaternions, 4 * i, 4, request.QuaternionRate);
+      adam(F.Reflectivities, M.Reflectivities, V.Reflectivities, gReflectivities, i, 1, request.ReflectivityRate);
+      float* q = &F.Quaternions[4 * i];
+      const float norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+      if (norm > 1e-12f)
+      {
+        for (int k = 0; k < 4; ++k)
+        {
+          q[k] /= norm;
+        }
+      }
+      float* l = &F.LogScales[3 * i];
+      const float* m = &F.Means[3 * i];
+      for (int k = 0; k < 3; ++k)
+      {
+        l[k] = std::min(hi, std::max(lo, l[k]));
+        ok = ok && std::isfinite(m[k]) && std::isfinite(l[k]);
+      }
+      ok = ok && std::isfinite(q[0]) && std::isfinite(q[1]) && std::isfinite(q[2]) && std::isfinite(q[3]) &&
+        std::isfinite(F.Reflectivities[i]);
+    }
+    if (!ok)
+    {
+      finite.store(false, std::memory_order_relaxed);
+    }
+  });
+  return finite.load();
+}
+}
+
+std::unique_ptr<TrainingEngine> CreateCpuTrainingEngine(std::unique_ptr<Renderer> renderer)
+{
+  return std::unique_ptr<TrainingEngine>(new CpuTrainingEngine(std::move(renderer)));
+}
+
+} // namespace bigus

@@ -1,0 +1,270 @@
+// The training state, its checkpoint file, and the engine factory (see bigusTrainingEngine.h).
+#include "bigusTrainingEngine.h"
+
+#include "bigusBackend.h"
+
+#include <algorithm>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+
+namespace bigus
+{
+
+TrainingEngine::~TrainingEngine() = default;
+
+SliceGeometry TrainingData::Slice(int frame) const
+{
+  SliceGeometry g;
+  std::copy(this->Poses[frame].begin(), this->Poses[frame].end(), g.ImageToReference);
+  g.Width = this->Width;
+  g.Height = this->Height;
+  return g;
+}
+
+// ------------------------------------------------------------------------------------------------
+
+namespace
+{
+/// Keeps the groups of @p stride entries of @p v (group i = Gaussian i) whose flag in @p keep is
+/// non-zero, in order.
+template <typename T>
+void CompactVector(std::vector<T>& v, const std::vector<unsigned char>& keep, std::size_t stride = 1)
+{
+  std::size_t out = 0;
+  for (std::size_t i = 0; i < v.size() / stride; ++i)
+  {
+    if (keep[i])
+    {
+      std::copy_n(&v[stride * i], stride, &v[stride * out++]);
+    }
+  }
+  v.resize(stride * out);
+}
+}
+
+FieldView GaussianField::View() const
+{
+  FieldView v;
+  v.Count = this->Count();
+  v.Means = this->Means.data();
+  v.LogScales = this->LogScales.data();
+  v.Quaternions = this->Quaternions.data();
+  v.Reflectivities = this->Reflectivities.data();
+  return v;
+}
+
+void GaussianField::Resize(std::int64_t n)
+{
+  this->Means.resize(3 * n, 0.f);
+  this->LogScales.resize(3 * n, 0.f);
+  this->Quaternions.resize(4 * n, 0.f);
+  this->Reflectivities.resize(n, 0.f);
+}
+
+void GaussianField::Compact(const std::vector<unsigned char>& keep)
+{
+  CompactVector(this->Means, keep, 3);
+  CompactVector(this->LogScales, keep, 3);
+  CompactVector(this->Quaternions, keep, 4);
+  CompactVector(this->Reflectivities, keep);
+}
+
+void GaussianField::CopyGaussian(std::int64_t from, std::int64_t to)
+{
+  std::copy_n(&this->Means[3 * from], 3, &this->Means[3 * to]);
+  std::copy_n(&this->LogScales[3 * from], 3, &this->LogScales[3 * to]);
+  std::copy_n(&this->Quaternions[4 * from], 4, &this->Quaternions[4 * to]);
+  this->Reflectivities[to] = this->Reflectivities[from];
+}
+
+void GaussianField::ZeroGaussian(std::int64_t i)
+{
+  std::fill_n(&this->Means[3 * i], 3, 0.f);
+  std::fill_n(&this->LogScales[3 * i], 3, 0.f);
+  std::fill_n(&this->Quaternions[4 * i], 4, 0.f);
+  this->Reflectivities[i] = 0.f;
+}
+
+void OptimizerState::ResizeToField()
+{
+  const std::int64_t n = this->Field.Count();
+  this->FirstMoment.Resize(n);
+  this->SecondMoment.Resize(n);
+  this->Attribution.resize(n, 0.f);
+  this->SeenCount.resize(n, 0);
+}
+
+void OptimizerState::Compact(const std::vector<unsigned char>& keep)
+{
+  this->Field.Compact(keep);
+  this->FirstMoment.Compact(keep);
+  this->SecondMoment.Compact(keep);
+  CompactVector(this->Attribution, keep);
+  CompactVector(this->SeenCount, keep);
+}
+
+// ------------------------------------------------------------------------------------------------
+// Checkpoint file (format in bigusTrainingEngine.h).
+
+namespace
+{
+template <typename T>
+void Put(std::ostream& out, const T& value)
+{
+  out.write(reinterpret_cast<const char*>(&value), sizeof(T));
+}
+template <typename T>
+void PutVector(std::ostream& out, const std::vector<T>& v)
+{
+  out.write(reinterpret_cast<const char*>(v.data()), static_cast<std::streamsize>(v.size() * sizeof(T)));
+}
+template <typename T>
+bool Get(std::istream& in, T& value)
+{
+  return static_cast<bool>(in.read(reinterpret_cast<char*>(&value), sizeof(T)));
+}
+template <typename T>
+bool GetVector(std::istream& in, std::vector<T>& v, std::size_t n)
+{
+  v.resize(n);
+  return static_cast<bool>(in.read(reinterpret_cast<char*>(v.data()), static_cast<std::streamsize>(n * sizeof(T))));
+}
+void WriteField(std::ostream& out, const GaussianField& f)
+{
+  PutVector(out, f.Means);
+  PutVector(out, f.LogScales);
+  PutVector(out, f.Quaternions);
+  PutVector(out, f.Reflectivities);
+}
+bool ReadField(std::istream& in, GaussianField& f, std::int64_t n)
+{
+  return GetVector(in, f.Means, 3 * n) && GetVector(in, f.LogScales, 3 * n) && GetVector(in, f.Quaternions, 4 * n) &&
+    GetVector(in, f.Reflectivities, n);
+}
+}
+
+bool TrainingState::Save(const std::string& file, double gamma, std::string* error) const
+{
+  const std::string temporary = file + ".tmp";
+  {
+    std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
+    out.write("BIGUSCK1", 8);
+    Put(out, std::int32_t(this->Iteration));
+    Put(out, this->LearningRateScale);
+    Put(out, gamma);
+    Put(out, std::int32_t(this->Growing));
+    Put(out, this->BestValidationLoss);
+    Put(out, std::int32_t(this->StalledGrowthSteps));
+    Put(out, std::int32_t(this->RolledBackSteps));
+    std::ostringstream state;
+    state << this->Random;
+    const std::string text = state.str();
+    Put(out, std::uint32_t(text.size()));
+    out.write(text.data(), static_cast<std::streamsize>(text.size()));
+    const OptimizerState& g = this->Gaussians;
+    Put(out, std::int64_t(g.Count()));
+    WriteField(out, g.Field);
+    WriteField(out, g.FirstMoment);
+    WriteField(out, g.SecondMoment);
+    PutVector(out, g.Attribution);
+    PutVector(out, g.SeenCount);
+    Put(out, std::int64_t(this->LossHistory.size()));
+    PutVector(out, this->LossHistory);
+    out.close();
+    if (!out)
+    {
+      std::remove(temporary.c_str());
+      if (error)
+      {
+        *error = file + ": cannot write the checkpoint";
+      }
+      return false;
+    }
+  }
+  if (std::rename(temporary.c_str(), file.c_str()) != 0)
+  {
+    std::remove(temporary.c_str());
+    if (error)
+    {
+      *error = file + ": cannot replace the checkpoint";
+    }
+    return false;
+  }
+  return true;
+}
+
+bool TrainingState::Load(const std::string& file, double& gamma, std::string* error)
+{
+  std::ifstream in(file, std::ios::binary);
+  auto fail = [&](const std::string& what) {
+    if (error)
+    {
+      *error = file + ": " + what;
+    }
+    return false;
+  };
+  if (!in)
+  {
+    return fail("cannot open the checkpoint");
+  }
+  char magic[8];
+  if (!in.read(magic, 8) || std::memcmp(magic, "BIGUSCK1", 8) != 0)
+  {
+    return fail("not a BIGUS checkpoint (bad magic)");
+  }
+  TrainingState s;
+  std::int32_t iteration, growing, stalled, rolled;
+  double storedGamma;
+  std::uint32_t length;
+  if (!Get(in, iteration) || !Get(in, s.LearningRateScale) || !Get(in, storedGamma) || !Get(in, growing) ||
+    !Get(in, s.BestValidationLoss) || !Get(in, stalled) || !Get(in, rolled) || !Get(in, length) ||
+    length > (1u << 20))
+  {
+    return fail("truncated header");
+  }
+  std::string text(length, '\0');
+  std::int64_t n = 0;
+  if (!in.read(&text[0], length) || !Get(in, n) || n < 0 || n > (std::int64_t(1) << 32))
+  {
+    return fail("truncated header");
+  }
+  OptimizerState& g = s.Gaussians;
+  std::int64_t history = 0;
+  if (!ReadField(in, g.Field, n) || !ReadField(in, g.FirstMoment, n) || !ReadField(in, g.SecondMoment, n) ||
+    !GetVector(in, g.Attribution, n) || !GetVector(in, g.SeenCount, n) || !Get(in, history) || history < 0 ||
+    history > (std::int64_t(1) << 32) || !GetVector(in, s.LossHistory, static_cast<std::size_t>(history)))
+  {
+    return fail("truncated data (" + std::to_string(n) + " Gaussians announced)");
+  }
+  std::istringstream state(text);
+  state >> s.Random;
+  if (!state)
+  {
+    return fail("corrupt random state");
+  }
+  s.Iteration = iteration;
+  s.Growing = growing != 0;
+  s.StalledGrowthSteps = stalled;
+  s.RolledBackSteps = rolled;
+  *this = std::move(s);
+  gamma = storedGamma;
+  return true;
+}
+
+// ------------------------------------------------------------------------------------------------
+
+std::unique_ptr<TrainingEngine> CreateTrainingEngine(const std::string& name, std::string* error, std::string* notice)
+{
+  // Every backend's renderer comes from the one registry. A backend without an engine of its own
+  // (none has one yet) trains through the CPU engine's host-side step over its renderer.
+  std::unique_ptr<Renderer> renderer = CreateRenderer(name, error, notice);
+  if (!renderer)
+  {
+    return nullptr;
+  }
+  return CreateCpuTrainingEngine(std::move(renderer));
+}
+
+} // namespace bigus

@@ -1,0 +1,173 @@
+/**
+ * @file bigusTrainingEngine.h
+ * @brief The training state and the one interface a training step implements (DESIGN section 5).
+ *
+ * The trainer (bigus::Trainer) owns the schedule: which frames a step sees, learning rates,
+ * densification, pruning, checkpoints, roll-back. A TrainingEngine owns the per-Gaussian state while
+ * steps run (on the host for the CPU engine, on a device for a GPU engine, across ranks for a
+ * distributed one) and does the step itself: forward, loss, backward and the Adam update for a batch
+ * of frames. Between steps the trainer pulls the state to the host (Pull), edits it there
+ * (densification, pruning, checkpoints) and pushes it back (Push). Every engine runs the same training
+ * loop, so a new backend implements this interface and nothing else.
+ */
+#ifndef bigusTrainingEngine_h
+#define bigusTrainingEngine_h
+
+#include "bigusImageLoss.h"
+#include "bigusRenderer.h"
+#include "bigusTrainingModule.h" // For export macro
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <random>
+#include <string>
+#include <vector>
+
+namespace bigus
+{
+
+/// The frames a trainer learns from. Intensities in [0, 1].
+struct TrainingData
+{
+  int Width = 0, Height = 0;
+  std::vector<float> Frames;                 ///< [N, H, W]
+  std::vector<std::array<double, 16>> Poses; ///< [N] ImageToReference, row-major
+  std::vector<unsigned char> Mask; ///< [H, W] fan mask shared by every frame, or [N, H, W] per frame (1 = imaged)
+  std::vector<int> TrainFrames;    ///< indices into Frames used for training
+  int Count() const { return static_cast<int>(this->Poses.size()); }
+  /// The [H, W] mask of frame @p frame (the shared one, or that frame's own).
+  const unsigned char* MaskOf(int frame) const
+  {
+    const std::size_t pixels = std::size_t(this->Width) * this->Height;
+    return this->Mask.data() + (this->Mask.size() == pixels ? 0 : pixels * frame);
+  }
+  /// The slice of frame @p frame: its pose and the frames' pixel grid.
+  SliceGeometry Slice(int frame) const;
+};
+
+/// A Gaussian field's parameters (float, structure of arrays).
+struct BIGUSTRAINING_EXPORT GaussianField
+{
+  std::vector<float> Means, LogScales, Quaternions, Reflectivities; ///< [N,3] mm, [N,3], [N,4], [N]
+  std::int64_t Count() const { return static_cast<std::int64_t>(this->Reflectivities.size()); }
+  FieldView View() const;
+  void Resize(std::int64_t n);
+  /// Keeps the Gaussians whose flag is non-zero, in order.
+  void Compact(const std::vector<unsigned char>& keep);
+  /// Gaussian @p to takes every parameter of Gaussian @p from.
+  void CopyGaussian(std::int64_t from, std::int64_t to);
+  /// Sets every parameter of Gaussian @p i to 0 (optimiser moments).
+  void ZeroGaussian(std::int64_t i);
+};
+
+/// Everything a step reads and writes per Gaussian: the field, its Adam moments and the EA-D
+/// accumulators since the last densification. Every vector has one entry (group) per Gaussian.
+struct BIGUSTRAINING_EXPORT OptimizerState
+{
+  GaussianField Field;
+  GaussianField FirstMoment, SecondMoment; ///< Adam m and v, laid out as the field
+  std::vector<float> Attribution;          ///< [N] E_i = sum_p |dL/dS(p)| w_i(p) (DESIGN section 4)
+  std::vector<int> SeenCount;              ///< [N] training slices whose pixels the Gaussian touched
+  std::int64_t Count() const { return this->Field.Count(); }
+  /// Moments and accumulators sized to the field; new entries are zero.
+  void ResizeToField();
+  /// Keeps the Gaussians whose flag is non-zero, with their moments and accumulators, in order.
+  void Compact(const std::vector<unsigned char>& keep);
+};
+
+/// The whole state of a training run: what a checkpoint stores and a resumed run continues from.
+struct BIGUSTRAINING_EXPORT TrainingState
+{
+  OptimizerState Gaussians;
+  // Schedule
+  int Iteration = 0;
+  double LearningRateScale = 1; ///< halved on every roll-back
+  bool Growing = true;
+  double BestValidationLoss = -1;
+  int StalledGrowthSteps = 0;
+  int RolledBackSteps = 0;
+  std::vector<double> LossHistory; ///< loss of every completed step
+  std::mt19937_64 Random;          ///< draws the frames of each step
+
+  /**
+   * Writes the state to @p file (written to FILE.tmp, then renamed; the previous file survives a
+   * failure). Little-endian binary, "BIGUSCK1" | int32 iteration | float64 learning-rate scale |
+   * float64 gamma | int32 growing | float64 best validation loss | int32 stalled growth steps |
+   * int32 rolled-back steps | uint32 length + text of the random engine state | int64 N | field, Adam
+   * m, Adam v: each [N,3] means, [N,3] log-scales, [N,4] quaternions, [N] reflectivities as float32 |
+   * [N] float32 attribution | [N] int32 seen counts | int64 H + H float64 loss history.
+   * Returns false with @p error naming the file.
+   */
+  bool Save(const std::string& file, double gamma, std::string* error) const;
+  /// Reads a state written by Save; on failure (@p error names the file and what is wrong: bad magic,
+  /// truncated header or data, corrupt random state) this state and @p gamma are unchanged.
+  bool Load(const std::string& file, double& gamma, std::string* error);
+};
+
+/// One training step's work.
+struct StepRequest
+{
+  const int* Frames = nullptr; ///< [Count] indices into the engine's TrainingData.Frames
+  int Count = 0;               ///< batch size; the loss and its gradient are the batch means
+  int Iteration = 0;           ///< Adam's bias correction uses t = Iteration + 1
+  double MeanRate = 0, LogScaleRate = 0, QuaternionRate = 0, ReflectivityRate = 0; ///< Adam learning rates
+  double MinimumLogScale = 0, MaximumLogScale = 0; ///< log-scales are clamped to this range after the update
+  RenderOptions Options;                           ///< rendering while training (cutoff, gamma, beam)
+  ImageLossWeights Loss;
+};
+
+enum class StepStatus
+{
+  Done,      ///< the state took the step
+  NonFinite, ///< the loss, a gradient or an updated parameter was NaN or Inf: call Restore()
+  Failed     ///< the engine could not run (a rejected pose, device error): see the error text
+};
+
+class BIGUSTRAINING_EXPORT TrainingEngine
+{
+public:
+  virtual ~TrainingEngine();
+  /// The rendering backend the engine runs on ("cpu", "cuda").
+  virtual const char* GetName() const = 0;
+
+  /// The training frames, poses and masks; kept (by pointer) for the engine's lifetime.
+  virtual bool SetData(const TrainingData* data, std::string* error) = 0;
+  /// The engine's state becomes @p state (initial field, after densification or pruning, a loaded
+  /// checkpoint); this is also the state Restore() returns to until the next Snapshot().
+  virtual bool Push(const OptimizerState& state, std::string* error) = 0;
+  /// Copies the engine's state into @p state.
+  virtual bool Pull(OptimizerState& state, std::string* error) = 0;
+  /// The field only, for rendering or writing on the host.
+  virtual bool PullField(GaussianField& field, std::string* error) = 0;
+
+  /**
+   * One step: renders each frame of @p request, the image loss inside its mask, the gradients (and
+   * the EA-D accumulators, which keep accumulating even when the step is not taken), then Adam.
+   * @p loss receives the batch's mean loss (NaN when not finite).
+   */
+  virtual StepStatus Step(const StepRequest& request, double* loss, std::string* error) = 0;
+  /// Remembers the field and moments as the last known-good state.
+  virtual void Snapshot() = 0;
+  /// Back to the last known-good field and moments (the accumulators are kept).
+  virtual void Restore() = 0;
+
+  /// Renders the engine's current field at @p count slices (bigus::Renderer::Forward).
+  virtual bool Render(const SliceGeometry* slices, int count, const RenderOptions& options, float* S, float* I,
+    std::string* error) = 0;
+};
+
+/// The CPU engine over @p renderer (normally bigus::CreateRenderer("cpu", ...)).
+BIGUSTRAINING_EXPORT std::unique_ptr<TrainingEngine> CreateCpuTrainingEngine(std::unique_ptr<Renderer> renderer);
+
+/**
+ * The training engine of backend @p name ("auto", "cpu", "cuda"), chosen through the one backend
+ * registry (bigus::CreateRenderer). Returns null with @p error when the backend is unknown, not
+ * built, or has no training engine; @p notice as for CreateRenderer.
+ */
+BIGUSTRAINING_EXPORT std::unique_ptr<TrainingEngine> CreateTrainingEngine(
+  const std::string& name, std::string* error, std::string* notice = nullptr);
+
+} // namespace bigus
+
+#endif
