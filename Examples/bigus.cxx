@@ -331,10 +331,6 @@ struct TrainOptions
 
 int RunTrain(const TrainOptions& o)
 {
-  if (o.Backend == "cuda")
-  {
-    return Fail("--backend cuda: the CUDA renderer is not available in this build yet; use cpu or auto");
-  }
   if (o.Threads > 0)
   {
     vtkSMPTools::Initialize(o.Threads);
@@ -373,6 +369,7 @@ int RunTrain(const TrainOptions& o)
   trainer->SetElevationSigma(o.ElevationSigma);
   trainer->SetSeed(o.Seed);
   trainer->SetEvaluationInterval(o.EvaluationInterval);
+  trainer->SetBackend(o.Backend.c_str());
   if (!o.Checkpoint.empty())
   {
     trainer->SetCheckpointFile(o.Checkpoint.c_str());
@@ -448,6 +445,7 @@ int RunTrain(const TrainOptions& o)
     o.Output.c_str(), static_cast<long long>(trainer->GetNumberOfGaussians()),
     seeds ? static_cast<long long>(seeds->GetTuple1(0)) : 0LL, trainer->GetCompletedIterations(),
     trainer->GetTrainingSeconds(), trainer->GetStopReason(), trainer->GetGrowthStopReason());
+  std::printf("backend        %s\n", trainer->GetBackendInUse());
   return 0;
 }
 
