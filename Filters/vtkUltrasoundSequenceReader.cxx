@@ -1,6 +1,7 @@
 #include "vtkUltrasoundSequenceReader.h"
 
 #include "bigusMetaImageHeader.h"
+#include "bigusRenderer.h"
 #include "bigusSliceFrame.h"
 #include "vtkUltrasoundCalibration.h"
 
@@ -102,6 +103,7 @@ vtkStandardNewMacro(vtkUltrasoundSequenceReader);
 vtkUltrasoundSequenceReader::vtkUltrasoundSequenceReader()
   : Internals(new vtkInternals)
 {
+  this->MaximumShearAngle = bigus::DefaultMaximumShearAngle;
   this->SetNumberOfInputPorts(0);
 }
 

@@ -86,7 +86,10 @@ public:
 
   /**
    * Largest accepted deviation of the angle between the image axes of a valid frame from 90 degrees.
-   * Default 5: real calibrations carry some shear (the PLUS spine phantom about 2.8 degrees).
+   * Default 5 (bigus::DefaultMaximumShearAngle, the renderer's limit): real calibrations carry some
+   * shear (the PLUS spine phantom about 2.8 degrees). A sweep read with a larger limit can be
+   * compounded or resliced, but the BIGUS trainer and renderer refuse its more sheared frames with an
+   * error that names the frame.
    */
   vtkSetClampMacro(MaximumShearAngle, double, 0.0, 90.0);
   vtkGetMacro(MaximumShearAngle, double);
@@ -110,7 +113,7 @@ protected:
   char* TransformChain = nullptr;
   char* CalibrationFileName = nullptr;
   int FrameRange[2] = { 0, -1 };
-  double MaximumShearAngle = 5.0;
+  double MaximumShearAngle;
   int NumberOfFramesInFile = 0;
 
 private:

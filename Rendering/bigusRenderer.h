@@ -52,6 +52,14 @@ struct SliceGeometry
   int Height = 0;              ///< pixels along the second matrix column
 };
 
+/**
+ * Largest |90 deg - angle between the image axes| of a pose that the renderer accepts by default, and
+ * the default limit of every reader and geometry check (vtkUltrasoundSequenceReader,
+ * vtkUltrasoundSliceGeometry), so that a sweep read with the defaults is one the renderer and the
+ * trainer accept. Real calibrations carry a few degrees of shear (the PLUS spine phantom about 2.8).
+ */
+constexpr double DefaultMaximumShearAngle = 5.0;
+
 /// Rendering settings.
 struct RenderOptions
 {
@@ -61,7 +69,7 @@ struct RenderOptions
                                         ///< 5 keeps the float error in I below 1e-5 (TestCpuRenderer)
   bool BeamIntegration = true;          ///< false: thin plane (sigma_E -> 0), the UltraGauss ablation
   bool NonNegativeReflectivity = false; ///< true: r is used as max(r, 0) (ablation)
-  double MaximumShearAngle = 5.0;       ///< degrees; a pose sheared more is rejected
+  double MaximumShearAngle = DefaultMaximumShearAngle; ///< degrees; a pose sheared more is rejected
 };
 
 /// What one call did (summed over its slices).

@@ -1,5 +1,6 @@
 #include "vtkUltrasoundSliceGeometry.h"
 
+#include "bigusRenderer.h"
 #include "bigusSliceFrame.h"
 
 #include "vtkMatrix4x4.h"
@@ -9,7 +10,10 @@
 
 vtkStandardNewMacro(vtkUltrasoundSliceGeometry);
 
-vtkUltrasoundSliceGeometry::vtkUltrasoundSliceGeometry() = default;
+vtkUltrasoundSliceGeometry::vtkUltrasoundSliceGeometry()
+  : MaximumShearAngle(bigus::DefaultMaximumShearAngle)
+{
+}
 
 void vtkUltrasoundSliceGeometry::SetImageToReference(vtkMatrix4x4* imageToReference)
 {

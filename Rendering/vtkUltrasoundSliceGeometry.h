@@ -28,7 +28,8 @@ public:
 
   /**
    * Largest accepted deviation of the angle between the image axes from 90 degrees.
-   * Default 5 degrees: tracked calibrations carry some shear (PLUS spine phantom: about 2.8).
+   * Default 5 degrees (bigus::DefaultMaximumShearAngle, the renderer's limit): tracked calibrations
+   * carry some shear (PLUS spine phantom: about 2.8).
    */
   vtkSetClampMacro(MaximumShearAngle, double, 0.0, 90.0);
   vtkGetMacro(MaximumShearAngle, double);
@@ -55,7 +56,7 @@ protected:
   vtkUltrasoundSliceGeometry();
   ~vtkUltrasoundSliceGeometry() override = default;
 
-  double MaximumShearAngle = 5.0;
+  double MaximumShearAngle;
   int Status = 0;
   double AxisU[3] = { 1, 0, 0 };
   double AxisV[3] = { 0, 1, 0 };
