@@ -13,6 +13,7 @@
 // Exit codes: 0 success, 1 a bad file or a failed step (one line on stderr), 2 bad arguments.
 // Outputs are written under a temporary name and renamed: an existing file is never left half-written.
 #include "bigusBenchmark.h"
+#include "bigusGaussianFieldData.h"
 #include "bigusImageMetrics.h"
 #include "bigusPlot.h"
 #include "bigusSliceFrame.h"
@@ -51,12 +52,14 @@
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <limits>
+#include <optional>
 #include <string>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -163,6 +166,17 @@ vtkSmartPointer<vtkPolyData> ReadField(const std::string& file)
   return copy;
 }
 
+/**
+ * Whether frame @p k of a sweep may be used: its FrameValid value is non-zero, or the sweep has no
+ * FrameValid of one value per frame (every frame valid), as vtkGaussianFieldTrainer and
+ * vtkUltrasoundVolumeCompounder read it.
+ */
+bool FrameIsValid(vtkImageData* sweep, int k)
+{
+  vtkDataArray* valid = sweep->GetFieldData()->GetArray("FrameValid");
+  return !valid || valid->GetNumberOfTuples() != sweep->GetDimensions()[2] || valid->GetTuple1(k) != 0;
+}
+
 /// Frames with index k mod every == offset (every > 0), or the explicit list, or all.
 std::vector<int> ChooseFrames(int count, int every, int offset, const std::vector<int>& list)
 {
@@ -226,7 +240,6 @@ int RunInfo(const InfoOptions& options)
   frames->GetDimensions(dims);
   vtkFieldData* fd = frames->GetFieldData();
   vtkDataArray* poses = fd->GetArray("ImageToReference");
-  vtkDataArray* valid = fd->GetArray("FrameValid");
   vtkDataArray* stamps = fd->GetArray("Timestamp");
 
   int validCount = 0;
@@ -238,7 +251,7 @@ int RunInfo(const InfoOptions& options)
   bool havePrevious = false;
   for (int k = 0; k < dims[2]; ++k)
   {
-    if (valid->GetTuple1(k) == 0)
+    if (!FrameIsValid(frames, k))
     {
       continue;
     }
@@ -298,7 +311,10 @@ int RunInfo(const InfoOptions& options)
       lo[2], hi[2]);
     std::printf("probe path     %.1f mm (distance between consecutive frame origins, summed)\n", path);
   }
-  std::printf("time           %.3f .. %.3f s\n", stamps->GetTuple1(0), stamps->GetTuple1(dims[2] - 1));
+  if (stamps && stamps->GetNumberOfTuples() == dims[2])
+  {
+    std::printf("time           %.3f .. %.3f s\n", stamps->GetTuple1(0), stamps->GetTuple1(dims[2] - 1));
+  }
   std::printf("fan mask       %.1f %% of the frame (estimated from the frames)\n",
     100.0 * covered / std::max<vtkIdType>(1, mask->GetNumberOfTuples()));
   return 0;
@@ -683,9 +699,16 @@ int RunEvaluate(const EvaluateOptions& o)
   vtkImageData* truth = reader->GetOutput();
   int dims[3];
   truth->GetDimensions(dims);
+  for (int k : o.Frames)
+  {
+    if (k < 0 || k >= dims[2])
+    {
+      return Fail("--frames: frame " + std::to_string(k) + " is outside the " + std::to_string(dims[2]) +
+        " frames of " + o.Sweep.Sweep);
+    }
+  }
   std::vector<int> frames = ChooseFrames(dims[2], o.HoldOutEvery, o.HoldOutOffset, o.Frames);
-  vtkDataArray* valid = truth->GetFieldData()->GetArray("FrameValid");
-  frames.erase(std::remove_if(frames.begin(), frames.end(), [&](int k) { return valid->GetTuple1(k) == 0; }),
+  frames.erase(std::remove_if(frames.begin(), frames.end(), [&](int k) { return !FrameIsValid(truth, k); }),
     frames.end());
   if (frames.empty())
   {
@@ -706,13 +729,13 @@ int RunEvaluate(const EvaluateOptions& o)
     fan->Update();
     maskImage = fan->GetOutput();
   }
-  // One mask for every frame, or one per frame; as 0 / 1 bytes.
-  std::vector<unsigned char> masks(maskImage->GetNumberOfPoints());
-  for (std::size_t p = 0; p < masks.size(); ++p)
+  // The recorded frames and masks as the trainer sees them, so that the metrics are the trainer's own.
+  bigus::TrainingData data;
+  std::string message;
+  if (!bigus::TrainingDataFromSequence(truth, maskImage, data, &message))
   {
-    masks[p] = maskImage->GetPointData()->GetScalars()->GetComponent(vtkIdType(p), 0) != 0;
+    return Fail(o.Sweep.Sweep + ": " + message);
   }
-  const std::size_t maskStride = masks.size() == std::size_t(dims[0]) * dims[1] ? 0 : std::size_t(dims[0]) * dims[1];
   vtkNew<vtkGaussianFieldSequenceRenderer> renderer;
   renderer->SetInputData(field);
   renderer->SetPoseConnection(reader->GetOutputPort());
@@ -736,45 +759,44 @@ int RunEvaluate(const EvaluateOptions& o)
   }
   const std::size_t pixels = std::size_t(dims[0]) * dims[1];
   const auto* renderedPixels = static_cast<float*>(rendered->GetScalarPointer());
-  vtkDataArray* truthPixels = truth->GetPointData()->GetScalars();
-  const double scale = truthPixels->GetDataType() == VTK_UNSIGNED_CHAR ? 1.0 / 255 : 1.0;
+  std::vector<std::optional<bigus::ImageMetrics>> perFrame;
+  const bigus::ImageMetrics mean = bigus::MeanFrameMetrics(
+    data, frames, [&](std::size_t m, int) { return renderedPixels + pixels * m; }, &perFrame);
   nlohmann::json report;
   report["field"] = o.Field;
   report["sweep"] = o.Sweep.Sweep;
   report["render_seconds_per_frame"] = renderer->GetSecondsPerFrame();
-  double sums[4] = { 0, 0, 0, 0 };
-  std::vector<float> truthFrame(pixels);
+  std::size_t used = 0;
   std::printf("%6s %8s %8s %8s %8s\n", "frame", "PSNR", "SSIM", "NCC", "speckle");
   for (std::size_t n = 0; n < frames.size(); ++n)
   {
     const int k = frames[n];
-    for (std::size_t p = 0; p < pixels; ++p)
+    if (!perFrame[n])
     {
-      truthFrame[p] = static_cast<float>(truthPixels->GetTuple1(vtkIdType(pixels * k + p)) * scale);
+      report["frames"].push_back({ { "frame", k }, { "left_out", "empty mask" } });
+      std::printf("%6d  left out of the mean: empty mask\n", k);
+      continue;
     }
-    const float* image = renderedPixels + pixels * n;
-    const bigus::ImageMetrics m =
-      bigus::CompareImages(image, truthFrame.data(), masks.data() + maskStride * k, dims[0], dims[1]);
+    const bigus::ImageMetrics& m = *perFrame[n];
+    ++used;
     report["frames"].push_back(
       { { "frame", k }, { "psnr", m.PSNR }, { "ssim", m.SSIM }, { "ncc", m.NCC }, { "speckle", m.Speckle } });
-    sums[0] += m.PSNR;
-    sums[1] += m.SSIM;
-    sums[2] += m.NCC;
-    sums[3] += m.Speckle;
     std::printf("%6d %8.2f %8.4f %8.4f %8.4f\n", k, m.PSNR, m.SSIM, m.NCC, m.Speckle);
     // Side by side for a few frames: truth | rendering | absolute error (x 4, so that it shows).
     if (n % std::max<std::size_t>(1, frames.size() / 4) == 0)
     {
+      const float* image = renderedPixels + pixels * n;
+      const float* recorded = &data.Frames[pixels * k];
       cv::Mat side(dims[1], 3 * dims[0], CV_8U);
       for (int j = 0; j < dims[1]; ++j)
       {
         for (int i = 0; i < dims[0]; ++i)
         {
           const std::size_t p = std::size_t(j) * dims[0] + i;
-          side.at<unsigned char>(j, i) = cv::saturate_cast<unsigned char>(255 * truthFrame[p]);
+          side.at<unsigned char>(j, i) = cv::saturate_cast<unsigned char>(255 * recorded[p]);
           side.at<unsigned char>(j, dims[0] + i) = cv::saturate_cast<unsigned char>(255 * image[p]);
           side.at<unsigned char>(j, 2 * dims[0] + i) =
-            cv::saturate_cast<unsigned char>(4 * 255 * std::abs(image[p] - truthFrame[p]));
+            cv::saturate_cast<unsigned char>(4 * 255 * std::abs(image[p] - recorded[p]));
         }
       }
       const std::string path = o.Report + "/frame_" + std::to_string(k) + "_truth_rendering_error.png";
@@ -785,19 +807,23 @@ int RunEvaluate(const EvaluateOptions& o)
       }
     }
   }
+  if (used == 0)
+  {
+    return Fail("evaluate: every chosen frame has an empty mask, so there is nothing to compare");
+  }
   // Views that no frame saw, through the centre of the middle evaluated frame: the plane spanned by
   // depth and elevation (orthogonal to the frames), and one tilted 45 degrees between the two.
-  double pose[16];
-  truth->GetFieldData()->GetArray("ImageToReference")->GetTuple(frames[frames.size() / 2], pose);
+  const std::array<double, 16>& pose = data.Poses[frames[frames.size() / 2]];
   bigus::SliceFrame middle;
-  bigus::ComputeSliceFrame(pose, 90, middle);
+  bigus::ComputeSliceFrame(pose.data(), 90, middle);
   double tilted[3];
   for (int c = 0; c < 3; ++c)
   {
     tilted[c] = (middle.u[c] + middle.n[c]) / std::sqrt(2.0);
   }
-  if (WriteSliceThrough(field, pose, dims[0], dims[1], middle.n, middle.v, o.Report + "/slice_orthogonal.png") != 0 ||
-    WriteSliceThrough(field, pose, dims[0], dims[1], tilted, middle.v, o.Report + "/slice_oblique.png") != 0)
+  const double* matrix = pose.data();
+  if (WriteSliceThrough(field, matrix, dims[0], dims[1], middle.n, middle.v, o.Report + "/slice_orthogonal.png") != 0 ||
+    WriteSliceThrough(field, matrix, dims[0], dims[1], tilted, middle.v, o.Report + "/slice_oblique.png") != 0)
   {
     return 1;
   }
@@ -813,14 +839,22 @@ int RunEvaluate(const EvaluateOptions& o)
         { { "seconds", history->GetComponent(k, 0) }, { "psnr", history->GetComponent(k, 1) } });
     }
   }
-  const double n = static_cast<double>(frames.size());
-  report["mean"] = { { "psnr", sums[0] / n }, { "ssim", sums[1] / n }, { "ncc", sums[2] / n },
-    { "speckle", sums[3] / n } };
-  std::printf("%6s %8.2f %8.4f %8.4f %8.4f  (%zu frames, %.1f ms per rendered frame)\n", "mean", sums[0] / n,
-    sums[1] / n, sums[2] / n, sums[3] / n, frames.size(), 1e3 * renderer->GetSecondsPerFrame());
+  report["mean"] = { { "psnr", mean.PSNR }, { "ssim", mean.SSIM }, { "ncc", mean.NCC }, { "speckle", mean.Speckle },
+    { "frames", used } };
+  std::printf("%6s %8.2f %8.4f %8.4f %8.4f  (%zu frames, %zu left out: empty mask; %.1f ms per rendered frame)\n",
+    "mean", mean.PSNR, mean.SSIM, mean.NCC, mean.Speckle, used, frames.size() - used,
+    1e3 * renderer->GetSecondsPerFrame());
   const std::string path = o.Report + "/metrics.json";
   const std::string temporary = TemporaryName(path);
-  std::ofstream(temporary) << report.dump(2) << "\n";
+  std::ofstream out(temporary);
+  out << report.dump(2) << "\n";
+  out.close();
+  // A failed write (disk full) must not be published: the temporary goes, an existing file stays.
+  if (!out)
+  {
+    std::remove(temporary.c_str());
+    return Fail(path + ": cannot write");
+  }
   if (!Publish(temporary, path))
   {
     return Fail(path + ": cannot write");

@@ -439,7 +439,8 @@ std::string ErrorSourcesSection(const Row& blend, const std::vector<ErrorSources
 
 /// Trains with @p settings, evaluating @p heldOut at each of @p marks (cumulative training seconds);
 /// @p onMark is called with the mark, its row (measured time) and the trainer, and returns false (with
-/// @p error) when its own measurement fails. The field is not pruned at the marks (Trainer::Train). Returns false on a
+/// @p error) when its own measurement fails. The field is not pruned at the marks (Trainer::Train).
+/// Returns false on a
 /// training error.
 bool TrainWithMarks(const TrainingData& data, const TrainerSettings& settings, const std::vector<double>& marks,
   const std::vector<int>& heldOut, const std::string& method,
@@ -590,30 +591,60 @@ bool MakeFolder(const std::string& path)
 {
   return ::mkdir(path.c_str(), 0755) == 0 || errno == EEXIST;
 }
+
+/// Sets @p error to @p what and returns false: how a section fails (RunBenchmark reports it).
+bool Failed(const std::string& what, std::string* error)
+{
+  *error = what;
+  return false;
 }
 
-int RunBenchmark(const BenchmarkOptions& options)
+/// Training time (s) of each ablation and capacity run, and the time mark of the full method they are
+/// compared with.
+double AblationSeconds(bool quick)
 {
-  const double started = Now();
-  const bool quick = options.Quick;
-  const std::string root = options.SourceDirectory;
-  Report report;
-  report.PlotFolder = options.Output + "/benchmarks";
-  report.PlotLink = "benchmarks";
-  if (!MakeFolder(options.Output) || !MakeFolder(report.PlotFolder))
-  {
-    return Fail(options.Output + ": cannot create the output folder");
-  }
-  // Time marks (s). The default run takes about 45 minutes on 2 cores, --quick a few minutes.
-  const std::vector<double> liverMarks = quick ? std::vector<double>{ 4, 8 } : std::vector<double>{ 30, 60, 120, 300, 600 };
-  const std::vector<double> spineMarks = quick ? std::vector<double>{ 4, 8 } : std::vector<double>{ 30, 60, 120, 300 };
-  const std::vector<double> nwireMarks = quick ? std::vector<double>{ 4 } : std::vector<double>{ 30, 60, 120 };
-  const std::vector<double> volumeMarks = quick ? std::vector<double>{ 5 } : std::vector<double>{ 30, 60, 180 };
-  const double ablationSeconds = quick ? 4 : 60;
-  const std::vector<long long> caps = quick ? std::vector<long long>{ 2000, 4000 }
-                                            : std::vector<long long>{ 10000, 40000, 160000 };
-  const int crop = quick ? 32 : 128;
+  return quick ? 4 : 60;
+}
 
+/**
+ * The bundled real sweeps, each with its training schedule and time marks (s): liver, spine phantom,
+ * N-wire phantom, and 20 frames of the liver. The default run takes about 45 minutes on 2 cores,
+ * --quick a few minutes.
+ */
+std::vector<Sweep> BundledSweeps(const std::string& root, bool quick)
+{
+  std::vector<Sweep> sweeps(4);
+  sweeps[0].Name = "liver";
+  sweeps[0].File = root + "/Examples/Data/liver/liver_sweep.igs.mha";
+  // The liver's frames decorrelate within a few tenths of a millimetre (vtkGaussianFieldTrainer.h): held-out
+  // PSNR after 10 minutes on 2 cores was 37.6 dB at sigma 0.3 mm, 36.3 at 0.5 and 35.6 at 1.0.
+  sweeps[0].ElevationSigma = 0.3;
+  sweeps[0].Iterations = quick ? 300 : 8000; // at 10 minutes on 2 cores 7,703 steps are done
+  sweeps[0].Marks = quick ? std::vector<double>{ 4, 8 } : std::vector<double>{ 30, 60, 120, 300, 600 };
+  sweeps[1].Name = "spine phantom";
+  sweeps[1].File = root + "/Testing/Data/spine-phantom/SpinePhantomFreehand.igs.mha";
+  sweeps[1].Calibration = root + "/Testing/Data/spine-phantom/PlusDeviceSet_SpinePhantomFreehandReconstructionOnly.xml";
+  sweeps[1].ElevationSigma = 1.5;
+  sweeps[1].Iterations = quick ? 300 : 3000;
+  sweeps[1].Marks = quick ? std::vector<double>{ 4, 8 } : std::vector<double>{ 30, 60, 120, 300 };
+  sweeps[2].Name = "N-wire phantom";
+  sweeps[2].File = root + "/Testing/Data/nwire-phantom/NwirePhantomFreehand.igs.mha";
+  sweeps[2].Calibration =
+    root + "/Testing/Data/nwire-phantom/PlusDeviceSet_NwirePhantomFreehand_vtkVolumeReconstructorTest2.xml";
+  sweeps[2].ElevationSigma = 1.0;
+  sweeps[2].Iterations = quick ? 300 : 1200;
+  sweeps[2].Marks = quick ? std::vector<double>{ 4 } : std::vector<double>{ 30, 60, 120 };
+  // The same liver settings on 20 of its 140 frames: in the same time every training frame is visited
+  // about 7 times as often, which shows what more steps (a faster backend) would buy on the full sweep.
+  sweeps[3] = sweeps[0];
+  sweeps[3].Name = "liver, frames 40 to 59";
+  sweeps[3].FrameRange = { 40, 59 };
+  return sweeps;
+}
+
+/// The report's title, the machine and commit, and the conventions of every table (also in @p report.Json).
+void Introduction(const std::string& root, bool quick, Report& report)
+{
   const std::string commit = CommandOutput("git -C '" + root + "' rev-parse --short HEAD 2>/dev/null");
   const bool dirty = !CommandOutput("git -C '" + root + "' status --porcelain --untracked-files=no 2>/dev/null").empty();
   char date[64];
@@ -623,33 +654,6 @@ int RunBenchmark(const BenchmarkOptions& options)
     " logical cores, " + std::to_string(vtkSMPTools::GetEstimatedNumberOfThreads()) + " threads (" +
     vtkSMPTools::GetBackend() + ")";
   std::printf("bigus benchmark%s: %s\n", quick ? " --quick" : "", machine.c_str());
-
-  std::vector<Sweep> sweeps(4);
-  sweeps[0].Name = "liver";
-  sweeps[0].File = root + "/Examples/Data/liver/liver_sweep.igs.mha";
-  // The liver's frames decorrelate within a few tenths of a millimetre (vtkGaussianFieldTrainer.h): held-out
-  // PSNR after 10 minutes on 2 cores was 37.6 dB at sigma 0.3 mm, 36.3 at 0.5 and 35.6 at 1.0.
-  sweeps[0].ElevationSigma = 0.3;
-  sweeps[0].Iterations = quick ? 300 : 8000; // at 10 minutes on 2 cores 7,703 steps are done
-  sweeps[0].Marks = liverMarks;
-  sweeps[1].Name = "spine phantom";
-  sweeps[1].File = root + "/Testing/Data/spine-phantom/SpinePhantomFreehand.igs.mha";
-  sweeps[1].Calibration = root + "/Testing/Data/spine-phantom/PlusDeviceSet_SpinePhantomFreehandReconstructionOnly.xml";
-  sweeps[1].ElevationSigma = 1.5;
-  sweeps[1].Iterations = quick ? 300 : 3000;
-  sweeps[1].Marks = spineMarks;
-  sweeps[2].Name = "N-wire phantom";
-  sweeps[2].File = root + "/Testing/Data/nwire-phantom/NwirePhantomFreehand.igs.mha";
-  sweeps[2].Calibration =
-    root + "/Testing/Data/nwire-phantom/PlusDeviceSet_NwirePhantomFreehand_vtkVolumeReconstructorTest2.xml";
-  sweeps[2].ElevationSigma = 1.0;
-  sweeps[2].Iterations = quick ? 300 : 1200;
-  sweeps[2].Marks = nwireMarks;
-  // The same liver settings on 20 of its 140 frames: in the same time every training frame is visited
-  // about 7 times as often, which shows what more steps (a faster backend) would buy on the full sweep.
-  sweeps[3] = sweeps[0];
-  sweeps[3].Name = "liver, frames 40 to 59";
-  sweeps[3].FrameRange = { 40, 59 };
 
   std::ostringstream& md = report.Markdown;
   md << "# Benchmarks: speed against error\n\n"
@@ -675,392 +679,425 @@ int RunBenchmark(const BenchmarkOptions& options)
   report.Json["commit"] = commit + (dirty ? "+dirty" : "");
   report.Json["machine"] = machine;
   report.Json["quick"] = quick;
+}
 
-  std::string error;
-  TrainerSettings defaults;
-  // --- The real sweeps: quality against time -----------------------------------------------------
-  GaussianField liverField;
-  RenderOptions liverOptions;
-  Row fullRowAtAblationTime[2]; // the default run at the ablation time: the full method's row
-  for (std::size_t si = 0; si < sweeps.size(); ++si)
+/// What the later sections take from the hold-out runs.
+struct HoldOutResults
+{
+  GaussianField LiverField; ///< the liver's field at the end of its run (render speed against error)
+  RenderOptions LiverOptions;
+  Row FullAtAblationTime[2]; ///< liver and spine: the default run at the ablation time (the full method)
+};
+
+/**
+ * The section of sweep @p si of BundledSweeps with the hold-out protocol: the baselines, BIGUS at the
+ * sweep's time marks, the blurred truth for scale, where the held-out error comes from, and the plot
+ * psnr_time_<si>.png. The liver and the spine (si 0 and 1) also run to the ablation time; the liver
+ * keeps its field.
+ */
+bool HoldOutSection(Sweep& sweep, std::size_t si, const std::string& root, bool quick, Report& report,
+  HoldOutResults& results, std::string* error)
+{
+  std::ostringstream& md = report.Markdown;
+  const double ablationSeconds = AblationSeconds(quick);
+  if (!Load(sweep, error))
   {
-    Sweep& sweep = sweeps[si];
-    if (!Load(sweep, &error))
-    {
-      return Fail(error);
-    }
-    std::printf("%s: %s\n", sweep.Name.c_str(), sweep.Description.c_str());
-    const std::vector<Row> baselines = Baselines(sweep);
-    for (const Row& r : baselines)
-    {
+    return false;
+  }
+  std::printf("%s: %s\n", sweep.Name.c_str(), sweep.Description.c_str());
+  const std::vector<Row> baselines = Baselines(sweep);
+  for (const Row& r : baselines)
+  {
+    Print(sweep.Name, r);
+  }
+  TrainerSettings s;
+  s.ElevationSigma = sweep.ElevationSigma;
+  s.Iterations = sweep.Iterations;
+  std::vector<double> marks = sweep.Marks;
+  if (si < 2 && std::find(marks.begin(), marks.end(), ablationSeconds) == marks.end())
+  {
+    marks.push_back(ablationSeconds);
+    std::sort(marks.begin(), marks.end());
+  }
+  std::vector<Row> bigus;
+  std::vector<ErrorSources> sources;
+  const bool ok = TrainWithMarks(sweep.Data, s, marks, sweep.HeldOut, "BIGUS",
+    [&](double mark, const Row& r, Trainer& trainer) {
       Print(sweep.Name, r);
-    }
-    TrainerSettings s;
-    s.ElevationSigma = sweep.ElevationSigma;
-    s.Iterations = sweep.Iterations;
-    std::vector<double> marks = sweep.Marks;
-    if (si < 2 && std::find(marks.begin(), marks.end(), ablationSeconds) == marks.end())
-    {
-      marks.push_back(ablationSeconds);
-      std::sort(marks.begin(), marks.end());
-    }
-    std::vector<Row> bigus;
-    std::vector<ErrorSources> sources;
-    const bool ok = TrainWithMarks(sweep.Data, s, marks, sweep.HeldOut, "BIGUS",
-      [&](double mark, const Row& r, Trainer& trainer) {
-        Print(sweep.Name, r);
-        if (std::find(sweep.Marks.begin(), sweep.Marks.end(), mark) != sweep.Marks.end())
+      if (std::find(sweep.Marks.begin(), sweep.Marks.end(), mark) != sweep.Marks.end())
+      {
+        bigus.push_back(r);
+        sources.emplace_back();
+        if (!MeasureErrorSources(sweep, trainer, r, sources.back(), error))
         {
-          bigus.push_back(r);
-          sources.emplace_back();
-          if (!MeasureErrorSources(sweep, trainer, r, sources.back(), &error))
-          {
-            return false;
-          }
-          // Its renders are freed again: the next row's peak memory is the training's own.
-          ResetPeakMemory();
+          return false;
         }
-        if (mark == ablationSeconds && si < 2)
-        {
-          fullRowAtAblationTime[si] = r;
-        }
-        if (si == 0)
-        {
-          liverField = trainer.GetField();
-          liverOptions = trainer.Options();
-        }
-        return true;
-      },
-      &error);
-    if (!ok)
+        // Its renders are freed again: the next row's peak memory is the training's own.
+        ResetPeakMemory();
+      }
+      if (mark == ablationSeconds && si < 2)
+      {
+        results.FullAtAblationTime[si] = r;
+      }
+      if (si == 0)
+      {
+        results.LiverField = trainer.GetField();
+        results.LiverOptions = trainer.Options();
+      }
+      return true;
+    },
+    error);
+  if (!ok)
+  {
+    return Failed(sweep.Name + ": " + *error, error);
+  }
+  if (si < 2 && !std::isfinite(results.FullAtAblationTime[si].Seconds))
+  {
+    results.FullAtAblationTime[si] = bigus.back(); // the schedule ended before the ablation time
+  }
+  md << "\n## " << sweep.Name << "\n\n`" << sweep.File.substr(root.size() + 1) << "`: " << sweep.Description
+     << ".\n\n"
+     << TableHeader();
+  nlohmann::json j;
+  j["description"] = sweep.Description;
+  for (const Row& r : baselines)
+  {
+    md << TableRow(r);
+    j["baselines"].push_back(ToJson(r));
+  }
+  for (const Row& r : bigus)
+  {
+    md << TableRow(r);
+    j["bigus"].push_back(ToJson(r));
+  }
+  const Row* best = &baselines[0];
+  for (const Row& r : baselines)
+  {
+    best = r.Quality.PSNR > best->Quality.PSNR ? &r : best;
+  }
+  const Row& last = bigus.back();
+  md << "\nAfter " << Format("%.0f", last.Seconds) << " s BIGUS is at " << Format("%.2f", last.Quality.PSNR)
+     << " dB; the best baseline, " << best->Method << ", at " << Format("%.2f", best->Quality.PSNR) << " dB ("
+     << (last.Quality.PSNR > best->Quality.PSNR ? "BIGUS ahead by " : "BIGUS behind by ")
+     << Format("%.2f", std::abs(last.Quality.PSNR - best->Quality.PSNR)) << " dB).\n";
+  md << "\nFor scale, the held-out frames themselves blurred in plane (Gaussian, sigma in pixels) score";
+  const char* separator = " ";
+  for (const auto& [sigma, q] : BlurredTruth(sweep, { 0.5, 1.0, 1.5, 2.0 }))
+  {
+    md << std::exchange(separator, ", ") << Format("%.2f", q.PSNR) << " dB (SSIM " << Format("%.3f", q.SSIM)
+       << ") at " << Format("%.1f", sigma);
+    j["blurred_truth"].push_back({ { "sigma_pixels", sigma }, { "psnr", q.PSNR }, { "ssim", q.SSIM } });
+  }
+  md << ": a prediction at one of these scores is as close to the recording as the recording blurred that much.\n";
+  md << ErrorSourcesSection(baselines[1], sources, j); // Baselines(): nearest, blend, compounded
+  report.Json["sweeps"][sweep.Name] = j;
+  if (!report.Plot(TimePlot(sweep.Name + ": held-out PSNR against time", baselines, bigus),
+        "psnr_time_" + std::to_string(si) + ".png"))
+  {
+    return Failed(report.PlotFolder + ": cannot write a plot", error);
+  }
+  return true;
+}
+
+/// The volume protocol on the PLUS reconstruction of the spine phantom: train on parallel slices, test
+/// on in-between, oblique and orthogonal slices, against the compounded volume resliced.
+bool VolumeProtocolSection(const std::string& root, bool quick, Report& report, std::string* error)
+{
+  std::ostringstream& md = report.Markdown;
+  const std::vector<double> marks = quick ? std::vector<double>{ 5 } : std::vector<double>{ 30, 60, 180 };
+  const std::string file = root + "/Testing/Data/spine-phantom/SpinePhantomFreehandReconstructed.mha";
+  vtkNew<vtkMetaImageReader> volumeReader;
+  volumeReader->SetFileName(file.c_str());
+  volumeReader->Update();
+  vtkImageData* volume = volumeReader->GetOutput();
+  int vdims[3];
+  volume->GetDimensions(vdims);
+  if (vdims[0] < 2 || vdims[1] < 2 || vdims[2] < 2)
+  {
+    return Failed(file + ": cannot read the volume", error);
+  }
+  const int trainFrames = quick ? 40 : 80;
+  const int testFrames = quick ? 10 : 40;
+  auto makeSweep = [&](int protocol, int frames, double offset) {
+    auto sweep = vtkSmartPointer<vtkUltrasoundVolumeSweep>::New();
+    sweep->SetInputData(volume);
+    sweep->SetProtocol(protocol);
+    sweep->SetNumberOfFrames(frames);
+    sweep->SetOffset(offset);
+    sweep->SetMaximumTiltAngle(30);
+    sweep->SetSeed(1);
+    sweep->Update();
+    return sweep;
+  };
+  auto train = makeSweep(vtkUltrasoundVolumeSweep::PARALLEL, trainFrames, 0);
+  const char* testNames[] = { "in-between parallel slices", "oblique slices (tilt up to 30 degrees)",
+    "orthogonal slices" };
+  vtkSmartPointer<vtkUltrasoundVolumeSweep> tests[] = {
+    makeSweep(vtkUltrasoundVolumeSweep::PARALLEL, trainFrames, 0.5),
+    makeSweep(vtkUltrasoundVolumeSweep::OBLIQUE, testFrames, 0),
+    makeSweep(vtkUltrasoundVolumeSweep::ORTHOGONAL, testFrames, 0),
+  };
+  TrainingData trainData;
+  if (!TrainingDataFromSequence(train->GetOutput(), train->GetMaskOutput(), trainData, error))
+  {
+    return Failed("volume protocol: " + *error, error);
+  }
+  for (int k = 0; k < trainData.Count(); ++k)
+  {
+    trainData.TrainFrames.push_back(k);
+  }
+  TrainingData testData[3];
+  std::vector<int> testList[3];
+  for (int t = 0; t < 3; ++t)
+  {
+    if (!TrainingDataFromSequence(tests[t]->GetOutput(), tests[t]->GetMaskOutput(), testData[t], error))
     {
-      return Fail(sweep.Name + ": " + error);
+      return Failed("volume protocol: " + *error, error);
     }
-    if (si < 2 && !std::isfinite(fullRowAtAblationTime[si].Seconds))
+    for (int k = 0; k < testData[t].Count(); ++k)
     {
-      fullRowAtAblationTime[si] = bigus.back(); // the schedule ended before the ablation time
+      testList[t].push_back(k);
     }
-    md << "\n## " << sweep.Name << "\n\n`" << sweep.File.substr(root.size() + 1) << "`: " << sweep.Description
-       << ".\n\n"
-       << TableHeader();
+  }
+  const double sliceSpacing = train->GetSliceSpacing();
+  std::ostringstream d;
+  d << "`" << file.substr(root.size() + 1) << "` (" << vdims[0] << " x " << vdims[1] << " x " << vdims[2]
+    << " voxels of 0.5 mm). Training sweep: " << trainFrames << " parallel slices along z, "
+    << Format("%.3f", sliceSpacing) << " mm apart, frames of " << trainData.Width << " x " << trainData.Height
+    << " pixels; per-frame masks of where the volume has data (PLUS leaves unreconstructed voxels at 0). "
+    << "Test sweeps: " << trainFrames << " in-between parallel slices (offset half a slice), " << testFrames
+    << " oblique slices (random tilt up to 30 degrees, seed 1) and " << testFrames
+    << " orthogonal slices (along x). BIGUS elevation sigma = half the slice spacing.";
+  std::printf("volume protocol: %s\n", d.str().c_str());
+
+  // Baseline: compound the training slices (0.5 mm, the volume's own grid spacing) and reslice.
+  vtkNew<vtkUltrasoundVolumeCompounder> compound;
+  compound->SetInputConnection(train->GetOutputPort());
+  compound->SetFanMaskConnection(train->GetMaskOutputPort());
+  compound->SetOutputSpacing(0.5, 0.5, 0.5);
+  double t0 = Now();
+  compound->Update();
+  const double compoundSeconds = Now() - t0;
+  std::vector<Row> baselineRows[3];
+  for (int t = 0; t < 3; ++t)
+  {
+    vtkNew<vtkUltrasoundSequenceReslice> reslice;
+    reslice->SetInputConnection(compound->GetOutputPort());
+    reslice->SetPoseConnection(tests[t]->GetOutputPort());
+    reslice->MaskEmptyVoxelsOff();
+    t0 = Now();
+    reslice->Update();
+    Row r;
+    r.Method = "compounded volume + trilinear reslice";
+    r.Seconds = compoundSeconds;
+    r.MsPerFrame = 1e3 * (Now() - t0) / testList[t].size();
+    r.Quality = Score(static_cast<float*>(reslice->GetOutput()->GetScalarPointer()), 1.0, testData[t], testList[t]);
+    baselineRows[t].push_back(r);
+    Print("volume", r);
+  }
+  TrainerSettings s;
+  s.ElevationSigma = 0.5 * sliceSpacing;
+  s.Iterations = quick ? 300 : 15000;
+  std::vector<Row> bigusRows[3];
+  const bool ok = TrainWithMarks(trainData, s, marks, {}, "BIGUS",
+    [&](double, const Row& mark, Trainer& trainer) {
+      for (int t = 0; t < 3; ++t)
+      {
+        Row r = mark;
+        double secondsPerFrame = 0;
+        if (!trainer.EvaluateOn(testData[t], testList[t], r.Quality, error, &secondsPerFrame))
+        {
+          return false;
+        }
+        r.MsPerFrame = 1e3 * secondsPerFrame;
+        bigusRows[t].push_back(r);
+        Print("volume", r);
+      }
+      return true;
+    },
+    error);
+  if (!ok)
+  {
+    return Failed("volume protocol: " + *error, error);
+  }
+  md << "\n## Volume protocol (spine-phantom reconstruction)\n\n" << d.str() << "\n";
+  for (int t = 0; t < 3; ++t)
+  {
+    md << "\n### " << testNames[t] << "\n\n" << TableHeader();
     nlohmann::json j;
-    j["description"] = sweep.Description;
-    for (const Row& r : baselines)
+    for (const Row& r : baselineRows[t])
     {
       md << TableRow(r);
       j["baselines"].push_back(ToJson(r));
     }
-    for (const Row& r : bigus)
+    for (const Row& r : bigusRows[t])
     {
       md << TableRow(r);
       j["bigus"].push_back(ToJson(r));
     }
-    const Row* best = &baselines[0];
-    for (const Row& r : baselines)
+    report.Json["volume_protocol"][testNames[t]] = j;
+  }
+  PlotSpec spec = TimePlot("volume protocol: PSNR of the in-between slices against time", baselineRows[0], bigusRows[0]);
+  spec.Series.push_back({ "BIGUS, oblique slices", {} });
+  spec.Series.push_back({ "BIGUS, orthogonal slices", {} });
+  for (int t = 1; t < 3; ++t)
+  {
+    for (const Row& r : bigusRows[t])
     {
-      best = r.Quality.PSNR > best->Quality.PSNR ? &r : best;
-    }
-    const Row& last = bigus.back();
-    md << "\nAfter " << Format("%.0f", last.Seconds) << " s BIGUS is at " << Format("%.2f", last.Quality.PSNR)
-       << " dB; the best baseline, " << best->Method << ", at " << Format("%.2f", best->Quality.PSNR) << " dB ("
-       << (last.Quality.PSNR > best->Quality.PSNR ? "BIGUS ahead by " : "BIGUS behind by ")
-       << Format("%.2f", std::abs(last.Quality.PSNR - best->Quality.PSNR)) << " dB).\n";
-    md << "\nFor scale, the held-out frames themselves blurred in plane (Gaussian, sigma in pixels) score";
-    const char* separator = " ";
-    for (const auto& [sigma, q] : BlurredTruth(sweep, { 0.5, 1.0, 1.5, 2.0 }))
-    {
-      md << std::exchange(separator, ", ") << Format("%.2f", q.PSNR) << " dB (SSIM " << Format("%.3f", q.SSIM)
-         << ") at " << Format("%.1f", sigma);
-      j["blurred_truth"].push_back({ { "sigma_pixels", sigma }, { "psnr", q.PSNR }, { "ssim", q.SSIM } });
-    }
-    md << ": a prediction at one of these scores is as close to the recording as the recording blurred that much.\n";
-    md << ErrorSourcesSection(baselines[1], sources, j); // Baselines(): nearest, blend, compounded
-    report.Json["sweeps"][sweep.Name] = j;
-    if (!report.Plot(TimePlot(sweep.Name + ": held-out PSNR against time", baselines, bigus),
-          "psnr_time_" + std::to_string(si) + ".png"))
-    {
-      return Fail(report.PlotFolder + ": cannot write a plot");
+      spec.Series[spec.Series.size() - 3 + t].Points.emplace_back(r.Seconds, r.Quality.PSNR);
     }
   }
-
-  // --- The volume protocol on the PLUS reconstruction of the spine phantom ----------------------
+  if (!report.Plot(spec, "psnr_time_volume.png"))
   {
-    const std::string file = root + "/Testing/Data/spine-phantom/SpinePhantomFreehandReconstructed.mha";
-    vtkNew<vtkMetaImageReader> volumeReader;
-    volumeReader->SetFileName(file.c_str());
-    volumeReader->Update();
-    vtkImageData* volume = volumeReader->GetOutput();
-    int vdims[3];
-    volume->GetDimensions(vdims);
-    if (vdims[0] < 2 || vdims[1] < 2 || vdims[2] < 2)
-    {
-      return Fail(file + ": cannot read the volume");
-    }
-    const int trainFrames = quick ? 40 : 80;
-    const int testFrames = quick ? 10 : 40;
-    auto makeSweep = [&](int protocol, int frames, double offset) {
-      auto sweep = vtkSmartPointer<vtkUltrasoundVolumeSweep>::New();
-      sweep->SetInputData(volume);
-      sweep->SetProtocol(protocol);
-      sweep->SetNumberOfFrames(frames);
-      sweep->SetOffset(offset);
-      sweep->SetMaximumTiltAngle(30);
-      sweep->SetSeed(1);
-      sweep->Update();
-      return sweep;
-    };
-    auto train = makeSweep(vtkUltrasoundVolumeSweep::PARALLEL, trainFrames, 0);
-    const char* testNames[] = { "in-between parallel slices", "oblique slices (tilt up to 30 degrees)",
-      "orthogonal slices" };
-    vtkSmartPointer<vtkUltrasoundVolumeSweep> tests[] = {
-      makeSweep(vtkUltrasoundVolumeSweep::PARALLEL, trainFrames, 0.5),
-      makeSweep(vtkUltrasoundVolumeSweep::OBLIQUE, testFrames, 0),
-      makeSweep(vtkUltrasoundVolumeSweep::ORTHOGONAL, testFrames, 0),
-    };
-    TrainingData trainData;
-    if (!TrainingDataFromSequence(train->GetOutput(), train->GetMaskOutput(), trainData, &error))
-    {
-      return Fail("volume protocol: " + error);
-    }
-    for (int k = 0; k < trainData.Count(); ++k)
-    {
-      trainData.TrainFrames.push_back(k);
-    }
-    TrainingData testData[3];
-    std::vector<int> testList[3];
-    for (int t = 0; t < 3; ++t)
-    {
-      if (!TrainingDataFromSequence(tests[t]->GetOutput(), tests[t]->GetMaskOutput(), testData[t], &error))
-      {
-        return Fail("volume protocol: " + error);
-      }
-      for (int k = 0; k < testData[t].Count(); ++k)
-      {
-        testList[t].push_back(k);
-      }
-    }
-    const double sliceSpacing = train->GetSliceSpacing();
-    std::ostringstream d;
-    d << "`" << file.substr(root.size() + 1) << "` (" << vdims[0] << " x " << vdims[1] << " x " << vdims[2]
-      << " voxels of 0.5 mm). Training sweep: " << trainFrames << " parallel slices along z, "
-      << Format("%.3f", sliceSpacing) << " mm apart, frames of " << trainData.Width << " x " << trainData.Height
-      << " pixels; per-frame masks of where the volume has data (PLUS leaves unreconstructed voxels at 0). "
-      << "Test sweeps: " << trainFrames << " in-between parallel slices (offset half a slice), " << testFrames
-      << " oblique slices (random tilt up to 30 degrees, seed 1) and " << testFrames
-      << " orthogonal slices (along x). BIGUS elevation sigma = half the slice spacing.";
-    std::printf("volume protocol: %s\n", d.str().c_str());
+    return Failed(report.PlotFolder + ": cannot write a plot", error);
+  }
+  return true;
+}
 
-    // Baseline: compound the training slices (0.5 mm, the volume's own grid spacing) and reslice.
-    vtkNew<vtkUltrasoundVolumeCompounder> compound;
-    compound->SetInputConnection(train->GetOutputPort());
-    compound->SetFanMaskConnection(train->GetMaskOutputPort());
-    compound->SetOutputSpacing(0.5, 0.5, 0.5);
-    double t0 = Now();
-    compound->Update();
-    const double compoundSeconds = Now() - t0;
-    std::vector<Row> baselineRows[3];
-    for (int t = 0; t < 3; ++t)
-    {
-      vtkNew<vtkUltrasoundSequenceReslice> reslice;
-      reslice->SetInputConnection(compound->GetOutputPort());
-      reslice->SetPoseConnection(tests[t]->GetOutputPort());
-      reslice->MaskEmptyVoxelsOff();
-      t0 = Now();
-      reslice->Update();
-      Row r;
-      r.Method = "compounded volume + trilinear reslice";
-      r.Seconds = compoundSeconds;
-      r.MsPerFrame = 1e3 * (Now() - t0) / testList[t].size();
-      r.Quality = Score(static_cast<float*>(reslice->GetOutput()->GetScalarPointer()), 1.0, testData[t], testList[t]);
-      baselineRows[t].push_back(r);
-      Print("volume", r);
-    }
+/// Quality against the number of Gaussians on the liver: capped runs against the adaptive stop
+/// (@p full, the default run at the ablation time).
+bool CapacitySection(const Sweep& liver, const Row& full, bool quick, Report& report, std::string* error)
+{
+  std::ostringstream& md = report.Markdown;
+  const double ablationSeconds = AblationSeconds(quick);
+  const std::vector<long long> caps = quick ? std::vector<long long>{ 2000, 4000 }
+                                            : std::vector<long long>{ 10000, 40000, 160000 };
+  const TrainerSettings defaults;
+  std::vector<Row> rows;
+  for (long long cap : caps)
+  {
     TrainerSettings s;
-    s.ElevationSigma = 0.5 * sliceSpacing;
-    s.Iterations = quick ? 300 : 15000;
-    std::vector<Row> bigusRows[3];
-    const bool ok = TrainWithMarks(trainData, s, volumeMarks, {}, "BIGUS",
-      [&](double, const Row& mark, Trainer& trainer) {
-        for (int t = 0; t < 3; ++t)
-        {
-          Row r = mark;
-          double secondsPerFrame = 0;
-          if (!trainer.EvaluateOn(testData[t], testList[t], r.Quality, &error, &secondsPerFrame))
-          {
-            return false;
-          }
-          r.MsPerFrame = 1e3 * secondsPerFrame;
-          bigusRows[t].push_back(r);
-          Print("volume", r);
-        }
+    s.ElevationSigma = liver.ElevationSigma;
+    s.Iterations = liver.Iterations;
+    s.InitialGaussians = cap / 2;
+    s.MaximumGaussians = cap;
+    s.GrowthMargin = 0; // grow while it improves at all, up to the cap
+    const bool ok = TrainWithMarks(liver.Data, s, { ablationSeconds }, liver.HeldOut,
+      "cap " + std::to_string(cap) + " (start at " + std::to_string(cap / 2) + ")",
+      [&](double, const Row& r, Trainer&) {
+        rows.push_back(r);
+        Print("capacity", r);
         return true;
       },
-      &error);
+      error);
     if (!ok)
     {
-      return Fail("volume protocol: " + error);
-    }
-    md << "\n## Volume protocol (spine-phantom reconstruction)\n\n" << d.str() << "\n";
-    for (int t = 0; t < 3; ++t)
-    {
-      md << "\n### " << testNames[t] << "\n\n" << TableHeader();
-      nlohmann::json j;
-      for (const Row& r : baselineRows[t])
-      {
-        md << TableRow(r);
-        j["baselines"].push_back(ToJson(r));
-      }
-      for (const Row& r : bigusRows[t])
-      {
-        md << TableRow(r);
-        j["bigus"].push_back(ToJson(r));
-      }
-      report.Json["volume_protocol"][testNames[t]] = j;
-    }
-    PlotSpec spec = TimePlot("volume protocol: PSNR of the in-between slices against time", baselineRows[0], bigusRows[0]);
-    spec.Series.push_back({ "BIGUS, oblique slices", {} });
-    spec.Series.push_back({ "BIGUS, orthogonal slices", {} });
-    for (int t = 1; t < 3; ++t)
-    {
-      for (const Row& r : bigusRows[t])
-      {
-        spec.Series[spec.Series.size() - 3 + t].Points.emplace_back(r.Seconds, r.Quality.PSNR);
-      }
-    }
-    if (!report.Plot(spec, "psnr_time_volume.png"))
-    {
-      return Fail(report.PlotFolder + ": cannot write a plot");
+      return Failed("capacity: " + *error, error);
     }
   }
-
-  // --- Quality against the number of Gaussians (liver) ------------------------------------------
+  Row adaptive = full;
+  adaptive.Method = "adaptive stop (default: automatic seeds, margin " + Format("%.1f", 100 * defaults.GrowthMargin) +
+    " %, cap " + std::to_string(defaults.MaximumGaussians) + ")";
+  rows.push_back(adaptive);
+  md << "\n## Quality against the number of Gaussians (liver, " << Format("%.0f", ablationSeconds)
+     << " s of training each)\n\n"
+     << "A capped run starts at half its cap and densifies until the cap (growth margin 0); the adaptive run is "
+     << "the default trainer, whose growth stops when a validation subset of the training frames stops "
+     << "improving by the margin.\n\n"
+     << TableHeader();
+  PlotSpec spec;
+  spec.Title = "liver: held-out PSNR against the number of Gaussians";
+  spec.XLabel = "Gaussians at the end (log)";
+  spec.YLabel = "PSNR (dB)";
+  spec.LogX = true;
+  spec.Series.push_back({ "capped", {} });
+  for (const Row& r : rows)
   {
-    Sweep& liver = sweeps[0];
-    std::vector<Row> rows;
-    for (long long cap : caps)
+    md << TableRow(r);
+    report.Json["capacity"].push_back(ToJson(r));
+    if (&r != &rows.back())
     {
-      TrainerSettings s;
-      s.ElevationSigma = liver.ElevationSigma;
-      s.Iterations = liver.Iterations;
-      s.InitialGaussians = cap / 2;
-      s.MaximumGaussians = cap;
-      s.GrowthMargin = 0; // grow while it improves at all, up to the cap
-      const bool ok = TrainWithMarks(liver.Data, s, { ablationSeconds }, liver.HeldOut,
-        "cap " + std::to_string(cap) + " (start at " + std::to_string(cap / 2) + ")",
-        [&](double, const Row& r, Trainer&) {
-          rows.push_back(r);
-          Print("capacity", r);
-          return true;
-        },
-        &error);
-      if (!ok)
-      {
-        return Fail("capacity: " + error);
-      }
-    }
-    Row adaptive = fullRowAtAblationTime[0];
-    adaptive.Method = "adaptive stop (default: automatic seeds, margin " + Format("%.1f", 100 * defaults.GrowthMargin) +
-      " %, cap " + std::to_string(defaults.MaximumGaussians) + ")";
-    rows.push_back(adaptive);
-    md << "\n## Quality against the number of Gaussians (liver, " << Format("%.0f", ablationSeconds)
-       << " s of training each)\n\n"
-       << "A capped run starts at half its cap and densifies until the cap (growth margin 0); the adaptive run is "
-       << "the default trainer, whose growth stops when a validation subset of the training frames stops "
-       << "improving by the margin.\n\n"
-       << TableHeader();
-    PlotSpec spec;
-    spec.Title = "liver: held-out PSNR against the number of Gaussians";
-    spec.XLabel = "Gaussians at the end (log)";
-    spec.YLabel = "PSNR (dB)";
-    spec.LogX = true;
-    spec.Series.push_back({ "capped", {} });
-    for (const Row& r : rows)
-    {
-      md << TableRow(r);
-      report.Json["capacity"].push_back(ToJson(r));
-      if (&r != &rows.back())
-      {
-        spec.Series[0].Points.emplace_back(static_cast<double>(r.Gaussians), r.Quality.PSNR);
-      }
-    }
-    spec.Series.push_back({ "adaptive", { { static_cast<double>(adaptive.Gaussians), adaptive.Quality.PSNR } } });
-    if (!report.Plot(spec, "psnr_gaussians_liver.png"))
-    {
-      return Fail(report.PlotFolder + ": cannot write a plot");
+      spec.Series[0].Points.emplace_back(static_cast<double>(r.Gaussians), r.Quality.PSNR);
     }
   }
-
-  // --- Render speed against render error (the liver field at the end of its run) ----------------
+  spec.Series.push_back({ "adaptive", { { static_cast<double>(adaptive.Gaussians), adaptive.Quality.PSNR } } });
+  if (!report.Plot(spec, "psnr_gaussians_liver.png"))
   {
-    Sweep& liver = sweeps[0];
-    const std::array<double, 16>& pose = liver.Data.Poses[liver.HeldOut[liver.HeldOut.size() / 2]];
-    const int W = liver.Data.Width, H = liver.Data.Height;
-    const double referenceStart = Now();
-    RenderOptions exact = liverOptions;
-    const CropReference ref = RenderReference(liverField, exact, pose, W, H, crop);
-    const double referenceSeconds = Now() - referenceStart;
-    auto cpu = CreateCpuRenderer();
-    md << "\n## Render speed against render error (liver field, " << liverField.Count() << " Gaussians)\n\n"
-       << "Time per " << W << " x " << H << " slice at the held-out poses (CPU renderer, float) and the largest "
-       << "and RMS difference in intensity from the naive double-precision renderer (no cutoff) on a " << crop << " x "
-       << crop << " crop at the centre of a held-out frame (the naive renderer took "
-       << Format("%.1f", referenceSeconds) << " s for that crop).\n\n"
-       << "| cutoff k (standard deviations) | ms / slice | max abs error | RMS error | PSNR against naive (dB) |\n"
-       << "|---|---|---|---|---|\n";
-    PlotSpec spec;
-    spec.Title = "render time per slice against error from the naive renderer (liver)";
-    spec.XLabel = "ms per slice (log)";
-    spec.YLabel = "-log10(max abs error)";
-    spec.LogX = true;
-    spec.Series.push_back({ "cutoff 3, 4, 5, 6", {} });
-    std::vector<float> S(std::size_t(W) * H), I(S.size()), cropS(std::size_t(crop) * crop), cropI(cropS.size());
-    for (double k : { 3.0, 4.0, 5.0, 6.0 })
-    {
-      RenderOptions o = liverOptions;
-      o.Cutoff = k;
-      const int repeats = quick ? 2 : 10;
-      const double start = Now();
-      for (int n = 0; n < repeats; ++n)
-      {
-        SliceGeometry g;
-        const auto& p = liver.Data.Poses[liver.HeldOut[n % liver.HeldOut.size()]];
-        std::copy(p.begin(), p.end(), g.ImageToReference);
-        g.Width = W;
-        g.Height = H;
-        cpu->Forward(liverField.View(), &g, 1, o, S.data(), I.data(), nullptr, nullptr);
-      }
-      const double ms = 1e3 * (Now() - start) / repeats;
-      cpu->Forward(liverField.View(), &ref.Slice, 1, o, cropS.data(), cropI.data(), nullptr, nullptr);
-      double maxError = 0, sum = 0;
-      for (std::size_t p = 0; p < cropI.size(); ++p)
-      {
-        const double e = std::abs(cropI[p] - ref.I[p]);
-        maxError = std::max(maxError, e);
-        sum += e * e;
-      }
-      const double rms = std::sqrt(sum / cropI.size());
-      md << "| " << Format("%.0f", k) << " | " << Format("%.2f", ms) << " | " << Format("%.2e", maxError) << " | "
-         << Format("%.2e", rms) << " | " << Format("%.1f", -20 * std::log10(std::max(rms, 1e-12))) << " |\n";
-      report.Json["render"].push_back(
-        { { "cutoff", k }, { "ms_per_slice", ms }, { "max_error", maxError }, { "rms_error", rms } });
-      std::printf("  render       cutoff %.0f: %.2f ms per slice, max |dI| %.2e, RMS %.2e\n", k, ms, maxError, rms);
-      spec.Series[0].Points.emplace_back(ms, -std::log10(std::max(maxError, 1e-12)));
-    }
-    if (!report.Plot(spec, "render_speed_error.png"))
-    {
-      return Fail(report.PlotFolder + ": cannot write a plot");
-    }
+    return Failed(report.PlotFolder + ": cannot write a plot", error);
   }
+  return true;
+}
 
-  // --- Ablations (liver and spine) --------------------------------------------------------------
+/// Render time per slice against the error from the naive double-precision renderer, per cutoff, for
+/// the liver field at the end of its run.
+bool RenderSection(const Sweep& liver, const HoldOutResults& results, bool quick, Report& report, std::string* error)
+{
+  std::ostringstream& md = report.Markdown;
+  const int crop = quick ? 32 : 128;
+  const std::array<double, 16>& pose = liver.Data.Poses[liver.HeldOut[liver.HeldOut.size() / 2]];
+  const int W = liver.Data.Width, H = liver.Data.Height;
+  const double referenceStart = Now();
+  RenderOptions exact = results.LiverOptions;
+  const CropReference ref = RenderReference(results.LiverField, exact, pose, W, H, crop);
+  const double referenceSeconds = Now() - referenceStart;
+  auto cpu = CreateCpuRenderer();
+  md << "\n## Render speed against render error (liver field, " << results.LiverField.Count() << " Gaussians)\n\n"
+     << "Time per " << W << " x " << H << " slice at the held-out poses (CPU renderer, float) and the largest "
+     << "and RMS difference in intensity from the naive double-precision renderer (no cutoff) on a " << crop << " x "
+     << crop << " crop at the centre of a held-out frame (the naive renderer took "
+     << Format("%.1f", referenceSeconds) << " s for that crop).\n\n"
+     << "| cutoff k (standard deviations) | ms / slice | max abs error | RMS error | PSNR against naive (dB) |\n"
+     << "|---|---|---|---|---|\n";
+  PlotSpec spec;
+  spec.Title = "render time per slice against error from the naive renderer (liver)";
+  spec.XLabel = "ms per slice (log)";
+  spec.YLabel = "-log10(max abs error)";
+  spec.LogX = true;
+  spec.Series.push_back({ "cutoff 3, 4, 5, 6", {} });
+  std::vector<float> S(std::size_t(W) * H), I(S.size()), cropS(std::size_t(crop) * crop), cropI(cropS.size());
+  for (double k : { 3.0, 4.0, 5.0, 6.0 })
+  {
+    RenderOptions o = results.LiverOptions;
+    o.Cutoff = k;
+    const int repeats = quick ? 2 : 10;
+    const double start = Now();
+    for (int n = 0; n < repeats; ++n)
+    {
+      SliceGeometry g;
+      const auto& p = liver.Data.Poses[liver.HeldOut[n % liver.HeldOut.size()]];
+      std::copy(p.begin(), p.end(), g.ImageToReference);
+      g.Width = W;
+      g.Height = H;
+      cpu->Forward(results.LiverField.View(), &g, 1, o, S.data(), I.data(), nullptr, nullptr);
+    }
+    const double ms = 1e3 * (Now() - start) / repeats;
+    cpu->Forward(results.LiverField.View(), &ref.Slice, 1, o, cropS.data(), cropI.data(), nullptr, nullptr);
+    double maxError = 0, sum = 0;
+    for (std::size_t p = 0; p < cropI.size(); ++p)
+    {
+      const double e = std::abs(cropI[p] - ref.I[p]);
+      maxError = std::max(maxError, e);
+      sum += e * e;
+    }
+    const double rms = std::sqrt(sum / cropI.size());
+    md << "| " << Format("%.0f", k) << " | " << Format("%.2f", ms) << " | " << Format("%.2e", maxError) << " | "
+       << Format("%.2e", rms) << " | " << Format("%.1f", -20 * std::log10(std::max(rms, 1e-12))) << " |\n";
+    report.Json["render"].push_back(
+      { { "cutoff", k }, { "ms_per_slice", ms }, { "max_error", maxError }, { "rms_error", rms } });
+    std::printf("  render       cutoff %.0f: %.2f ms per slice, max |dI| %.2e, RMS %.2e\n", k, ms, maxError, rms);
+    spec.Series[0].Points.emplace_back(ms, -std::log10(std::max(maxError, 1e-12)));
+  }
+  if (!report.Plot(spec, "render_speed_error.png"))
+  {
+    return Failed(report.PlotFolder + ": cannot write a plot", error);
+  }
+  return true;
+}
+
+/// The ablations on the liver and the spine (the first two of @p sweeps) against the full method.
+bool AblationSection(const std::vector<Sweep>& sweeps, const HoldOutResults& results, bool quick, Report& report,
+  std::string* error)
+{
+  std::ostringstream& md = report.Markdown;
+  const double ablationSeconds = AblationSeconds(quick);
   md << "\n## Ablations (" << Format("%.0f", ablationSeconds) << " s of training each)\n\n"
      << "The paper's Tables 3 and 4 report that each part of the method helps; the last column says "
      << "whether our measurement goes the same way as the paper on held-out PSNR and SSIM against the full "
      << "method trained for the same time.\n";
   for (std::size_t si = 0; si < 2; ++si)
   {
-    Sweep& sweep = sweeps[si];
-    const Row full = fullRowAtAblationTime[si];
+    const Sweep& sweep = sweeps[si];
+    const Row full = results.FullAtAblationTime[si];
     md << "\n### " << sweep.Name << "\n\n"
        << "| variant | PSNR (dB) | SSIM | NCC | speckle | Gaussians | steps | paper | ours |\n"
        << "|---|---|---|---|---|---|---|---|---|\n"
@@ -1080,10 +1117,10 @@ int RunBenchmark(const BenchmarkOptions& options)
           row = r;
           return true;
         },
-        &error);
+        error);
       if (!ok)
       {
-        return Fail("ablation " + a.Name + ": " + error);
+        return Failed("ablation " + a.Name + ": " + *error, error);
       }
       Print(sweep.Name, row);
       // The paper's direction: the variant is worse than the full method, except adding FFL (better).
@@ -1099,14 +1136,18 @@ int RunBenchmark(const BenchmarkOptions& options)
       report.Json["ablations"][sweep.Name].push_back(j);
     }
   }
+  return true;
+}
 
-  const double total = Now() - started;
-  md << "\nTotal run time of the command: " << Format("%.1f", total / 60) << " minutes.\n";
-  report.Json["total_seconds"] = total;
-  const std::string markdown = options.Output + "/BENCHMARKS.md";
+/// Adds the total run time (@p seconds) and writes @p output/BENCHMARKS.md and results.json next to the plots.
+bool WriteReport(const std::string& output, double seconds, Report& report, std::string* error)
+{
+  report.Markdown << "\nTotal run time of the command: " << Format("%.1f", seconds / 60) << " minutes.\n";
+  report.Json["total_seconds"] = seconds;
+  const std::string markdown = output + "/BENCHMARKS.md";
   const std::string json = report.PlotFolder + "/results.json";
   for (const auto& [path, text] :
-    { std::pair<std::string, std::string>{ markdown, md.str() }, { json, report.Json.dump(2) + "\n" } })
+    { std::pair<std::string, std::string>{ markdown, report.Markdown.str() }, { json, report.Json.dump(2) + "\n" } })
   {
     const std::string temporary = TemporaryName(path);
     std::ofstream out(temporary);
@@ -1114,10 +1155,51 @@ int RunBenchmark(const BenchmarkOptions& options)
     out.close();
     if (!out || !Publish(temporary, path))
     {
-      return Fail(path + ": cannot write");
+      std::remove(temporary.c_str());
+      return Failed(path + ": cannot write", error);
     }
   }
-  std::printf("wrote %s and %s (%.1f minutes)\n", markdown.c_str(), json.c_str(), total / 60);
+  return true;
+}
+}
+
+int RunBenchmark(const BenchmarkOptions& options)
+{
+  const double started = Now();
+  const bool quick = options.Quick;
+  const std::string root = options.SourceDirectory;
+  Report report;
+  report.PlotFolder = options.Output + "/benchmarks";
+  report.PlotLink = "benchmarks";
+  if (!MakeFolder(options.Output) || !MakeFolder(report.PlotFolder))
+  {
+    return Fail(options.Output + ": cannot create the output folder");
+  }
+  Introduction(root, quick, report);
+  std::vector<Sweep> sweeps = BundledSweeps(root, quick);
+  std::string error;
+  HoldOutResults results;
+  for (std::size_t si = 0; si < sweeps.size(); ++si)
+  {
+    if (!HoldOutSection(sweeps[si], si, root, quick, report, results, &error))
+    {
+      return Fail(error);
+    }
+  }
+  if (!VolumeProtocolSection(root, quick, report, &error) ||
+    !CapacitySection(sweeps[0], results.FullAtAblationTime[0], quick, report, &error) ||
+    !RenderSection(sweeps[0], results, quick, report, &error) || !AblationSection(sweeps, results, quick, report, &error))
+  {
+    return Fail(error);
+  }
+
+  const double total = Now() - started;
+  if (!WriteReport(options.Output, total, report, &error))
+  {
+    return Fail(error);
+  }
+  std::printf("wrote %s/BENCHMARKS.md and %s/results.json (%.1f minutes)\n", options.Output.c_str(),
+    report.PlotFolder.c_str(), total / 60);
   return 0;
 }
 }

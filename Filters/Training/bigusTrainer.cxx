@@ -691,11 +691,15 @@ bool Trainer::RenderFrame(const TrainingData& data, int frame, float* image, std
 }
 
 ImageMetrics MeanFrameMetrics(const TrainingData& data, const std::vector<int>& frames,
-  const std::function<const float*(std::size_t, int)>& image)
+  const std::function<const float*(std::size_t, int)>& image, std::vector<std::optional<ImageMetrics>>* perFrame)
 {
   const std::size_t pixels = std::size_t(data.Width) * data.Height;
   ImageMetrics mean;
   int used = 0;
+  if (perFrame)
+  {
+    perFrame->assign(frames.size(), std::nullopt);
+  }
   for (std::size_t m = 0; m < frames.size(); ++m)
   {
     const int f = frames[m];
@@ -705,6 +709,10 @@ ImageMetrics MeanFrameMetrics(const TrainingData& data, const std::vector<int>& 
       continue; // nothing of this frame is imaged (a per-frame mask outside the data)
     }
     const ImageMetrics q = CompareImages(image(m, f), &data.Frames[pixels * f], mask, data.Width, data.Height);
+    if (perFrame)
+    {
+      (*perFrame)[m] = q;
+    }
     mean.PSNR += q.PSNR;
     mean.SSIM += q.SSIM;
     mean.NCC += q.NCC;

@@ -19,6 +19,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <random>
 #include <string>
 #include <vector>
@@ -193,10 +194,12 @@ private:
 /**
  * Mean metrics (bigus::CompareImages) of one [H, W] image per frame against @p frames of @p data, each
  * inside that frame's mask; frames whose mask is empty are left out of the means (and @p image is not
- * called for them). @p image(m, f) gives the image for the m-th entry f of @p frames.
+ * called for them). @p image(m, f) gives the image for the m-th entry f of @p frames. @p perFrame, if
+ * non-null, receives one entry per entry of @p frames: that frame's metrics, or empty for a frame left out.
  */
 BIGUSTRAINING_EXPORT ImageMetrics MeanFrameMetrics(const TrainingData& data, const std::vector<int>& frames,
-  const std::function<const float*(std::size_t, int)>& image);
+  const std::function<const float*(std::size_t, int)>& image,
+  std::vector<std::optional<ImageMetrics>>* perFrame = nullptr);
 
 /**
  * EA-D densification of Gaussian @p i (DESIGN section 4): appends one child and returns its index.

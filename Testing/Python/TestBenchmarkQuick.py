@@ -1,6 +1,7 @@
 """`bigus benchmark --quick` end to end: every section is written, the report's numbers are those of
-results.json, the plots are PNG files, and the frame baselines of the liver sweep match an independent
-computation here (numpy: nearest frame by pose, linear blend of the neighbours in time, masked PSNR).
+results.json, the plots are PNG files, and the frame baselines and blurred held-out frames of the liver
+sweep match an independent computation here (numpy: nearest frame by pose, linear blend of the neighbours
+in time, Gaussian blur, masked PSNR).
 
 Usage: TestBenchmarkQuick.py EXAMPLE_DATA_DIR BIGUS_EXECUTABLE OUTPUT_DIR
 """
@@ -20,6 +21,19 @@ import bigus
 def masked_psnr(a, b, mask):
     mse = float(np.mean((a[mask] - b[mask]) ** 2))
     return min(100.0, 10 * math.log10(1.0 / mse)) if mse > 0 else 100.0
+
+
+def gaussian_blur(image, sigma):
+    """OpenCV's GaussianBlur(image, Size(0, 0), sigma, sigma, BORDER_REFLECT) on float images, written out:
+    a separable kernel exp(-x^2 / (2 sigma^2)), normalised, of round(8 sigma + 1) taps made odd; borders
+    reflected including the edge pixel."""
+    radius = (int(math.floor(8 * sigma + 1.5)) | 1) // 2
+    x = np.arange(-radius, radius + 1)
+    kernel = np.exp(-x ** 2 / (2 * sigma ** 2))
+    kernel /= kernel.sum()
+    padded = np.pad(image, radius, mode="symmetric")
+    rows = sum(k * padded[:, i:i + image.shape[1]] for i, k in enumerate(kernel))
+    return sum(k * rows[i:i + image.shape[0], :] for i, k in enumerate(kernel))
 
 
 def liver_baselines(example_data):
@@ -46,7 +60,9 @@ def liver_baselines(example_data):
         after = min((t for t in train if t > k), default=before)
         weight = 0.0 if after == before else (stamps[k] - stamps[before]) / (stamps[after] - stamps[before])
         blend.append(masked_psnr((1 - weight) * frames[before] + weight * frames[after], frames[k], mask))
-    return float(np.mean(nearest)), float(np.mean(blend))
+    blurred = {sigma: float(np.mean([masked_psnr(gaussian_blur(frames[k], sigma), frames[k], mask) for k in held]))
+               for sigma in (0.5, 1.0, 1.5, 2.0)}
+    return float(np.mean(nearest)), float(np.mean(blend)), blurred
 
 
 def main():
@@ -72,14 +88,21 @@ def main():
             assert math.isfinite(row["psnr"]) and -1 <= row["ncc"] <= 1, (name, row)
             assert "| %s | %.1f |" % (row["method"], row["seconds"]) in report, (name, row["method"])
             assert "| %.2f | %.4f |" % (row["psnr"], row["ssim"]) in report, (name, row["method"])
-    # Where the held-out error comes from: one row per BIGUS row, the same held-out PSNR, and the fit + blend
-    # estimate is the PSNR of the summed mean squared errors of the training frames and the blend baseline.
+    # Where the held-out error comes from: one row per BIGUS row, and the fit + blend estimate is the PSNR of
+    # the summed mean squared errors of the training frames and the blend baseline.
     assert "Where the held-out error comes from" in report
     for name, sweep in results["sweeps"].items():
         blend_psnr = sweep["baselines"][1]["psnr"]
         assert len(sweep["error_sources"]) == len(sweep["bigus"]), name
         for row, source in zip(sweep["bigus"], sweep["error_sources"]):
-            assert source["seconds"] == row["seconds"] and source["held_out_psnr"] == row["psnr"], (name, source)
+            # The training-frame PSNR (the field rendered at its training poses, measured for this table) and
+            # the held-out PSNR (Trainer::Evaluate at the held-out poses, the BIGUS row) are two measurements
+            # of one field. A field fitted to the training frames does not predict the frames it never saw
+            # better than it fits the ones it was fitted to; the held-out frames (i mod 4 == 2) are spread
+            # over the whole sweep like the training frames, so their statistics differ little: 0.5 dB covers
+            # that (measured gaps: 0.01 to 7 dB, held-out always below). Training frames rendered at the
+            # wrong poses or with the wrong field would fall far below the held-out PSNR.
+            assert source["training_psnr"] > row["psnr"] - 0.5, (name, source, row)
             for key in ("training_psnr", "blended_renders_psnr"):
                 assert math.isfinite(source[key]) and source[key] > 5, (name, source)
             summed = 10 ** (-source["training_psnr"] / 10) + 10 ** (-blend_psnr / 10)
@@ -101,13 +124,17 @@ def main():
                 assert f.read(8) == b"\x89PNG\r\n\x1a\n", png
             assert "(benchmarks/%s)" % png in report, png
 
-    # The frame baselines against the computation here.
-    nearest, blend = liver_baselines(example_data)
+    # The frame baselines and the blurred held-out frames against the computation here.
+    nearest, blend, blurred = liver_baselines(example_data)
     rows = {row["method"]: row for row in results["sweeps"]["liver"]["baselines"]}
     got_nearest = rows["nearest training frame (pose)"]["psnr"]
     got_blend = rows["blend of bracketing training frames (time)"]["psnr"]
     print("liver nearest frame %.4f dB (here %.4f), blend %.4f dB (here %.4f)" % (got_nearest, nearest, got_blend, blend))
     assert abs(got_nearest - nearest) < 1e-3 and abs(got_blend - blend) < 1e-3
+    for row in results["sweeps"]["liver"]["blurred_truth"]:
+        expected = blurred[row["sigma_pixels"]]
+        print("liver blurred at sigma %.1f: %.4f dB (here %.4f)" % (row["sigma_pixels"], row["psnr"], expected))
+        assert abs(row["psnr"] - expected) < 1e-3, (row, expected)
 
 
 if __name__ == "__main__":

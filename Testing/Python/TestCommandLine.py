@@ -4,17 +4,132 @@ outputs that exist and read back, and no half-written file when a step fails.
 Usage: TestCommandLine.py TESTING_DATA_DIR EXAMPLE_DATA_DIR BIGUS_EXECUTABLE OUTPUT_DIR
 """
 import json
+import math
 import os
 import subprocess
 import sys
 
+import numpy as np
 import vtk  # noqa: F401
+from vtk.util.numpy_support import numpy_to_vtk, vtk_to_numpy
+
 import bigus
 
 
-def run(*args):
-    result = subprocess.run([BIGUS, *args], capture_output=True, text=True)
+def run(*args, preexec_fn=None):
+    result = subprocess.run([BIGUS, *args], capture_output=True, text=True, preexec_fn=preexec_fn)
     return result.returncode, result.stdout, result.stderr
+
+
+def read_sweep(path, calibration):
+    reader = bigus.vtkUltrasoundSequenceReader()
+    reader.SetFileName(path)
+    reader.SetCalibrationFileName(calibration)
+    reader.Update()
+    return reader
+
+
+def masked_psnr(rendered, truth, mask):
+    """PSNR (data range 1, capped at 100 dB) of the masked pixels, computed here with numpy."""
+    mse = float(np.mean((rendered[mask].astype(np.float64) - truth[mask].astype(np.float64)) ** 2))
+    return min(100.0, 10 * math.log10(1.0 / mse)) if mse > 0 else 100.0
+
+
+def check_evaluate_leaves_out_empty_masks(field, sweep, xml, out):
+    """`bigus evaluate` with a per-frame mask whose frame 6 is empty: frame 6 is reported as left out and
+    the mean PSNR is that of the other frames, computed here from the field's float renders (the sequence
+    renderer, the filters' cutoff) and the recorded frames inside the mask."""
+    reader = read_sweep(sweep, xml)
+    w, h, n = reader.GetOutput().GetDimensions()
+    fan = bigus.vtkUltrasoundFanMask()
+    fan.SetInputConnection(reader.GetOutputPort())
+    fan.Update()
+    fan_mask = vtk_to_numpy(fan.GetOutput().GetPointData().GetScalars()).reshape(h, w) != 0
+    masks = np.repeat(fan_mask[np.newaxis], n, axis=0).astype(np.uint8)
+    masks[6] = 0
+    image = vtk.vtkImageData()
+    image.SetDimensions(w, h, n)
+    image.GetPointData().SetScalars(numpy_to_vtk(masks.ravel(), deep=True))
+    mask_file = os.path.join(out, "nwire_mask_frame6_empty.mha")
+    writer = vtk.vtkMetaImageWriter()
+    writer.SetInputData(image)
+    writer.SetFileName(mask_file)
+    writer.Write()
+
+    report = os.path.join(out, "report_empty_mask")
+    code, out_text, err = run("evaluate", field, sweep, "--calibration", xml, "--holdout-every", "4",
+                              "--holdout-offset", "2", "--mask", mask_file, "--report", report)
+    assert code == 0, err
+    metrics = json.load(open(os.path.join(report, "metrics.json")))
+    entries = {f["frame"]: f for f in metrics["frames"]}
+    assert sorted(entries) == [2, 6, 10, 14, 18], metrics["frames"]
+    assert entries[6] == {"frame": 6, "left_out": "empty mask"}, entries[6]
+    assert "left out of the mean: empty mask" in out_text and "(4 frames, 1 left out: empty mask" in out_text, out_text
+
+    used = [2, 10, 14, 18]
+    renderer = bigus.vtkGaussianFieldSequenceRenderer()
+    poly = vtk.vtkXMLPolyDataReader()
+    poly.SetFileName(field)
+    poly.Update()
+    renderer.SetInputData(poly.GetOutput())
+    renderer.SetPoseConnection(reader.GetOutputPort())
+    ids = vtk.vtkIdList()
+    for k in used:
+        ids.InsertNextId(k)
+    renderer.SetFrameList(ids)
+    renderer.Update()
+    rendered = vtk_to_numpy(renderer.GetOutput().GetPointData().GetScalars()).reshape(len(used), h, w)
+    truth = vtk_to_numpy(reader.GetOutput().GetPointData().GetScalars()).reshape(n, h, w) / 255.0
+    expected = [masked_psnr(rendered[m], truth[k], masks[k] != 0) for m, k in enumerate(used)]
+    for k, psnr in zip(used, expected):
+        assert abs(entries[k]["psnr"] - psnr) < 1e-4, (k, entries[k]["psnr"], psnr)
+    assert metrics["mean"]["frames"] == 4, metrics["mean"]
+    assert abs(metrics["mean"]["psnr"] - float(np.mean(expected))) < 1e-4, (metrics["mean"], expected)
+
+    # Every chosen frame empty: nothing to compare, said on one line.
+    code, _, err = run("evaluate", field, sweep, "--calibration", xml, "--frames", "6", "--mask", mask_file,
+                       "--report", report)
+    assert code == 1 and err.count("\n") == 1 and "empty mask" in err, (code, err)
+
+
+def check_metrics_write_failure(field, sweep, xml, report):
+    """metrics.json whose write fails (its temporary is a link to /dev/full, so the data never reach the
+    disk): exit 1 naming the file, the temporary removed, the metrics.json already there untouched."""
+    metrics = os.path.join(report, "metrics.json")
+    before = open(metrics, "rb").read()
+
+    def full_disk_temporary():
+        # Runs in the child between fork and exec: its pid is the one bigus names its temporaries with.
+        os.symlink("/dev/full", os.path.join(report, "metrics.tmp%d.json" % os.getpid()))
+
+    code, _, err = run("evaluate", field, sweep, "--calibration", xml, "--holdout-every", "4", "--holdout-offset",
+                       "2", "--report", report, preexec_fn=full_disk_temporary)
+    assert code == 1 and err.count("\n") == 1 and "metrics.json" in err, (code, err)
+    assert not os.path.islink(metrics) and open(metrics, "rb").read() == before
+    assert not [f for f in os.listdir(report) if ".tmp" in f], os.listdir(report)
+
+
+def check_sweep_without_statuses(field, sweep, xml, out):
+    """A sweep file without any status field (PLUS writes them, other tools may not): every frame is
+    valid, as vtkUltrasoundSequenceReader, the trainer and the compounder read it."""
+    reader = read_sweep(sweep, xml)
+    written = os.path.join(out, "nwire_with_statuses.igs.mha")
+    writer = bigus.vtkUltrasoundSequenceWriter()
+    writer.SetInputConnection(reader.GetOutputPort())
+    writer.SetFileName(written)
+    assert writer.Write()
+    text = open(written, "rb").read()
+    body = text.index(b"ElementDataFile")
+    header = b"".join(line for line in text[:body].splitlines(True) if b"Status" not in line)
+    assert header != text[:body]
+    stripped = os.path.join(out, "nwire_without_statuses.igs.mha")
+    open(stripped, "wb").write(header + text[body:])
+    report = os.path.join(out, "report_without_statuses")
+    code, _, err = run("evaluate", field, stripped, "--holdout-every", "4", "--holdout-offset", "2",
+                       "--report", report)
+    assert code == 0, err
+    metrics = json.load(open(os.path.join(report, "metrics.json")))
+    assert [f["frame"] for f in metrics["frames"]] == [2, 6, 10, 14, 18], metrics["frames"]
 
 
 def main():
@@ -100,6 +215,11 @@ def main():
     assert all(0 < f["psnr"] <= 100 for f in metrics["frames"])
     for name in ("slice_orthogonal.png", "slice_oblique.png", "psnr_against_time.png"):
         assert os.path.getsize(os.path.join(report, name)) > 0, name
+    code, _, err = run("evaluate", field, sweep, "--calibration", xml, "--frames", "2", "25", "--report", report)
+    assert code == 1 and err.count("\n") == 1 and "frame 25 is outside the 20 frames" in err, (code, err)
+    check_metrics_write_failure(field, sweep, xml, report)
+    check_evaluate_leaves_out_empty_masks(field, sweep, xml, out)
+    check_sweep_without_statuses(field, sweep, xml, out)
 
     # The volume protocol: a sweep of the PLUS reconstruction with exact poses and per-frame masks,
     # trained on and evaluated with those masks.
