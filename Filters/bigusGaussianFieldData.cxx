@@ -1,5 +1,7 @@
 #include "bigusGaussianFieldData.h"
 
+#include "bigusBackend.h"
+
 #include "vtkCellArray.h"
 #include "vtkDataArray.h"
 #include "vtkDoubleArray.h"
@@ -88,6 +90,49 @@ bool FieldFromPolyData(vtkPolyData* data, GaussianField& field, FieldModel& mode
   return true;
 }
 
+bool FieldCache::Update(vtkPolyData* data, std::string* error)
+{
+  if (data && data == this->Source.GetPointer() && data->GetMTime() == this->SourceTime)
+  {
+    if (!this->Valid && error)
+    {
+      *error = this->Error;
+    }
+    return this->Valid;
+  }
+  this->Source = data;
+  this->SourceTime = data ? data->GetMTime() : 0;
+  this->Error.clear();
+  this->Valid = FieldFromPolyData(data, this->Field, this->Model, &this->Error);
+  if (!this->Valid)
+  {
+    this->Field = GaussianField();
+    if (error)
+    {
+      *error = this->Error;
+    }
+    return false;
+  }
+  data->GetPoints()->GetBounds(this->Bounds);
+  float largest = -VTK_FLOAT_MAX;
+  for (float l : this->Field.LogScales)
+  {
+    largest = std::max(largest, l);
+  }
+  this->LargestScale = std::exp(double(largest));
+  return true;
+}
+
+Renderer* RendererCache::Get(const std::string& name, std::string* error, std::string* notice)
+{
+  if (!this->Held || name != this->Name)
+  {
+    this->Held = CreateRenderer(name, error, notice);
+    this->Name = name;
+  }
+  return this->Held.get();
+}
+
 RenderOptions RenderOptionsFor(const FieldModel& model, double elevationSigma, double cutoff)
 {
   RenderOptions options;
@@ -119,6 +164,20 @@ vtkSmartPointer<vtkDataArray> IntensityArray(const std::vector<float>& I, int sc
   }
   scalars->SetName("Intensity");
   return scalars;
+}
+
+bool IsIntensityScalarType(int scalarType, std::string* error)
+{
+  if (scalarType == VTK_FLOAT || scalarType == VTK_UNSIGNED_CHAR)
+  {
+    return true;
+  }
+  if (error)
+  {
+    *error = std::string("scalar type ") + vtkImageScalarTypeNameMacro(scalarType) + " (" + std::to_string(scalarType) +
+      ") is not supported: use VTK_FLOAT or VTK_UNSIGNED_CHAR";
+  }
+  return false;
 }
 
 void FieldToPolyData(const GaussianField& field, const FieldModel& model, vtkPolyData* data)

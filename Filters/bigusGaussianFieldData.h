@@ -11,11 +11,14 @@
 #define bigusGaussianFieldData_h
 
 #include "bigusFiltersModule.h" // For export macro
+#include "bigusRenderer.h"
 #include "bigusTrainer.h"
 
 #include "vtkSmartPointer.h"
 #include "vtkType.h"
+#include "vtkWeakPointer.h"
 
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -43,6 +46,57 @@ struct FieldModel
  */
 BIGUSFILTERS_EXPORT bool FieldFromPolyData(vtkPolyData* data, GaussianField& field, FieldModel& model, std::string* error);
 
+/**
+ * A field converted from its vtkPolyData form once and kept, for a filter that renders its input on
+ * every execute (vtkGaussianFieldReslice, vtkGaussianFieldSequenceRenderer): Update converts only
+ * when @p data is not the object converted last time or has been modified since (its GetMTime covers
+ * points, point data and field data), so an execute that follows a change of a filter setting alone
+ * (a reslice matrix) reuses the conversion. A malformed field's error is kept the same way.
+ */
+class BIGUSFILTERS_EXPORT FieldCache
+{
+public:
+  /// Brings the conversion up to date with @p data; false with @p error (FieldFromPolyData's) when
+  /// @p data is null or not a valid field.
+  bool Update(vtkPolyData* data, std::string* error);
+  /// The last conversion (valid after Update returned true).
+  const GaussianField& GetField() const { return this->Field; }
+  const FieldModel& GetModel() const { return this->Model; }
+  /// Bounds of the means (xmin, xmax, ymin, ymax, zmin, zmax; mm, reference frame).
+  const double* GetBounds() const { return this->Bounds; }
+  /// Largest standard deviation of any Gaussian along any of its axes (mm).
+  double GetLargestScale() const { return this->LargestScale; }
+
+private:
+  vtkWeakPointer<vtkPolyData> Source;
+  vtkMTimeType SourceTime = 0;
+  bool Valid = false;
+  std::string Error;
+  GaussianField Field;
+  FieldModel Model;
+  double Bounds[6] = { 0, 0, 0, 0, 0, 0 };
+  double LargestScale = 0;
+};
+
+/**
+ * The renderer a filter keeps between executes, created through the backend registry
+ * (bigus::CreateRenderer, DESIGN section 5) and created again only when the backend name changes.
+ */
+class BIGUSFILTERS_EXPORT RendererCache
+{
+public:
+  /**
+   * The renderer of backend @p name ("auto", "cpu", "cuda"; empty = "auto"). Null with @p error
+   * ("backend 'x' is not available in this build; available: auto, cpu") when that backend cannot
+   * run here; @p notice says which backend "auto" skipped and why, on the call that created it.
+   */
+  Renderer* Get(const std::string& name, std::string* error, std::string* notice);
+
+private:
+  std::unique_ptr<Renderer> Held;
+  std::string Name;
+};
+
 /// Rendering settings of a stored field: its gamma and elevation sigma (@p elevationSigma < 0 keeps
 /// the field's), with footprint cutoff @p cutoff.
 BIGUSFILTERS_EXPORT RenderOptions RenderOptionsFor(const FieldModel& model, double elevationSigma, double cutoff);
@@ -50,6 +104,10 @@ BIGUSFILTERS_EXPORT RenderOptions RenderOptionsFor(const FieldModel& model, doub
 /// The rendered image I ([0, 1] floats) as point-data scalars "Intensity": VTK_FLOAT as is, or
 /// VTK_UNSIGNED_CHAR as round(255 I).
 BIGUSFILTERS_EXPORT vtkSmartPointer<vtkDataArray> IntensityArray(const std::vector<float>& I, int scalarType);
+
+/// Whether IntensityArray produces @p scalarType (VTK_FLOAT or VTK_UNSIGNED_CHAR); false with @p error
+/// naming the type and the two accepted otherwise. The filters' OutputScalarType setters check it.
+BIGUSFILTERS_EXPORT bool IsIntensityScalarType(int scalarType, std::string* error);
 
 /// Write a field (points, vertices, Scale, Rotation normalised, Reflectivity, ElevationSigma, Gamma,
 /// PixelSpacing).

@@ -3,7 +3,6 @@
 #include "bigusGaussianFieldData.h"
 #include "bigusRenderer.h"
 
-#include "vtkAlgorithmOutput.h"
 #include "vtkFloatArray.h"
 #include "vtkImageData.h"
 #include "vtkInformation.h"
@@ -28,14 +27,159 @@ namespace
 {
 constexpr double Unset = VTK_DOUBLE_MAX;
 constexpr int UnsetExtent = VTK_INT_MIN;
+
+/// An output grid in the reslice frame (mm, voxel indices); Unset / UnsetExtent where a default applies.
+struct Grid
+{
+  double Spacing[3];
+  double Origin[3];
+  int Extent[6];
+
+  bool IsEmpty() const
+  {
+    return this->Extent[1] < this->Extent[0] || this->Extent[3] < this->Extent[2] || this->Extent[5] < this->Extent[4];
+  }
+  std::string ExtentText() const
+  {
+    std::string text;
+    for (int k = 0; k < 6; ++k)
+    {
+      text += (k ? " " : "") + std::to_string(this->Extent[k]);
+    }
+    return text;
+  }
+};
+
+/// Whether a default that only the field can give (bounds, pixel spacing) is still unset.
+bool NeedsField(const Grid& g, bool planar)
+{
+  return g.Spacing[0] == Unset || g.Spacing[1] == Unset || (!planar && g.Spacing[2] == Unset) ||
+    g.Origin[0] == Unset || g.Origin[1] == Unset || (!planar && g.Origin[2] == Unset) || g.Extent[0] == UnsetExtent;
 }
 
+/**
+ * The field's defaults for the unset parts of @p g: spacing = PixelSpacing or 0.5 mm; origin and extent
+ * = the means' bounds padded by three times the largest scale, in the reslice frame of @p axes
+ * (null = identity); a planar grid passes through the axes' origin (z = 0).
+ */
+void FillDefaults(Grid& g, const bigus::FieldCache& field, vtkMatrix4x4* axes, bool planar)
+{
+  const double step = field.GetModel().PixelSpacing > 0 ? field.GetModel().PixelSpacing : 0.5;
+  for (int k = 0; k < 3; ++k)
+  {
+    g.Spacing[k] = g.Spacing[k] == Unset ? step : g.Spacing[k];
+  }
+  const double* world = field.GetBounds();
+  const double pad = 3 * field.GetLargestScale();
+  vtkNew<vtkMatrix4x4> inverse;
+  if (axes)
+  {
+    vtkMatrix4x4::Invert(axes, inverse);
+  }
+  double lo[3] = { VTK_DOUBLE_MAX, VTK_DOUBLE_MAX, VTK_DOUBLE_MAX };
+  double hi[3] = { -VTK_DOUBLE_MAX, -VTK_DOUBLE_MAX, -VTK_DOUBLE_MAX };
+  for (int c = 0; c < 8; ++c)
+  {
+    double p[4] = { 0, 0, 0, 1 };
+    for (int k = 0; k < 3; ++k)
+    {
+      const int upper = (c >> k) & 1;
+      p[k] = world[2 * k + upper] + (upper ? pad : -pad);
+    }
+    double q[4];
+    inverse->MultiplyPoint(p, q);
+    for (int k = 0; k < 3; ++k)
+    {
+      lo[k] = std::min(lo[k], q[k]);
+      hi[k] = std::max(hi[k], q[k]);
+    }
+  }
+  for (int k = 0; k < 3; ++k)
+  {
+    if (g.Origin[k] == Unset)
+    {
+      g.Origin[k] = (planar && k == 2) ? 0.0 : lo[k];
+    }
+  }
+  if (g.Extent[0] == UnsetExtent)
+  {
+    for (int k = 0; k < 3; ++k)
+    {
+      g.Extent[2 * k] = 0;
+      g.Extent[2 * k + 1] = static_cast<int>(std::ceil((hi[k] - g.Origin[k]) / g.Spacing[k]));
+    }
+  }
+}
+
+/// Pose of slice k of @p extent: pixel (i, j) -> axes * (origin + (extent[0] + i, extent[2] + j,
+/// extent[4] + k) * spacing).
+bigus::SliceGeometry SliceAt(vtkMatrix4x4* axes, const double spacing[3], const double origin[3],
+  const int extent[6], int k)
+{
+  vtkNew<vtkMatrix4x4> grid, pose;
+  grid->SetElement(0, 0, spacing[0]);
+  grid->SetElement(1, 1, spacing[1]);
+  grid->SetElement(0, 3, origin[0] + extent[0] * spacing[0]);
+  grid->SetElement(1, 3, origin[1] + extent[2] * spacing[1]);
+  grid->SetElement(2, 3, origin[2] + (extent[4] + k) * spacing[2]);
+  vtkMatrix4x4::Multiply4x4(axes, grid, pose);
+  bigus::SliceGeometry slice;
+  std::copy(pose->GetData(), pose->GetData() + 16, slice.ImageToReference);
+  slice.Width = extent[1] - extent[0] + 1;
+  slice.Height = extent[3] - extent[2] + 1;
+  return slice;
+}
+}
+
+/// What the filter keeps between executes (see "Interactive use" in the class description).
+class vtkGaussianFieldReslice::vtkInternals
+{
+public:
+  bigus::FieldCache Field;
+  bigus::RendererCache Renderer;
+
+  /**
+   * The output grid: the settings, an InformationInput's geometry over them, and for what is still
+   * unset the defaults of the field @p input holds (converted only then). Returns false when a default
+   * is needed and @p input holds no valid field.
+   */
+  static bool OutputGrid(vtkGaussianFieldReslice* self, vtkPolyData* input, Grid& g)
+  {
+    std::copy(self->OutputSpacing, self->OutputSpacing + 3, g.Spacing);
+    std::copy(self->OutputOrigin, self->OutputOrigin + 3, g.Origin);
+    std::copy(self->OutputExtent, self->OutputExtent + 6, g.Extent);
+    if (self->InformationInput)
+    {
+      self->InformationInput->GetSpacing(g.Spacing);
+      self->InformationInput->GetOrigin(g.Origin);
+      self->InformationInput->GetExtent(g.Extent);
+    }
+    const bool planar = self->OutputDimensionality == 2;
+    if (NeedsField(g, planar))
+    {
+      bigus::FieldCache& field = self->Internals->Field;
+      if (!field.Update(input, nullptr))
+      {
+        return false;
+      }
+      FillDefaults(g, field, self->ResliceAxes, planar);
+    }
+    if (planar)
+    {
+      g.Extent[5] = g.Extent[4];
+      g.Spacing[2] = g.Spacing[2] == Unset ? 1.0 : g.Spacing[2];
+    }
+    return true;
+  }
+};
+
 vtkGaussianFieldReslice::vtkGaussianFieldReslice()
+  : Internals(new vtkInternals)
 {
   this->SetOutputSpacingToDefault();
   this->SetOutputOriginToDefault();
   this->SetOutputExtentToDefault();
-  this->SetBackend("cpu");
+  this->SetBackend("auto");
 }
 
 vtkGaussianFieldReslice::~vtkGaussianFieldReslice()
@@ -43,6 +187,22 @@ vtkGaussianFieldReslice::~vtkGaussianFieldReslice()
   this->SetResliceAxes(nullptr);
   this->SetInformationInput(nullptr);
   this->SetBackend(nullptr);
+  delete this->Internals;
+}
+
+void vtkGaussianFieldReslice::SetOutputScalarType(int type)
+{
+  std::string error;
+  if (!bigus::IsIntensityScalarType(type, &error))
+  {
+    vtkErrorMacro("OutputScalarType: " << error << "; keeping " << vtkImageScalarTypeNameMacro(this->OutputScalarType));
+    return;
+  }
+  if (type != this->OutputScalarType)
+  {
+    this->OutputScalarType = type;
+    this->Modified();
+  }
 }
 
 void vtkGaussianFieldReslice::SetOutputSpacingToDefault()
@@ -115,100 +275,29 @@ int vtkGaussianFieldReslice::FillInputPortInformation(int, vtkInformation* info)
 int vtkGaussianFieldReslice::RequestInformation(
   vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector* outputVector)
 {
-  double spacing[3], origin[3];
-  int extent[6];
-  std::copy(this->OutputSpacing, this->OutputSpacing + 3, spacing);
-  std::copy(this->OutputOrigin, this->OutputOrigin + 3, origin);
-  std::copy(this->OutputExtent, this->OutputExtent + 6, extent);
-  if (this->InformationInput)
+  // Metadata only: the input is never executed from here. A default grid uses the field the input
+  // holds now (converted once and kept); RequestData corrects it if the field changes in this update.
+  Grid grid;
+  vtkInformation* outInfo = outputVector->GetInformationObject(0);
+  vtkDataObject::SetPointDataActiveScalarInfo(outInfo, this->OutputScalarType, 1);
+  if (!vtkInternals::OutputGrid(this, vtkPolyData::GetData(inputVector[0], 0), grid))
   {
-    this->InformationInput->GetSpacing(spacing);
-    this->InformationInput->GetOrigin(origin);
-    this->InformationInput->GetExtent(extent);
+    // No field yet (its producer has not run): nothing to announce until RequestData knows the grid.
+    const int empty[6] = { 0, -1, 0, -1, 0, -1 };
+    const double unit[3] = { 1, 1, 1 }, zero[3] = { 0, 0, 0 };
+    outInfo->Set(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT(), empty, 6);
+    outInfo->Set(vtkDataObject::SPACING(), unit, 3);
+    outInfo->Set(vtkDataObject::ORIGIN(), zero, 3);
+    return 1;
   }
-  const bool planar = this->OutputDimensionality == 2;
-  const bool needField = spacing[0] == Unset || spacing[1] == Unset || (!planar && spacing[2] == Unset) ||
-    origin[0] == Unset || origin[1] == Unset || (!planar && origin[2] == Unset) || extent[0] == UnsetExtent;
-  if (needField)
+  if (grid.IsEmpty())
   {
-    // The defaults come from the field itself (bounds, pixel spacing): bring it up to date now.
-    if (vtkAlgorithmOutput* connection = this->GetInputConnection(0, 0))
-    {
-      connection->GetProducer()->UpdatePiece(0, 1, 0);
-    }
-    vtkPolyData* input = vtkPolyData::GetData(inputVector[0], 0);
-    bigus::GaussianField field;
-    bigus::FieldModel model;
-    std::string error;
-    if (!bigus::FieldFromPolyData(input, field, model, &error))
-    {
-      vtkErrorMacro(<< error);
-      return 0;
-    }
-    const double step = model.PixelSpacing > 0 ? model.PixelSpacing : 0.5;
-    for (int k = 0; k < 3; ++k)
-    {
-      spacing[k] = spacing[k] == Unset ? step : spacing[k];
-    }
-    // Field bounds padded by three times the largest scale, expressed in the reslice frame.
-    double lo[3] = { VTK_DOUBLE_MAX, VTK_DOUBLE_MAX, VTK_DOUBLE_MAX }, hi[3] = { -VTK_DOUBLE_MAX, -VTK_DOUBLE_MAX,
-      -VTK_DOUBLE_MAX };
-    double largest = 0;
-    for (float l : field.LogScales)
-    {
-      largest = std::max(largest, std::exp(double(l)));
-    }
-    double world[6];
-    input->GetBounds(world);
-    vtkNew<vtkMatrix4x4> inverse;
-    if (this->ResliceAxes)
-    {
-      vtkMatrix4x4::Invert(this->ResliceAxes, inverse);
-    }
-    for (int c = 0; c < 8; ++c)
-    {
-      const double p[4] = { world[c & 1] + (c & 1 ? 3 : -3) * largest, world[2 + ((c >> 1) & 1)] + ((c >> 1) & 1 ? 3 : -3) * largest,
-        world[4 + ((c >> 2) & 1)] + ((c >> 2) & 1 ? 3 : -3) * largest, 1 };
-      double q[4];
-      inverse->MultiplyPoint(p, q);
-      for (int k = 0; k < 3; ++k)
-      {
-        lo[k] = std::min(lo[k], q[k]);
-        hi[k] = std::max(hi[k], q[k]);
-      }
-    }
-    for (int k = 0; k < 3; ++k)
-    {
-      if (origin[k] == Unset)
-      {
-        origin[k] = (planar && k == 2) ? 0.0 : lo[k];
-      }
-    }
-    if (extent[0] == UnsetExtent)
-    {
-      for (int k = 0; k < 3; ++k)
-      {
-        extent[2 * k] = 0;
-        extent[2 * k + 1] = static_cast<int>(std::ceil((hi[k] - origin[k]) / spacing[k]));
-      }
-    }
-  }
-  if (planar)
-  {
-    extent[5] = extent[4];
-    spacing[2] = spacing[2] == Unset ? 1.0 : spacing[2];
-  }
-  if (extent[1] < extent[0] || extent[3] < extent[2] || extent[5] < extent[4])
-  {
-    vtkErrorMacro("empty output extent " << extent[0] << " " << extent[1] << " " << extent[2] << " " << extent[3] << " "
-                                         << extent[4] << " " << extent[5]);
+    vtkErrorMacro("empty output extent " << grid.ExtentText());
     return 0;
   }
-  vtkInformation* outInfo = outputVector->GetInformationObject(0);
-  outInfo->Set(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT(), extent, 6);
-  outInfo->Set(vtkDataObject::SPACING(), spacing, 3);
-  outInfo->Set(vtkDataObject::ORIGIN(), origin, 3);
-  vtkDataObject::SetPointDataActiveScalarInfo(outInfo, this->OutputScalarType, 1);
+  outInfo->Set(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT(), grid.Extent, 6);
+  outInfo->Set(vtkDataObject::SPACING(), grid.Spacing, 3);
+  outInfo->Set(vtkDataObject::ORIGIN(), grid.Origin, 3);
   return 1;
 }
 
@@ -223,59 +312,83 @@ int vtkGaussianFieldReslice::RequestData(
   vtkInformation* outInfo = outputVector->GetInformationObject(0);
   vtkImageData* output = vtkImageData::GetData(outputVector, 0);
   vtkPolyData* input = vtkPolyData::GetData(inputVector[0], 0);
-  const std::string backend = this->Backend ? this->Backend : "cpu";
-  if (backend != "cpu" && backend != "auto")
-  {
-    vtkErrorMacro("Backend '" << backend << "' is not one of: cpu, auto");
-    return 0;
-  }
-  bigus::GaussianField field;
-  bigus::FieldModel model;
-  std::string error;
-  if (!bigus::FieldFromPolyData(input, field, model, &error))
+  bigus::FieldCache& field = this->Internals->Field;
+  std::string error, notice;
+  if (!field.Update(input, &error))
   {
     vtkErrorMacro(<< error);
     return 0;
   }
-  int extent[6];
-  double spacing[3], origin[3];
-  outInfo->Get(vtkStreamingDemandDrivenPipeline::UPDATE_EXTENT(), extent);
-  outInfo->Get(vtkDataObject::SPACING(), spacing);
-  outInfo->Get(vtkDataObject::ORIGIN(), origin);
-  output->SetExtent(extent);
-  output->SetSpacing(spacing);
-  output->SetOrigin(origin);
-  const int width = extent[1] - extent[0] + 1, height = extent[3] - extent[2] + 1, depth = extent[5] - extent[4] + 1;
+  bigus::Renderer* renderer = this->Internals->Renderer.Get(this->Backend ? this->Backend : "auto", &error, &notice);
+  if (!renderer)
+  {
+    vtkErrorMacro("Backend: " << error);
+    return 0;
+  }
+  if (!notice.empty())
+  {
+    vtkWarningMacro("Backend: " << notice);
+  }
 
-  // Slice k: pixel (i, j) -> ResliceAxes * (origin + (extent[0] + i, extent[2] + j, extent[4] + k) * spacing).
+  Grid grid;
+  vtkInternals::OutputGrid(this, input, grid);
+  if (grid.IsEmpty())
+  {
+    vtkErrorMacro("empty output extent " << grid.ExtentText());
+    return 0;
+  }
+  int extent[6], announced[6];
+  double announcedSpacing[3], announcedOrigin[3];
+  outInfo->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT(), announced);
+  outInfo->Get(vtkDataObject::SPACING(), announcedSpacing);
+  outInfo->Get(vtkDataObject::ORIGIN(), announcedOrigin);
+  if (std::equal(announced, announced + 6, grid.Extent) &&
+    std::equal(announcedSpacing, announcedSpacing + 3, grid.Spacing) &&
+    std::equal(announcedOrigin, announcedOrigin + 3, grid.Origin))
+  {
+    outInfo->Get(vtkStreamingDemandDrivenPipeline::UPDATE_EXTENT(), extent);
+  }
+  else
+  {
+    // A default grid from a field that was not there yet, or changed, when RequestInformation ran:
+    // render the up-to-date field's whole grid and publish it (see the class description).
+    std::copy(grid.Extent, grid.Extent + 6, extent);
+    outInfo->Set(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT(), grid.Extent, 6);
+    outInfo->Set(vtkDataObject::SPACING(), grid.Spacing, 3);
+    outInfo->Set(vtkDataObject::ORIGIN(), grid.Origin, 3);
+  }
+  const int depth = extent[5] - extent[4] + 1;
+  const std::size_t slicePixels = std::size_t(extent[1] - extent[0] + 1) * (extent[3] - extent[2] + 1);
+  const std::size_t pixels = slicePixels * depth;
+
   vtkNew<vtkMatrix4x4> axes;
   if (this->ResliceAxes)
   {
     axes->DeepCopy(this->ResliceAxes);
   }
-  std::vector<bigus::SliceGeometry> slices(depth);
+  const bigus::RenderOptions options = bigus::RenderOptionsFor(field.GetModel(), this->ElevationSigma, this->Cutoff);
+  const bigus::FieldView view = field.GetField().View();
+  // S is kept whole only when it is an output; otherwise one slice of scratch.
+  std::vector<float> I(pixels), S(this->OutputScatteringField ? pixels : slicePixels);
   for (int k = 0; k < depth; ++k)
   {
-    vtkNew<vtkMatrix4x4> grid, pose;
-    grid->SetElement(0, 0, spacing[0]);
-    grid->SetElement(1, 1, spacing[1]);
-    grid->SetElement(0, 3, origin[0] + extent[0] * spacing[0]);
-    grid->SetElement(1, 3, origin[1] + extent[2] * spacing[1]);
-    grid->SetElement(2, 3, origin[2] + (extent[4] + k) * spacing[2]);
-    vtkMatrix4x4::Multiply4x4(axes, grid, pose);
-    std::copy(pose->GetData(), pose->GetData() + 16, slices[k].ImageToReference);
-    slices[k].Width = width;
-    slices[k].Height = height;
+    if (this->GetAbortExecute())
+    {
+      // The output stays empty, so the pipeline does not take it for the requested extent.
+      return 1;
+    }
+    const bigus::SliceGeometry slice = SliceAt(axes, grid.Spacing, grid.Origin, extent, k);
+    float* s = S.data() + (this->OutputScatteringField ? k * slicePixels : 0);
+    if (!renderer->Forward(view, &slice, 1, options, s, I.data() + k * slicePixels, nullptr, &error))
+    {
+      vtkErrorMacro("ResliceAxes: " << error);
+      return 0;
+    }
+    this->UpdateProgress(double(k + 1) / depth);
   }
-  const bigus::RenderOptions options = bigus::RenderOptionsFor(model, this->ElevationSigma, this->Cutoff);
-  const std::size_t pixels = std::size_t(width) * height * depth;
-  std::vector<float> S(pixels), I(pixels);
-  auto renderer = bigus::CreateCpuRenderer();
-  if (!renderer->Forward(field.View(), slices.data(), depth, options, S.data(), I.data(), nullptr, &error))
-  {
-    vtkErrorMacro("ResliceAxes: " << error);
-    return 0;
-  }
+  output->SetExtent(extent);
+  output->SetSpacing(grid.Spacing);
+  output->SetOrigin(grid.Origin);
   output->GetPointData()->SetScalars(bigus::IntensityArray(I, this->OutputScalarType));
   if (this->OutputScatteringField)
   {
@@ -328,5 +441,5 @@ void vtkGaussianFieldReslice::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "Cutoff: " << this->Cutoff << "\n";
   os << indent << "OutputScatteringField: " << this->OutputScatteringField << "\n";
   os << indent << "OutputScalarType: " << vtkImageScalarTypeNameMacro(this->OutputScalarType) << "\n";
-  os << indent << "Backend: " << (this->Backend ? this->Backend : "(none)") << "\n";
+  os << indent << "Backend: " << (this->Backend ? this->Backend : "auto") << "\n";
 }

@@ -17,11 +17,27 @@
  * Defaults when nothing is set: identity axes; spacing = the field's PixelSpacing (its training frames'
  * pixel spacing) or 0.5 mm; origin and extent = the field's bounds in the reslice frame (points, padded
  * by three times the largest scale); for OutputDimensionality 2 the slice passes through the axes'
- * origin (z = 0). Using the field's bounds needs the field itself, so the input is brought up to date
- * during RequestInformation when a default is in use.
+ * origin (z = 0).
  *
- * Errors (no field, a malformed field, a singular or sheared ResliceAxes, an empty extent) fail the
- * request with vtkErrorMacro.
+ * Pipeline: RequestInformation never executes the input. With spacing, origin and extent all set (or
+ * an InformationInput) the output grid is pure metadata. A default grid needs the field's bounds, which
+ * are data, not pipeline information: RequestInformation takes them from the field the input holds at
+ * that moment (exact for SetInputData and for an input that is already up to date), and RequestData
+ * takes them from the up-to-date field; when the two differ (the field was not there yet, or changed
+ * in this update) RequestData renders the grid of the up-to-date field and writes it into the output
+ * information, as vtkGaussianSplatter does with its automatic bounds. A filter downstream that plans
+ * from the whole extent during that same update saw the earlier grid (reader -> this filter with a
+ * default grid -> vtkImageReslice, first Update): set the grid, or update this filter before the
+ * downstream one.
+ *
+ * Interactive use: the renderer and the field converted to the renderer's form are kept between
+ * executes, rebuilt only when Backend changes or the input (object or MTime) changes, so moving the
+ * plane (ResliceAxes) re-renders without converting the field again. A stack (OutputDimensionality 3)
+ * reports progress after every slice and stops at the next slice when AbortExecute is set, leaving an
+ * empty output (the next Update renders again).
+ *
+ * Errors (no field, a malformed field, an unavailable backend, a singular or sheared ResliceAxes, an
+ * empty extent) fail the request with vtkErrorMacro and leave the output empty.
  */
 #ifndef vtkGaussianFieldReslice_h
 #define vtkGaussianFieldReslice_h
@@ -38,7 +54,12 @@ public:
   vtkTypeMacro(vtkGaussianFieldReslice, vtkImageAlgorithm);
   void PrintSelf(ostream& os, vtkIndent indent) override;
 
-  ///@{ The reslice frame (4x4, columns: x axis, y axis, normal, origin in mm). Held, not copied.
+  ///@{
+  /**
+   * The reslice frame: a 4x4 matrix whose columns are the x axis, the y axis, the normal (unit
+   * vectors) and the origin (mm) in the field's reference frame; null = identity. Held, not copied:
+   * changing its elements re-executes the filter (GetMTime includes it).
+   */
   virtual void SetResliceAxes(vtkMatrix4x4*);
   vtkGetObjectMacro(ResliceAxes, vtkMatrix4x4);
   void SetResliceAxesDirectionCosines(double x0, double x1, double x2, double y0, double y1, double y2, double z0,
@@ -46,7 +67,12 @@ public:
   void SetResliceAxesOrigin(double x, double y, double z);
   ///@}
 
-  ///@{ Output grid in the reslice frame (mm, voxel indices); unset = defaults (see the class description).
+  ///@{
+  /**
+   * Output grid in the reslice frame: spacing (mm), origin (mm) and extent (voxel indices);
+   * OutputDimensionality 2 (default, one slice at z = OutputOrigin[2]) or 3 (a stack along the
+   * normal). The ...ToDefault methods restore the defaults of the class description.
+   */
   vtkSetVector3Macro(OutputSpacing, double);
   vtkGetVector3Macro(OutputSpacing, double);
   vtkSetVector3Macro(OutputOrigin, double);
@@ -60,37 +86,68 @@ public:
   vtkGetMacro(OutputDimensionality, int);
   ///@}
 
-  ///@{ Copy spacing, origin and extent from this image's information.
+  ///@{
+  /**
+   * Copy spacing, origin and extent from this image (its data object, as vtkImageReslice does);
+   * they take precedence over OutputSpacing, OutputOrigin and OutputExtent.
+   */
   virtual void SetInformationInput(vtkImageData*);
   vtkGetObjectMacro(InformationInput, vtkImageData);
   ///@}
 
-  ///@{ Elevation beam sigma (mm); negative (default) = the field's ElevationSigma.
+  ///@{
+  /**
+   * Elevation beam sigma (mm); negative (default) = the field's ElevationSigma.
+   */
   vtkSetMacro(ElevationSigma, double);
   vtkGetMacro(ElevationSigma, double);
   ///@}
-  ///@{ Footprint cutoff k (standard deviations). Default 5 (float error in I below 1e-5).
+
+  ///@{
+  /**
+   * Footprint cutoff k (standard deviations, clamped to [1, 20]). Default 5 (float error in I below
+   * 1e-5).
+   */
   vtkSetClampMacro(Cutoff, double, 1.0, 20.0);
   vtkGetMacro(Cutoff, double);
   ///@}
-  ///@{ Also output the signed scattering field S as point data "ScatteringField".
+
+  ///@{
+  /**
+   * Also output the signed scattering field S as float point data "ScatteringField". Default off.
+   */
   vtkSetMacro(OutputScatteringField, bool);
   vtkGetMacro(OutputScatteringField, bool);
   vtkBooleanMacro(OutputScatteringField, bool);
   ///@}
-  ///@{ VTK_FLOAT (default, [0, 1]) or VTK_UNSIGNED_CHAR.
-  vtkSetMacro(OutputScalarType, int);
+
+  ///@{
+  /**
+   * Scalar type of "Intensity": VTK_FLOAT (default, I in [0, 1]) or VTK_UNSIGNED_CHAR
+   * (round(255 I)). Any other type is refused with vtkErrorMacro and the previous type kept, so the
+   * scalar type announced in the pipeline information is the one produced.
+   */
+  virtual void SetOutputScalarType(int type);
   vtkGetMacro(OutputScalarType, int);
   void SetOutputScalarTypeToFloat() { this->SetOutputScalarType(VTK_FLOAT); }
   void SetOutputScalarTypeToUnsignedChar() { this->SetOutputScalarType(VTK_UNSIGNED_CHAR); }
   ///@}
-  ///@{ Rendering backend: "cpu" (default) or "auto" (the CUDA renderer when it exists and a GPU is
-  /// present; until the CUDA backend lands, "auto" renders on the CPU). Anything else is an error.
+
+  ///@{
+  /**
+   * Rendering backend, by name in the backend registry (bigusBackend.h): "auto" (default: the
+   * available backend of highest priority, CUDA where it is built and a device is usable, else the
+   * CPU, with a warning that says why a backend was skipped), "cpu", "cuda". A backend that cannot
+   * run here fails the request with an error naming it and the available ones; no silent fallback.
+   * The renderer is kept between executes and created again only when this name changes.
+   */
   vtkSetStringMacro(Backend);
   vtkGetStringMacro(Backend);
   ///@}
 
-  /// Includes the ResliceAxes matrix and the information input.
+  /**
+   * Includes the ResliceAxes matrix and the information input.
+   */
   vtkMTimeType GetMTime() override;
 
 protected:
@@ -115,6 +172,9 @@ protected:
   char* Backend = nullptr;
 
 private:
+  class vtkInternals;
+  vtkInternals* Internals;
+
   vtkGaussianFieldReslice(const vtkGaussianFieldReslice&) = delete;
   void operator=(const vtkGaussianFieldReslice&) = delete;
 };

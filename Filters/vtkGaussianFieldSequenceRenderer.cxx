@@ -23,14 +23,41 @@
 vtkStandardNewMacro(vtkGaussianFieldSequenceRenderer);
 vtkCxxSetObjectMacro(vtkGaussianFieldSequenceRenderer, FrameList, vtkIdList);
 
+/// What the filter keeps between executes.
+class vtkGaussianFieldSequenceRenderer::vtkInternals
+{
+public:
+  bigus::FieldCache Field;
+  bigus::RendererCache Renderer;
+};
+
 vtkGaussianFieldSequenceRenderer::vtkGaussianFieldSequenceRenderer()
+  : Internals(new vtkInternals)
 {
   this->SetNumberOfInputPorts(2);
+  this->SetBackend("auto");
 }
 
 vtkGaussianFieldSequenceRenderer::~vtkGaussianFieldSequenceRenderer()
 {
   this->SetFrameList(nullptr);
+  this->SetBackend(nullptr);
+  delete this->Internals;
+}
+
+void vtkGaussianFieldSequenceRenderer::SetOutputScalarType(int type)
+{
+  std::string error;
+  if (!bigus::IsIntensityScalarType(type, &error))
+  {
+    vtkErrorMacro("OutputScalarType: " << error << "; keeping " << vtkImageScalarTypeNameMacro(this->OutputScalarType));
+    return;
+  }
+  if (type != this->OutputScalarType)
+  {
+    this->OutputScalarType = type;
+    this->Modified();
+  }
 }
 
 int vtkGaussianFieldSequenceRenderer::FillInputPortInformation(int port, vtkInformation* info)
@@ -63,13 +90,22 @@ int vtkGaussianFieldSequenceRenderer::RequestData(
   vtkPolyData* input = vtkPolyData::GetData(inputVector[0], 0);
   vtkImageData* sequence = vtkImageData::GetData(inputVector[1], 0);
   vtkImageData* output = vtkImageData::GetData(outputVector, 0);
-  bigus::GaussianField field;
-  bigus::FieldModel model;
-  std::string error;
-  if (!bigus::FieldFromPolyData(input, field, model, &error))
+  bigus::FieldCache& field = this->Internals->Field;
+  std::string error, notice;
+  if (!field.Update(input, &error))
   {
     vtkErrorMacro(<< error);
     return 0;
+  }
+  bigus::Renderer* renderer = this->Internals->Renderer.Get(this->Backend ? this->Backend : "auto", &error, &notice);
+  if (!renderer)
+  {
+    vtkErrorMacro("Backend: " << error);
+    return 0;
+  }
+  if (!notice.empty())
+  {
+    vtkWarningMacro("Backend: " << notice);
   }
   int dims[3];
   sequence->GetDimensions(dims);
@@ -93,12 +129,11 @@ int vtkGaussianFieldSequenceRenderer::RequestData(
     slices[k].Width = dims[0];
     slices[k].Height = dims[1];
   }
-  const bigus::RenderOptions options = bigus::RenderOptionsFor(model, this->ElevationSigma, this->Cutoff);
+  const bigus::RenderOptions options = bigus::RenderOptionsFor(field.GetModel(), this->ElevationSigma, this->Cutoff);
   const std::size_t pixels = std::size_t(dims[0]) * dims[1] * count;
   std::vector<float> S(pixels), I(pixels);
-  auto renderer = bigus::CreateCpuRenderer();
   const auto start = std::chrono::steady_clock::now();
-  if (!renderer->Forward(field.View(), slices.data(), count, options, S.data(), I.data(), nullptr, &error))
+  if (!renderer->Forward(field.GetField().View(), slices.data(), count, options, S.data(), I.data(), nullptr, &error))
   {
     vtkErrorMacro(<< error);
     return 0;
@@ -122,5 +157,6 @@ void vtkGaussianFieldSequenceRenderer::PrintSelf(ostream& os, vtkIndent indent)
      << "\n";
   os << indent << "Cutoff: " << this->Cutoff << "\n";
   os << indent << "OutputScalarType: " << vtkImageScalarTypeNameMacro(this->OutputScalarType) << "\n";
+  os << indent << "Backend: " << (this->Backend ? this->Backend : "auto") << "\n";
   os << indent << "SecondsPerFrame: " << this->SecondsPerFrame << "\n";
 }

@@ -10,7 +10,10 @@
  * vtkUltrasoundSequenceWriter and compared frame by frame (vtkUltrasoundImageMetrics).
  * Frames: all (default) or those of SetFrameList (indices into the sequence).
  * Scalars "Intensity": float in [0, 1] (default) or unsigned char; ElevationSigma < 0 uses the field's.
- * Errors (malformed field or sequence, a frame index outside the sequence, a bad pose) fail the request.
+ * The renderer (Backend) and the field converted to the renderer's form are kept between executes and
+ * rebuilt only when Backend or the field input (object or MTime) changes.
+ * Errors (malformed field or sequence, a frame index outside the sequence, a bad pose, an unavailable
+ * backend) fail the request with vtkErrorMacro and leave the output empty.
  */
 #ifndef vtkGaussianFieldSequenceRenderer_h
 #define vtkGaussianFieldSequenceRenderer_h
@@ -27,24 +30,66 @@ public:
   vtkTypeMacro(vtkGaussianFieldSequenceRenderer, vtkImageAlgorithm);
   void PrintSelf(ostream& os, vtkIndent indent) override;
 
-  /// The tracked sequence whose poses are rendered (port 1).
+  /**
+   * The tracked sequence whose poses are rendered (port 1): W x H x N with field data
+   * ImageToReference (N x 16, row-major, pixel -> mm).
+   */
   void SetPoseConnection(vtkAlgorithmOutput* output) { this->SetInputConnection(1, output); }
   void SetPoseData(vtkDataObject* data) { this->SetInputData(1, data); }
 
-  ///@{ Frames to render (indices into the pose sequence); empty = all.
+  ///@{
+  /**
+   * Frames to render (indices into the pose sequence, in this order); null or empty = all. An index
+   * outside the sequence fails the request.
+   */
   void SetFrameList(vtkIdList* frames);
   vtkGetObjectMacro(FrameList, vtkIdList);
   ///@}
+
+  ///@{
+  /**
+   * Elevation beam sigma (mm); negative (default) = the field's ElevationSigma.
+   */
   vtkSetMacro(ElevationSigma, double);
   vtkGetMacro(ElevationSigma, double);
+  ///@}
+
+  ///@{
+  /**
+   * Footprint cutoff k (standard deviations, clamped to [1, 20]). Default 5 (float error in I below
+   * 1e-5).
+   */
   vtkSetClampMacro(Cutoff, double, 1.0, 20.0);
   vtkGetMacro(Cutoff, double);
-  vtkSetMacro(OutputScalarType, int);
+  ///@}
+
+  ///@{
+  /**
+   * Scalar type of "Intensity": VTK_FLOAT (default, I in [0, 1]) or VTK_UNSIGNED_CHAR
+   * (round(255 I)). Any other type is refused with vtkErrorMacro and the previous type kept, so the
+   * scalar type announced in the pipeline information is the one produced.
+   */
+  virtual void SetOutputScalarType(int type);
   vtkGetMacro(OutputScalarType, int);
   void SetOutputScalarTypeToFloat() { this->SetOutputScalarType(VTK_FLOAT); }
   void SetOutputScalarTypeToUnsignedChar() { this->SetOutputScalarType(VTK_UNSIGNED_CHAR); }
+  ///@}
 
-  /// Seconds spent rendering in the last update, per frame.
+  ///@{
+  /**
+   * Rendering backend, by name in the backend registry (bigusBackend.h): "auto" (default: the
+   * available backend of highest priority, CUDA where it is built and a device is usable, else the
+   * CPU, with a warning that says why a backend was skipped), "cpu", "cuda". A backend that cannot
+   * run here fails the request with an error naming it and the available ones; no silent fallback.
+   * The renderer is kept between executes and created again only when this name changes.
+   */
+  vtkSetStringMacro(Backend);
+  vtkGetStringMacro(Backend);
+  ///@}
+
+  /**
+   * Seconds spent rendering in the last update, per frame.
+   */
   vtkGetMacro(SecondsPerFrame, double);
 
 protected:
@@ -60,9 +105,13 @@ protected:
   double ElevationSigma = -1;
   double Cutoff = 5.0;
   int OutputScalarType = VTK_FLOAT;
+  char* Backend = nullptr;
   double SecondsPerFrame = 0;
 
 private:
+  class vtkInternals;
+  vtkInternals* Internals;
+
   vtkGaussianFieldSequenceRenderer(const vtkGaussianFieldSequenceRenderer&) = delete;
   void operator=(const vtkGaussianFieldSequenceRenderer&) = delete;
 };

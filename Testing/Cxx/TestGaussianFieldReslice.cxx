@@ -1,21 +1,39 @@
 // vtkGaussianFieldReslice: a Gaussian lands where geometry says, slices agree with the naive double
 // renderer, a stack is a volume that vtkImageReslice can cut, and the matrix drives the pipeline.
+// The backend comes from the registry (both field renderers), the renderer and the converted field are
+// kept between executes, RequestInformation leaves the input alone, a stack reports progress and
+// stops when aborted, and the announced scalar type is the produced one.
+#include "bigusBackend.h"
 #include "bigusGaussianFieldData.h"
 #include "bigusReferenceRenderer.h"
+#include "bigusTestUtilities.h"
 
+#include "vtkCallbackCommand.h"
+#include "vtkDataArray.h"
+#include "vtkFieldData.h"
 #include "vtkFloatArray.h"
 #include "vtkGaussianFieldReslice.h"
+#include "vtkGaussianFieldSequenceRenderer.h"
 #include "vtkImageData.h"
 #include "vtkImageReslice.h"
+#include "vtkInformation.h"
+#include "vtkInformationVector.h"
 #include "vtkMatrix4x4.h"
 #include "vtkNew.h"
+#include "vtkObjectFactory.h"
 #include "vtkPointData.h"
+#include "vtkPoints.h"
 #include "vtkPolyData.h"
+#include "vtkPolyDataAlgorithm.h"
+#include "vtkStreamingDemandDrivenPipeline.h"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
+#include <string>
+#include <vector>
 
 using namespace bigus;
 
@@ -247,4 +265,379 @@ TEST(GaussianFieldReslice, ChangingTheMatrixReExecutes)
   const float after = static_cast<float*>(reslice->GetOutput()->GetScalarPointer())[4 * 9 + 4];
   EXPECT_GT(before, 0.5);
   EXPECT_LT(after, before * 0.5);
+}
+
+namespace
+{
+/// A pipeline source of a Gaussian field that counts its executions (a reader or a trainer upstream).
+class CountingFieldSource : public vtkPolyDataAlgorithm
+{
+public:
+  static CountingFieldSource* New();
+  vtkTypeMacro(CountingFieldSource, vtkPolyDataAlgorithm);
+  void SetField(vtkPolyData* field)
+  {
+    this->Field = field;
+    this->Modified();
+  }
+  int Executions = 0;
+
+protected:
+  CountingFieldSource() { this->SetNumberOfInputPorts(0); }
+  int RequestData(vtkInformation*, vtkInformationVector**, vtkInformationVector* outputVector) override
+  {
+    ++this->Executions;
+    vtkPolyData::GetData(outputVector, 0)->ShallowCopy(this->Field);
+    return 1;
+  }
+  vtkSmartPointer<vtkPolyData> Field;
+};
+vtkStandardNewMacro(CountingFieldSource);
+
+/// The field moved by (dx, 0, 0) mm.
+vtkSmartPointer<vtkPolyData> Shifted(vtkPolyData* field, double dx)
+{
+  auto moved = vtkSmartPointer<vtkPolyData>::New();
+  moved->DeepCopy(field);
+  for (vtkIdType i = 0; i < moved->GetNumberOfPoints(); ++i)
+  {
+    double p[3];
+    moved->GetPoint(i, p);
+    p[0] += dx;
+    moved->GetPoints()->SetPoint(i, p);
+  }
+  moved->GetPoints()->Modified();
+  return moved;
+}
+
+std::vector<float> Values(vtkImageData* image)
+{
+  vtkDataArray* scalars = image->GetPointData()->GetScalars();
+  std::vector<float> v(scalars ? scalars->GetNumberOfTuples() : 0);
+  for (std::size_t p = 0; p < v.size(); ++p)
+  {
+    v[p] = static_cast<float>(scalars->GetComponent(p, 0));
+  }
+  return v;
+}
+
+/// The scalar type the output information announces.
+int AnnouncedScalarType(vtkAlgorithm* filter)
+{
+  vtkInformation* scalars = vtkDataObject::GetActiveFieldInformation(filter->GetOutputInformation(0),
+    vtkDataObject::FIELD_ASSOCIATION_POINTS, vtkDataSetAttributes::SCALARS);
+  return scalars ? scalars->Get(vtkDataObject::FIELD_ARRAY_TYPE()) : -1;
+}
+
+/// Poses of a small sweep through the random field (0.25 mm pixels, frames 1 mm apart along z).
+vtkSmartPointer<vtkImageData> SweepThroughTheField()
+{
+  std::vector<std::array<double, 16>> poses;
+  for (int k = 0; k < 3; ++k)
+  {
+    poses.push_back({ 0.25, 0, 0, 1, 0, 0.25, 0, 1, 0, 0, 1, 3.0 + k, 0, 0, 0, 1 });
+  }
+  return bigus_test::TrackedSequence(24, 20, poses, { 0, 0.1, 0.2 }, [](int, int, int) { return 0.f; });
+}
+
+/// How often the registry's "counting" backend (a CPU renderer) was created.
+int CountingCreations = 0;
+std::unique_ptr<Renderer> CountingFactory(std::string*)
+{
+  ++CountingCreations;
+  return CreateCpuRenderer();
+}
+}
+
+TEST(GaussianFieldReslice, AnUnavailableBackendIsAnErrorThatNamesIt)
+{
+  reference::FieldD exact;
+  vtkNew<vtkGaussianFieldReslice> reslice;
+  reslice->SetInputData(RandomField(50, 6, exact));
+  reslice->SetOutputSpacing(0.5, 0.5, 1);
+  reslice->SetOutputOrigin(0, 0, 5);
+  reslice->SetOutputExtent(0, 19, 0, 19, 0, 0);
+  EXPECT_STREQ(reslice->GetBackend(), "auto");
+  reslice->SetBackend("nonexistent");
+  vtkNew<bigus_test::MessageCollector> messages;
+  messages->Watch(reslice);
+  reslice->Update();
+  ASSERT_EQ(messages->Errors.size(), 1u);
+  EXPECT_NE(messages->Errors[0].find("'nonexistent'"), std::string::npos) << messages->Errors[0];
+  EXPECT_NE(messages->Errors[0].find("available: auto, cpu"), std::string::npos) << messages->Errors[0];
+  EXPECT_EQ(reslice->GetOutput()->GetNumberOfPoints(), 0);
+
+  // Naming an available backend renders again.
+  reslice->SetBackend("cpu");
+  reslice->Update();
+  EXPECT_EQ(reslice->GetOutput()->GetNumberOfPoints(), 400);
+
+  vtkNew<vtkGaussianFieldSequenceRenderer> sequence;
+  sequence->SetInputData(reslice->GetInput());
+  sequence->SetPoseData(SweepThroughTheField());
+  EXPECT_STREQ(sequence->GetBackend(), "auto");
+  sequence->SetBackend("nonexistent");
+  messages->Watch(sequence);
+  sequence->Update();
+  ASSERT_EQ(messages->Errors.size(), 2u);
+  EXPECT_NE(messages->Errors[1].find("'nonexistent'"), std::string::npos) << messages->Errors[1];
+  EXPECT_EQ(sequence->GetOutput()->GetNumberOfPoints(), 0);
+}
+
+TEST(GaussianFieldReslice, CpuAndAutoRenderTheSameImages)
+{
+  // "auto" is the CPU renderer unless a GPU backend registered; then the two agree to float rounding.
+  const bool autoIsCpu = ResolveBackend("auto", nullptr) == "cpu";
+  const double tolerance = autoIsCpu ? 0.0 : 1e-4;
+  reference::FieldD exact;
+  vtkSmartPointer<vtkPolyData> field = RandomField(300, 7, exact);
+  std::vector<float> images[2][2];
+  const char* names[2] = { "cpu", "auto" };
+  for (int b = 0; b < 2; ++b)
+  {
+    vtkNew<vtkGaussianFieldReslice> reslice;
+    reslice->SetInputData(field);
+    reslice->SetResliceAxes(Oblique(5, 5, 5));
+    reslice->SetOutputSpacing(0.25, 0.25, 0.5);
+    reslice->SetOutputOrigin(-4, -4, -1);
+    reslice->SetOutputExtent(0, 31, 0, 31, 0, 2);
+    reslice->SetOutputDimensionality(3);
+    reslice->SetBackend(names[b]);
+    reslice->Update();
+    images[0][b] = Values(reslice->GetOutput());
+
+    vtkNew<vtkGaussianFieldSequenceRenderer> sequence;
+    sequence->SetInputData(field);
+    sequence->SetPoseData(SweepThroughTheField());
+    sequence->SetBackend(names[b]);
+    sequence->Update();
+    images[1][b] = Values(sequence->GetOutput());
+  }
+  for (int f = 0; f < 2; ++f)
+  {
+    ASSERT_EQ(images[f][0].size(), f == 0 ? 32u * 32 * 3 : 24u * 20 * 3);
+    ASSERT_EQ(images[f][1].size(), images[f][0].size());
+    EXPECT_GT(*std::max_element(images[f][0].begin(), images[f][0].end()), 0.05f) << "the slices cut the field";
+    double worst = 0;
+    for (std::size_t p = 0; p < images[f][0].size(); ++p)
+    {
+      worst = std::max(worst, double(std::abs(images[f][0][p] - images[f][1][p])));
+    }
+    EXPECT_LE(worst, tolerance) << (f == 0 ? "reslice" : "sequence renderer");
+  }
+}
+
+TEST(GaussianFieldReslice, TheRendererIsKeptUntilTheBackendChanges)
+{
+  RegisterBackend("counting", &CountingFactory, -100);
+  const double centre[3] = { 0, 0, 0 };
+  vtkNew<vtkGaussianFieldReslice> reslice;
+  reslice->SetInputData(OneGaussian(centre));
+  reslice->SetBackend("counting");
+  reslice->SetOutputSpacing(0.5, 0.5, 1);
+  reslice->SetOutputOrigin(-2, -2, 0);
+  reslice->SetOutputExtent(0, 8, 0, 8, 0, 0);
+  CountingCreations = 0;
+  for (int k = 0; k < 3; ++k)
+  {
+    reslice->SetResliceAxesOrigin(0, 0, 0.2 * k);
+    reslice->Update();
+  }
+  EXPECT_EQ(CountingCreations, 1);
+  reslice->SetBackend("cpu");
+  reslice->Update();
+  reslice->SetBackend("counting");
+  reslice->Update();
+  EXPECT_EQ(CountingCreations, 2);
+}
+
+TEST(GaussianFieldReslice, TheFieldIsConvertedAgainOnlyWhenTheInputIsModified)
+{
+  const double centre[3] = { 0, 0, 0 };
+  vtkSmartPointer<vtkPolyData> field = OneGaussian(centre);
+  vtkNew<vtkGaussianFieldReslice> reslice;
+  reslice->SetInputData(field);
+  reslice->SetOutputSpacing(0.5, 0.5, 1);
+  reslice->SetOutputOrigin(-2, -2, 0);
+  reslice->SetOutputExtent(0, 8, 0, 8, 0, 0);
+  reslice->SetResliceAxesOrigin(0, 0, 0);
+  reslice->Update();
+  const float first = static_cast<float>(reslice->GetOutput()->GetPointData()->GetScalars()->GetComponent(40, 0));
+  ASSERT_GT(first, 0.5f);
+
+  // Changed in place without Modified(): the pipeline cannot know, so the kept conversion is used.
+  vtkDataArray* reflectivity = field->GetPointData()->GetArray("Reflectivity");
+  reflectivity->SetComponent(0, 0, 0.0);
+  reslice->SetResliceAxesOrigin(0, 0, 0.01);
+  reslice->Update();
+  const float moved = static_cast<float>(reslice->GetOutput()->GetPointData()->GetScalars()->GetComponent(40, 0));
+  EXPECT_NEAR(moved, first, 1e-3) << "the plane moved 0.01 mm; the reflectivity change must not be seen yet";
+
+  // Modified() (the VTK contract) brings the conversion up to date: reflectivity 0 renders nothing.
+  reflectivity->Modified();
+  reslice->Update();
+  EXPECT_EQ(reslice->GetOutput()->GetPointData()->GetScalars()->GetComponent(40, 0), 0.0);
+}
+
+TEST(GaussianFieldReslice, RequestInformationDoesNotExecuteTheInputAndTheDefaultGridFollowsTheField)
+{
+  reference::FieldD exact;
+  vtkSmartPointer<vtkPolyData> field = RandomField(200, 8, exact);
+  vtkNew<CountingFieldSource> source;
+  source->SetField(field);
+  vtkNew<vtkGaussianFieldReslice> reslice;
+  reslice->SetInputConnection(source->GetOutputPort());
+  reslice->SetOutputDimensionality(3);
+  reslice->SetOutputSpacing(1, 1, 1);
+  reslice->UpdateInformation();
+  EXPECT_EQ(source->Executions, 0) << "RequestInformation executed the input";
+
+  for (double dx : { 0.0, 20.0 })
+  {
+    vtkSmartPointer<vtkPolyData> expected = dx == 0 ? field : Shifted(field, dx);
+    if (dx != 0)
+    {
+      source->SetField(expected);
+    }
+    reslice->Update();
+    // The same grid and image as a filter given that field directly (where RequestInformation sees it).
+    vtkNew<vtkGaussianFieldReslice> direct;
+    direct->SetInputData(expected);
+    direct->SetOutputDimensionality(3);
+    direct->SetOutputSpacing(1, 1, 1);
+    direct->Update();
+    vtkImageData* out = reslice->GetOutput();
+    int extent[6], whole[6], directExtent[6];
+    out->GetExtent(extent);
+    direct->GetOutput()->GetExtent(directExtent);
+    reslice->GetOutputInformation(0)->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT(), whole);
+    for (int k = 0; k < 6; ++k)
+    {
+      EXPECT_EQ(extent[k], directExtent[k]) << "dx " << dx << ", k " << k;
+      EXPECT_EQ(whole[k], extent[k]) << "the output information must describe the output";
+    }
+    for (int k = 0; k < 3; ++k)
+    {
+      EXPECT_DOUBLE_EQ(out->GetOrigin()[k], direct->GetOutput()->GetOrigin()[k]);
+    }
+    double bounds[6];
+    out->GetBounds(bounds);
+    EXPECT_LE(bounds[0], dx);
+    EXPECT_GE(bounds[1], 10.0 + dx);
+    EXPECT_EQ(Values(out), Values(direct->GetOutput()));
+  }
+  EXPECT_EQ(source->Executions, 2);
+}
+
+TEST(GaussianFieldReslice, AStackReportsProgressPerSliceAndStopsWhenAborted)
+{
+  reference::FieldD exact;
+  vtkNew<vtkGaussianFieldReslice> reslice;
+  reslice->SetInputData(RandomField(100, 9, exact));
+  reslice->SetOutputDimensionality(3);
+  reslice->SetOutputSpacing(0.5, 0.5, 1.25);
+  reslice->SetOutputOrigin(0, 0, 0);
+  reslice->SetOutputExtent(0, 19, 0, 19, 0, 7);
+
+  // Progress events from inside RequestData (the executive adds 0 before and 1 after).
+  struct Record
+  {
+    std::vector<double> Progress;
+    int AbortAfter = -1; // abort on this many events from inside RequestData; -1 never
+    bool AbortAtStart = false;
+  } record;
+  vtkNew<vtkCallbackCommand> observer;
+  observer->SetClientData(&record);
+  observer->SetCallback([](vtkObject* caller, unsigned long, void* clientData, void* callData) {
+    auto* r = static_cast<Record*>(clientData);
+    const double p = *static_cast<double*>(callData);
+    auto* filter = static_cast<vtkAlgorithm*>(caller);
+    if (p == 0.0 && r->AbortAtStart)
+    {
+      filter->SetAbortExecute(1);
+    }
+    if (p > 0.0 && p < 1.0 + 1e-12 && !(p == 1.0 && filter->GetAbortExecute()))
+    {
+      r->Progress.push_back(p);
+      if (int(r->Progress.size()) == r->AbortAfter)
+      {
+        filter->SetAbortExecute(1);
+      }
+    }
+  });
+  reslice->AddObserver(vtkCommand::ProgressEvent, observer);
+
+  reslice->Update();
+  // One event per slice, k / 8, then the executive's 1.
+  ASSERT_EQ(record.Progress.size(), 9u);
+  for (int k = 0; k < 8; ++k)
+  {
+    EXPECT_DOUBLE_EQ(record.Progress[k], (k + 1) / 8.0);
+  }
+  const std::vector<float> whole = Values(reslice->GetOutput());
+  ASSERT_EQ(whole.size(), 20u * 20 * 8);
+
+  // Aborted after the first slice: no further slice is rendered, the output is empty.
+  record.Progress.clear();
+  record.AbortAfter = 1;
+  reslice->Modified();
+  reslice->Update();
+  EXPECT_EQ(record.Progress.size(), 1u) << "slices rendered after the abort";
+  EXPECT_EQ(reslice->GetOutput()->GetNumberOfPoints(), 0);
+
+  // Aborted on the first progress event (the executive's 0, before any slice): nothing rendered.
+  record.Progress.clear();
+  record.AbortAfter = -1;
+  record.AbortAtStart = true;
+  reslice->Modified();
+  reslice->Update();
+  EXPECT_TRUE(record.Progress.empty());
+  EXPECT_EQ(reslice->GetOutput()->GetNumberOfPoints(), 0);
+
+  // The empty output is not taken for the requested extent: the next Update renders it all.
+  record.AbortAtStart = false;
+  reslice->Update();
+  EXPECT_EQ(Values(reslice->GetOutput()), whole);
+}
+
+TEST(GaussianFieldReslice, TheAnnouncedScalarTypeIsTheProducedOne)
+{
+  reference::FieldD exact;
+  vtkSmartPointer<vtkPolyData> field = RandomField(50, 10, exact);
+  vtkNew<vtkGaussianFieldReslice> reslice;
+  reslice->SetInputData(field);
+  reslice->SetOutputSpacing(0.5, 0.5, 1);
+  reslice->SetOutputOrigin(0, 0, 5);
+  reslice->SetOutputExtent(0, 9, 0, 9, 0, 0);
+  vtkNew<vtkGaussianFieldSequenceRenderer> sequence;
+  sequence->SetInputData(field);
+  sequence->SetPoseData(SweepThroughTheField());
+  vtkNew<bigus_test::MessageCollector> messages;
+  messages->Watch(reslice);
+  messages->Watch(sequence);
+  for (int type : { VTK_SHORT, VTK_DOUBLE, VTK_UNSIGNED_CHAR, VTK_FLOAT })
+  {
+    const std::size_t errors = messages->Errors.size();
+    reslice->SetOutputScalarType(type);
+    sequence->SetOutputScalarType(type);
+    for (vtkImageAlgorithm* filter :
+      { static_cast<vtkImageAlgorithm*>(reslice), static_cast<vtkImageAlgorithm*>(sequence) })
+    {
+      filter->UpdateInformation();
+      const int announced = AnnouncedScalarType(filter);
+      filter->Update();
+      EXPECT_EQ(announced, filter->GetOutput()->GetScalarType())
+        << filter->GetClassName() << " asked for " << vtkImageScalarTypeNameMacro(type);
+    }
+    // A type the filters cannot produce is refused, by name.
+    const bool accepted = type == VTK_UNSIGNED_CHAR || type == VTK_FLOAT;
+    EXPECT_EQ(messages->Errors.size(), errors + (accepted ? 0 : 2)) << vtkImageScalarTypeNameMacro(type);
+    if (!accepted && messages->Errors.size() > errors)
+    {
+      EXPECT_NE(messages->Errors.back().find(vtkImageScalarTypeNameMacro(type)), std::string::npos)
+        << messages->Errors.back();
+    }
+  }
+  EXPECT_EQ(reslice->GetOutput()->GetScalarType(), VTK_FLOAT);
+  EXPECT_EQ(sequence->GetOutput()->GetScalarType(), VTK_FLOAT);
 }
