@@ -477,6 +477,7 @@ struct RenderOptionsCli
   std::vector<int> Size = { 512, 512 };
   double Spacing = 0;
   bool Volume = false;
+  std::string Backend = "auto";
 };
 
 /// Writes an image: .png (8-bit, rows flipped so that row 0 is the top), .mha (MetaImage), .vti.
@@ -546,6 +547,7 @@ int RunRender(const RenderOptionsCli& o)
     vtkNew<vtkGaussianFieldSequenceRenderer> renderer;
     renderer->SetInputData(field);
     renderer->SetPoseConnection(reader->GetOutputPort());
+    renderer->SetBackend(o.Backend.c_str());
     renderer->SetOutputScalarTypeToUnsignedChar();
     vtkNew<vtkIdList> frames;
     for (int f : o.Frames)
@@ -574,6 +576,7 @@ int RunRender(const RenderOptionsCli& o)
   }
   vtkNew<vtkGaussianFieldReslice> reslice;
   reslice->SetInputData(field);
+  reslice->SetBackend(o.Backend.c_str());
   if (o.Spacing > 0)
   {
     reslice->SetOutputSpacing(o.Spacing, o.Spacing, o.Spacing);
@@ -641,7 +644,7 @@ int RunRender(const RenderOptionsCli& o)
 
 struct EvaluateOptions
 {
-  std::string Field, Report, Mask;
+  std::string Field, Report, Mask, Backend = "auto";
   SweepOptions Sweep;
   int HoldOutEvery = 0, HoldOutOffset = 0;
   std::vector<int> Frames;
@@ -665,7 +668,7 @@ bool PlotHistory(vtkDataArray* history, const std::string& path)
 /// Renders a slice through the centre of frame @p pose (W x H pixels at the frame's spacing) whose
 /// in-plane axes are @p x and @p y (unit vectors), and writes it as PNG.
 int WriteSliceThrough(vtkPolyData* field, const double pose[16], int width, int height, const double x[3],
-  const double y[3], const std::string& path)
+  const double y[3], const std::string& backend, const std::string& path)
 {
   bigus::SliceFrame frame;
   bigus::ComputeSliceFrame(pose, 90, frame);
@@ -678,13 +681,20 @@ int WriteSliceThrough(vtkPolyData* field, const double pose[16], int width, int 
   const double n[3] = { x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2], x[0] * y[1] - x[1] * y[0] };
   vtkNew<vtkGaussianFieldReslice> reslice;
   reslice->SetInputData(field);
+  reslice->SetBackend(backend.c_str());
   reslice->SetResliceAxesDirectionCosines(x[0], x[1], x[2], y[0], y[1], y[2], n[0], n[1], n[2]);
   reslice->SetResliceAxesOrigin(centre[0], centre[1], centre[2]);
   reslice->SetOutputSpacing(spacing, spacing, 1);
   reslice->SetOutputOrigin(-0.5 * spacing * (width - 1), -0.5 * spacing * (height - 1), 0);
   reslice->SetOutputExtent(0, width - 1, 0, height - 1, 0, 0);
   reslice->SetOutputScalarTypeToUnsignedChar();
+  FilterError error;
+  error.Watch(reslice);
   reslice->Update();
+  if (reslice->GetOutput()->GetNumberOfPoints() == 0)
+  {
+    return Fail(path + ": rendering failed: " + error.Or("empty slice"));
+  }
   return WriteImage(reslice->GetOutput(), path);
 }
 
@@ -739,6 +749,7 @@ int RunEvaluate(const EvaluateOptions& o)
   vtkNew<vtkGaussianFieldSequenceRenderer> renderer;
   renderer->SetInputData(field);
   renderer->SetPoseConnection(reader->GetOutputPort());
+  renderer->SetBackend(o.Backend.c_str());
   vtkNew<vtkIdList> list;
   for (int k : frames)
   {
@@ -822,8 +833,9 @@ int RunEvaluate(const EvaluateOptions& o)
     tilted[c] = (middle.u[c] + middle.n[c]) / std::sqrt(2.0);
   }
   const double* matrix = pose.data();
-  if (WriteSliceThrough(field, matrix, dims[0], dims[1], middle.n, middle.v, o.Report + "/slice_orthogonal.png") != 0 ||
-    WriteSliceThrough(field, matrix, dims[0], dims[1], tilted, middle.v, o.Report + "/slice_oblique.png") != 0)
+  if (WriteSliceThrough(field, matrix, dims[0], dims[1], middle.n, middle.v, o.Backend,
+        o.Report + "/slice_orthogonal.png") != 0 ||
+    WriteSliceThrough(field, matrix, dims[0], dims[1], tilted, middle.v, o.Backend, o.Report + "/slice_oblique.png") != 0)
   {
     return 1;
   }
@@ -1024,8 +1036,7 @@ int main(int argc, char** argv)
     ->check(CLI::NonNegativeNumber);
   trainCommand->add_option("--elevation-sigma", train.ElevationSigma, "Elevation beam sigma, mm (FWHM / 2.355)")
     ->capture_default_str();
-  trainCommand->add_option("--backend", train.Backend, "auto, cpu or cuda")
-    ->check(CLI::IsMember({ "auto", "cpu", "cuda" }))
+  trainCommand->add_option("--backend", train.Backend, "Training backend: auto, cpu or cuda (as registered)")
     ->capture_default_str();
   trainCommand->add_option("--threads", train.Threads, "Threads (0: all cores)");
   trainCommand->add_option("--seed", train.Seed, "Random seed")->capture_default_str();
@@ -1047,6 +1058,7 @@ int main(int argc, char** argv)
   renderCommand->add_option("--plane", render.Plane, "Plane origin and normal, mm: OX OY OZ NX NY NZ")->expected(6);
   renderCommand->add_option("--size", render.Size, "Plane size in pixels: W H")->expected(2);
   renderCommand->add_option("--spacing", render.Spacing, "Pixel spacing, mm");
+  renderCommand->add_option("--backend", render.Backend, "Rendering backend: auto, cpu or cuda (as registered)");
   renderCommand->add_flag("--volume", render.Volume, "Render a stack of parallel slices covering the field");
 
   EvaluateOptions evaluate;
@@ -1058,6 +1070,7 @@ int main(int argc, char** argv)
   evaluateCommand->add_option("--holdout-offset", evaluate.HoldOutOffset, "J of --holdout-every");
   evaluateCommand->add_option("--frames", evaluate.Frames, "Evaluate these frames");
   evaluateCommand->add_option("--mask", evaluate.Mask, "Fan mask .mha (W x H x 1, or W x H x N per frame; default: estimated)");
+  evaluateCommand->add_option("--backend", evaluate.Backend, "Rendering backend: auto, cpu or cuda (as registered)");
   evaluateCommand->add_option("--report", evaluate.Report, "Folder for metrics.json and side-by-side PNGs")->required();
 
   SweepFromVolumeOptions sweep;

@@ -128,7 +128,7 @@ double PixelSpacingOf(const std::array<double, 16>& pose)
 Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique_ptr<TrainingEngine> engine)
   : Data(new TrainingData(std::move(data)))
   , Settings(settings)
-  , Engine(engine ? std::move(engine) : CreateCpuTrainingEngine(CreateCpuRenderer()))
+  , Engine(engine ? std::move(engine) : CreateTrainingEngine("cpu", nullptr))
 {
   this->State.Random.seed(settings.Seed);
   this->Settings.FramesPerStep = std::max(1, this->Settings.FramesPerStep);

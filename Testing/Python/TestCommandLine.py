@@ -206,6 +206,27 @@ def main():
     code, _, err = run("render", field, "--plane", "0", "0", "0", "0", "0", "0", "-o", os.path.join(out, "p.png"))
     assert code == 1 and "normal" in err, err
 
+    # The backend is chosen in one place (the registry): every command takes --backend, says which it
+    # used, refuses an unknown one by name, and writes nothing then.
+    code, out_text, err = run("train", sweep, "--calibration", xml, "-o", field, "--iterations", "5",
+                              "--backend", "no-such-backend")
+    assert code == 1 and err.count("\n") == 1 and "'no-such-backend' is not available" in err and "cpu" in err, err
+    assert open(field, "rb").read() == before
+    cpu_field = os.path.join(out, "nwire_cpu.vtp")
+    code, out_text, err = run("train", sweep, "--calibration", xml, "-o", cpu_field, "--iterations", "5",
+                              "--backend", "cpu")
+    assert code == 0 and "backend        cpu" in out_text, (out_text, err)
+    code, _, err = run("render", field, "--plane", "0", "0", "0", "0", "0", "1", "--backend", "no-such-backend",
+                       "-o", os.path.join(out, "p.png"))
+    assert code == 1 and "'no-such-backend' is not available" in err, err
+    assert not os.path.exists(os.path.join(out, "p.png"))
+    code, _, err = run("render", field, "--poses", sweep, "--calibration", xml, "--frames", "2", "--backend",
+                       "no-such-backend", "-o", os.path.join(out, "backend.igs.mha"))
+    assert code == 1 and "'no-such-backend' is not available" in err, err
+    code, _, err = run("evaluate", field, sweep, "--calibration", xml, "--frames", "2", "--backend",
+                       "no-such-backend", "--report", os.path.join(out, "report_backend"))
+    assert code == 1 and "'no-such-backend' is not available" in err, err
+
     report = os.path.join(out, "report")
     code, out_text, err = run("evaluate", field, sweep, "--calibration", xml, "--holdout-every", "4",
                               "--holdout-offset", "2", "--report", report)
