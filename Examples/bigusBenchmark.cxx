@@ -12,8 +12,8 @@
 // - quality against the number of Gaussians (capped runs against the adaptive stop);
 // - render time per slice against the error from the naive double-precision renderer, per cutoff;
 // - ablations (initialisation, EA-D, loss terms, signed reflectivity, beam integration).
-// Times are wall-clock seconds on this machine; training time includes the end-of-run pruning but not
-// the evaluations, which stop the clock.
+// Times are wall-clock seconds on this machine; training time excludes the evaluations, which stop the
+// clock, and the rows at the time marks are of the field as trained so far (no final prune).
 #include "bigusBenchmark.h"
 
 #include "bigusGaussianFieldData.h"
@@ -661,10 +661,12 @@ void Introduction(const std::string& root, bool quick, Report& report)
      << (dirty ? " (with uncommitted changes)" : "") << "`.\n"
      << "Machine: " << machine << "; no GPU was used (CPU backend).\n"
      << "Every number below is the one this command printed; rerun it to reproduce them (timings vary "
-     << "between runs on a shared machine: compare within one report).\n\n"
+     << "between runs on a shared machine: compare within one report). The hand-run measurements behind "
+     << "the trainer's defaults are in docs/FINDINGS.md.\n\n"
      << "Conventions: metrics inside the fan mask of the recorded frame (DESIGN section 9; speckle = "
-     << "Backscatter Fidelity Score). Training time is wall-clock, includes the end-of-run pruning, and "
-     << "stops while held-out frames are evaluated. A baseline's time is its preparation (compounding) "
+     << "Backscatter Fidelity Score). Training time is wall-clock and "
+     << "stops while held-out frames are evaluated; each row is the field as trained until then, without the "
+     << "final prune (which changes no training pixel by more than 1/512). A baseline's time is its preparation (compounding) "
      << "and its ms per frame is the time to produce one held-out frame; BIGUS's ms per frame is the render "
      << "time of one held-out frame. Peak MiB is the process's peak resident memory during that run "
      << "(frames of every sweep included).\n\n"

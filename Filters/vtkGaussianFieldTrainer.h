@@ -20,49 +20,30 @@
  * improving, and a final prune of every Gaussian whose removal changes no training pixel by more than
  * 1/512.
  *
- * Defaults and why:
+ * Defaults and why (the measurements behind them, dated and with their commands, are in
+ * docs/FINDINGS.md; current numbers in docs/BENCHMARKS.md):
  * - ElevationSigma 0.5 mm: the elevation beam of abdominal and linear probes is about 1 to 3 mm wide
  *   (FWHM) near the focus; sigma = FWHM / 2.355. Set it from the probe's data sheet; too small makes
  *   frames independent (no interpolation between them), too large blurs across the sweep. A rendered
  *   frame is the field averaged over the beam, so it cannot change faster across the sweep than the
- *   beam allows: where the recorded frames decorrelate faster, a smaller sigma fits better. The bundled
- *   liver sweep (frames 0.21 mm apart at the transducer, 0.55 mm at mid-depth) has neighbouring frames
- *   at 37.3 dB PSNR, two apart at 32.6, four apart at 28.4; held-out PSNR after 10 minutes of training
- *   on 2 cores (hold-out i mod 4 == 2, 8000-step schedule) was 35.6 dB at sigma 1.0 mm, 36.3 at 0.5 and
- *   37.6 at 0.3 (a thinner beam also meets fewer Gaussians per frame: 5,631 steps against 4,179), so
- *   the benchmark and `./setup.sh main` use 0.3 there. Try a few values on held-out frames.
- * - Loss weights L1 0.8, D-SSIM 0.2 (the 3D Gaussian splatting balance), FFL 0 (off): on an 820 x 616
- *   frame the FFL's two DFTs cost about as much as the rest of the loss (measured ~40 ms per step on 2
- *   cores), so it is an option (e.g. 0.1) rather than the default; TestImageLoss checks each gradient.
+ *   beam allows: where the recorded frames decorrelate faster, a smaller sigma fits better (the
+ *   bundled liver sweep trains best at 0.3 mm). Try a few values on held-out frames.
+ * - Loss weights L1 0.8, D-SSIM 0.2 (the 3D Gaussian splatting balance), FFL 0 (off): the FFL's two
+ *   DFTs cost about as much as the rest of the loss, so it is an option (e.g. 0.1) rather than the
+ *   default; TestImageLoss checks each gradient.
  * - InitialGaussians 0 = automatic: one seed per 200 masked training pixels, at least 20,000 and at
- *   most half of MaximumGaussians (400,000). On the liver sweep (105 training frames of ~280k fan
- *   pixels: 147k seeds) held-out PSNR after 120 s of training rose with the seed count: 20k 32.5 dB,
- *   60k 33.0, 100k 33.3, 200k 33.7; a field that is too small underfits (training and held-out PSNR
- *   stay equal). Growth and the final prune then set the count that training ends with, which is
- *   reported, not fixed.
- * - Training renders with cutoff k = 4 (held-out metrics and the render filters use 5): a step on the
- *   liver is about 1.6 times faster, and the rendered intensity changes by at most ~1e-3.
+ *   most half of MaximumGaussians (400,000): held-out quality rises with the seed count, and a field
+ *   that is too small underfits (training and held-out PSNR stay equal). Growth and the final prune
+ *   then set the count that training ends with, which is reported, not fixed.
+ * - Training renders with cutoff k = 4 (held-out metrics and the render filters use 5): a step is
+ *   about 1.6 times faster, and the rendered intensity changes by at most ~1e-3.
  * - Densify every 200 steps from step 200 to 60 % of the iterations, top 5 % by attribution.
  *
- * What limits held-out quality (measured on the liver sweep, hold-out i mod 4 == 2, sigma 0.3 mm):
- * - Steps per frame. In 10 minutes on 2 cores the full sweep (105 training frames) gets about 73
- *   steps per training frame and ends near 37.4 dB. On 20 of its frames (40 to 59: 15 train, 5 held
- *   out) the same 10 minutes give about 530 steps per frame and 40.5 dB held out (36.7, 37.6, 39.0 at
- *   1, 2, 5 minutes), still rising: the full sweep needs several times the compute (`bigus benchmark`
- *   shows both).
- * - Not the tracking: a test-time search of each held-out pose (elevation +-0.4 mm, in-plane +-0.6 px)
- *   found the recorded pose best for all 5 held-out frames of that sub-sweep.
- * - Between-frame fit: there the training frames reached 44.2 dB and the held-out 40.3, below the blend
- *   of the two bracketing frames (42.5 dB for frames 43 ms apart); runs repeat to within about 0.4 dB.
- * - The field's view at a held-out pose is no better than blending its own renders at the two
- *   bracketing training frames (40.3 against 40.5 dB there; 37.4 against 37.5 after 1,100 steps), so
- *   the held-out error is close to the training error plus the blend's error:
- *   -10 log10(10^(-44.2/10) + 10^(-42.5/10)) = 40.2 dB, 40.3 measured. Held-out PSNR therefore stays
- *   below the blend of the recorded frames however well the training frames are fitted (`bigus
- *   benchmark` reports this split for every sweep). With training frames further apart (liver, every
- *   4th frame, 2.2 mm apart at mid-depth; held out i mod 4 == 2) it is the same: after 5 minutes the
- *   training frames scored 38.3 dB, the held-out 33.9 (fit + blend estimate 34.3) against 36.6 for the
- *   blend.
+ * What limits held-out quality: held-out error is close to the training-frame error plus the error
+ * of blending the two bracketing recorded frames (the part of a held-out frame that no neighbour
+ * holds): MSE_held-out ~ MSE_training + MSE_blend, so held-out PSNR stays below the blend of the
+ * recorded frames however well the training frames are fitted, and training fit is bought with steps
+ * per frame and capacity. `bigus benchmark` reports this split for every sweep.
  *
  * Stopping: Iterations, TimeBudget (s) or ConvergenceTolerance, whichever first; AbortExecute is
  * honoured and UpdateProgress called. Checkpoints (CheckpointFile every CheckpointInterval steps)
@@ -152,11 +133,14 @@ public:
   vtkSetMacro(Seed, unsigned int);
   vtkGetMacro(Seed, unsigned int);
   ///@}
-  ///@{ Backend that runs the training steps: "auto" (default: the fastest available, CUDA where it
-  /// is built and a device is usable, else the CPU), "cpu" or "cuda", chosen through the one backend
-  /// registry (bigus::CreateTrainingEngine). An unavailable backend fails the request with an error
-  /// that names it and the available ones. GetBackendInUse() says which one the last run used (also
-  /// stored as the output's field data `Backend`).
+  ///@{
+  /**
+   * Backend that runs the training steps: "auto" (default: the fastest available, CUDA where it is
+   * built and a device is usable, else the CPU), "cpu" or "cuda", chosen through the one backend
+   * registry (bigus::CreateTrainingEngine). An unavailable backend fails the request with an error
+   * that names it and the available ones. GetBackendInUse() says which one the last run used (also
+   * stored as the output's field data `Backend`).
+   */
   vtkSetStringMacro(Backend);
   vtkGetStringMacro(Backend);
   const char* GetBackendInUse() const { return this->BackendInUse.c_str(); }
