@@ -17,6 +17,16 @@ constexpr double AdamBeta1 = 0.9;
 constexpr double AdamBeta2 = 0.999;
 constexpr double AdamEpsilon = 1e-12;
 
+/// A step that the renderer refused: its message, prefixed with the training frame.
+StepStatus Failed(int frame, std::string* error)
+{
+  if (error)
+  {
+    *error = "training frame " + std::to_string(frame) + ": " + *error;
+  }
+  return StepStatus::Failed;
+}
+
 class CpuTrainingEngine : public TrainingEngine
 {
 public:
@@ -115,7 +125,7 @@ StepStatus CpuTrainingEngine::Step(const StepRequest& request, double* loss, std
     if (!this->Backend->Forward(this->State.Field.View(), &slice, 1, request.Options, this->S.data(), this->I.data(),
           nullptr, error))
     {
-      return StepStatus::Failed;
+      return Failed(f, error);
     }
     const ImageLossTerms terms = ComputeImageLoss(this->I.data(), &data.Frames[pixels * f], data.MaskOf(f), data.Width,
       data.Height, request.Loss, this->LossGradient.data(), false, &this->LossWorkspace);
@@ -130,7 +140,7 @@ StepStatus CpuTrainingEngine::Step(const StepRequest& request, double* loss, std
     if (!this->Backend->Backward(this->State.Field.View(), &slice, 1, request.Options, this->S.data(),
           this->LossGradient.data(), false, grads, nullptr, error))
     {
-      return StepStatus::Failed;
+      return Failed(f, error);
     }
   }
   *loss = total / request.Count;

@@ -28,7 +28,7 @@ namespace bigus
 {
 
 /// The frames a trainer learns from. Intensities in [0, 1].
-struct TrainingData
+struct BIGUSTRAINING_EXPORT TrainingData
 {
   int Width = 0, Height = 0;
   std::vector<float> Frames;                 ///< [N, H, W]
