@@ -90,22 +90,6 @@ bool PrepareSlices(const SliceGeometry* slices, int count, const RenderOptions& 
   return true;
 }
 
-GaussianParams LoadGaussian(const FieldView& field, std::int64_t i)
-{
-  GaussianParams g;
-  for (int k = 0; k < 3; ++k)
-  {
-    g.Mean[k] = field.Means[3 * i + k];
-    g.LogScale[k] = field.LogScales[3 * i + k];
-  }
-  for (int k = 0; k < 4; ++k)
-  {
-    g.Quaternion[k] = field.Quaternions[4 * i + k];
-  }
-  g.Reflectivity = field.Reflectivities[i];
-  return g;
-}
-
 /**
  * Bound on every Gaussian's variance along any direction, exp(2 max_k l_k) (mm^2), computed once per
  * call. n^T Sigma n never exceeds it, so the elevation test below only keeps extra candidates, which
@@ -210,7 +194,7 @@ void SetupSlice(const FieldView& field, const CullBounds& bounds, const Prepared
         {
           continue;
         }
-        const GaussianParams g = LoadGaussian(field, i);
+        const GaussianParams g = LoadGaussian(field.Means, field.LogScales, field.Quaternions, field.Reflectivities, i);
         const double r = EffectiveReflectivity(g.Reflectivity, o);
         if (r == 0)
         {
@@ -568,7 +552,8 @@ public:
           {
             continue;
           }
-          const GaussianParams g = LoadGaussian(field, i);
+          const GaussianParams g =
+            LoadGaussian(field.Means, field.LogScales, field.Quaternions, field.Reflectivities, i);
           const double r = EffectiveReflectivity(g.Reflectivity, options);
           SetupCache cache;
           const Footprint f = SetupFootprint(g, s.Frame, sigmaE, options.Cutoff, &cache);

@@ -79,6 +79,28 @@ struct GaussianParams
   double Reflectivity;
 };
 
+/**
+ * Gaussian @p i of a field held as structure of arrays (float or double): @p means [N, 3] mm (reference
+ * frame), @p logScales [N, 3] ln mm, @p quaternions [N, 4] w, x, y, z, @p reflectivities [N] signed.
+ */
+template <typename T>
+BIGUS_HD GaussianParams LoadGaussian(
+  const T* means, const T* logScales, const T* quaternions, const T* reflectivities, std::int64_t i)
+{
+  GaussianParams g;
+  for (int k = 0; k < 3; ++k)
+  {
+    g.Mean[k] = means[3 * i + k];
+    g.LogScale[k] = logScales[3 * i + k];
+  }
+  for (int k = 0; k < 4; ++k)
+  {
+    g.Quaternion[k] = quaternions[4 * i + k];
+  }
+  g.Reflectivity = reflectivities[i];
+  return g;
+}
+
 /// Result of phase 1 for one Gaussian and one slice: the 2D footprint.
 struct Footprint
 {

@@ -28,18 +28,8 @@ struct FieldD
   std::int64_t Count() const { return static_cast<std::int64_t>(this->Reflectivities.size()); }
   GaussianParams Get(std::int64_t i) const
   {
-    GaussianParams g;
-    for (int k = 0; k < 3; ++k)
-    {
-      g.Mean[k] = this->Means[3 * i + k];
-      g.LogScale[k] = this->LogScales[3 * i + k];
-    }
-    for (int k = 0; k < 4; ++k)
-    {
-      g.Quaternion[k] = this->Quaternions[4 * i + k];
-    }
-    g.Reflectivity = this->Reflectivities[i];
-    return g;
+    return LoadGaussian(this->Means.data(), this->LogScales.data(), this->Quaternions.data(),
+      this->Reflectivities.data(), i);
   }
 };
 
