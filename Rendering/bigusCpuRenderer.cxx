@@ -170,16 +170,11 @@ double EffectiveReflectivity(double r, const RenderOptions& o)
   return o.NonNegativeReflectivity ? std::max(r, 0.0) : r;
 }
 
-double EffectiveSigma(const RenderOptions& o)
-{
-  return o.BeamIntegration ? o.ElevationSigma : 0.0;
-}
-
 /// Phase 1 for one slice: the visible splats, in Gaussian index order.
 void SetupSlice(const FieldView& field, const CullBounds& bounds, const PreparedSlice& s,
   const RenderOptions& o, std::vector<std::vector<Splat>>& perChunk, std::vector<Splat>& splats)
 {
-  const double sigmaE = EffectiveSigma(o);
+  const double sigmaE = EffectiveElevationSigma(o);
   const std::int64_t chunks = (field.Count + ChunkSize - 1) / ChunkSize;
   perChunk.resize(chunks);
   vtkSMPTools::For(0, chunks, 1, [&](std::int64_t begin, std::int64_t end) {
@@ -523,7 +518,7 @@ public:
     }
     const double t0 = Now();
     this->Bounds.Compute(field);
-    const double sigmaE = EffectiveSigma(options);
+    const double sigmaE = EffectiveElevationSigma(options);
     std::int64_t offset = 0;
     std::vector<float>& gS = this->ScatteringGradient;
     for (int k = 0; k < count; ++k)

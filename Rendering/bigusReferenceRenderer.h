@@ -68,7 +68,7 @@ inline bool Forward(const FieldD& field, const SliceGeometry& slice, const Rende
   {
     return false;
   }
-  const double sigmaE = o.BeamIntegration ? o.ElevationSigma : 0.0;
+  const double sigmaE = EffectiveElevationSigma(o);
   S.assign(std::size_t(slice.Width) * slice.Height, 0.0);
   for (std::int64_t i = 0; i < field.Count(); ++i)
   {
@@ -110,7 +110,7 @@ inline bool Backward(const FieldD& field, const SliceGeometry& slice, const Rend
   {
     return false;
   }
-  const double sigmaE = o.BeamIntegration ? o.ElevationSigma : 0.0;
+  const double sigmaE = EffectiveElevationSigma(o);
   std::vector<double> gS(dL.size());
   for (std::size_t p = 0; p < dL.size(); ++p)
   {
