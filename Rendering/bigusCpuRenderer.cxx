@@ -398,10 +398,10 @@ constexpr int Lanes = 8;
 
 /**
  * The per-Gaussian pixel sums of the backward pass over the row spans (RowSpan) of its bounding box
- * @p box (columns box[0..1], rows box[2..3]); @p gS points at row box[2] of dL/dS. The weight comes from the principal-axes
- * form (@p axes, as phase 2), the gradient terms from the conic (a, b, c). sum[0..1]: dL/dcentre; sum[2..4]: dL/dconic;
- * sum[5]: sum dL/dS e; sum[6]: attribution sum |dL/dS| |w| e. Columns are processed in groups of
- * Lanes with one partial sum per lane (vectorisable without reassociation, deterministic order).
+ * @p box (columns box[0..1], rows box[2..3]); @p gS points at row box[2] of dL/dS; @p w = r amp.
+ * sum[q] is the sum over those pixels of PixelWeightBackward's term q, with e from the principal-axes
+ * form (@p axes) and the cutoff, as in phase 2. Columns are processed in groups of Lanes with one
+ * partial sum per lane (vectorisable without reassociation, deterministic order).
  * Returns the number of pixels in the row spans (RenderStats::PixelEvaluations).
  */
 BIGUS_TARGET_CLONES std::int64_t FootprintSums(const float* gS, int width, const int box[4], float dcx, float dcy,
@@ -411,7 +411,6 @@ BIGUS_TARGET_CLONES std::int64_t FootprintSums(const float* gS, int width, const
   {
     sum[q] = 0;
   }
-  const float absW = std::abs(w);
   const float det = a * c - b * b;
   std::int64_t evaluations = 0;
   for (int row = box[2]; row <= box[3]; ++row)
@@ -432,19 +431,9 @@ BIGUS_TARGET_CLONES std::int64_t FootprintSums(const float* gS, int width, const
         const float inside = col <= last ? 1.0f : 0.0f;
         const float gv = g[col <= last ? col : last] * inside;
         const float dx = col * P0 + xrow;
-        const float u = (axes[0] * dx + axes[1] * dy) * axes[2];
-        const float v = (axes[0] * dy - axes[1] * dx) * axes[3];
-        const float form = u * u + v * v;
+        const float form = AxesForm(axes[0], axes[1], axes[2], axes[3], dx, dy);
         const float e = form <= cutoffSquared ? FastExp(-0.5f * form) : 0.0f;
-        const float ge = gv * e;
-        const float gw = ge * w;
-        part[0][l] += gw * (a * dx + b * dy);
-        part[1][l] += gw * (b * dx + c * dy);
-        part[2][l] += -0.5f * gw * dx * dx;
-        part[3][l] += -gw * dx * dy;
-        part[4][l] += -0.5f * gw * dy * dy;
-        part[5][l] += ge;
-        part[6][l] += std::abs(gv) * absW * e;
+        PixelWeightBackward(gv, w, e, a, b, c, dx, dy, &part[0][l], Lanes);
       }
     }
     for (int q = 0; q < 7; ++q)

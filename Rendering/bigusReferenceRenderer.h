@@ -126,17 +126,16 @@ inline bool Backward(const FieldD& field, const SliceGeometry& slice, const Rend
       continue;
     }
     const double r = Reflectivity(g.Reflectivity, o);
-    double sums[6] = { 0, 0, 0, 0, 0, 0 };
-    double attribution = 0;
+    double sums[7] = { 0, 0, 0, 0, 0, 0, 0 };
     for (int j = 0; j < slice.Height; ++j)
     {
       for (int k = 0; k < slice.Width; ++k)
       {
         const double dx = k * pixel[0] + j * pixel[1] - f.Center[0];
         const double dy = j * pixel[2] - f.Center[1];
-        const double gp = gS[std::size_t(j) * slice.Width + k];
-        PixelWeightBackward(gp, r, f.Amplitude, f.Conic[0], f.Conic[1], f.Conic[2], dx, dy, sums);
-        attribution += std::abs(gp) * std::abs(r) * PixelWeight(f.Amplitude, f.Conic[0], f.Conic[1], f.Conic[2], dx, dy);
+        const double e = std::exp(-0.5 * ConicForm(f.Conic[0], f.Conic[1], f.Conic[2], dx, dy));
+        PixelWeightBackward(gS[std::size_t(j) * slice.Width + k], r * f.Amplitude, e, f.Conic[0], f.Conic[1],
+          f.Conic[2], dx, dy, sums, 1);
       }
     }
     const FootprintGrad gf = FootprintGradFromSums(sums, r);
@@ -152,7 +151,7 @@ inline bool Backward(const FieldD& field, const SliceGeometry& slice, const Rend
       grad.Quaternions[4 * i + q] += gg.Quaternion[q];
     }
     grad.Reflectivities[i] += (o.NonNegativeReflectivity && g.Reflectivity <= 0) ? 0.0 : f.Amplitude * sums[5];
-    grad.Attribution[i] += attribution;
+    grad.Attribution[i] += sums[6];
   }
   return true;
 }
