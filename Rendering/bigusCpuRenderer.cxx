@@ -340,14 +340,11 @@ BIGUS_TARGET_CLONES std::int64_t RasterTile(const Splat* splats, const std::int3
     {
       const float dy = r * t.P2 - dcy;
       const float xrow = r * t.P1 - dcx;
-      const float sdy = si * dy, cdy = co * dy;
       float* out = acc + r * TileSize;
       for (int q = cs; q < ce; ++q)
       {
         const float dx = column[q] + xrow;
-        const float u = (co * dx + sdy) * s1;
-        const float v = (cdy - si * dx) * s2;
-        const float form = u * u + v * v;
+        const float form = AxesForm(co, si, s1, s2, dx, dy);
         const float value = w * FastExp(-0.5f * form);
         out[q] += form <= cutoffSquared ? value : 0.0f;
       }
