@@ -203,7 +203,7 @@ int vtkGaussianFieldTrainer::RequestData(
 
   const bigus::TrainerReport& report = trainer.GetReport();
   bigus::FieldModel model;
-  model.ElevationSigma = this->BeamIntegration ? this->ElevationSigma : 0.0;
+  model.ElevationSigma = bigus::EffectiveElevationSigma(trainer.Options());
   model.Gamma = trainer.GetGamma();
   model.PixelSpacing = trainer.GetPixelSpacing();
   bigus::FieldToPolyData(trainer.GetField(), model, output);

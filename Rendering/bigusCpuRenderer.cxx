@@ -90,22 +90,6 @@ bool PrepareSlices(const SliceGeometry* slices, int count, const RenderOptions& 
   return true;
 }
 
-GaussianParams LoadGaussian(const FieldView& field, std::int64_t i)
-{
-  GaussianParams g;
-  for (int k = 0; k < 3; ++k)
-  {
-    g.Mean[k] = field.Means[3 * i + k];
-    g.LogScale[k] = field.LogScales[3 * i + k];
-  }
-  for (int k = 0; k < 4; ++k)
-  {
-    g.Quaternion[k] = field.Quaternions[4 * i + k];
-  }
-  g.Reflectivity = field.Reflectivities[i];
-  return g;
-}
-
 /**
  * Bound on every Gaussian's variance along any direction, exp(2 max_k l_k) (mm^2), computed once per
  * call. n^T Sigma n never exceeds it, so the elevation test below only keeps extra candidates, which
@@ -186,16 +170,11 @@ double EffectiveReflectivity(double r, const RenderOptions& o)
   return o.NonNegativeReflectivity ? std::max(r, 0.0) : r;
 }
 
-double EffectiveSigma(const RenderOptions& o)
-{
-  return o.BeamIntegration ? o.ElevationSigma : 0.0;
-}
-
 /// Phase 1 for one slice: the visible splats, in Gaussian index order.
 void SetupSlice(const FieldView& field, const CullBounds& bounds, const PreparedSlice& s,
   const RenderOptions& o, std::vector<std::vector<Splat>>& perChunk, std::vector<Splat>& splats)
 {
-  const double sigmaE = EffectiveSigma(o);
+  const double sigmaE = EffectiveElevationSigma(o);
   const std::int64_t chunks = (field.Count + ChunkSize - 1) / ChunkSize;
   perChunk.resize(chunks);
   vtkSMPTools::For(0, chunks, 1, [&](std::int64_t begin, std::int64_t end) {
@@ -210,7 +189,7 @@ void SetupSlice(const FieldView& field, const CullBounds& bounds, const Prepared
         {
           continue;
         }
-        const GaussianParams g = LoadGaussian(field, i);
+        const GaussianParams g = LoadGaussian(field.Means, field.LogScales, field.Quaternions, field.Reflectivities, i);
         const double r = EffectiveReflectivity(g.Reflectivity, o);
         if (r == 0)
         {
@@ -361,14 +340,11 @@ BIGUS_TARGET_CLONES std::int64_t RasterTile(const Splat* splats, const std::int3
     {
       const float dy = r * t.P2 - dcy;
       const float xrow = r * t.P1 - dcx;
-      const float sdy = si * dy, cdy = co * dy;
       float* out = acc + r * TileSize;
       for (int q = cs; q < ce; ++q)
       {
         const float dx = column[q] + xrow;
-        const float u = (co * dx + sdy) * s1;
-        const float v = (cdy - si * dx) * s2;
-        const float form = u * u + v * v;
+        const float form = AxesForm(co, si, s1, s2, dx, dy);
         const float value = w * FastExp(-0.5f * form);
         out[q] += form <= cutoffSquared ? value : 0.0f;
       }
@@ -419,10 +395,10 @@ constexpr int Lanes = 8;
 
 /**
  * The per-Gaussian pixel sums of the backward pass over the row spans (RowSpan) of its bounding box
- * @p box (columns box[0..1], rows box[2..3]); @p gS points at row box[2] of dL/dS. The weight comes from the principal-axes
- * form (@p axes, as phase 2), the gradient terms from the conic (a, b, c). sum[0..1]: dL/dcentre; sum[2..4]: dL/dconic;
- * sum[5]: sum dL/dS e; sum[6]: attribution sum |dL/dS| |w| e. Columns are processed in groups of
- * Lanes with one partial sum per lane (vectorisable without reassociation, deterministic order).
+ * @p box (columns box[0..1], rows box[2..3]); @p gS points at row box[2] of dL/dS; @p w = r amp.
+ * sum[q] is the sum over those pixels of PixelWeightBackward's term q, with e from the principal-axes
+ * form (@p axes) and the cutoff, as in phase 2. Columns are processed in groups of Lanes with one
+ * partial sum per lane (vectorisable without reassociation, deterministic order).
  * Returns the number of pixels in the row spans (RenderStats::PixelEvaluations).
  */
 BIGUS_TARGET_CLONES std::int64_t FootprintSums(const float* gS, int width, const int box[4], float dcx, float dcy,
@@ -432,7 +408,6 @@ BIGUS_TARGET_CLONES std::int64_t FootprintSums(const float* gS, int width, const
   {
     sum[q] = 0;
   }
-  const float absW = std::abs(w);
   const float det = a * c - b * b;
   std::int64_t evaluations = 0;
   for (int row = box[2]; row <= box[3]; ++row)
@@ -453,19 +428,9 @@ BIGUS_TARGET_CLONES std::int64_t FootprintSums(const float* gS, int width, const
         const float inside = col <= last ? 1.0f : 0.0f;
         const float gv = g[col <= last ? col : last] * inside;
         const float dx = col * P0 + xrow;
-        const float u = (axes[0] * dx + axes[1] * dy) * axes[2];
-        const float v = (axes[0] * dy - axes[1] * dx) * axes[3];
-        const float form = u * u + v * v;
+        const float form = AxesForm(axes[0], axes[1], axes[2], axes[3], dx, dy);
         const float e = form <= cutoffSquared ? FastExp(-0.5f * form) : 0.0f;
-        const float ge = gv * e;
-        const float gw = ge * w;
-        part[0][l] += gw * (a * dx + b * dy);
-        part[1][l] += gw * (b * dx + c * dy);
-        part[2][l] += -0.5f * gw * dx * dx;
-        part[3][l] += -gw * dx * dy;
-        part[4][l] += -0.5f * gw * dy * dy;
-        part[5][l] += ge;
-        part[6][l] += std::abs(gv) * absW * e;
+        PixelWeightBackward(gv, w, e, a, b, c, dx, dy, &part[0][l], Lanes);
       }
     }
     for (int q = 0; q < 7; ++q)
@@ -539,7 +504,7 @@ public:
     }
     const double t0 = Now();
     this->Bounds.Compute(field);
-    const double sigmaE = EffectiveSigma(options);
+    const double sigmaE = EffectiveElevationSigma(options);
     std::int64_t offset = 0;
     std::vector<float>& gS = this->ScatteringGradient;
     for (int k = 0; k < count; ++k)
@@ -568,7 +533,8 @@ public:
           {
             continue;
           }
-          const GaussianParams g = LoadGaussian(field, i);
+          const GaussianParams g =
+            LoadGaussian(field.Means, field.LogScales, field.Quaternions, field.Reflectivities, i);
           const double r = EffectiveReflectivity(g.Reflectivity, options);
           SetupCache cache;
           const Footprint f = SetupFootprint(g, s.Frame, sigmaE, options.Cutoff, &cache);

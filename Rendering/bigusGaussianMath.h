@@ -79,6 +79,28 @@ struct GaussianParams
   double Reflectivity;
 };
 
+/**
+ * Gaussian @p i of a field held as structure of arrays (float or double): @p means [N, 3] mm (reference
+ * frame), @p logScales [N, 3] ln mm, @p quaternions [N, 4] w, x, y, z, @p reflectivities [N] signed.
+ */
+template <typename T>
+BIGUS_HD GaussianParams LoadGaussian(
+  const T* means, const T* logScales, const T* quaternions, const T* reflectivities, std::int64_t i)
+{
+  GaussianParams g;
+  for (int k = 0; k < 3; ++k)
+  {
+    g.Mean[k] = means[3 * i + k];
+    g.LogScale[k] = logScales[3 * i + k];
+  }
+  for (int k = 0; k < 4; ++k)
+  {
+    g.Quaternion[k] = quaternions[4 * i + k];
+  }
+  g.Reflectivity = reflectivities[i];
+  return g;
+}
+
 /// Result of phase 1 for one Gaussian and one slice: the 2D footprint.
 struct Footprint
 {
@@ -406,10 +428,11 @@ BIGUS_HD void SetupFootprintBackward(const Footprint& f, const SetupCache& c, co
 }
 
 /**
- * The footprint gradient from the per-pixel sums of PixelWeightBackward (sums[0..4]: centre and conic
- * terms; sums[5]: sum dL/dS e) for a Gaussian of effective reflectivity @p r: dL/d(amp) = r sums[5].
+ * The footprint gradient from the per-pixel sums of PixelWeightBackward (sums[0..4]: centre and
+ * conic terms; sums[5]: sum dL/dS e; sums[6], the attribution, is not used here) for a Gaussian of
+ * effective reflectivity @p r: dL/d(amp) = r sums[5].
  */
-BIGUS_HD FootprintGrad FootprintGradFromSums(const double sums[6], double r)
+BIGUS_HD FootprintGrad FootprintGradFromSums(const double sums[7], double r)
 {
   FootprintGrad gf;
   gf.Center[0] = sums[0];
@@ -449,23 +472,30 @@ BIGUS_HD T PixelWeight(T amp, T a, T b, T c, T dx, T dy)
 }
 
 /**
- * Accumulates the sums that the backward pass needs from one pixel with dL/dS = @p gS, reflectivity
- * @p r and offset (dx, dy) = p - c. With e = exp(-q/2) and w = amp e:
- *   dS/dc = r w conic d;  dS/d(a, b, c) = -r w (dx^2 / 2, dx dy, dy^2 / 2);  dS/d(amp) = r e;  dS/dr = w.
- * grad[0..4] receive the centre and conic terms; grad[5] receives sum gS e (times r gives dL/d(amp),
- * times amp gives dL/dr).
+ * Accumulates one pixel's terms of the backward pass: dL/dS = @p gS at the offset (dx, dy) = p - c (mm)
+ * from a footprint with conic (a, b, c), signed peak @p ra = r amp (r the effective reflectivity) and
+ * @p e = exp(-q / 2) at that pixel (0 outside the footprint). The caller evaluates e, so that the float
+ * backends use FastExp, AxesForm and their cutoff while the double reference uses std::exp, ConicForm.
+ * With the Gaussian's share S(p) = r amp e, q = d^T conic d and d = p - c:
+ *   dS/dc = r amp e conic d  (dq/dc = -2 conic d);   dS/d(a, b, c) = -r amp e (dx^2 / 2, dx dy, dy^2 / 2);
+ *   dS/d(amp) = r e;   dS/dr = amp e.
+ * sums[k * stride] += term k: k = 0, 1: dL/dc; 2..4: dL/d(a, b, c); 5: gS e (times r: dL/d(amp); times
+ * amp: dL/dr); 6: |gS| |r amp| e, the pixel's share of the error attribution E_i (bigusRenderer.h).
+ * @p stride is 1 for one running sum per term; the CPU backend passes its lane count to keep one partial
+ * sum per vector lane (sums = &part[0][lane] of part[7][lanes]), which vectorises without reassociation.
  */
 template <typename T>
-BIGUS_HD void PixelWeightBackward(T gS, T r, T amp, T a, T b, T c, T dx, T dy, T grad[6])
+BIGUS_HD void PixelWeightBackward(T gS, T ra, T e, T a, T b, T c, T dx, T dy, T* sums, int stride)
 {
-  const T e = std::exp(T(-0.5) * ConicForm(a, b, c, dx, dy));
-  const T gw = gS * r * amp * e;
-  grad[0] += gw * (a * dx + b * dy); // centre x
-  grad[1] += gw * (b * dx + c * dy); // centre y
-  grad[2] += T(-0.5) * gw * dx * dx;
-  grad[3] += -gw * dx * dy;
-  grad[4] += T(-0.5) * gw * dy * dy;
-  grad[5] += gS * e;
+  const T ge = gS * e;
+  const T gw = ge * ra;
+  sums[0 * stride] += gw * (a * dx + b * dy);
+  sums[1 * stride] += gw * (b * dx + c * dy);
+  sums[2 * stride] += T(-0.5) * gw * dx * dx;
+  sums[3 * stride] += -gw * dx * dy;
+  sums[4 * stride] += T(-0.5) * gw * dy * dy;
+  sums[5 * stride] += ge;
+  sums[6 * stride] += std::abs(gS) * std::abs(ra) * e;
 }
 
 /**

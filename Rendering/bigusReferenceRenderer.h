@@ -28,18 +28,8 @@ struct FieldD
   std::int64_t Count() const { return static_cast<std::int64_t>(this->Reflectivities.size()); }
   GaussianParams Get(std::int64_t i) const
   {
-    GaussianParams g;
-    for (int k = 0; k < 3; ++k)
-    {
-      g.Mean[k] = this->Means[3 * i + k];
-      g.LogScale[k] = this->LogScales[3 * i + k];
-    }
-    for (int k = 0; k < 4; ++k)
-    {
-      g.Quaternion[k] = this->Quaternions[4 * i + k];
-    }
-    g.Reflectivity = this->Reflectivities[i];
-    return g;
+    return LoadGaussian(this->Means.data(), this->LogScales.data(), this->Quaternions.data(),
+      this->Reflectivities.data(), i);
   }
 };
 
@@ -78,7 +68,7 @@ inline bool Forward(const FieldD& field, const SliceGeometry& slice, const Rende
   {
     return false;
   }
-  const double sigmaE = o.BeamIntegration ? o.ElevationSigma : 0.0;
+  const double sigmaE = EffectiveElevationSigma(o);
   S.assign(std::size_t(slice.Width) * slice.Height, 0.0);
   for (std::int64_t i = 0; i < field.Count(); ++i)
   {
@@ -120,7 +110,7 @@ inline bool Backward(const FieldD& field, const SliceGeometry& slice, const Rend
   {
     return false;
   }
-  const double sigmaE = o.BeamIntegration ? o.ElevationSigma : 0.0;
+  const double sigmaE = EffectiveElevationSigma(o);
   std::vector<double> gS(dL.size());
   for (std::size_t p = 0; p < dL.size(); ++p)
   {
@@ -136,17 +126,16 @@ inline bool Backward(const FieldD& field, const SliceGeometry& slice, const Rend
       continue;
     }
     const double r = Reflectivity(g.Reflectivity, o);
-    double sums[6] = { 0, 0, 0, 0, 0, 0 };
-    double attribution = 0;
+    double sums[7] = { 0, 0, 0, 0, 0, 0, 0 };
     for (int j = 0; j < slice.Height; ++j)
     {
       for (int k = 0; k < slice.Width; ++k)
       {
         const double dx = k * pixel[0] + j * pixel[1] - f.Center[0];
         const double dy = j * pixel[2] - f.Center[1];
-        const double gp = gS[std::size_t(j) * slice.Width + k];
-        PixelWeightBackward(gp, r, f.Amplitude, f.Conic[0], f.Conic[1], f.Conic[2], dx, dy, sums);
-        attribution += std::abs(gp) * std::abs(r) * PixelWeight(f.Amplitude, f.Conic[0], f.Conic[1], f.Conic[2], dx, dy);
+        const double e = std::exp(-0.5 * ConicForm(f.Conic[0], f.Conic[1], f.Conic[2], dx, dy));
+        PixelWeightBackward(gS[std::size_t(j) * slice.Width + k], r * f.Amplitude, e, f.Conic[0], f.Conic[1],
+          f.Conic[2], dx, dy, sums, 1);
       }
     }
     const FootprintGrad gf = FootprintGradFromSums(sums, r);
@@ -162,7 +151,7 @@ inline bool Backward(const FieldD& field, const SliceGeometry& slice, const Rend
       grad.Quaternions[4 * i + q] += gg.Quaternion[q];
     }
     grad.Reflectivities[i] += (o.NonNegativeReflectivity && g.Reflectivity <= 0) ? 0.0 : f.Amplitude * sums[5];
-    grad.Attribution[i] += attribution;
+    grad.Attribution[i] += sums[6];
   }
   return true;
 }

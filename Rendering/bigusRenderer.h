@@ -72,6 +72,12 @@ struct RenderOptions
   double MaximumShearAngle = DefaultMaximumShearAngle; ///< degrees; a pose sheared more is rejected
 };
 
+/// The sigma_E (mm) that the maths uses: ElevationSigma with beam integration, 0 (the thin plane) without.
+inline double EffectiveElevationSigma(const RenderOptions& o)
+{
+  return o.BeamIntegration ? o.ElevationSigma : 0.0;
+}
+
 /// What one call did (summed over its slices).
 struct RenderStats
 {
