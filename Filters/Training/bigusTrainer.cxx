@@ -739,7 +739,7 @@ std::int64_t Trainer::FinalPrune(std::string* error)
   const GaussianField& field = this->State.Gaussians.Field;
   const std::int64_t n = field.Count();
   const RenderOptions o = this->Options();
-  const double sigmaE = o.BeamIntegration ? o.ElevationSigma : 0.0;
+  const double sigmaE = EffectiveElevationSigma(o);
   std::vector<unsigned char> keep(n, 0);
   std::vector<SliceFrameD> frames;
   for (int f : this->Data->TrainFrames)
@@ -752,17 +752,8 @@ std::int64_t Trainer::FinalPrune(std::string* error)
   vtkSMPTools::For(0, n, 256, [&](std::int64_t b, std::int64_t e) {
     for (std::int64_t i = b; i < e; ++i)
     {
-      GaussianParams g;
-      for (int k = 0; k < 3; ++k)
-      {
-        g.Mean[k] = field.Means[3 * i + k];
-        g.LogScale[k] = field.LogScales[3 * i + k];
-      }
-      for (int k = 0; k < 4; ++k)
-      {
-        g.Quaternion[k] = field.Quaternions[4 * i + k];
-      }
-      g.Reflectivity = field.Reflectivities[i];
+      const GaussianParams g = LoadGaussian(
+        field.Means.data(), field.LogScales.data(), field.Quaternions.data(), field.Reflectivities.data(), i);
       const double r = o.NonNegativeReflectivity ? std::max(g.Reflectivity, 0.0) : std::abs(g.Reflectivity);
       for (const SliceFrameD& frame : frames)
       {
