@@ -4,7 +4,8 @@
  *        (Harris or uniform random), Adam, losses, error-attributed densification (EA-D), adaptive
  *        growth stop, final pruning, NaN roll-back, checkpoints. vtkGaussianFieldTrainer wraps it.
  *
- * Part of BIGUS::Training (public, not wrapped for Python). Deterministic for a given seed and thread count on the CPU backend.
+ * Part of BIGUS::Training (public, not wrapped for Python). Deterministic for a given seed and thread
+ * count on the CPU backend.
  */
 #ifndef bigusTrainer_h
 #define bigusTrainer_h
@@ -99,9 +100,9 @@ public:
 
   /**
    * Initial field (Harris or random) and gamma. Returns false with @p error on bad data: no training
-   * frame, inconsistent sizes, an empty mask, or a training pose the renderer rejects ("frame 12:
-   * ImageToReference is sheared by 7.2 degrees ...": the renderer accepts at most
-   * RenderOptions::MaximumShearAngle, the reader's default limit).
+   * frame, inconsistent sizes, an empty mask, or a training pose the renderer rejects ("training
+   * frame 12: ImageToReference is sheared ... by 7.20 degrees; the renderer accepts at most 5.00":
+   * bigus::DefaultMaximumShearAngle, also the reader's default limit).
    */
   bool Initialize(std::string* error);
   /// Start from a given field instead (gamma still from the data).
