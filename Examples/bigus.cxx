@@ -1027,8 +1027,11 @@ int main(int argc, char** argv)
   trainCommand->add_option("--holdout-offset", train.HoldOutOffset, "J of --holdout-every");
   trainCommand->add_option("--frames", train.Frames, "Train on these frames only (indices); the others are held out")
     ->excludes("--holdout-every");
-  trainCommand->add_option("--time-budget", train.TimeBudget, "Wall-clock budget for training, seconds (0: none)");
-  trainCommand->add_option("--iterations", train.Iterations, "Optimisation steps")->capture_default_str();
+  trainCommand->add_option("--time-budget", train.TimeBudget,
+    "Wall-clock budget for training, seconds (0: none); alone, it is the whole schedule (learning-rate decay, "
+    "densification window) and training runs until it");
+  auto* iterations = trainCommand->add_option("--iterations", train.Iterations,
+    "Optimisation steps (with --time-budget: whichever ends first)")->capture_default_str();
   trainCommand->add_option("--max-gaussians", train.MaxGaussians, "Hard maximum of Gaussians")->capture_default_str();
   trainCommand->add_option("--initial-gaussians", train.InitialGaussians,
     "Seeds (0: one per 200 fan pixels of the training frames, 20,000 to half the maximum)")
@@ -1117,6 +1120,10 @@ int main(int argc, char** argv)
   }
   if (trainCommand->parsed())
   {
+    if (iterations->count() == 0 && train.TimeBudget > 0)
+    {
+      train.Iterations = 0; // the budget alone is the schedule
+    }
     return RunTrain(train);
   }
   if (renderCommand->parsed())

@@ -86,7 +86,15 @@ public:
   vtkSetMacro(Densify, bool);
   vtkGetMacro(Densify, bool);
   ///@}
-  ///@{ Stopping: iterations, wall-clock budget (s, 0 = none), relative convergence tolerance (0 = off).
+  ///@{
+  /**
+   * Stopping and schedule: Iterations (steps), TimeBudget (wall-clock seconds, 0 = none),
+   * ConvergenceTolerance (relative, 0 = off); whichever ends first. The mean learning rate decays and
+   * the densification window (to 60 %) closes along the schedule, which is the larger of
+   * steps / Iterations and seconds / TimeBudget: with Iterations 0 and a TimeBudget the budget alone is
+   * the schedule and training runs until it (Iterations 0 without a budget means 3000). A run
+   * scheduled by time is not reproducible step for step; one scheduled by Iterations is.
+   */
   vtkSetClampMacro(Iterations, int, 0, 100000000);
   vtkGetMacro(Iterations, int);
   vtkSetClampMacro(TimeBudget, double, 0.0, 1e9);
@@ -104,7 +112,7 @@ public:
   vtkSetVector3Macro(LossWeights, double);
   vtkGetVector3Macro(LossWeights, double);
   ///@}
-  ///@{ Densification schedule: first step, last step (-1: 60 % of Iterations), interval, top percentile.
+  ///@{ Densification schedule: first step, last step (-1: 60 % of the schedule), interval, top percentile.
   vtkSetMacro(DensifyStart, int);
   vtkGetMacro(DensifyStart, int);
   vtkSetMacro(DensifyEnd, int);

@@ -24,6 +24,8 @@ namespace bigus
 namespace
 {
 constexpr int SnapshotInterval = 100;
+constexpr int DefaultIterations = 3000;         // the schedule when neither iterations nor a time budget is given
+constexpr double DensifyEndFraction = 0.6;     // densification stops at this fraction of the schedule
 constexpr double MinimumScaleMm = 1e-3;
 constexpr double MaximumScaleMm = 100.0;
 constexpr double SplitShrink = 1.6; // every scale of a split Gaussian is divided by this
@@ -132,9 +134,9 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
 {
   this->State.Random.seed(settings.Seed);
   this->Settings.FramesPerStep = std::max(1, this->Settings.FramesPerStep);
-  if (this->Settings.DensifyEnd < 0)
+  if (this->Settings.Iterations <= 0 && this->Settings.TimeBudget <= 0)
   {
-    this->Settings.DensifyEnd = static_cast<int>(0.6 * this->Settings.Iterations);
+    this->Settings.Iterations = DefaultIterations;
   }
   if (!this->Data->TrainFrames.empty())
   {
@@ -461,11 +463,27 @@ bool Trainer::FitReflectivityScale(std::string* error)
   return this->PushState(error);
 }
 
-double Trainer::MeanLearningRateAt(int iteration) const
+double Trainer::ScheduleFraction() const
 {
-  const double t = std::min(1.0, double(iteration) / std::max(1, this->Settings.Iterations));
+  const TrainerSettings& s = this->Settings;
+  double f = s.Iterations > 0 ? double(this->State.Iteration) / s.Iterations : 0.0;
+  if (s.TimeBudget > 0 && this->TrainStart > 0)
+  {
+    f = std::max(f, (Seconds() - this->TrainStart) / s.TimeBudget);
+  }
+  return std::min(1.0, f);
+}
+
+double Trainer::MeanLearningRateAt(double fraction) const
+{
   return this->Settings.MeanLearningRate *
-    std::pow(this->Settings.MeanLearningRateFinal / this->Settings.MeanLearningRate, t);
+    std::pow(this->Settings.MeanLearningRateFinal / this->Settings.MeanLearningRate, fraction);
+}
+
+bool Trainer::InDensificationWindow() const
+{
+  const TrainerSettings& s = this->Settings;
+  return s.DensifyEnd >= 0 ? this->State.Iteration <= s.DensifyEnd : this->ScheduleFraction() <= DensifyEndFraction;
 }
 
 StepStatus Trainer::Step(double* loss, std::string* error)
@@ -482,7 +500,7 @@ StepStatus Trainer::Step(double* loss, std::string* error)
   request.Count = static_cast<int>(frames.size());
   request.Iteration = state.Iteration;
   const double scale = state.LearningRateScale;
-  request.MeanRate = scale * this->MeanLearningRateAt(state.Iteration);
+  request.MeanRate = scale * this->MeanLearningRateAt(this->ScheduleFraction());
   request.LogScaleRate = scale * this->Settings.LogScaleLearningRate;
   request.QuaternionRate = scale * this->Settings.QuaternionLearningRate;
   request.ReflectivityRate = scale * this->Settings.ReflectivityLearningRate;
@@ -790,6 +808,7 @@ bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>
     return false;
   }
   const double start = Seconds();
+  this->TrainStart = start;
   const TrainerSettings& s = this->Settings;
   const TrainingState& state = this->State;
   this->Report.StopReason = "iterations";
@@ -797,7 +816,7 @@ bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>
   int recentCount = 0;
   double previousWindow = -1;
   bool ok = true;
-  while (state.Iteration < s.Iterations)
+  while (s.Iterations <= 0 || state.Iteration < s.Iterations)
   {
     if (abort && abort())
     {
@@ -830,7 +849,7 @@ bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>
       break;
     }
     const int it = state.Iteration;
-    if (s.Densify && it >= s.DensifyStart && it <= s.DensifyEnd && it % s.DensifyInterval == 0 &&
+    if (s.Densify && it >= s.DensifyStart && it % s.DensifyInterval == 0 && this->InDensificationWindow() &&
       !this->DensifyAndPrune(error))
     {
       ok = false;
@@ -856,12 +875,7 @@ bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>
     }
     if (progress && (it % 10 == 0 || it == s.Iterations))
     {
-      double fraction = double(it) / s.Iterations;
-      if (s.TimeBudget > 0)
-      {
-        fraction = std::max(fraction, (Seconds() - start) / s.TimeBudget);
-      }
-      progress(std::min(1.0, fraction), it, std::isfinite(loss) ? loss : 0.0, state.Gaussians.Count());
+      progress(this->ScheduleFraction(), it, std::isfinite(loss) ? loss : 0.0, state.Gaussians.Count());
     }
   }
   this->Report.Iterations = state.Iteration;
@@ -875,6 +889,8 @@ bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>
   }
   this->Report.LastLoss = h ? last / std::min<std::size_t>(h, 50) : 0;
   this->Report.Gaussians = this->GetField().Count();
+  this->DensificationEnded = !this->InDensificationWindow();
+  this->TrainStart = 0;
   return ok;
 }
 
@@ -882,7 +898,7 @@ bool Trainer::Finish(std::string* error)
 {
   const double start = Seconds();
   const TrainerSettings& s = this->Settings;
-  if (this->Report.GrowthStopReason.empty() && (!s.Densify || this->State.Iteration > s.DensifyEnd))
+  if (this->Report.GrowthStopReason.empty() && (!s.Densify || this->DensificationEnded))
   {
     this->Report.GrowthStopReason = s.Densify ? "densification schedule ended" : "densification off";
   }

@@ -44,11 +44,13 @@ struct TrainerSettings
   double UniformShare = 0.1;         ///< share of Harris seeds drawn uniformly inside the mask
   double InitialScalePixels = 1.5;   ///< in-plane standard deviation of a seed, pixels
   // Optimisation
+  /// Steps; 0 = no step limit when a TimeBudget is given (the budget is then the schedule), 3000 when
+  /// neither is. With both, whichever ends first, and the schedule follows the one further along.
   int Iterations = 3000;
-  double TimeBudget = 0;             ///< seconds of training; 0 = no limit
+  double TimeBudget = 0;             ///< seconds of training per Train call; 0 = no limit
   int FramesPerStep = 1;             ///< training frames rendered per step (the batch); losses are averaged
   double MeanLearningRate = 0.02;    ///< mm per step at the start ...
-  double MeanLearningRateFinal = 0.002; ///< ... decaying exponentially to this at Iterations
+  double MeanLearningRateFinal = 0.002; ///< ... decaying exponentially to this at the end of the schedule
   double LogScaleLearningRate = 0.01;
   double QuaternionLearningRate = 0.005;
   double ReflectivityLearningRate = 0.01;
@@ -56,7 +58,7 @@ struct TrainerSettings
   double ConvergenceTolerance = 0;   ///< stop when the mean loss of the last 200 steps improved by less (relative); 0 = off
   // Densification (EA-D)
   bool Densify = true;
-  int DensifyStart = 200, DensifyEnd = -1, DensifyInterval = 200; ///< End -1: 60 % of Iterations
+  int DensifyStart = 200, DensifyEnd = -1, DensifyInterval = 200; ///< End -1: 60 % of the schedule
   double DensifyPercentile = 5.0;    ///< top share (%) of the attribution score densified each time
   double SplitScalePixels = 3.0;     ///< largest scale above which a Gaussian is split, not cloned
   double PruneReflectivity = 1e-3;   ///< |r| below this is pruned (after the first densification)
@@ -175,7 +177,14 @@ private:
   bool FitReflectivityScale(std::string* error);
   bool DensifyAndPrune(std::string* error);
   bool ValidationLoss(double& loss, std::string* error);
-  double MeanLearningRateAt(int iteration) const;
+  /**
+   * How far through its schedule the run is, in [0, 1]: the larger of iterations / Iterations and,
+   * inside Train, seconds / TimeBudget; with a budget alone, the budget is the schedule. The mean
+   * learning rate decays and the densification window closes along it.
+   */
+  double ScheduleFraction() const;
+  double MeanLearningRateAt(double fraction) const;
+  bool InDensificationWindow() const;
   /// The host state becomes the engine's (a no-op when nothing changed since the last pull).
   bool PullState(std::string* error) const;
   /// The engine takes the host state.
@@ -189,6 +198,8 @@ private:
   double Gamma = 1;
   double PixelSpacing = 1; // mean in-plane pixel spacing of the training frames, mm
   TrainerReport Report;
+  double TrainStart = 0;           // Seconds() at the start of the Train call in progress, 0 outside
+  bool DensificationEnded = false; // the last Train call ended past the densification window
   std::vector<float> S; // scratch for RenderFrame
 };
 

@@ -464,6 +464,26 @@ TEST(Trainer, TrainingInStagesEqualsOneRunAndOnlyFinishPrunes)
   EXPECT_EQ(staged.GetField().Count(), before - staged.GetReport().PrunedAtEnd);
 }
 
+TEST(Trainer, ATimeBudgetAloneIsTheSchedule)
+{
+  // No step count chosen for another sweep: with Iterations 0 the run trains until the budget (before,
+  // it took no step at all; the CLI stopped at its default 3000 steps whatever the budget).
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(150, 4), 0.5, heldOut);
+  TrainerSettings s = ShortSettings();
+  s.Iterations = 0;
+  s.TimeBudget = 1.5;
+  s.DensifyEnd = -1; // 60 % of the schedule
+  Trainer trainer(data, s);
+  std::string error;
+  ASSERT_TRUE(trainer.Initialize(&error)) << error;
+  ASSERT_TRUE(trainer.Run(nullptr, nullptr, &error)) << error;
+  const TrainerReport& r = trainer.GetReport();
+  EXPECT_EQ(r.StopReason, "time budget");
+  EXPECT_GE(r.Seconds, 1.5);
+  EXPECT_GT(r.Iterations, 100);
+}
+
 TEST(Trainer, APoseTheRendererRejectsFailsTheRunWithItsMessage)
 {
   // A sweep read with a looser shear limit than the renderer's (the reader's MaximumShearAngle at 10
