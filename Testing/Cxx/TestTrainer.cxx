@@ -543,9 +543,12 @@ TEST(Trainer, AnUnavailableBackendIsAClearError)
   filter->SetInputData(sequence);
   filter->SetIterations(10);
   filter->SetBackend("no-such-backend");
-  filter->GlobalWarningDisplayOff();
+  vtkNew<bigus_test::MessageCollector> messages;
+  messages->Watch(filter);
   filter->Update();
   EXPECT_EQ(filter->GetOutput()->GetNumberOfPoints(), 0);
+  ASSERT_EQ(messages->Errors.size(), 1u);
+  EXPECT_NE(messages->Errors[0].find("'no-such-backend' is not available"), std::string::npos) << messages->Errors[0];
   filter->SetBackend("cpu");
   filter->Update();
   EXPECT_GT(filter->GetOutput()->GetNumberOfPoints(), 0);
