@@ -130,13 +130,23 @@ int vtkGaussianFieldSequenceRenderer::RequestData(
     slices[k].Height = dims[1];
   }
   const bigus::RenderOptions options = bigus::RenderOptionsFor(field.GetModel(), this->ElevationSigma, this->Cutoff);
-  const std::size_t pixels = std::size_t(dims[0]) * dims[1] * count;
-  std::vector<float> S(pixels), I(pixels);
+  const std::size_t framePixels = std::size_t(dims[0]) * dims[1];
+  std::vector<float> S(framePixels), I(framePixels * count);
   const auto start = std::chrono::steady_clock::now();
-  if (!renderer->Forward(field.GetField().View(), slices.data(), count, options, S.data(), I.data(), nullptr, &error))
+  for (int k = 0; k < count; ++k)
   {
-    vtkErrorMacro(<< error);
-    return 0;
+    if (this->GetAbortExecute())
+    {
+      // The output stays empty, so the pipeline does not take it for the requested frames.
+      return 1;
+    }
+    if (!renderer->Forward(
+          field.GetField().View(), &slices[k], 1, options, S.data(), I.data() + k * framePixels, nullptr, &error))
+    {
+      vtkErrorMacro("frame " << frames[k] << ": " << error);
+      return 0;
+    }
+    this->UpdateProgress(double(k + 1) / count);
   }
   this->SecondsPerFrame =
     std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() / std::max(1, count);

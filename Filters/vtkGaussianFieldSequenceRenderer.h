@@ -12,6 +12,8 @@
  * Scalars "Intensity": float in [0, 1] (default) or unsigned char; ElevationSigma < 0 uses the field's.
  * The renderer (Backend) and the field converted to the renderer's form are kept between executes and
  * rebuilt only when Backend or the field input (object or MTime) changes.
+ * Frames are rendered one at a time: UpdateProgress after each, and AbortExecute stops before the
+ * next (the output is then left empty, so the next Update renders every frame).
  * Errors (malformed field or sequence, a frame index outside the sequence, a bad pose, an unavailable
  * backend) fail the request with vtkErrorMacro and leave the output empty.
  */

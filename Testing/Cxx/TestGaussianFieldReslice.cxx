@@ -529,6 +529,42 @@ TEST(GaussianFieldReslice, RequestInformationDoesNotExecuteTheInputAndTheDefault
   EXPECT_EQ(source->Executions, 2);
 }
 
+namespace
+{
+/// Progress events from inside RequestData (the executive adds 0 before and 1 after), and when to
+/// abort: on the AbortAfter-th of them, or on the executive's 0 (AbortAtStart).
+struct ProgressRecord
+{
+  std::vector<double> Progress;
+  int AbortAfter = -1; // -1: never
+  bool AbortAtStart = false;
+};
+
+void RecordProgress(vtkAlgorithm* filter, ProgressRecord& record)
+{
+  vtkNew<vtkCallbackCommand> observer;
+  observer->SetClientData(&record);
+  observer->SetCallback([](vtkObject* caller, unsigned long, void* clientData, void* callData) {
+    auto* r = static_cast<ProgressRecord*>(clientData);
+    const double p = *static_cast<double*>(callData);
+    auto* algorithm = static_cast<vtkAlgorithm*>(caller);
+    if (p == 0.0 && r->AbortAtStart)
+    {
+      algorithm->SetAbortExecute(1);
+    }
+    if (p > 0.0 && p < 1.0 + 1e-12 && !(p == 1.0 && algorithm->GetAbortExecute()))
+    {
+      r->Progress.push_back(p);
+      if (int(r->Progress.size()) == r->AbortAfter)
+      {
+        algorithm->SetAbortExecute(1);
+      }
+    }
+  });
+  filter->AddObserver(vtkCommand::ProgressEvent, observer);
+}
+}
+
 TEST(GaussianFieldReslice, AStackReportsProgressPerSliceAndStopsWhenAborted)
 {
   reference::FieldD exact;
@@ -539,33 +575,8 @@ TEST(GaussianFieldReslice, AStackReportsProgressPerSliceAndStopsWhenAborted)
   reslice->SetOutputOrigin(0, 0, 0);
   reslice->SetOutputExtent(0, 19, 0, 19, 0, 7);
 
-  // Progress events from inside RequestData (the executive adds 0 before and 1 after).
-  struct Record
-  {
-    std::vector<double> Progress;
-    int AbortAfter = -1; // abort on this many events from inside RequestData; -1 never
-    bool AbortAtStart = false;
-  } record;
-  vtkNew<vtkCallbackCommand> observer;
-  observer->SetClientData(&record);
-  observer->SetCallback([](vtkObject* caller, unsigned long, void* clientData, void* callData) {
-    auto* r = static_cast<Record*>(clientData);
-    const double p = *static_cast<double*>(callData);
-    auto* filter = static_cast<vtkAlgorithm*>(caller);
-    if (p == 0.0 && r->AbortAtStart)
-    {
-      filter->SetAbortExecute(1);
-    }
-    if (p > 0.0 && p < 1.0 + 1e-12 && !(p == 1.0 && filter->GetAbortExecute()))
-    {
-      r->Progress.push_back(p);
-      if (int(r->Progress.size()) == r->AbortAfter)
-      {
-        filter->SetAbortExecute(1);
-      }
-    }
-  });
-  reslice->AddObserver(vtkCommand::ProgressEvent, observer);
+  ProgressRecord record;
+  RecordProgress(reslice, record);
 
   reslice->Update();
   // One event per slice, k / 8, then the executive's 1.
@@ -598,6 +609,40 @@ TEST(GaussianFieldReslice, AStackReportsProgressPerSliceAndStopsWhenAborted)
   record.AbortAtStart = false;
   reslice->Update();
   EXPECT_EQ(Values(reslice->GetOutput()), whole);
+}
+
+TEST(GaussianFieldReslice, TheSequenceRendererReportsProgressPerFrameAndStopsWhenAborted)
+{
+  reference::FieldD exact;
+  vtkNew<vtkGaussianFieldSequenceRenderer> sequence;
+  sequence->SetInputData(RandomField(100, 9, exact));
+  vtkSmartPointer<vtkImageData> poses = SweepThroughTheField();
+  sequence->SetPoseData(poses);
+  const int frames = poses->GetDimensions()[2];
+  ASSERT_GT(frames, 2);
+  ProgressRecord record;
+  RecordProgress(sequence, record);
+
+  sequence->Update();
+  ASSERT_EQ(record.Progress.size(), std::size_t(frames) + 1) << "one event per frame, then the executive's 1";
+  for (int k = 0; k < frames; ++k)
+  {
+    EXPECT_DOUBLE_EQ(record.Progress[k], double(k + 1) / frames);
+  }
+  const std::vector<float> whole = Values(sequence->GetOutput());
+
+  // Aborted after the first frame: no further frame is rendered, the output is empty.
+  record.Progress.clear();
+  record.AbortAfter = 1;
+  sequence->Modified();
+  sequence->Update();
+  EXPECT_EQ(record.Progress.size(), 1u) << "frames rendered after the abort";
+  EXPECT_EQ(sequence->GetOutput()->GetNumberOfPoints(), 0);
+
+  // The empty output is not taken for the requested frames: the next Update renders them all, the same.
+  record.AbortAfter = -1;
+  sequence->Update();
+  EXPECT_EQ(Values(sequence->GetOutput()), whole);
 }
 
 TEST(GaussianFieldReslice, TheAnnouncedScalarTypeIsTheProducedOne)
