@@ -48,8 +48,10 @@
  * Stopping: Iterations, TimeBudget (s) or ConvergenceTolerance, whichever first; AbortExecute is
  * honoured and UpdateProgress called. Checkpoints (CheckpointFile every CheckpointInterval steps)
  * hold the field and the optimiser state; ResumeFile continues a stopped run (same settings).
- * Deterministic for a given Seed and thread count. Errors (no valid frames, empty mask, an unreadable
- * checkpoint) fail the request with vtkErrorMacro and an empty output.
+ * Deterministic for a given Seed and thread count when scheduled by Iterations (a run scheduled by
+ * TimeBudget depends on the machine's speed). Errors (no valid frames, empty mask, a training pose the
+ * renderer rejects, an unavailable Backend, an unreadable checkpoint) fail the request with
+ * vtkErrorMacro and an empty output.
  */
 #ifndef vtkGaussianFieldTrainer_h
 #define vtkGaussianFieldTrainer_h

@@ -5,7 +5,7 @@
  *        growth stop, final pruning, NaN roll-back, checkpoints. vtkGaussianFieldTrainer wraps it.
  *
  * Part of BIGUS::Training (public, not wrapped for Python). Deterministic for a given seed and thread
- * count on the CPU backend.
+ * count on the CPU backend when scheduled by Iterations (TimeBudget alone follows the clock).
  */
 #ifndef bigusTrainer_h
 #define bigusTrainer_h
