@@ -527,18 +527,9 @@ TEST(Trainer, AnUnavailableBackendIsAClearError)
 
   std::vector<int> heldOut;
   const TrainingData data = SyntheticSweep(KnownField(150, 9), 0.5, heldOut);
-  vtkNew<vtkImageData> sequence;
-  sequence->SetDimensions(W, H, data.Count());
-  sequence->AllocateScalars(VTK_FLOAT, 1);
-  std::copy(data.Frames.begin(), data.Frames.end(), static_cast<float*>(sequence->GetScalarPointer()));
-  vtkNew<vtkDoubleArray> poses;
-  poses->SetName("ImageToReference");
-  poses->SetNumberOfComponents(16);
-  for (const auto& p : data.Poses)
-  {
-    poses->InsertNextTuple(p.data());
-  }
-  sequence->GetFieldData()->AddArray(poses);
+  vtkSmartPointer<vtkImageData> sequence = bigus_test::TrackedSequence(W, H, data.Poses,
+    std::vector<double>(data.Count(), 0.0),
+    [&](int k, int i, int j) { return data.Frames[(std::size_t(k) * H + j) * W + i]; });
   vtkNew<vtkGaussianFieldTrainer> filter;
   filter->SetInputData(sequence);
   filter->SetIterations(10);
