@@ -13,6 +13,7 @@
 // Exit codes: 0 success, 1 a bad file or a failed step (one line on stderr), 2 bad arguments.
 // Outputs are written under a temporary name and renamed: an existing file is never left half-written.
 #include "bigusBenchmark.h"
+#include "bigusElevationSigma.h"
 #include "bigusGaussianFieldData.h"
 #include "bigusImageMetrics.h"
 #include "bigusPlot.h"
@@ -60,6 +61,7 @@
 #include <fstream>
 #include <limits>
 #include <optional>
+#include <sstream>
 #include <string>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -317,6 +319,34 @@ int RunInfo(const InfoOptions& options)
   }
   std::printf("fan mask       %.1f %% of the frame (estimated from the frames)\n",
     100.0 * covered / std::max<vtkIdType>(1, mask->GetNumberOfTuples()));
+  bigus::TrainingData data;
+  std::string error;
+  if (bigus::TrainingDataFromSequence(frames, fan->GetOutput(), data, &error))
+  {
+    for (int k = 0; k < dims[2]; ++k)
+    {
+      if (FrameIsValid(frames, k))
+      {
+        data.TrainFrames.push_back(k);
+      }
+    }
+    const bigus::ElevationSigmaChoice choice = bigus::ChooseElevationSigma(data);
+    const bigus::ElevationDecorrelation& decorrelation = choice.Measurement;
+    if (!decorrelation.Distance.empty())
+    {
+      std::printf("frame spacing  %.3f mm between neighbouring frames along the elevation axis (median)\n",
+        decorrelation.NeighbourSpacing);
+      std::printf("speckle        decorrelation sigma %.3f mm; correlation at", decorrelation.DecorrelationSigma);
+      for (std::size_t k = 0; k < decorrelation.Distance.size(); k += 2)
+      {
+        std::printf(" %.2f:%.3f", decorrelation.Distance[k], decorrelation.Correlation[k]);
+      }
+      std::printf(" (mm:NCC)\n");
+    }
+    std::printf("elevation sigma %.3f mm, as `bigus train` chooses it: %s\n", choice.Sigma, choice.Reason.c_str());
+    return 0;
+  }
+  std::printf("elevation sigma not measured: %s\n", error.c_str());
   return 0;
 }
 
@@ -435,6 +465,16 @@ int RunTrain(const TrainOptions& o)
     }
   });
   trainer->AddObserver(vtkCommand::ProgressEvent, progress);
+  vtkNew<vtkCallbackCommand> chosen;
+  chosen->SetCallback([](vtkObject* caller, unsigned long, void*, void*) {
+    std::istringstream lines(static_cast<vtkGaussianFieldTrainer*>(caller)->GetSettingsText());
+    for (std::string line; std::getline(lines, line);)
+    {
+      std::printf("setting        %s\n", line.c_str());
+    }
+    std::fflush(stdout);
+  });
+  trainer->AddObserver(vtkGaussianFieldTrainer::SettingsChosenEvent, chosen);
   FilterError error;
   error.Watch(trainer);
   trainer->Update();
@@ -1037,7 +1077,7 @@ int main(int argc, char** argv)
     "Seeds (0: one per 200 fan pixels of the training frames, 20,000 to half the maximum)")
     ->capture_default_str()
     ->check(CLI::NonNegativeNumber);
-  trainCommand->add_option("--elevation-sigma", train.ElevationSigma, "Elevation beam sigma, mm (FWHM / 2.355)")
+  trainCommand->add_option("--elevation-sigma", train.ElevationSigma, "Elevation beam sigma, mm (FWHM / 2.355); 0: chosen from the sweep (frame spacing, speckle decorrelation)")
     ->capture_default_str();
   trainCommand->add_option("--backend", train.Backend, "Training backend: auto, cpu or cuda (as registered)")
     ->capture_default_str();

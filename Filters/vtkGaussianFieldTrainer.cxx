@@ -22,6 +22,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <vector>
 
 vtkStandardNewMacro(vtkGaussianFieldTrainer);
@@ -59,10 +60,12 @@ int vtkGaussianFieldTrainer::RequestData(
   vtkPolyData* output = vtkPolyData::GetData(outputVector, 0);
   this->StopReason.clear();
   this->GrowthStopReason.clear();
+  this->SettingsText.clear();
   this->NumberOfGaussians = 0;
   this->BackendInUse.clear();
 
   vtkSmartPointer<vtkImageData> mask = maskImage;
+  const bool maskGiven = mask != nullptr;
   if (!mask && sequence)
   {
     vtkNew<vtkUltrasoundFanMask> estimate;
@@ -149,6 +152,23 @@ int vtkGaussianFieldTrainer::RequestData(
     vtkErrorMacro(<< error);
     return 0;
   }
+  std::vector<std::string> settings = trainer.GetReport().Settings;
+  {
+    const bigus::TrainingData& d = trainer.GetData();
+    const double imaged =
+      static_cast<double>(std::count_if(d.Mask.begin(), d.Mask.end(), [](unsigned char v) { return v != 0; }));
+    char text[200];
+    std::snprintf(text, sizeof(text), "FanMask = %s, %.1f %% of the frame%s",
+      maskGiven ? "given (input port 1)" : "estimated from the frames (vtkUltrasoundFanMask)",
+      100 * imaged / std::max<std::size_t>(1, d.Mask.size()),
+      d.Mask.size() == std::size_t(d.Width) * d.Height ? "" : " (one per frame, mean)");
+    settings.insert(settings.begin(), text);
+  }
+  for (const std::string& line : settings)
+  {
+    this->SettingsText += line + "\n";
+  }
+  this->InvokeEvent(SettingsChosenEvent, nullptr);
   // Held-out frames for the evaluation: valid, not trained on.
   std::vector<int> heldOut;
   for (int k = 0; k < trainer.GetData().Count(); ++k)
@@ -227,6 +247,13 @@ int vtkGaussianFieldTrainer::RequestData(
   addText("StopReason", report.StopReason);
   addText("GrowthStopReason", report.GrowthStopReason);
   addText("Backend", this->BackendInUse);
+  vtkNew<vtkStringArray> settingsArray;
+  settingsArray->SetName("TrainingSettings");
+  for (const std::string& line : settings)
+  {
+    settingsArray->InsertNextValue(line);
+  }
+  output->GetFieldData()->AddArray(settingsArray);
   vtkNew<vtkIntArray> frames;
   frames->SetName("TrainingFrames");
   for (int f : trainer.GetData().TrainFrames)

@@ -9,7 +9,12 @@
  * data `Scale` (3 floats, standard deviations in mm along the local axes), `Rotation` (4 floats, unit
  * quaternion w, x, y, z) and `Reflectivity` (signed); field data `ElevationSigma` (mm), `Gamma`,
  * `TrainingFrames` (frame indices), `InitialGaussians` (seeds), `Iterations`, `TrainingSeconds`,
- * `StopReason`, `GrowthStopReason`.
+ * `StopReason`, `GrowthStopReason`, `TrainingSettings` (strings: every setting the run chose or was
+ * given, "name = value (why)", as bigus::TrainerReport::Settings, plus the fan mask's origin).
+ *
+ * Events: SettingsChosenEvent (vtkCommand::UserEvent + 1) is invoked once per run, before the first
+ * step, when the settings are chosen (GetSettingsText() then holds them, one per line); `bigus train`
+ * prints them.
  *
  * The method (BIGUS; DESIGN section 4): seeds from the Harris response of the training frames inside
  * the fan mask (or uniform random, for the ablation), gamma = -ln(1 - mean masked intensity), Adam on
@@ -22,12 +27,12 @@
  *
  * Defaults and why (the measurements behind them, dated and with their commands, are in
  * docs/FINDINGS.md; current numbers in docs/BENCHMARKS.md):
- * - ElevationSigma 0.5 mm: the elevation beam of abdominal and linear probes is about 1 to 3 mm wide
- *   (FWHM) near the focus; sigma = FWHM / 2.355. Set it from the probe's data sheet; too small makes
- *   frames independent (no interpolation between them), too large blurs across the sweep. A rendered
- *   frame is the field averaged over the beam, so it cannot change faster across the sweep than the
- *   beam allows: where the recorded frames decorrelate faster, a smaller sigma fits better (the
- *   bundled liver sweep trains best at 0.3 mm). Try a few values on held-out frames.
+ * - ElevationSigma 0 = chosen from the training frames (bigus::ChooseElevationSigma): the smaller of
+ *   0.6 times the median spacing of neighbouring frames along the elevation axis and the sigma that
+ *   the speckle's decorrelation between frames shows. A rendered frame is the field averaged over the
+ *   beam, so it cannot change faster across the sweep than the beam allows; too small makes frames
+ *   independent (no interpolation between them), too large blurs across the sweep. A value > 0 (mm;
+ *   FWHM / 2.355 from a probe's data sheet) overrides the rule.
  * - Loss weights L1 0.8, D-SSIM 0.2 (the 3D Gaussian splatting balance), FFL 0 (off): the FFL's two
  *   DFTs cost about as much as the rest of the loss, so it is an option (e.g. 0.1) rather than the
  *   default; TestImageLoss checks each gradient.
@@ -57,6 +62,7 @@
 #define vtkGaussianFieldTrainer_h
 
 #include "bigusFiltersModule.h" // For export macro
+#include "vtkCommand.h" // For SettingsChosenEvent
 #include "vtkPolyDataAlgorithm.h"
 
 #include <string> // For std::string
@@ -181,7 +187,15 @@ public:
   vtkGetMacro(Gamma, double);
   const char* GetStopReason() const { return this->StopReason.c_str(); }
   const char* GetGrowthStopReason() const { return this->GrowthStopReason.c_str(); }
+  /// The settings of the last run (chosen or given), one per line; set before its first step.
+  const char* GetSettingsText() const { return this->SettingsText.c_str(); }
   ///@}
+
+  /// Invoked once per run when its settings are chosen, before the first step (see GetSettingsText).
+  enum
+  {
+    SettingsChosenEvent = vtkCommand::UserEvent + 1
+  };
 
 protected:
   vtkGaussianFieldTrainer();
@@ -190,7 +204,7 @@ protected:
   int FillInputPortInformation(int port, vtkInformation* info) override;
   int RequestData(vtkInformation*, vtkInformationVector**, vtkInformationVector*) override;
 
-  double ElevationSigma = 0.5;
+  double ElevationSigma = 0;
   bool BeamIntegration = true;
   bool NonNegativeReflectivity = false;
   bool HarrisInitialisation = true;
@@ -226,6 +240,7 @@ protected:
   double Gamma = 0;
   std::string StopReason;
   std::string GrowthStopReason;
+  std::string SettingsText;
 
 private:
   vtkGaussianFieldTrainer(const vtkGaussianFieldTrainer&) = delete;

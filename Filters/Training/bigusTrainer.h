@@ -11,6 +11,7 @@
 #define bigusTrainer_h
 
 #include "bigusTrainingModule.h" // For export macro
+#include "bigusElevationSigma.h"
 #include "bigusImageLoss.h"
 #include "bigusImageMetrics.h"
 #include "bigusRenderer.h"
@@ -31,7 +32,8 @@ namespace bigus
 struct TrainerSettings
 {
   // Model
-  double ElevationSigma = 0.5;       ///< mm; see vtkGaussianFieldTrainer for how to set it for a probe
+  /// mm; 0 = chosen from the training frames (bigus::ChooseElevationSigma, bigusElevationSigma.h)
+  double ElevationSigma = 0;
   bool BeamIntegration = true;
   bool NonNegativeReflectivity = false;
   double Cutoff = 4.0;                ///< renderer cutoff k while training (Evaluate renders at the filters' 5):
@@ -83,6 +85,15 @@ struct TrainerReport
   std::int64_t PrunedAtEnd = 0;
   double Gamma = 0;
   double LastLoss = 0;              ///< mean loss of the last 50 steps
+  double ElevationSigma = 0;        ///< mm, the sigma trained with (given or chosen)
+  /// Early stopping: the iteration whose field Finish kept (the best on the validation frames), the
+  /// validation loss there and that of the last field; equal iterations when the last was best.
+  int BestIteration = 0;
+  double BestValidationLoss = 0, LastValidationLoss = 0;
+  /// Every setting the run depends on that the trainer chose or was given, one line each
+  /// ("ElevationSigma = 0.306 mm (chosen: ...)"), filled by the constructor and Initialize: printed by
+  /// `bigus train` and stored in the field data (TrainingSettings) so that a run can be reproduced.
+  std::vector<std::string> Settings;
 };
 
 /**
@@ -118,8 +129,14 @@ public:
    */
   bool Train(const std::function<void(double, int, double, std::int64_t)>& progress,
     const std::function<bool()>& abort, std::string* error);
-  /// Ends a run: the final prune (FinalPrune) and the report's totals. Returns false with @p error when
-  /// the engine fails.
+  /**
+   * Ends a run: early stopping, the final prune (FinalPrune) and the report's totals. Early stopping:
+   * the validation frames (every 8th training frame, at most 8) are rendered every DensifyInterval
+   * steps and once more here; when a field seen during training scored a lower validation loss than
+   * the last one, that field is kept (fresh optimiser moments: Train may go on from it) and the report
+   * says so (BestIteration). A longer run therefore never ends with a higher validation loss than the
+   * best it passed through. Returns false with @p error when the engine fails.
+   */
   bool Finish(std::string* error);
   /// Train, then Finish.
   bool Run(const std::function<void(double, int, double, std::int64_t)>& progress, const std::function<bool()>& abort,
@@ -175,8 +192,10 @@ private:
   void InitializeHarris(std::int64_t total, std::mt19937_64& rng, GaussianField& field);
   void InitializeRandom(std::int64_t total, std::mt19937_64& rng, GaussianField& field);
   bool FitReflectivityScale(std::string* error);
-  bool DensifyAndPrune(std::string* error);
+  bool DensifyAndPrune(double validation, std::string* error);
   bool ValidationLoss(double& loss, std::string* error);
+  /// Measures the validation loss; keeps a copy of the field when it is the best so far.
+  bool CheckValidation(double& loss, std::string* error);
   /**
    * How far through its schedule the run is, in [0, 1]: the larger of iterations / Iterations and,
    * inside Train, seconds / TimeBudget; with a budget alone, the budget is the schedule. The mean

@@ -150,7 +150,7 @@ bool TrainingState::Save(const std::string& file, double gamma, std::string* err
   const std::string temporary = file + ".tmp";
   {
     std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
-    out.write("BIGUSCK1", 8);
+    out.write("BIGUSCK2", 8);
     Put(out, std::int32_t(this->Iteration));
     Put(out, this->LearningRateScale);
     Put(out, gamma);
@@ -172,6 +172,10 @@ bool TrainingState::Save(const std::string& file, double gamma, std::string* err
     PutVector(out, g.SeenCount);
     Put(out, std::int64_t(this->LossHistory.size()));
     PutVector(out, this->LossHistory);
+    Put(out, this->BestFieldLoss);
+    Put(out, std::int32_t(this->BestFieldIteration));
+    Put(out, std::int64_t(this->BestField.Count()));
+    WriteField(out, this->BestField);
     out.close();
     if (!out)
     {
@@ -210,10 +214,11 @@ bool TrainingState::Load(const std::string& file, double& gamma, std::string* er
     return fail("cannot open the checkpoint");
   }
   char magic[8];
-  if (!in.read(magic, 8) || std::memcmp(magic, "BIGUSCK1", 8) != 0)
+  if (!in.read(magic, 8) || (std::memcmp(magic, "BIGUSCK1", 8) != 0 && std::memcmp(magic, "BIGUSCK2", 8) != 0))
   {
     return fail("not a BIGUS checkpoint (bad magic)");
   }
+  const bool withBest = magic[7] == '2';
   TrainingState s;
   std::int32_t iteration, growing, stalled, rolled;
   double storedGamma;
@@ -238,6 +243,15 @@ bool TrainingState::Load(const std::string& file, double& gamma, std::string* er
   {
     return fail("truncated data (" + std::to_string(n) + " Gaussians announced)");
   }
+  std::int32_t bestIteration = 0;
+  std::int64_t best = 0;
+  if (withBest &&
+    (!Get(in, s.BestFieldLoss) || !Get(in, bestIteration) || !Get(in, best) || best < 0 ||
+      best > (std::int64_t(1) << 32) || !ReadField(in, s.BestField, best)))
+  {
+    return fail("truncated best field");
+  }
+  s.BestFieldIteration = bestIteration;
   std::istringstream state(text);
   state >> s.Random;
   if (!state)

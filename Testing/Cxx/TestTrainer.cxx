@@ -1,6 +1,7 @@
 // The trainer: self-consistency on a synthetic sweep rendered from a known field, determinism,
 // checkpoint/resume, ablation switches, and a short run on the real spine-phantom sweep.
 #include "bigusTestUtilities.h"
+#include "bigusElevationSigma.h"
 #include "bigusTrainer.h"
 
 #include "vtkCallbackCommand.h"
@@ -10,6 +11,7 @@
 #include "vtkIdList.h"
 #include "vtkPointData.h"
 #include "vtkPolyData.h"
+#include "vtkStringArray.h"
 #include "vtkFieldData.h"
 #include "vtkImageData.h"
 #include "vtkNew.h"
@@ -756,6 +758,22 @@ TEST(GaussianFieldTrainer, PipelineOutputsTheFieldOfTheDataModel)
   counter->SetClientData(&progressEvents);
   counter->SetCallback([](vtkObject*, unsigned long, void* client, void*) { ++*static_cast<int*>(client); });
   trainer->AddObserver(vtkCommand::ProgressEvent, counter);
+  // The settings are announced once, before any step.
+  struct Announced
+  {
+    int Count = 0, IterationThen = -1;
+    std::string Text;
+  } announced;
+  vtkNew<vtkCallbackCommand> settingsObserver;
+  settingsObserver->SetClientData(&announced);
+  settingsObserver->SetCallback([](vtkObject* caller, unsigned long, void* client, void*) {
+    auto* a = static_cast<Announced*>(client);
+    auto* t = static_cast<vtkGaussianFieldTrainer*>(caller);
+    ++a->Count;
+    a->IterationThen = t->GetCurrentIteration();
+    a->Text = t->GetSettingsText();
+  });
+  trainer->AddObserver(vtkGaussianFieldTrainer::SettingsChosenEvent, settingsObserver);
   trainer->Update();
   vtkPolyData* field = trainer->GetOutput();
   const vtkIdType n = field->GetNumberOfPoints();
@@ -773,7 +791,33 @@ TEST(GaussianFieldTrainer, PipelineOutputsTheFieldOfTheDataModel)
     rotation->GetTuple(i, q);
     EXPECT_NEAR(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3], 1.0, 1e-5);
   }
-  EXPECT_EQ(field->GetFieldData()->GetArray("ElevationSigma")->GetTuple1(0), 0.5);
+  // ElevationSigma 0 (the default): chosen from the frames, stored and reported with the rule used.
+  TrainingData trained = data;
+  trained.TrainFrames.clear();
+  for (int k = 0; k < data.Count(); ++k)
+  {
+    if (k % 4 != 2)
+    {
+      trained.TrainFrames.push_back(k);
+    }
+  }
+  const ElevationSigmaChoice chosen = ChooseElevationSigma(trained);
+  EXPECT_NEAR(field->GetFieldData()->GetArray("ElevationSigma")->GetTuple1(0), chosen.Sigma, 1e-12);
+  EXPECT_EQ(announced.Count, 1);
+  EXPECT_EQ(announced.IterationThen, 0);
+  auto* settings = vtkStringArray::SafeDownCast(field->GetFieldData()->GetAbstractArray("TrainingSettings"));
+  ASSERT_NE(settings, nullptr);
+  std::string stored;
+  for (vtkIdType k = 0; k < settings->GetNumberOfValues(); ++k)
+  {
+    stored += settings->GetValue(k) + "\n";
+  }
+  EXPECT_EQ(stored, announced.Text);
+  for (const char* line : { "FanMask = estimated from the frames", "ElevationSigma = ", "(chosen: ", "Gamma = ",
+         "InitialGaussians = 500 (given", "Iterations = 150", "Densification = every 200 steps" })
+  {
+    EXPECT_NE(stored.find(line), std::string::npos) << line << " not in\n" << stored;
+  }
   vtkDataArray* frames = field->GetFieldData()->GetArray("TrainingFrames");
   ASSERT_NE(frames, nullptr);
   EXPECT_EQ(frames->GetNumberOfTuples(), 45);

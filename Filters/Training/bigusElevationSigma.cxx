@@ -1,0 +1,291 @@
+#include "bigusElevationSigma.h"
+
+#include "bigusSliceFrame.h"
+
+#include "vtkSMPTools.h"
+
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <map>
+
+namespace bigus
+{
+namespace
+{
+/// Sums for the normalised cross-correlation of one distance bin.
+struct CorrelationSums
+{
+  double X = 0, Y = 0, XX = 0, YY = 0, XY = 0;
+  long N = 0;
+  void Add(double x, double y)
+  {
+    this->X += x;
+    this->Y += y;
+    this->XX += x * x;
+    this->YY += y * y;
+    this->XY += x * y;
+    ++this->N;
+  }
+  void Add(const CorrelationSums& o)
+  {
+    this->X += o.X;
+    this->Y += o.Y;
+    this->XX += o.XX;
+    this->YY += o.YY;
+    this->XY += o.XY;
+    this->N += o.N;
+  }
+  double Correlation() const
+  {
+    const double mx = this->X / this->N, my = this->Y / this->N;
+    const double vx = this->XX / this->N - mx * mx, vy = this->YY / this->N - my * my;
+    return vx > 0 && vy > 0 ? (this->XY / this->N - mx * my) / std::sqrt(vx * vy) : 0.0;
+  }
+};
+
+/// A training frame minus its masked local mean (Gaussian of @p sigmaPixels), 0 outside the mask.
+cv::Mat HighPass(const TrainingData& data, int frame, double sigmaPixels)
+{
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
+  cv::Mat image(data.Height, data.Width, CV_32F, const_cast<float*>(&data.Frames[pixels * frame]));
+  cv::Mat mask;
+  cv::Mat imaged = cv::Mat(data.Height, data.Width, CV_8U, const_cast<unsigned char*>(data.MaskOf(frame))) != 0;
+  imaged.convertTo(mask, CV_32F, 1.0 / 255);
+  cv::Mat masked = image.mul(mask), meanImage, meanMask;
+  cv::GaussianBlur(masked, meanImage, cv::Size(0, 0), sigmaPixels, sigmaPixels, cv::BORDER_CONSTANT);
+  cv::GaussianBlur(mask, meanMask, cv::Size(0, 0), sigmaPixels, sigmaPixels, cv::BORDER_CONSTANT);
+  cv::Mat out = masked - meanImage / cv::max(meanMask, 1e-6f);
+  return out.mul(mask);
+}
+
+struct FramePlane
+{
+  double F[3][3], Origin[3], PixelToPlane[3];
+};
+}
+
+bool MeasureElevationDecorrelation(const TrainingData& data, const ElevationDecorrelationSettings& settings,
+  ElevationDecorrelation& result, std::string* error)
+{
+  result = ElevationDecorrelation();
+  std::vector<int> frames = data.TrainFrames;
+  std::sort(frames.begin(), frames.end());
+  if (frames.size() < 2)
+  {
+    if (error)
+    {
+      *error = "the elevation decorrelation needs at least two training frames";
+    }
+    return false;
+  }
+  std::vector<FramePlane> planes(frames.size());
+  double spacing = 0;
+  for (std::size_t k = 0; k < frames.size(); ++k)
+  {
+    FramePlane& p = planes[k];
+    if (ComputeRenderingFrame(data.Poses[frames[k]].data(), 90, p.F, p.Origin, p.PixelToPlane) != PoseStatus::Ok)
+    {
+      if (error)
+      {
+        *error = "training frame " + std::to_string(frames[k]) + ": ImageToReference is singular or not finite";
+      }
+      return false;
+    }
+    spacing += 0.5 * (p.PixelToPlane[0] + p.PixelToPlane[2]) / frames.size();
+  }
+  const int bins = std::max(1, static_cast<int>(std::ceil(settings.MaximumDistanceMm / settings.BinWidthMm)));
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
+  const int gaps = std::max(1, settings.MaximumPairGap);
+  std::vector<CorrelationSums> total(bins);
+  std::vector<double> neighbourDistances;
+  std::map<int, cv::Mat> highPassed; // by position in frames: the window [a, a + gaps]
+  for (std::size_t a = 0; a + 1 < frames.size(); ++a)
+  {
+    const std::size_t last = std::min(frames.size() - 1, a + gaps);
+    highPassed.erase(highPassed.begin(), highPassed.lower_bound(static_cast<int>(a)));
+    std::vector<std::size_t> missing;
+    for (std::size_t b = a; b <= last; ++b)
+    {
+      if (!highPassed.count(static_cast<int>(b)))
+      {
+        missing.push_back(b);
+        highPassed[static_cast<int>(b)];
+      }
+    }
+    vtkSMPTools::For(0, static_cast<vtkIdType>(missing.size()), [&](vtkIdType b0, vtkIdType b1) {
+      for (vtkIdType m = b0; m < b1; ++m)
+      {
+        const std::size_t b = missing[m];
+        highPassed.at(static_cast<int>(b)) = HighPass(data, frames[b], settings.HighPassMm / spacing);
+      }
+    });
+    // The sampled fan pixels of frame a, in the reference frame.
+    const unsigned char* maskA = data.MaskOf(frames[a]);
+    const long inFan = std::count_if(maskA, maskA + pixels, [](unsigned char v) { return v != 0; });
+    const long stride = std::max<long>(1, inFan / std::max<long>(1, settings.PixelsPerFrame));
+    std::vector<double> points; // x, y, z, high-passed value
+    long seen = 0;
+    const FramePlane& A = planes[a];
+    const cv::Mat& hpA = highPassed.at(static_cast<int>(a));
+    for (std::size_t p = 0; p < pixels; ++p)
+    {
+      if (!maskA[p] || seen++ % stride != 0)
+      {
+        continue;
+      }
+      const double i = double(p % data.Width), j = double(p / data.Width);
+      const double x = i * A.PixelToPlane[0] + j * A.PixelToPlane[1], y = j * A.PixelToPlane[2];
+      for (int c = 0; c < 3; ++c)
+      {
+        points.push_back(A.Origin[c] + x * A.F[0][c] + y * A.F[1][c]);
+      }
+      points.push_back(hpA.at<float>(static_cast<int>(j), static_cast<int>(i)));
+    }
+    std::vector<std::vector<CorrelationSums>> perGap(last - a, std::vector<CorrelationSums>(bins));
+    std::vector<double> nextDistances;
+    vtkSMPTools::For(0, static_cast<vtkIdType>(last - a), [&](vtkIdType g0, vtkIdType g1) {
+      for (vtkIdType g = g0; g < g1; ++g)
+      {
+        const std::size_t b = a + 1 + g;
+        const FramePlane& B = planes[b];
+        const cv::Mat& hpB = highPassed.at(static_cast<int>(b));
+        const unsigned char* maskB = data.MaskOf(frames[b]);
+        for (std::size_t k = 0; k + 3 < points.size(); k += 4)
+        {
+          double r[3] = { 0, 0, 0 };
+          for (int row = 0; row < 3; ++row)
+          {
+            for (int c = 0; c < 3; ++c)
+            {
+              r[row] += B.F[row][c] * (points[k + c] - B.Origin[c]);
+            }
+          }
+          const double d = std::abs(r[2]);
+          const int bin = static_cast<int>(d / settings.BinWidthMm);
+          const double j = r[1] / B.PixelToPlane[2];
+          const double i = (r[0] - j * B.PixelToPlane[1]) / B.PixelToPlane[0];
+          const int i0 = static_cast<int>(std::floor(i)), j0 = static_cast<int>(std::floor(j));
+          if (bin >= bins || i0 < 0 || j0 < 0 || i0 + 1 >= data.Width || j0 + 1 >= data.Height)
+          {
+            continue;
+          }
+          const std::size_t q = std::size_t(j0) * data.Width + i0;
+          if (!maskB[q] || !maskB[q + 1] || !maskB[q + data.Width] || !maskB[q + data.Width + 1])
+          {
+            continue;
+          }
+          const double fi = i - i0, fj = j - j0;
+          const double value = (1 - fj) * ((1 - fi) * hpB.at<float>(j0, i0) + fi * hpB.at<float>(j0, i0 + 1)) +
+            fj * ((1 - fi) * hpB.at<float>(j0 + 1, i0) + fi * hpB.at<float>(j0 + 1, i0 + 1));
+          perGap[g][bin].Add(points[k + 3], value);
+        }
+      }
+    });
+    for (const auto& gap : perGap)
+    {
+      for (int bin = 0; bin < bins; ++bin)
+      {
+        total[bin].Add(gap[bin]);
+      }
+    }
+    // Distance to the next frame's plane, at every sampled pixel.
+    const FramePlane& B = planes[a + 1];
+    for (std::size_t k = 0; k + 3 < points.size(); k += 4)
+    {
+      double z = 0;
+      for (int c = 0; c < 3; ++c)
+      {
+        z += B.F[2][c] * (points[k + c] - B.Origin[c]);
+      }
+      neighbourDistances.push_back(std::abs(z));
+    }
+  }
+  if (!neighbourDistances.empty())
+  {
+    auto middle = neighbourDistances.begin() + neighbourDistances.size() / 2;
+    std::nth_element(neighbourDistances.begin(), middle, neighbourDistances.end());
+    result.NeighbourSpacing = *middle;
+  }
+  for (int bin = 0; bin < bins; ++bin)
+  {
+    if (total[bin].N >= 1000)
+    {
+      result.Distance.push_back((bin + 0.5) * settings.BinWidthMm);
+      result.Correlation.push_back(total[bin].Correlation());
+      result.Samples.push_back(total[bin].N);
+    }
+  }
+  if (result.Distance.empty())
+  {
+    if (error)
+    {
+      *error = "no two training frames overlap within " + std::to_string(settings.MaximumDistanceMm) +
+        " mm along the elevation axis";
+    }
+    return false;
+  }
+  // Weighted least squares of ln rho on d^2, down to half the first bin's correlation.
+  const double half = 0.5 * result.Correlation.front();
+  double sw = 0, sx = 0, sy = 0, sxx = 0, sxy = 0;
+  for (std::size_t k = 0; k < result.Distance.size() && result.Correlation[k] >= half; ++k)
+  {
+    const double w = static_cast<double>(result.Samples[k]);
+    const double x = result.Distance[k] * result.Distance[k], y = std::log(result.Correlation[k]);
+    sw += w;
+    sx += w * x;
+    sy += w * y;
+    sxx += w * x * x;
+    sxy += w * x * y;
+  }
+  const double denominator = sw * sxx - sx * sx;
+  const double slope = denominator > 0 ? (sw * sxy - sx * sy) / denominator : 0.0;
+  result.DecorrelationSigma = slope < 0 ? std::sqrt(-1.0 / (4 * slope)) : 0.0;
+  return true;
+}
+
+ElevationSigmaChoice ChooseElevationSigma(const TrainingData& data)
+{
+  ElevationSigmaChoice choice;
+  std::string error;
+  if (!MeasureElevationDecorrelation(data, ElevationDecorrelationSettings(), choice.Measurement, &error))
+  {
+    choice.Reason = "0.5 mm, the fixed default: " + error;
+    return choice;
+  }
+  const ElevationDecorrelation& m = choice.Measurement;
+  char text[256];
+  int bins = 0;
+  while (bins < static_cast<int>(m.Correlation.size()) && m.Correlation[bins] >= 0.5 * m.Correlation.front())
+  {
+    ++bins;
+  }
+  const bool correlated = m.DecorrelationSigma > 0 && m.Correlation.front() >= 0.3 && bins >= 3;
+  if (correlated)
+  {
+    choice.Sigma = ElevationSigmaDecorrelationFactor * m.DecorrelationSigma;
+    std::snprintf(text, sizeof(text),
+      "%.2g x the speckle decorrelation sigma %.3g mm of the training frames, %.3g mm apart (median)",
+      ElevationSigmaDecorrelationFactor, m.DecorrelationSigma, m.NeighbourSpacing);
+  }
+  else
+  {
+    choice.Sigma = ElevationSigmaSpacingFactor * m.NeighbourSpacing;
+    std::snprintf(text, sizeof(text),
+      "%.2g x the median spacing %.3g mm of neighbouring training frames, whose speckle does not correlate "
+      "across it",
+      ElevationSigmaSpacingFactor, m.NeighbourSpacing);
+  }
+  choice.Reason = text;
+  if (!(choice.Sigma > 0))
+  {
+    choice.Sigma = 0.5;
+    choice.Reason = "0.5 mm, the fixed default: the training frames lie in one plane";
+  }
+  return choice;
+}
+
+} // namespace bigus

@@ -1,0 +1,98 @@
+/**
+ * @file bigusElevationSigma.h
+ * @brief The elevation beam sigma chosen from a sweep: how fast the recorded speckle decorrelates
+ *        with the distance between frames along the elevation axis.
+ *
+ * Part of BIGUS::Training (public, not wrapped for Python).
+ */
+#ifndef bigusElevationSigma_h
+#define bigusElevationSigma_h
+
+#include "bigusTrainingEngine.h"
+#include "bigusTrainingModule.h" // For export macro
+
+#include <string>
+#include <vector>
+
+namespace bigus
+{
+
+/**
+ * The correlation of the recorded speckle between pairs of training frames as a function of the
+ * elevation distance between them, and the elevation sigma it implies.
+ *
+ * A slice through a field of scatterers weighted across the beam by exp(-z^2 / (2 sigma^2)) correlates
+ * with a parallel slice d mm away as exp(-d^2 / (4 sigma^2)) (the overlap integral of the two beam
+ * profiles; the same relation underlies speckle-decorrelation tracking: Chen et al., Ultrasound Med.
+ * Biol. 23(2), 1997; Prager et al., Ultrasound Med. Biol. 29(3), 2003). The measurement pairs every
+ * training frame with the next MaximumPairGap training frames: each sampled fan pixel of the first is
+ * placed in the reference frame (its ImageToReference), its distance d to the second frame's plane is
+ * taken and the second frame is sampled (bilinear) where the pixel projects onto it. Intensities are
+ * high-passed first (minus a masked Gaussian mean of HighPassMm), so anatomy that persists across
+ * frames does not count as correlation. Pixel pairs are binned by d; per bin the normalised cross
+ * correlation is computed. DecorrelationSigma is the sigma of the least-squares fit of
+ * ln rho = ln rho0 - d^2 / (4 sigma^2) over the bins down to half the first bin's correlation (rho0
+ * absorbs the noise that decorrelates even at d = 0).
+ */
+struct BIGUSTRAINING_EXPORT ElevationDecorrelation
+{
+  std::vector<double> Distance;    ///< bin centres, mm
+  std::vector<double> Correlation; ///< normalised cross-correlation of the high-passed intensities per bin
+  std::vector<long> Samples;       ///< pixel pairs per bin
+  double DecorrelationSigma = 0;   ///< mm; 0 when too few pairs overlap
+  double NeighbourSpacing = 0;     ///< mm, median over fan pixels of the distance to the next training frame's plane
+};
+
+/// Settings of the measurement (defaults are the ones ChooseElevationSigma uses).
+struct ElevationDecorrelationSettings
+{
+  int MaximumPairGap = 6;          ///< a frame is paired with the next this many training frames
+  double HighPassMm = 1.0;         ///< sigma of the Gaussian mean removed from each frame, mm
+  long PixelsPerFrame = 20000;     ///< fan pixels sampled per frame (evenly strided)
+  double BinWidthMm = 0.1;
+  double MaximumDistanceMm = 4.0;
+};
+
+/**
+ * Measure @p data's training frames (at least two; poses the renderer accepts). Returns false with
+ * @p error when there are fewer than two training frames or no pair of them overlaps within
+ * MaximumDistanceMm.
+ */
+BIGUSTRAINING_EXPORT bool MeasureElevationDecorrelation(const TrainingData& data,
+  const ElevationDecorrelationSettings& settings, ElevationDecorrelation& result, std::string* error);
+
+/// The elevation sigma a trainer uses when none is given, and why.
+struct BIGUSTRAINING_EXPORT ElevationSigmaChoice
+{
+  double Sigma = 0.5;      ///< mm
+  std::string Reason;      ///< one line: the rule and the measured values it used
+  ElevationDecorrelation Measurement;
+};
+
+/**
+ * The elevation sigma for @p data's training frames (TrainerSettings::ElevationSigma 0).
+ * - Where the speckle of neighbouring frames still correlates (the first bin's correlation is at
+ *   least 0.3 and at least three bins fall before it halves): sigma = 0.5 x DecorrelationSigma. The
+ *   measured decorrelation is that of the beam and of the scatterers' own extent along the elevation
+ *   axis together (sigma_measured^2 = sigma^2 + s^2); a Gaussian field supplies the second through its
+ *   scales, so the beam takes a quarter of the variance and the Gaussians keep the freedom to be
+ *   thinner where the data changes faster. Measured (docs/FINDINGS.md, TestElevationSigma): on a sweep
+ *   rendered with sigma 0.6 mm (frames 0.2 mm apart) training with 0.32 mm gave a higher held-out
+ *   PSNR than with the true 0.6 (49.4 against 47.1 dB; 0.45: 49.3, 0.2: 48.2, 0.12: 45.6); the liver
+ *   sweep (decorrelation sigma 0.84 mm) trained best at 0.3 of 0.3, 0.5 and 1.0.
+ * - Otherwise (the frames are farther apart than the speckle's correlation length):
+ *   sigma = 0.6 x NeighbourSpacing, so that a frame rendered between two training frames still meets
+ *   the Gaussians fitted to them (sigma 0.3 mm, frames 0.6 mm apart: 0.36 mm trains to within 0.1 dB
+ *   of the true sigma).
+ * Falls back to 0.5 mm, saying so in Reason, when the frames cannot be measured (fewer than two
+ * training frames, or none overlapping).
+ */
+BIGUSTRAINING_EXPORT ElevationSigmaChoice ChooseElevationSigma(const TrainingData& data);
+
+/// The factors of ChooseElevationSigma's two rules.
+constexpr double ElevationSigmaDecorrelationFactor = 0.5;
+constexpr double ElevationSigmaSpacingFactor = 0.6;
+
+} // namespace bigus
+
+#endif
