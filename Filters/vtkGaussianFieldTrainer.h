@@ -9,8 +9,7 @@
  * data `Scale` (3 floats, standard deviations in mm along the local axes), `Rotation` (4 floats, unit
  * quaternion w, x, y, z) and `Reflectivity` (signed); field data `ElevationSigma` (mm), `Gamma`,
  * `TrainingFrames` (frame indices), `InitialGaussians` (seeds), `Iterations`, `TrainingSeconds`,
- * `StopReason`, `GrowthStopReason`, and the training geometry `TrainingPoses`, `TrainingFrameSize`,
- * `TrainingFanMask` (bigus::TrainingGeometry), from which renders compute their "Coverage" image.
+ * `StopReason`, `GrowthStopReason`.
  *
  * The method (BIGUS; DESIGN section 4): seeds from the Harris response of the training frames inside
  * the fan mask (or uniform random, for the ablation), gamma = -ln(1 - mean masked intensity), Adam on
