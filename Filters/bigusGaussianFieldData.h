@@ -4,7 +4,9 @@
  *        renderer's parameter arrays. Installed with BIGUS::Filters, not wrapped.
  *
  * vtkPolyData form: points = means (mm), one vertex per Gaussian, point data Scale (3, mm),
- * Rotation (4, unit quaternion w x y z), Reflectivity (1); field data ElevationSigma (mm), Gamma.
+ * Rotation (4, unit quaternion w x y z), Reflectivity (1); field data ElevationSigma (mm), Gamma, and
+ * from the trainer the training geometry (TrainingPoses, TrainingFrameSize, TrainingFanMask; see
+ * TrainingGeometry) that the coverage image of a render (TrainingCoverage) is computed from.
  * Renderer form: log-scales, so Scale must be positive.
  */
 #ifndef bigusGaussianFieldData_h
@@ -18,6 +20,7 @@
 #include "vtkType.h"
 #include "vtkWeakPointer.h"
 
+#include <array>
 #include <memory>
 #include <string>
 #include <vector>
@@ -47,6 +50,88 @@ struct FieldModel
 BIGUSFILTERS_EXPORT bool FieldFromPolyData(vtkPolyData* data, GaussianField& field, FieldModel& model, std::string* error);
 
 /**
+ * The geometry of the frames a field was trained on, kept with the field as field data so that a
+ * render can say which of its pixels training data supports (TrainingCoverage):
+ * - "TrainingPoses": vtkDoubleArray, 16 components, one tuple per training frame (in the order of the
+ *   trainer's "TrainingFrames"): ImageToReference, row-major, pixel (i, j, 0, 1) -> mm.
+ * - "TrainingFrameSize": vtkIntArray, one tuple of 2 components: width, height (pixels).
+ * - "TrainingFanMask": vtkUnsignedCharArray, width x height values, row-major [H, W] (pixel (i, j) at
+ *   j * W + i), 1 where tissue was imaged: the mask used in training, or the union of the training
+ *   frames' masks when each frame had its own.
+ */
+struct TrainingGeometry
+{
+  int Width = 0, Height = 0;                 ///< pixels
+  std::vector<std::array<double, 16>> Poses; ///< [T] ImageToReference of the training frames, row-major
+  std::vector<unsigned char> Mask;           ///< [H, W] 1 = imaged
+};
+
+/// The geometry of @p data's training frames (TrainFrames, in order); a per-frame mask becomes the union
+/// of the training frames' masks. @p data as the trainer accepts it (a mask of either size).
+BIGUSFILTERS_EXPORT TrainingGeometry TrainingGeometryOf(const TrainingData& data);
+
+/// Adds @p geometry's three arrays to @p out (replacing arrays of the same names).
+BIGUSFILTERS_EXPORT void TrainingGeometryToFieldData(const TrainingGeometry& geometry, vtkFieldData* out);
+
+/**
+ * Reads the training geometry. Field data with none of the three arrays (a field written before they
+ * existed, a hand-made field) gives an empty geometry (no poses) and true. Returns false with @p error
+ * naming the array when one of the three is missing while another is there, or is malformed:
+ * TrainingPoses without tuples, not 16 components, or with a pose that is non-finite, not affine or
+ * singular; TrainingFrameSize not 2 positive values; TrainingFanMask not one component with
+ * width x height tuples.
+ */
+BIGUSFILTERS_EXPORT bool TrainingGeometryFromFieldData(
+  vtkFieldData* in, TrainingGeometry& geometry, std::string* error);
+
+/**
+ * How much training data supports each pixel of a rendered slice (issue 19): for a pixel at x (mm,
+ * reference frame),
+ *
+ *   Coverage(x) = sum over training frames t of [x projects inside t's fan mask] exp(-d_t(x)^2 / (2 sigma_E^2))
+ *
+ * with d_t(x) the distance (mm) from x to the plane of frame t and sigma_E the elevation beam sigma
+ * (mm). The projection is the foot of the perpendicular from x on that plane in frame t's pixel
+ * coordinates (a, b) (ImageToReference inverted on its plane, exact for a sheared pose); it is inside
+ * when the nearest pixel (round(a), round(b)) lies in the frame and its fan mask is set. Coverage is
+ * dimensionless: the elevation weights of the training frames, each at most 1. A pixel on a training
+ * frame inside its fan gets 1 plus its neighbours' share; a pixel in a gap wider than the beam gets
+ * about 0. The weight is the beam profile at unit peak (DESIGN section 3's beam, times
+ * sqrt(2 pi) sigma_E). Frames further than CullSigmas sigma_E from a pixel are skipped (each adds less
+ * than exp(-8) = 3.4e-4). sigma_E = 0 (a thin-plane field) is the limit: 1 from every frame whose
+ * plane the pixel lies on (|d| <= 1e-6 mm), 0 from the others.
+ */
+class BIGUSFILTERS_EXPORT TrainingCoverage
+{
+public:
+  /// Frames further than this many sigma_E are skipped.
+  static constexpr double CullSigmas = 4.0;
+
+  /// Prepares @p geometry (as TrainingGeometryFromFieldData accepts it): the inverse of every pose.
+  explicit TrainingCoverage(const TrainingGeometry& geometry = TrainingGeometry());
+  /// No training frames: there is no coverage to compute.
+  bool IsEmpty() const { return this->Frames.empty(); }
+  const TrainingGeometry& GetGeometry() const { return this->Geometry; }
+
+  /**
+   * Coverage of the pixels of @p slice into @p coverage ([H, W] floats of the slice, pixel (i, j) at
+   * j * W + i), for elevation sigma @p elevationSigma (mm). Rows in parallel (vtkSMPTools); each pixel
+   * sums its frames in their order, so the result does not depend on the thread count.
+   */
+  void Compute(const SliceGeometry& slice, double elevationSigma, float* coverage) const;
+
+private:
+  /// Frame t's pixel coordinates a, b and signed distance d (mm) of a point x: row r gives
+  /// Rows[r][0..2] . x + Rows[r][3].
+  struct Frame
+  {
+    double Rows[3][4];
+  };
+  TrainingGeometry Geometry;
+  std::vector<Frame> Frames;
+};
+
+/**
  * A field converted from its vtkPolyData form once and kept, for a filter that renders its input on
  * every execute (vtkGaussianFieldReslice, vtkGaussianFieldSequenceRenderer): Update converts only
  * when @p data is not the object converted last time or has been modified since (its GetMTime covers
@@ -66,6 +151,12 @@ public:
   const double* GetBounds() const { return this->Bounds; }
   /// Largest standard deviation of any Gaussian along any of its axes (mm).
   double GetLargestScale() const { return this->LargestScale; }
+  /**
+   * The training coverage of the last converted field (empty when the field has no training
+   * geometry); null with @p error (TrainingGeometryFromFieldData's) when its geometry is malformed.
+   * Only a render that outputs coverage asks, so a malformed geometry fails only such a render.
+   */
+  const TrainingCoverage* GetCoverage(std::string* error) const;
 
 private:
   vtkWeakPointer<vtkPolyData> Source;
@@ -76,6 +167,8 @@ private:
   FieldModel Model;
   double Bounds[6] = { 0, 0, 0, 0, 0, 0 };
   double LargestScale = 0;
+  TrainingCoverage Coverage;
+  std::string CoverageError; ///< empty when the geometry is well-formed (or absent)
 };
 
 /**
@@ -104,6 +197,9 @@ BIGUSFILTERS_EXPORT RenderOptions RenderOptionsFor(const FieldModel& model, doub
 /// The rendered image I ([0, 1] floats) as point-data scalars "Intensity": VTK_FLOAT as is, or
 /// VTK_UNSIGNED_CHAR as round(255 I).
 BIGUSFILTERS_EXPORT vtkSmartPointer<vtkDataArray> IntensityArray(const std::vector<float>& I, int scalarType);
+
+/// A coverage image (TrainingCoverage::Compute, slices one after the other) as point data "Coverage" (float).
+BIGUSFILTERS_EXPORT vtkSmartPointer<vtkDataArray> CoverageArray(const std::vector<float>& coverage);
 
 /// Whether IntensityArray produces @p scalarType (VTK_FLOAT or VTK_UNSIGNED_CHAR); false with @p error
 /// naming the type and the two accepted otherwise. The filters' OutputScalarType setters check it.

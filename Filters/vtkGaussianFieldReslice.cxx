@@ -330,6 +330,21 @@ int vtkGaussianFieldReslice::RequestData(
     vtkWarningMacro("Backend: " << notice);
   }
 
+  const bigus::TrainingCoverage* coverage = nullptr;
+  if (this->OutputCoverage)
+  {
+    coverage = field.GetCoverage(&error);
+    if (!coverage)
+    {
+      vtkErrorMacro(<< error << " (OutputCoverage off renders without the coverage image)");
+      return 0;
+    }
+    if (coverage->IsEmpty())
+    {
+      coverage = nullptr; // no training geometry: no Coverage array (see the class description)
+    }
+  }
+
   Grid grid;
   vtkInternals::OutputGrid(this, input, grid);
   if (grid.IsEmpty())
@@ -369,7 +384,7 @@ int vtkGaussianFieldReslice::RequestData(
   const bigus::RenderOptions options = bigus::RenderOptionsFor(field.GetModel(), this->ElevationSigma, this->Cutoff);
   const bigus::FieldView view = field.GetField().View();
   // S is kept whole only when it is an output; otherwise one slice of scratch.
-  std::vector<float> I(pixels), S(this->OutputScatteringField ? pixels : slicePixels);
+  std::vector<float> I(pixels), S(this->OutputScatteringField ? pixels : slicePixels), C(coverage ? pixels : 0);
   for (int k = 0; k < depth; ++k)
   {
     if (this->GetAbortExecute())
@@ -384,6 +399,10 @@ int vtkGaussianFieldReslice::RequestData(
       vtkErrorMacro("ResliceAxes: " << error);
       return 0;
     }
+    if (coverage)
+    {
+      coverage->Compute(slice, options.ElevationSigma, C.data() + k * slicePixels);
+    }
     this->UpdateProgress(double(k + 1) / depth);
   }
   output->SetExtent(extent);
@@ -397,6 +416,10 @@ int vtkGaussianFieldReslice::RequestData(
     scattering->SetNumberOfTuples(static_cast<vtkIdType>(pixels));
     std::copy(S.begin(), S.end(), scattering->GetPointer(0));
     output->GetPointData()->AddArray(scattering);
+  }
+  if (coverage)
+  {
+    output->GetPointData()->AddArray(bigus::CoverageArray(C));
   }
   return 1;
 }
@@ -440,6 +463,7 @@ void vtkGaussianFieldReslice::PrintSelf(ostream& os, vtkIndent indent)
      << "\n";
   os << indent << "Cutoff: " << this->Cutoff << "\n";
   os << indent << "OutputScatteringField: " << this->OutputScatteringField << "\n";
+  os << indent << "OutputCoverage: " << this->OutputCoverage << "\n";
   os << indent << "OutputScalarType: " << vtkImageScalarTypeNameMacro(this->OutputScalarType) << "\n";
   os << indent << "Backend: " << (this->Backend ? this->Backend : "auto") << "\n";
 }

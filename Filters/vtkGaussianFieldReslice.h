@@ -14,6 +14,19 @@
  * rounded); with OutputScatteringField on, a second point-data array "ScatteringField" holds S (float).
  * ElevationSigma (mm) and gamma default to the field's (field data); Cutoff is the renderer's k.
  *
+ * Point data "Coverage" (float, dimensionless; OutputCoverage, default on) says how much training
+ * data supports each voxel, so that a viewer can tell data from interpolation: for a voxel at x (mm),
+ *   Coverage(x) = sum over training frames t of [x projects inside t's fan mask] exp(-d_t(x)^2 / (2 sigma_E^2)),
+ * d_t(x) the distance (mm) from x to frame t's plane, the projection made with frame t's
+ * ImageToReference, sigma_E the ElevationSigma of the render (mm). A voxel on a training frame inside
+ * its fan has about 1 (plus its neighbours' share), a voxel in a gap wider than the beam about 0.
+ * Frames further than 4 sigma_E are left out (less than 3.4e-4 each); details in
+ * bigus::TrainingCoverage (bigusGaussianFieldData.h). It needs the field's training geometry (field
+ * data TrainingPoses, TrainingFrameSize, TrainingFanMask, written by vtkGaussianFieldTrainer): a field
+ * without those arrays (an older file, a hand-made field) renders as before, with no Coverage array;
+ * a field whose arrays are malformed fails the request with an error naming the array (turn
+ * OutputCoverage off to render it without coverage).
+ *
  * Defaults when nothing is set: identity axes; spacing = the field's PixelSpacing (its training frames'
  * pixel spacing) or 0.5 mm; origin and extent = the field's bounds in the reslice frame (points, padded
  * by three times the largest scale); for OutputDimensionality 2 the slice passes through the axes'
@@ -36,8 +49,9 @@
  * reports progress after every slice and stops at the next slice when AbortExecute is set, leaving an
  * empty output (the next Update renders again).
  *
- * Errors (no field, a malformed field, an unavailable backend, a singular or sheared ResliceAxes, an
- * empty extent) fail the request with vtkErrorMacro and leave the output empty.
+ * Errors (no field, a malformed field or, with OutputCoverage on, malformed training geometry, an
+ * unavailable backend, a singular or sheared ResliceAxes, an empty extent) fail the request with
+ * vtkErrorMacro and leave the output empty.
  */
 #ifndef vtkGaussianFieldReslice_h
 #define vtkGaussianFieldReslice_h
@@ -123,6 +137,16 @@ public:
 
   ///@{
   /**
+   * Also output float point data "Coverage", the training data's support of each voxel (see the class
+   * description), when the field carries its training geometry. Default on.
+   */
+  vtkSetMacro(OutputCoverage, bool);
+  vtkGetMacro(OutputCoverage, bool);
+  vtkBooleanMacro(OutputCoverage, bool);
+  ///@}
+
+  ///@{
+  /**
    * Scalar type of "Intensity": VTK_FLOAT (default, I in [0, 1]) or VTK_UNSIGNED_CHAR
    * (round(255 I)). Any other type is refused with vtkErrorMacro and the previous type kept, so the
    * scalar type announced in the pipeline information is the one produced.
@@ -168,6 +192,7 @@ protected:
   double ElevationSigma = -1;
   double Cutoff = 5.0;
   bool OutputScatteringField = false;
+  bool OutputCoverage = true;
   int OutputScalarType = VTK_FLOAT;
   char* Backend = nullptr;
 

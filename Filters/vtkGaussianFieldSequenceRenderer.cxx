@@ -107,6 +107,20 @@ int vtkGaussianFieldSequenceRenderer::RequestData(
   {
     vtkWarningMacro("Backend: " << notice);
   }
+  const bigus::TrainingCoverage* coverage = nullptr;
+  if (this->OutputCoverage)
+  {
+    coverage = field.GetCoverage(&error);
+    if (!coverage)
+    {
+      vtkErrorMacro(<< error << " (OutputCoverage off renders without the coverage image)");
+      return 0;
+    }
+    if (coverage->IsEmpty())
+    {
+      coverage = nullptr; // no training geometry: no Coverage array
+    }
+  }
   int dims[3];
   sequence->GetDimensions(dims);
   vtkDataArray* poses = sequence->GetFieldData()->GetArray("ImageToReference");
@@ -131,8 +145,8 @@ int vtkGaussianFieldSequenceRenderer::RequestData(
   }
   const bigus::RenderOptions options = bigus::RenderOptionsFor(field.GetModel(), this->ElevationSigma, this->Cutoff);
   const std::size_t framePixels = std::size_t(dims[0]) * dims[1];
-  std::vector<float> S(framePixels), I(framePixels * count);
-  const auto start = std::chrono::steady_clock::now();
+  std::vector<float> S(framePixels), I(framePixels * count), C(coverage ? framePixels * count : 0);
+  double renderSeconds = 0;
   for (int k = 0; k < count; ++k)
   {
     if (this->GetAbortExecute())
@@ -140,21 +154,30 @@ int vtkGaussianFieldSequenceRenderer::RequestData(
       // The output stays empty, so the pipeline does not take it for the requested frames.
       return 1;
     }
+    const auto start = std::chrono::steady_clock::now();
     if (!renderer->Forward(
           field.GetField().View(), &slices[k], 1, options, S.data(), I.data() + k * framePixels, nullptr, &error))
     {
       vtkErrorMacro("frame " << frames[k] << ": " << error);
       return 0;
     }
+    renderSeconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (coverage)
+    {
+      coverage->Compute(slices[k], options.ElevationSigma, C.data() + k * framePixels);
+    }
     this->UpdateProgress(double(k + 1) / count);
   }
-  this->SecondsPerFrame =
-    std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() / std::max(1, count);
+  this->SecondsPerFrame = renderSeconds / std::max(1, count);
 
   output->SetExtent(0, dims[0] - 1, 0, dims[1] - 1, 0, count - 1);
   output->SetSpacing(1, 1, 1);
   output->SetOrigin(0, 0, 0);
   output->GetPointData()->SetScalars(bigus::IntensityArray(I, this->OutputScalarType));
+  if (coverage)
+  {
+    output->GetPointData()->AddArray(bigus::CoverageArray(C));
+  }
   bigus::CopyFrameFieldData(sequence->GetFieldData(), dims[2], frames, output->GetFieldData());
   return 1;
 }
@@ -166,6 +189,7 @@ void vtkGaussianFieldSequenceRenderer::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "ElevationSigma: " << this->ElevationSigma << (this->ElevationSigma < 0 ? " (the field's)" : "")
      << "\n";
   os << indent << "Cutoff: " << this->Cutoff << "\n";
+  os << indent << "OutputCoverage: " << this->OutputCoverage << "\n";
   os << indent << "OutputScalarType: " << vtkImageScalarTypeNameMacro(this->OutputScalarType) << "\n";
   os << indent << "Backend: " << (this->Backend ? this->Backend : "auto") << "\n";
   os << indent << "SecondsPerFrame: " << this->SecondsPerFrame << "\n";

@@ -10,12 +10,19 @@
  * vtkUltrasoundSequenceWriter and compared frame by frame (vtkUltrasoundImageMetrics).
  * Frames: all (default) or those of SetFrameList (indices into the sequence).
  * Scalars "Intensity": float in [0, 1] (default) or unsigned char; ElevationSigma < 0 uses the field's.
+ * Point data "Coverage" (float, OutputCoverage, default on): how much training data supports each
+ * rendered pixel, the summed elevation weight sum_t [inside frame t's fan] exp(-d_t^2 / (2 sigma_E^2))
+ * of the training frames t at distance d_t (mm), as vtkGaussianFieldReslice defines it (see there and
+ * bigus::TrainingCoverage); about 1 on a training frame, about 0 in a gap wider than the beam. Only a
+ * field that carries its training geometry (vtkGaussianFieldTrainer's output) has it; malformed
+ * geometry fails the request with an error naming the array.
  * The renderer (Backend) and the field converted to the renderer's form are kept between executes and
  * rebuilt only when Backend or the field input (object or MTime) changes.
  * Frames are rendered one at a time: UpdateProgress after each, and AbortExecute stops before the
  * next (the output is then left empty, so the next Update renders every frame).
- * Errors (malformed field or sequence, a frame index outside the sequence, a bad pose, an unavailable
- * backend) fail the request with vtkErrorMacro and leave the output empty.
+ * Errors (malformed field or sequence, malformed training geometry with OutputCoverage on, a frame
+ * index outside the sequence, a bad pose, an unavailable backend) fail the request with vtkErrorMacro
+ * and leave the output empty.
  */
 #ifndef vtkGaussianFieldSequenceRenderer_h
 #define vtkGaussianFieldSequenceRenderer_h
@@ -67,6 +74,16 @@ public:
 
   ///@{
   /**
+   * Also output float point data "Coverage" (see the class description) when the field carries its
+   * training geometry. Default on.
+   */
+  vtkSetMacro(OutputCoverage, bool);
+  vtkGetMacro(OutputCoverage, bool);
+  vtkBooleanMacro(OutputCoverage, bool);
+  ///@}
+
+  ///@{
+  /**
    * Scalar type of "Intensity": VTK_FLOAT (default, I in [0, 1]) or VTK_UNSIGNED_CHAR
    * (round(255 I)). Any other type is refused with vtkErrorMacro and the previous type kept, so the
    * scalar type announced in the pipeline information is the one produced.
@@ -90,7 +107,8 @@ public:
   ///@}
 
   /**
-   * Seconds spent rendering in the last update, per frame.
+   * Seconds spent rendering in the last update, per frame (the renderer's time; the Coverage image is
+   * not counted, so timings compare with renderers that have none).
    */
   vtkGetMacro(SecondsPerFrame, double);
 
@@ -106,6 +124,7 @@ protected:
   vtkIdList* FrameList = nullptr;
   double ElevationSigma = -1;
   double Cutoff = 5.0;
+  bool OutputCoverage = true;
   int OutputScalarType = VTK_FLOAT;
   char* Backend = nullptr;
   double SecondsPerFrame = 0;

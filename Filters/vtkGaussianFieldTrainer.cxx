@@ -227,6 +227,7 @@ int vtkGaussianFieldTrainer::RequestData(
   model.Gamma = trainer.GetGamma();
   model.PixelSpacing = trainer.GetPixelSpacing();
   bigus::FieldToPolyData(trainer.GetField(), model, output);
+  bigus::TrainingGeometryToFieldData(bigus::TrainingGeometryOf(trainer.GetData()), output->GetFieldData());
   const vtkIdType n = trainer.GetField().Count();
 
   auto addValue = [&](const char* name, double value) {
