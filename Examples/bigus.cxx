@@ -501,6 +501,15 @@ int RunTrain(const TrainOptions& o)
     o.Output.c_str(), static_cast<long long>(trainer->GetNumberOfGaussians()),
     seeds ? static_cast<long long>(seeds->GetTuple1(0)) : 0LL, trainer->GetCompletedIterations(),
     trainer->GetTrainingSeconds(), trainer->GetStopReason(), trainer->GetGrowthStopReason());
+  vtkFieldData* fd = trainer->GetOutput()->GetFieldData();
+  vtkDataArray* best = fd->GetArray("BestValidationLoss");
+  vtkDataArray* last = fd->GetArray("LastValidationLoss");
+  if (best && last)
+  {
+    std::printf("early stopping %s (validation loss %.5f at iteration %.0f, %.5f at the end)\n",
+      best->GetTuple1(0) < last->GetTuple1(0) ? "kept an earlier field" : "kept the last field", best->GetTuple1(0),
+      fd->GetArray("BestIteration")->GetTuple1(0), last->GetTuple1(0));
+  }
   std::printf("backend        %s\n", trainer->GetBackendInUse());
   return 0;
 }

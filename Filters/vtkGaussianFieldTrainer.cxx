@@ -245,6 +245,9 @@ int vtkGaussianFieldTrainer::RequestData(
   addValue("InitialGaussians", static_cast<double>(report.InitialGaussians));
   addValue("Iterations", report.Iterations);
   addValue("TrainingSeconds", report.Seconds);
+  addValue("BestIteration", report.BestIteration);
+  addValue("BestValidationLoss", report.BestValidationLoss);
+  addValue("LastValidationLoss", report.LastValidationLoss);
   addText("StopReason", report.StopReason);
   addText("GrowthStopReason", report.GrowthStopReason);
   addText("Backend", this->BackendInUse);

@@ -9,7 +9,9 @@
  * data `Scale` (3 floats, standard deviations in mm along the local axes), `Rotation` (4 floats, unit
  * quaternion w, x, y, z) and `Reflectivity` (signed); field data `ElevationSigma` (mm), `Gamma`,
  * `TrainingFrames` (frame indices), `InitialGaussians` (seeds), `Iterations`, `TrainingSeconds`,
- * `StopReason`, `GrowthStopReason`, `TrainingSettings` (strings: every setting the run chose or was
+ * `StopReason`, `GrowthStopReason`, early stopping's `BestIteration`, `BestValidationLoss` and
+ * `LastValidationLoss` (bigus::TrainerReport), the training geometry `TrainingPoses`, `TrainingFrameSize`,
+ * `TrainingFanMask` (what the render filters' Coverage array is computed from), `TrainingSettings` (strings: every setting the run chose or was
  * given, "name = value (why)", as bigus::TrainerReport::Settings, plus the fan mask's origin).
  *
  * Events: SettingsChosenEvent (vtkCommand::UserEvent + 1) is invoked once per run, before the first
@@ -27,9 +29,10 @@
  *
  * Defaults and why (the measurements behind them, dated and with their commands, are in
  * docs/FINDINGS.md; current numbers in docs/BENCHMARKS.md):
- * - ElevationSigma 0 = chosen from the training frames (bigus::ChooseElevationSigma): the smaller of
- *   0.6 times the median spacing of neighbouring frames along the elevation axis and the sigma that
- *   the speckle's decorrelation between frames shows. A rendered frame is the field averaged over the
+ * - ElevationSigma 0 = chosen from the training frames (bigus::ChooseElevationSigma): half the sigma
+ *   that the speckle's decorrelation between neighbouring frames shows, or, where the frames lie too
+ *   far apart for their speckle to correlate, the median spacing of neighbouring frames along the
+ *   elevation axis. A rendered frame is the field averaged over the
  *   beam, so it cannot change faster across the sweep than the beam allows; too small makes frames
  *   independent (no interpolation between them), too large blurs across the sweep. A value > 0 (mm;
  *   FWHM / 2.355 from a probe's data sheet) overrides the rule.

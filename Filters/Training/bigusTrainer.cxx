@@ -965,7 +965,6 @@ bool Trainer::Finish(std::string* error)
     this->Report.GrowthStopReason = s.Densify ? "densification schedule ended" : "densification off";
   }
   // Early stopping: keep the best field seen when the last one scores worse on the validation frames.
-  const int lastIteration = this->State.Iteration;
   double last = 0;
   if (!this->CheckValidation(last, error))
   {
@@ -974,7 +973,7 @@ bool Trainer::Finish(std::string* error)
   this->Report.LastValidationLoss = last;
   this->Report.BestValidationLoss = this->State.BestFieldLoss;
   this->Report.BestIteration = this->State.BestFieldIteration;
-  if (this->State.BestFieldIteration != lastIteration)
+  if (last > this->State.BestFieldLoss)
   {
     // Fresh optimiser moments, as after SetField, but the record of the best field stays.
     this->State.Gaussians = OptimizerState();

@@ -86,8 +86,9 @@ struct TrainerReport
   double Gamma = 0;
   double LastLoss = 0;              ///< mean loss of the last 50 steps
   double ElevationSigma = 0;        ///< mm, the sigma trained with (given or chosen)
-  /// Early stopping: the iteration whose field Finish kept (the best on the validation frames), the
-  /// validation loss there and that of the last field; equal iterations when the last was best.
+  /// Early stopping: the iteration whose field Finish kept (the best on the validation frames; a field
+  /// measured just before a densification carries that densification's iteration), the validation
+  /// loss there and that of the last field (equal when the last was kept).
   int BestIteration = 0;
   double BestValidationLoss = 0, LastValidationLoss = 0;
   /// Every setting the run depends on that the trainer chose or was given, one line each

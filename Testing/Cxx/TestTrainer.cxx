@@ -725,6 +725,36 @@ TEST(Trainer, SpinePhantomShortRunLearnsAndBeatsTheNearestFrameOnHeldOutFrames)
   EXPECT_LT(rendered, nearest);
 }
 
+// Early stopping: the field Finish keeps is the best the run passed through on the validation frames,
+// so a run twice as long (same seed, its schedule stretched) never ends with a higher validation loss.
+TEST(Trainer, ARunTwiceAsLongNeverEndsWorseOnTheValidationFrames)
+{
+  std::vector<int> heldOut;
+  const TrainingData data = SpineData(heldOut);
+  double validation[2] = { 0, 0 };
+  for (int run = 0; run < 2; ++run)
+  {
+    TrainerSettings s;
+    s.ElevationSigma = 1.5;
+    s.InitialGaussians = 10000;
+    s.Iterations = 300 * (run + 1);
+    s.DensifyStart = 100;
+    s.DensifyInterval = 100;
+    Trainer trainer(data, s);
+    std::string error;
+    ASSERT_TRUE(trainer.Initialize(&error)) << error;
+    ASSERT_TRUE(trainer.Run(nullptr, nullptr, &error)) << error;
+    const TrainerReport& r = trainer.GetReport();
+    std::printf("%d steps: validation loss %.5f at the end, best %.5f at iteration %d (kept)\n", r.Iterations,
+      r.LastValidationLoss, r.BestValidationLoss, r.BestIteration);
+    EXPECT_LE(r.BestValidationLoss, r.LastValidationLoss);
+    EXPECT_GT(r.BestIteration, 0);
+    EXPECT_LE(r.BestIteration, s.Iterations);
+    validation[run] = r.BestValidationLoss;
+  }
+  EXPECT_LE(validation[1], validation[0]);
+}
+
 TEST(GaussianFieldTrainer, PipelineOutputsTheFieldOfTheDataModel)
 {
   std::vector<int> heldOut;
@@ -802,7 +832,8 @@ TEST(GaussianFieldTrainer, PipelineOutputsTheFieldOfTheDataModel)
     }
   }
   const ElevationSigmaChoice chosen = ChooseElevationSigma(trained);
-  EXPECT_NEAR(field->GetFieldData()->GetArray("ElevationSigma")->GetTuple1(0), chosen.Sigma, 1e-12);
+  // (the filter measures the 8-bit frames inside the estimated fan mask, this the float frames)
+  EXPECT_NEAR(field->GetFieldData()->GetArray("ElevationSigma")->GetTuple1(0), chosen.Sigma, 0.01 * chosen.Sigma);
   EXPECT_EQ(announced.Count, 1);
   EXPECT_EQ(announced.IterationThen, 0);
   auto* settings = vtkStringArray::SafeDownCast(field->GetFieldData()->GetAbstractArray("TrainingSettings"));
