@@ -82,6 +82,17 @@ bool MeasureElevationDecorrelation(const TrainingData& data, const ElevationDeco
     }
     return false;
   }
+  const std::size_t framePixels = std::size_t(data.Width) * data.Height;
+  if (framePixels == 0 || data.Frames.size() != framePixels * data.Poses.size() ||
+    (data.Mask.size() != framePixels && data.Mask.size() != framePixels * data.Poses.size()) || frames.front() < 0 ||
+    frames.back() >= data.Count())
+  {
+    if (error)
+    {
+      *error = "frames, poses, mask and training frames of inconsistent sizes";
+    }
+    return false;
+  }
   std::vector<FramePlane> planes(frames.size());
   double spacing = 0;
   for (std::size_t k = 0; k < frames.size(); ++k)

@@ -55,8 +55,8 @@ struct ElevationDecorrelationSettings
 
 /**
  * Measure @p data's training frames (at least two; poses the renderer accepts). Returns false with
- * @p error when there are fewer than two training frames or no pair of them overlaps within
- * MaximumDistanceMm.
+ * @p error when there are fewer than two training frames, the data's sizes are inconsistent, a
+ * training pose is singular, or no pair of frames overlaps within MaximumDistanceMm.
  */
 BIGUSTRAINING_EXPORT bool MeasureElevationDecorrelation(const TrainingData& data,
   const ElevationDecorrelationSettings& settings, ElevationDecorrelation& result, std::string* error);

@@ -141,3 +141,16 @@ TEST(ElevationSigma, FewerThanTwoTrainingFramesFallBackToTheFixedDefault)
   EXPECT_EQ(choice.Sigma, 0.5);
   EXPECT_NE(choice.Reason.find("at least two training frames"), std::string::npos) << choice.Reason;
 }
+
+TEST(ElevationSigma, InconsistentDataIsAnErrorNotACrash)
+{
+  std::vector<int> heldOut;
+  TrainingData data = Sweep(SpeckleField(100, 2.0, 1), 0.5, 0.2, 6, heldOut);
+  data.Frames.resize(data.Frames.size() / 2); // fewer pixels than the poses announce
+  ElevationDecorrelation m;
+  std::string error;
+  EXPECT_FALSE(MeasureElevationDecorrelation(data, ElevationDecorrelationSettings(), m, &error));
+  EXPECT_NE(error.find("inconsistent sizes"), std::string::npos) << error;
+  const ElevationSigmaChoice choice = ChooseElevationSigma(data);
+  EXPECT_EQ(choice.Sigma, 0.5);
+}
