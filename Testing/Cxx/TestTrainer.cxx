@@ -659,18 +659,28 @@ double MaskedL1(const float* a, const float* b, const std::vector<unsigned char>
 }
 }
 
+namespace
+{
+/// The spine tests' settings: sigma 1.5 mm, 10,000 seeds, densification every 100 steps from 100.
+TrainerSettings SpineSettings(int iterations)
+{
+  TrainerSettings s;
+  s.ElevationSigma = 1.5;
+  s.InitialGaussians = 10000;
+  s.Iterations = iterations;
+  s.DensifyStart = 100;
+  s.DensifyInterval = 100;
+  return s;
+}
+}
+
 TEST(Trainer, SpinePhantomShortRunLearnsAndBeatsTheNearestFrameOnHeldOutFrames)
 {
   std::vector<int> heldOut;
   const TrainingData data = SpineData(heldOut);
   // The phantom's frames lie about 1.5 mm apart: a beam of sigma 1.5 mm lets neighbouring frames
   // constrain the Gaussians between them (with 0.5 mm the held-out frames fall in the gaps).
-  TrainerSettings s;
-  s.ElevationSigma = 1.5;
-  s.InitialGaussians = 10000;
-  s.Iterations = 300;
-  s.DensifyStart = 100;
-  s.DensifyInterval = 100;
+  const TrainerSettings s = SpineSettings(300);
   Trainer trainer(data, s);
   std::string error;
   ASSERT_TRUE(trainer.Initialize(&error)) << error;
@@ -734,12 +744,7 @@ TEST(Trainer, ARunTwiceAsLongNeverEndsWorseOnTheValidationFrames)
   double validation[2] = { 0, 0 };
   for (int run = 0; run < 2; ++run)
   {
-    TrainerSettings s;
-    s.ElevationSigma = 1.5;
-    s.InitialGaussians = 10000;
-    s.Iterations = 300 * (run + 1);
-    s.DensifyStart = 100;
-    s.DensifyInterval = 100;
+    const TrainerSettings s = SpineSettings(300 * (run + 1));
     Trainer trainer(data, s);
     std::string error;
     ASSERT_TRUE(trainer.Initialize(&error)) << error;
