@@ -8,7 +8,7 @@
 //   bigus render FIELD.vtp --volume [--spacing MM] -o volume.mha|.vti
 //   bigus evaluate FIELD.vtp SWEEP [--holdout-every K --holdout-offset J | --frames LIST] --report DIR
 //   bigus sweep VOLUME -o SWEEP.igs.mha [--mask-output MASK.mha] [--protocol parallel|oblique|orthogonal] ...
-//   bigus benchmark [--quick] [--output DIR]
+//   bigus benchmark [--quick] [--section all|defaults|volume] [--output DIR]
 //
 // Exit codes: 0 success, 1 a bad file or a failed step (one line on stderr), 2 bad arguments.
 // Outputs are written under a temporary name and renamed: an existing file is never left half-written.
@@ -361,6 +361,8 @@ struct TrainOptions
   std::vector<int> Frames; ///< explicit training frames (empty: the hold-out rule)
   double TimeBudget = 0, ElevationSigma = 0, EvaluationInterval = 0;
   long long MaxGaussians = 0, InitialGaussians = 0;
+  double GrowthMargin = 0;
+  int GrowthPatience = 0;
   unsigned Seed = 0;
 
   /// The filter's own defaults, so that `bigus train` and vtkGaussianFieldTrainer agree.
@@ -371,6 +373,8 @@ struct TrainOptions
     this->ElevationSigma = defaults->GetElevationSigma();
     this->MaxGaussians = defaults->GetMaximumGaussians();
     this->InitialGaussians = defaults->GetInitialGaussians();
+    this->GrowthMargin = defaults->GetGrowthMargin();
+    this->GrowthPatience = defaults->GetGrowthPatience();
     this->Seed = defaults->GetSeed();
   }
 };
@@ -412,6 +416,8 @@ int RunTrain(const TrainOptions& o)
   trainer->SetTimeBudget(o.TimeBudget);
   trainer->SetMaximumGaussians(o.MaxGaussians);
   trainer->SetInitialGaussians(o.InitialGaussians);
+  trainer->SetGrowthMargin(o.GrowthMargin);
+  trainer->SetGrowthPatience(o.GrowthPatience);
   trainer->SetElevationSigma(o.ElevationSigma);
   trainer->SetSeed(o.Seed);
   trainer->SetEvaluationInterval(o.EvaluationInterval);
@@ -1086,6 +1092,14 @@ int main(int argc, char** argv)
     "Seeds (0: one per 200 fan pixels of the training frames, 20,000 to half the maximum)")
     ->capture_default_str()
     ->check(CLI::NonNegativeNumber);
+  trainCommand->add_option("--growth-margin", train.GrowthMargin,
+    "Growth stops when the validation loss improves by less than this (relative) on the best so far ...")
+    ->capture_default_str()
+    ->check(CLI::Range(0.0, 1.0));
+  trainCommand->add_option("--growth-patience", train.GrowthPatience,
+    "... over this many densification intervals in a row")
+    ->capture_default_str()
+    ->check(CLI::PositiveNumber);
   trainCommand->add_option("--elevation-sigma", train.ElevationSigma, "Elevation beam sigma, mm (FWHM / 2.355); 0: chosen from the sweep (frame spacing, speckle decorrelation)")
     ->capture_default_str();
   trainCommand->add_option("--backend", train.Backend, "Training backend: auto, cpu or cuda (as registered)")
@@ -1148,11 +1162,16 @@ int main(int argc, char** argv)
   benchmark.SourceDirectory = BIGUS_SOURCE_DIR;
   CLI::App* benchmarkCommand = app.add_subcommand("benchmark",
     "Speed against error on the bundled sweeps: baselines, volume protocol, capacity, render cutoffs, ablations; "
-    "writes OUTPUT/BENCHMARKS.md and OUTPUT/benchmarks/ (about 45 minutes on 2 cores)");
+    "writes OUTPUT/BENCHMARKS.md and OUTPUT/benchmarks/ (about 70 minutes on 2 cores)");
   benchmarkCommand->add_option("--output", benchmark.Output, "Folder for BENCHMARKS.md (default: docs)");
   benchmarkCommand->add_option("--data", benchmark.SourceDirectory, "Project folder holding Examples/Data and Testing/Data")
     ->check(CLI::ExistingDirectory);
   benchmarkCommand->add_flag("--quick", benchmark.Quick, "A few minutes: short training, small crops (smoke test)");
+  benchmarkCommand
+    ->add_option("--section", benchmark.Section,
+      "all, or one section alone: defaults (defaults against hand-tuned) or volume (the volume protocol)")
+    ->capture_default_str()
+    ->check(CLI::IsMember({ "all", "defaults", "volume" }));
 
   try
   {

@@ -128,6 +128,8 @@ int vtkGaussianFieldTrainer::RequestData(
   s.DensifyEnd = this->DensifyEnd;
   s.DensifyInterval = this->DensifyInterval;
   s.DensifyPercentile = this->DensifyPercentile;
+  s.GrowthMargin = this->GrowthMargin;
+  s.GrowthPatience = this->GrowthPatience;
   s.Seed = this->Seed;
   s.CheckpointInterval = this->CheckpointInterval;
   s.CheckpointFile = this->CheckpointFile ? this->CheckpointFile : "";
@@ -248,6 +250,18 @@ int vtkGaussianFieldTrainer::RequestData(
   addValue("BestIteration", report.BestIteration);
   addValue("BestValidationLoss", report.BestValidationLoss);
   addValue("LastValidationLoss", report.LastValidationLoss);
+  vtkNew<vtkDoubleArray> validationHistory;
+  validationHistory->SetName("ValidationHistory");
+  validationHistory->SetNumberOfComponents(3);
+  validationHistory->SetComponentName(0, "Iteration");
+  validationHistory->SetComponentName(1, "Loss");
+  validationHistory->SetComponentName(2, "Gaussians");
+  for (const bigus::TrainerReport::ValidationRecord& v : report.ValidationHistory)
+  {
+    const double tuple[3] = { double(v.Iteration), v.Loss, double(v.Gaussians) };
+    validationHistory->InsertNextTuple(tuple);
+  }
+  output->GetFieldData()->AddArray(validationHistory);
   addText("StopReason", report.StopReason);
   addText("GrowthStopReason", report.GrowthStopReason);
   addText("Backend", this->BackendInUse);
@@ -297,6 +311,7 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
      << "\n";
   os << indent << "Densify schedule: start " << this->DensifyStart << ", end " << this->DensifyEnd << ", interval "
      << this->DensifyInterval << ", percentile " << this->DensifyPercentile << "\n";
+  os << indent << "GrowthMargin: " << this->GrowthMargin << ", GrowthPatience: " << this->GrowthPatience << "\n";
   os << indent << "HoldOutEvery: " << this->HoldOutEvery << ", HoldOutOffset: " << this->HoldOutOffset << "\n";
   os << indent << "TrainingFrameList: " << (this->TrainingFrameList ? this->TrainingFrameList->GetNumberOfIds() : 0)
      << " frames\n";

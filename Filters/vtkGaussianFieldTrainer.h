@@ -10,7 +10,8 @@
  * quaternion w, x, y, z) and `Reflectivity` (signed); field data `ElevationSigma` (mm), `Gamma`,
  * `TrainingFrames` (frame indices), `InitialGaussians` (seeds), `Iterations`, `TrainingSeconds`,
  * `StopReason`, `GrowthStopReason`, early stopping's `BestIteration`, `BestValidationLoss` and
- * `LastValidationLoss` (bigus::TrainerReport), the training geometry `TrainingPoses`, `TrainingFrameSize`,
+ * `LastValidationLoss`, `ValidationHistory` (3 components per validation: Iteration, Loss, Gaussians)
+ * (bigus::TrainerReport), the training geometry `TrainingPoses`, `TrainingFrameSize`,
  * `TrainingFanMask` (what the render filters' Coverage array is computed from), `TrainingSettings` (strings: every setting the run chose or was
  * given, "name = value (why)", as bigus::TrainerReport::Settings, plus the fan mask's origin).
  *
@@ -133,6 +134,13 @@ public:
   vtkSetClampMacro(DensifyPercentile, double, 0.0, 100.0);
   vtkGetMacro(DensifyPercentile, double);
   ///@}
+  ///@{ Growth stops when the validation loss improves by less than GrowthMargin (relative) on the best
+  /// so far over GrowthPatience densification intervals in a row (bigus::TrainerSettings).
+  vtkSetClampMacro(GrowthMargin, double, 0.0, 1.0);
+  vtkGetMacro(GrowthMargin, double);
+  vtkSetClampMacro(GrowthPatience, int, 1, VTK_INT_MAX);
+  vtkGetMacro(GrowthPatience, int);
+  ///@}
   ///@{ Which frames to train on: all valid frames except those with index % HoldOutEvery ==
   /// HoldOutOffset (HoldOutEvery 0 = none), or the explicit list when one is set (an index outside
   /// the input fails the request).
@@ -222,6 +230,8 @@ protected:
   int DensifyEnd = -1;
   int DensifyInterval = 200;
   double DensifyPercentile = 5.0;
+  double GrowthMargin = 0.005;
+  int GrowthPatience = 2;
   int HoldOutEvery = 0;
   int HoldOutOffset = 0;
   vtkIdList* TrainingFrameList = nullptr;

@@ -612,6 +612,7 @@ bool Trainer::CheckValidation(double& loss, std::string* error)
     return false;
   }
   TrainingState& state = this->State;
+  this->Report.ValidationHistory.push_back({ state.Iteration, loss, state.Gaussians.Count() });
   if (state.BestFieldLoss < 0 || loss < state.BestFieldLoss)
   {
     state.BestFieldLoss = loss;
@@ -631,13 +632,13 @@ bool Trainer::DensifyAndPrune(double validation, std::string* error)
       state.BestValidationLoss = validation;
       state.StalledGrowthSteps = 0;
     }
-    else if (++state.StalledGrowthSteps >= 2)
+    else if (++state.StalledGrowthSteps >= this->Settings.GrowthPatience)
     {
       state.Growing = false;
       char why[200];
       std::snprintf(why, sizeof(why),
-        "validation loss improved by less than %.2g %% over two densification intervals (iteration %d)",
-        100 * this->Settings.GrowthMargin, state.Iteration);
+        "validation loss improved by less than %.2g %% over %d densification intervals (iteration %d)",
+        100 * this->Settings.GrowthMargin, this->Settings.GrowthPatience, state.Iteration);
       this->Report.GrowthStopReason = why;
     }
   }

@@ -64,7 +64,8 @@ struct TrainerSettings
   double DensifyPercentile = 5.0;    ///< top share (%) of the attribution score densified each time
   double SplitScalePixels = 3.0;     ///< largest scale above which a Gaussian is split, not cloned
   double PruneReflectivity = 1e-3;   ///< |r| below this is pruned (after the first densification)
-  double GrowthMargin = 0.005;       ///< growth stops when the validation loss improves by less (relative)
+  double GrowthMargin = 0.005;       ///< growth stops when the validation loss improves by less (relative) ...
+  int GrowthPatience = 2;            ///< ... than the best so far over this many densification intervals in a row
   std::int64_t MaximumGaussians = 400000;
   double FinalPruneTolerance = 1.0 / 512; ///< final prune: max change of any training pixel's I
   // Run
@@ -91,6 +92,16 @@ struct TrainerReport
   /// loss there and that of the last field (equal when the last was kept).
   int BestIteration = 0;
   double BestValidationLoss = 0, LastValidationLoss = 0;
+  /// Every validation measurement of this run, in order: the field at Iteration (before that
+  /// iteration's densification, if any) had Gaussians Gaussians and this mean loss on the validation
+  /// frames. The last one is Finish's. Stored in the field data as ValidationHistory.
+  struct ValidationRecord
+  {
+    int Iteration = 0;
+    double Loss = 0;
+    std::int64_t Gaussians = 0;
+  };
+  std::vector<ValidationRecord> ValidationHistory;
   /// Every setting the run depends on that the trainer chose or was given, one line each
   /// ("ElevationSigma = 0.306 mm (chosen: ...)"), filled by the constructor and Initialize: printed by
   /// `bigus train` and stored in the field data (TrainingSettings) so that a run can be reproduced.

@@ -486,6 +486,51 @@ TEST(Trainer, ATimeBudgetAloneIsTheSchedule)
   EXPECT_GT(r.Iterations, 100);
 }
 
+TEST(Trainer, GrowthStopsAfterPatienceIntervalsWithoutImprovementAndTheHistoryRecordsIt)
+{
+  // A margin no interval can meet (99.9 %): the first densification sets the best validation loss and
+  // each later one counts as stalled, so growth stops at DensifyStart + GrowthPatience intervals.
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(150, 4), 0.5, heldOut);
+  for (int patience : { 2, 4 })
+  {
+    TrainerSettings s = ShortSettings();
+    s.Iterations = 800;
+    s.DensifyEnd = 800;
+    s.GrowthMargin = 0.999;
+    s.GrowthPatience = patience;
+    Trainer trainer(data, s);
+    std::string error;
+    ASSERT_TRUE(trainer.Initialize(&error)) << error;
+    ASSERT_TRUE(trainer.Run(nullptr, nullptr, &error)) << error;
+    const TrainerReport& r = trainer.GetReport();
+    const int stop = s.DensifyStart + patience * s.DensifyInterval;
+    EXPECT_NE(r.GrowthStopReason.find("over " + std::to_string(patience) + " densification intervals (iteration " +
+                std::to_string(stop) + ")"),
+      std::string::npos)
+      << r.GrowthStopReason;
+    // One record per interval (measured before that interval's densification) and Finish's.
+    const auto& h = r.ValidationHistory;
+    ASSERT_EQ(h.size(), std::size_t(s.Iterations / s.DensifyInterval + 1));
+    double best = h[0].Loss;
+    for (std::size_t k = 0; k < h.size(); ++k)
+    {
+      EXPECT_EQ(h[k].Iteration, k + 1 < h.size() ? int(k + 1) * s.DensifyInterval : r.Iterations);
+      best = std::min(best, h[k].Loss);
+      if (k > 0 && h[k - 1].Iteration < stop)
+      {
+        EXPECT_GT(h[k].Gaussians, h[k - 1].Gaussians) << "still growing at " << h[k - 1].Iteration;
+      }
+      else if (k > 0)
+      {
+        EXPECT_LE(h[k].Gaussians, h[k - 1].Gaussians) << "grew after the stop, at " << h[k - 1].Iteration;
+      }
+    }
+    EXPECT_EQ(r.BestValidationLoss, best);
+    EXPECT_EQ(r.LastValidationLoss, h.back().Loss);
+  }
+}
+
 TEST(Trainer, APoseTheRendererRejectsFailsTheRunWithItsMessage)
 {
   // A sweep read with a looser shear limit than the renderer's (the reader's MaximumShearAngle at 10
