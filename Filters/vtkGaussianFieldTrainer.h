@@ -231,7 +231,7 @@ protected:
   int DensifyInterval = 200;
   double DensifyPercentile = 5.0;
   double GrowthMargin = 0.005;
-  int GrowthPatience = 2;
+  int GrowthPatience = 4;
   int HoldOutEvery = 0;
   int HoldOutOffset = 0;
   vtkIdList* TrainingFrameList = nullptr;

@@ -72,14 +72,15 @@ struct BIGUSTRAINING_EXPORT ElevationSigmaChoice
 /**
  * The elevation sigma for @p data's training frames (TrainerSettings::ElevationSigma 0).
  * - Where the speckle of neighbouring frames still correlates (the first bin's correlation is at
- *   least 0.3 and at least three bins fall before it halves): sigma = 0.5 x DecorrelationSigma. The
+ *   least 0.3 and at least three bins fall before it halves): sigma = 0.4 x DecorrelationSigma. The
  *   measured decorrelation is that of the beam and of the scatterers' own extent along the elevation
  *   axis together (sigma_measured^2 = sigma^2 + s^2); a Gaussian field supplies the second through its
- *   scales, so the beam takes a quarter of the variance and the Gaussians keep the freedom to be
+ *   scales, so the beam takes a sixth of the variance and the Gaussians keep the freedom to be
  *   thinner where the data changes faster. Measured (docs/FINDINGS.md, TestElevationSigma): on a sweep
- *   rendered with sigma 0.6 mm (frames 0.2 mm apart) training with 0.32 mm gave a higher held-out
- *   PSNR than with the true 0.6 (49.4 against 47.1 dB; 0.45: 49.3, 0.2: 48.2, 0.12: 45.6); the liver
- *   sweep (decorrelation sigma 0.84 mm) trained best at 0.3 of 0.3, 0.5 and 1.0.
+ *   rendered with sigma 0.6 mm (frames 0.2 mm apart; decorrelation sigma measured 0.645) training with
+ *   0.32 mm gave a higher held-out PSNR than with the true 0.6 (49.4 against 47.1 dB; 0.45: 49.3, 0.2:
+ *   48.2, 0.12: 45.6); the liver sweep (decorrelation sigma 0.81 mm; hold-out i mod 4 == 2, 3,600
+ *   steps) gave 36.98 dB at 0.3 mm, 36.83 at 0.324 (0.4 x) and 36.68 at 0.405 (0.5 x).
  * - Otherwise (the frames are farther apart than the speckle's correlation length):
  *   sigma = NeighbourSpacing, so that a frame rendered midway between two training frames still meets
  *   the Gaussians fitted to both (beam weight exp(-1/8) = 0.88 there). Measured: the spine phantom
@@ -93,7 +94,7 @@ struct BIGUSTRAINING_EXPORT ElevationSigmaChoice
 BIGUSTRAINING_EXPORT ElevationSigmaChoice ChooseElevationSigma(const TrainingData& data);
 
 /// The factors of ChooseElevationSigma's two rules.
-constexpr double ElevationSigmaDecorrelationFactor = 0.5;
+constexpr double ElevationSigmaDecorrelationFactor = 0.4;
 constexpr double ElevationSigmaSpacingFactor = 1.0;
 
 } // namespace bigus

@@ -65,7 +65,7 @@ struct TrainerSettings
   double SplitScalePixels = 3.0;     ///< largest scale above which a Gaussian is split, not cloned
   double PruneReflectivity = 1e-3;   ///< |r| below this is pruned (after the first densification)
   double GrowthMargin = 0.005;       ///< growth stops when the validation loss improves by less (relative) ...
-  int GrowthPatience = 2;            ///< ... than the best so far over this many densification intervals in a row
+  int GrowthPatience = 4;            ///< ... than the best so far over this many densification intervals in a row
   std::int64_t MaximumGaussians = 400000;
   double FinalPruneTolerance = 1.0 / 512; ///< final prune: max change of any training pixel's I
   // Run

@@ -36,7 +36,9 @@ def gaussian_blur(image, sigma):
     return sum(k * rows[i:i + image.shape[0], :] for i, k in enumerate(kernel))
 
 
-def liver_baselines(example_data):
+def liver_baselines(example_data, block=None):
+    """Nearest frame and blend PSNRs (and the blurred held-out frames) of the liver with frames
+    i mod 4 == 2 held out, or with the frames in @p block held out and all others trained on."""
     reader = bigus.vtkUltrasoundSequenceReader()
     reader.SetFileName(os.path.join(example_data, "liver", "liver_sweep.igs.mha"))
     fan = bigus.vtkUltrasoundFanMask()
@@ -49,8 +51,8 @@ def liver_baselines(example_data):
     fields = frames_image.GetFieldData()
     poses = vtk_to_numpy(fields.GetArray("ImageToReference")).reshape(n, 4, 4)
     stamps = vtk_to_numpy(fields.GetArray("Timestamp"))
-    train = [k for k in range(n) if k % 4 != 2]
-    held = [k for k in range(n) if k % 4 == 2]
+    train = [k for k in range(n) if (k % 4 != 2 if block is None else k not in block)]
+    held = [k for k in range(n) if (k % 4 == 2 if block is None else k in block)]
     centres = poses @ np.array([w / 2, h / 2, 0, 1])
     nearest, blend = [], []
     for k in held:
@@ -76,7 +78,8 @@ def main():
     for heading in ("## liver", "## spine phantom", "## N-wire phantom", "## Volume protocol",
                     "### in-between parallel slices", "### oblique slices", "### orthogonal slices",
                     "## Quality against the number of Gaussians", "## Render speed against render error",
-                    "## Ablations", "### liver", "### spine phantom", "## Defaults against hand-tuned"):
+                    "## Ablations", "### liver", "### spine phantom", "## Defaults against hand-tuned",
+                    "## Block hold-outs (liver)", "### 8 consecutive frames held out"):
         assert heading in report, heading
     assert results["commit"] and results["machine"] and results["quick"] is True
 
@@ -148,6 +151,21 @@ def main():
         expected = blurred[row["sigma_pixels"]]
         print("liver blurred at sigma %.1f: %.4f dB (here %.4f)" % (row["sigma_pixels"], row["psnr"], expected))
         assert abs(row["psnr"] - expected) < 1e-3, (row, expected)
+
+    # Block hold-out: 8 consecutive frames in the middle of the 140-frame sweep, the others trained on; the
+    # baselines against the computation here, every row in the report.
+    block = results["block_hold_outs"]["8"]
+    assert block["frames"] == list(range(66, 74)), block["frames"]
+    assert 2 < block["gap_mm"] < 8, block["gap_mm"]
+    nearest, blend, _ = liver_baselines(example_data, set(block["frames"]))
+    rows = {row["method"]: row for row in block["rows"]}
+    print("liver block of 8: nearest %.4f dB (here %.4f), blend %.4f dB (here %.4f), BIGUS %.2f dB" % (
+        rows["nearest training frame (pose)"]["psnr"], nearest, rows["blend of bracketing training frames (time)"]["psnr"],
+        blend, rows["BIGUS (defaults)"]["psnr"]))
+    assert abs(rows["nearest training frame (pose)"]["psnr"] - nearest) < 1e-3
+    assert abs(rows["blend of bracketing training frames (time)"]["psnr"] - blend) < 1e-3
+    for row in block["rows"]:
+        assert math.isfinite(row["psnr"]) and "| %.2f | %.4f |" % (row["psnr"], row["ssim"]) in report, row
 
 
 if __name__ == "__main__":

@@ -1,0 +1,198 @@
+// FillElevationGaps on a known geometry: two stacks of parallel frames 0.5 mm apart with a 4 mm gap
+// between them, each frame holding its own Gaussians. Rendered in the gap, the filled field must
+// show the blend of the two frames on either side (the scattering S of each, rendered by the
+// CPU renderer at their own poses), and the training frames must render as before.
+#include "bigusGapFilling.h"
+#include "bigusRenderer.h"
+#include "bigusTrainingEngine.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <random>
+#include <vector>
+
+using namespace bigus;
+
+namespace
+{
+constexpr int W = 48, H = 40;
+constexpr double PixelSpacing = 0.3; // mm
+constexpr double Sigma = 0.1;        // elevation beam, mm
+
+/// ImageToReference of a frame whose image centre is at (0, 0, z), turned by @p degrees about the
+/// image's x axis through that centre.
+std::array<double, 16> Pose(double z, double degrees)
+{
+  const double a = degrees * M_PI / 180, c = std::cos(a), s = std::sin(a);
+  const double u[3] = { 1, 0, 0 }, v[3] = { 0, c, s };
+  const double i0 = 0.5 * (W - 1) * PixelSpacing, j0 = 0.5 * (H - 1) * PixelSpacing;
+  std::array<double, 16> m{};
+  for (int r = 0; r < 3; ++r)
+  {
+    m[4 * r] = u[r] * PixelSpacing;
+    m[4 * r + 1] = v[r] * PixelSpacing;
+    m[4 * r + 3] = (r == 2 ? z : 0.0) - u[r] * i0 - v[r] * j0;
+  }
+  m[15] = 1;
+  return m;
+}
+
+SliceGeometry Slice(const std::array<double, 16>& pose)
+{
+  SliceGeometry g;
+  std::copy(pose.begin(), pose.end(), g.ImageToReference);
+  g.Width = W;
+  g.Height = H;
+  return g;
+}
+
+struct Sweep
+{
+  TrainingData Data;
+  GaussianField Field;
+  std::vector<int> Owner; ///< frame each Gaussian was placed on
+};
+
+/// Frames at z = 0, 0.5, ..., 2.0 (flat) and 6.0, ..., 8.0 (turned by @p degrees), 30 Gaussians on each
+/// frame's plane (thin in elevation, inside the image).
+Sweep MakeSweep(double degrees)
+{
+  Sweep s;
+  s.Data.Width = W;
+  s.Data.Height = H;
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> x(-5.5, 5.5), y(-4.5, 4.5), scale(0.25, 0.6), r(-0.8, 0.8);
+  for (int k = 0; k < 10; ++k)
+  {
+    const bool after = k >= 5;
+    const std::array<double, 16> pose = Pose(after ? 6.0 + 0.5 * (k - 5) : 0.5 * k, after ? degrees : 0.0);
+    s.Data.Poses.push_back(pose);
+    s.Data.TrainFrames.push_back(k);
+    const double a = after ? degrees * M_PI / 180 : 0.0;
+    for (int g = 0; g < 30; ++g)
+    {
+      const double px = x(rng), py = y(rng);
+      // In the frame's plane: centre + px u + py v, v = (0, cos a, sin a).
+      s.Field.Means.insert(s.Field.Means.end(),
+        { float(px), float(py * std::cos(a)), float(pose[11] + 0.5 * (H - 1) * PixelSpacing * std::sin(a) +
+                                                py * std::sin(a)) });
+      s.Field.LogScales.insert(
+        s.Field.LogScales.end(), { float(std::log(scale(rng))), float(std::log(scale(rng))), float(std::log(0.03)) });
+      // Rotation about x by a, so the thin axis stays along the frame's normal.
+      s.Field.Quaternions.insert(s.Field.Quaternions.end(), { float(std::cos(a / 2)), float(std::sin(a / 2)), 0.f, 0.f });
+      s.Field.Reflectivities.push_back(float(r(rng)));
+      s.Owner.push_back(k);
+    }
+  }
+  return s;
+}
+
+std::vector<float> RenderS(const GaussianField& field, const std::array<double, 16>& pose)
+{
+  auto renderer = CreateCpuRenderer();
+  RenderOptions o;
+  o.ElevationSigma = Sigma;
+  o.Gamma = 1;
+  std::vector<float> S(W * H), I(W * H);
+  const SliceGeometry g = Slice(pose);
+  std::string error;
+  EXPECT_TRUE(renderer->Forward(field.View(), &g, 1, o, S.data(), I.data(), nullptr, &error)) << error;
+  return S;
+}
+
+double MaxAbs(const std::vector<float>& a)
+{
+  double m = 0;
+  for (float v : a)
+  {
+    m = std::max(m, double(std::abs(v)));
+  }
+  return m;
+}
+}
+
+TEST(GapFilling, InTheGapTheFieldShowsTheBlendOfTheFramesOnEitherSide)
+{
+  for (double degrees : { 0.0, 10.0 })
+  {
+    SCOPED_TRACE(degrees);
+    Sweep s = MakeSweep(degrees);
+    const GaussianField before = s.Field;
+    const std::array<double, 16> a = s.Data.Poses[4], b = s.Data.Poses[5];
+    // At fraction t of the way: the image centre moved linearly between the two frames' centres, turned
+    // by t times the angle (the slerp of two turns about one axis).
+    auto poseAt = [&](double t) {
+      std::array<double, 16> m = Pose(0, t * degrees);
+      for (int r = 0; r < 3; ++r)
+      {
+        auto centre = [&](const std::array<double, 16>& q) {
+          return q[4 * r] * 0.5 * (W - 1) + q[4 * r + 1] * 0.5 * (H - 1) + q[4 * r + 3];
+        };
+        m[4 * r + 3] += (1 - t) * centre(a) + t * centre(b) - centre(m);
+      }
+      return m;
+    };
+    const std::array<double, 16> middle = poseAt(0.5);
+    const std::vector<float> Sa = RenderS(before, a), Sb = RenderS(before, b);
+    const double peak = std::max(MaxAbs(Sa), MaxAbs(Sb));
+    ASSERT_GT(peak, 0.1);
+    EXPECT_LT(MaxAbs(RenderS(before, middle)), 1e-6 * peak) << "the gap is empty before filling";
+
+    const GapFillingReport report = FillElevationGaps(s.Field, s.Data, Sigma);
+    EXPECT_NEAR(report.TypicalSpacing, 0.5, 1e-6);
+    EXPECT_EQ(report.Gaps, 1);
+    EXPECT_GT(report.WidestGap, 3.5);
+    // Seven copy planes 0.5 mm apart (steps = 4 mm / 0.5 mm), each with the 30 Gaussians of both frames;
+    // the clearance (3 x 0.104 mm) keeps them all.
+    EXPECT_EQ(report.Added, 7 * 2 * 30);
+    ASSERT_EQ(s.Field.Count(), before.Count() + report.Added);
+    for (std::int64_t i = 0; i < before.Count(); ++i)
+    {
+      ASSERT_EQ(s.Field.Reflectivities[i], before.Reflectivities[i]) << "an existing Gaussian was changed";
+    }
+
+    // On the copy planes at t = 1/4 and 1/2 (t = k / 8): the blend (1 - t) S_a + t S_b.
+    for (double t : { 0.25, 0.5 })
+    {
+      const std::vector<float> St = RenderS(s.Field, poseAt(t));
+      double worst = 0;
+      for (int p = 0; p < W * H; ++p)
+      {
+        worst = std::max(worst, std::abs(St[p] - ((1 - t) * Sa[p] + t * Sb[p])));
+      }
+      EXPECT_LT(worst, 0.01 * peak) << "at t = " << t << ": not the blend of the bracketing frames";
+    }
+    // The training frames render as before (the nearest copies are 0.5 mm = 4.8 beam widths away).
+    for (const auto& pose : { a, b, s.Data.Poses[0] })
+    {
+      const std::vector<float> S0 = RenderS(before, pose), S1 = RenderS(s.Field, pose);
+      double change = 0;
+      for (int p = 0; p < W * H; ++p)
+      {
+        change = std::max(change, double(std::abs(S1[p] - S0[p])));
+      }
+      EXPECT_LT(change, 1e-3 * peak);
+    }
+  }
+}
+
+TEST(GapFilling, ASweepWithoutGapsOrTooFewFramesIsLeftAlone)
+{
+  Sweep s = MakeSweep(0);
+  // The same frames without the gap: the second stack moved next to the first.
+  for (int k = 5; k < 10; ++k)
+  {
+    s.Data.Poses[k] = Pose(0.5 * k, 0);
+  }
+  const std::int64_t n = s.Field.Count();
+  EXPECT_EQ(FillElevationGaps(s.Field, s.Data, Sigma).Added, 0);
+  // A gap narrower than the beam's reach (6 x sigma) is no gap.
+  Sweep wide = MakeSweep(0);
+  EXPECT_EQ(FillElevationGaps(wide.Field, wide.Data, 1.0).Added, 0);
+  s.Data.TrainFrames = { 4, 5 };
+  EXPECT_EQ(FillElevationGaps(s.Field, s.Data, Sigma).Added, 0);
+  EXPECT_EQ(s.Field.Count(), n);
+}
