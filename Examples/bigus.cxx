@@ -366,6 +366,7 @@ struct TrainOptions
   long long MaxGaussians = 0, InitialGaussians = 0;
   double GrowthMargin = 0;
   int GrowthPatience = 0;
+  bool NoFillGaps = false;
   unsigned Seed = 0;
 
   /// The filter's own defaults, so that `bigus train` and vtkGaussianFieldTrainer agree.
@@ -421,6 +422,7 @@ int RunTrain(const TrainOptions& o)
   trainer->SetInitialGaussians(o.InitialGaussians);
   trainer->SetGrowthMargin(o.GrowthMargin);
   trainer->SetGrowthPatience(o.GrowthPatience);
+  trainer->SetFillGaps(!o.NoFillGaps);
   trainer->SetElevationSigma(o.ElevationSigma);
   trainer->SetSeed(o.Seed);
   trainer->SetEvaluationInterval(o.EvaluationInterval);
@@ -519,6 +521,10 @@ int RunTrain(const TrainOptions& o)
       best->GetTuple1(0) < last->GetTuple1(0) ? "kept an earlier field" : "kept the last field", best->GetTuple1(0),
       fd->GetArray("BestIteration")->GetTuple1(0), last->GetTuple1(0));
   }
+  if (vtkAbstractArray* gaps = fd->GetAbstractArray("GapFilling"))
+  {
+    std::printf("gap filling    %s\n", gaps->GetVariantValue(0).ToString().c_str());
+  }
   std::printf("backend        %s\n", trainer->GetBackendInUse());
   return 0;
 }
@@ -566,12 +572,7 @@ int RunFillGaps(const FillGapsOptions& o)
   output->GetFieldData()->PassData(input->GetFieldData());
   vtkNew<vtkStringArray> note;
   note->SetName("GapFilling");
-  char text[300];
-  std::snprintf(text, sizeof(text),
-    "%d gaps bridged (widest %.2f mm; typical spacing %.3f mm), %lld Gaussians added (min gap %.3g spacings, "
-    "clearance %.3g beam widths)",
-    report.Gaps, report.WidestGap, report.TypicalSpacing, static_cast<long long>(report.Added),
-    o.Settings.MinimumGapSpacings, o.Settings.ClearanceSigmas);
+  const std::string text = bigus::DescribeGapFilling(report, o.Settings);
   note->InsertNextValue(text);
   output->GetFieldData()->AddArray(note);
   const std::string temporary = TemporaryName(o.Output);
@@ -584,7 +585,7 @@ int RunFillGaps(const FillGapsOptions& o)
     std::remove(temporary.c_str());
     return Fail(o.Output + ": cannot write the field");
   }
-  std::printf("%s: %lld Gaussians, %s\n", o.Output.c_str(), static_cast<long long>(before + report.Added), text);
+  std::printf("%s: %lld Gaussians, %s\n", o.Output.c_str(), static_cast<long long>(before + report.Added), text.c_str());
   return 0;
 }
 
@@ -1168,6 +1169,8 @@ int main(int argc, char** argv)
     "... over this many densification intervals in a row")
     ->capture_default_str()
     ->check(CLI::PositiveNumber);
+  trainCommand->add_flag("--no-fill-gaps", train.NoFillGaps,
+    "Leave gaps between training frames wider than the beam empty (default: bridged, as bigus fill-gaps does)");
   trainCommand->add_option("--elevation-sigma", train.ElevationSigma, "Elevation beam sigma, mm (FWHM / 2.355); 0: chosen from the sweep (frame spacing, speckle decorrelation)")
     ->capture_default_str();
   trainCommand->add_option("--backend", train.Backend, "Training backend: auto, cpu or cuda (as registered)")

@@ -130,6 +130,7 @@ int vtkGaussianFieldTrainer::RequestData(
   s.DensifyPercentile = this->DensifyPercentile;
   s.GrowthMargin = this->GrowthMargin;
   s.GrowthPatience = this->GrowthPatience;
+  s.FillGaps = this->FillGaps;
   s.Seed = this->Seed;
   s.CheckpointInterval = this->CheckpointInterval;
   s.CheckpointFile = this->CheckpointFile ? this->CheckpointFile : "";
@@ -262,6 +263,8 @@ int vtkGaussianFieldTrainer::RequestData(
     validationHistory->InsertNextTuple(tuple);
   }
   output->GetFieldData()->AddArray(validationHistory);
+  addText("GapFilling", this->FillGaps ? bigus::DescribeGapFilling(report.GapFilling, bigus::GapFillingSettings())
+                                       : std::string("off"));
   addText("StopReason", report.StopReason);
   addText("GrowthStopReason", report.GrowthStopReason);
   addText("Backend", this->BackendInUse);
@@ -312,6 +315,7 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "Densify schedule: start " << this->DensifyStart << ", end " << this->DensifyEnd << ", interval "
      << this->DensifyInterval << ", percentile " << this->DensifyPercentile << "\n";
   os << indent << "GrowthMargin: " << this->GrowthMargin << ", GrowthPatience: " << this->GrowthPatience << "\n";
+  os << indent << "FillGaps: " << this->FillGaps << "\n";
   os << indent << "HoldOutEvery: " << this->HoldOutEvery << ", HoldOutOffset: " << this->HoldOutOffset << "\n";
   os << indent << "TrainingFrameList: " << (this->TrainingFrameList ? this->TrainingFrameList->GetNumberOfIds() : 0)
      << " frames\n";

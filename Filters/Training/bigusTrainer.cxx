@@ -180,8 +180,16 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
         (s.DensifyEnd >= 0 ? Format("step %d", s.DensifyEnd)
                            : Format("%.0f %% of the schedule", 100 * DensifyEndFraction)) +
         Format(", top %.3g %% by attribution, at most %lld Gaussians", s.DensifyPercentile,
-          static_cast<long long>(s.MaximumGaussians))
+          static_cast<long long>(s.MaximumGaussians)) +
+        Format("; growth stops when the validation loss improves by less than %.3g %%", 100 * s.GrowthMargin) +
+        Format(" over %d intervals", s.GrowthPatience)
       : "Densification = off");
+  this->Report.Settings.push_back(s.FillGaps
+      ? Format("FillGaps = on (after training, gaps between training frames over %.3g typical spacings ",
+          s.GapFilling.MinimumGapSpacings) +
+        Format("are bridged by blended copies of the frames on either side, %.3g beam widths clear of them)",
+          s.GapFilling.ClearanceSigmas)
+      : "FillGaps = off");
   this->Report.Settings.push_back(Format("Seed = %u, FramesPerStep = %d, Cutoff = %.3g", s.Seed, s.FramesPerStep, s.Cutoff));
   this->Engine->SetData(this->Data.get(), nullptr);
 }
@@ -991,6 +999,23 @@ bool Trainer::Finish(std::string* error)
     return false;
   }
   this->Report.PrunedAtEnd = pruned;
+  if (s.FillGaps)
+  {
+    if (!this->PullState(error))
+    {
+      return false;
+    }
+    this->Report.GapFilling =
+      FillElevationGaps(this->State.Gaussians.Field, *this->Data, s.ElevationSigma, s.GapFilling);
+    if (this->Report.GapFilling.Added > 0)
+    {
+      this->State.Gaussians.ResizeToField();
+      if (!this->PushState(error))
+      {
+        return false;
+      }
+    }
+  }
   this->Report.Gaussians = this->GetField().Count();
   this->Report.Seconds += Seconds() - start;
   return true;

@@ -12,6 +12,7 @@
 
 #include "bigusTrainingModule.h" // For export macro
 #include "bigusElevationSigma.h"
+#include "bigusGapFilling.h"
 #include "bigusImageLoss.h"
 #include "bigusImageMetrics.h"
 #include "bigusRenderer.h"
@@ -68,6 +69,9 @@ struct TrainerSettings
   int GrowthPatience = 4;            ///< ... than the best so far over this many densification intervals in a row
   std::int64_t MaximumGaussians = 400000;
   double FinalPruneTolerance = 1.0 / 512; ///< final prune: max change of any training pixel's I
+  /// After the final prune, bridge gaps between training frames wider than the beam (FillElevationGaps).
+  bool FillGaps = true;
+  GapFillingSettings GapFilling;
   // Run
   unsigned Seed = 1;
   int CheckpointInterval = 0;        ///< steps between checkpoints (0 = none)
@@ -84,6 +88,7 @@ struct TrainerReport
   std::int64_t InitialGaussians = 0; ///< seeds the run started from
   std::int64_t Gaussians = 0;
   std::int64_t PrunedAtEnd = 0;
+  GapFillingReport GapFilling;      ///< what Finish's gap filling added (FillGaps)
   double Gamma = 0;
   double LastLoss = 0;              ///< mean loss of the last 50 steps
   double ElevationSigma = 0;        ///< mm, the sigma trained with (given or chosen)

@@ -145,17 +145,34 @@ TEST(GapFilling, InTheGapTheFieldShowsTheBlendOfTheFramesOnEitherSide)
     EXPECT_NEAR(report.TypicalSpacing, 0.5, 1e-6);
     EXPECT_EQ(report.Gaps, 1);
     EXPECT_GT(report.WidestGap, 3.5);
-    // Seven copy planes 0.5 mm apart (steps = 4 mm / 0.5 mm), each with the 30 Gaussians of both frames;
-    // the clearance (3 x 0.104 mm) keeps them all.
-    EXPECT_EQ(report.Added, 7 * 2 * 30);
+    // Copies 1.5 beam widths (1.5 x 0.104 mm) apart along the 4 mm, from 1.5 widths off either frame:
+    // 24 per Gaussian on parallel frames 4 mm apart (the tilted gap's length differs a little).
+    EXPECT_GE(report.Added, 20 * 2 * 30);
+    EXPECT_LE(report.Added, 26 * 2 * 30);
     ASSERT_EQ(s.Field.Count(), before.Count() + report.Added);
+    // The Gaussians of the two bracketing frames give up what their copies add at their frame (the
+    // nearest copy, 1.5 widths off at weight 0.6: about 0.6 exp(-1.125) = 0.19); no other one changes.
     for (std::int64_t i = 0; i < before.Count(); ++i)
     {
-      ASSERT_EQ(s.Field.Reflectivities[i], before.Reflectivities[i]) << "an existing Gaussian was changed";
+      const double ratio = s.Field.Reflectivities[i] / before.Reflectivities[i];
+      if (s.Owner[i] == 4 || s.Owner[i] == 5)
+      {
+        ASSERT_GT(ratio, 0.7);
+        ASSERT_LT(ratio, 0.9);
+      }
+      else
+      {
+        ASSERT_EQ(ratio, 1.0) << "Gaussian " << i << " of frame " << s.Owner[i] << " was changed";
+      }
+      for (int c = 0; c < 3; ++c)
+      {
+        ASSERT_EQ(s.Field.Means[3 * i + c], before.Means[3 * i + c]);
+      }
     }
 
-    // On the copy planes at t = 1/4 and 1/2 (t = k / 8): the blend (1 - t) S_a + t S_b.
-    for (double t : { 0.25, 0.5 })
+    // At t = 1/4, 1/2 and 0.6: the blend (1 - t) S_a + t S_b (the sum of the copies' profiles ripples
+    // by 3e-4; the blend weight varies linearly under each copy's profile).
+    for (double t : { 0.25, 0.5, 0.6 })
     {
       const std::vector<float> St = RenderS(s.Field, poseAt(t));
       double worst = 0;
@@ -163,9 +180,10 @@ TEST(GapFilling, InTheGapTheFieldShowsTheBlendOfTheFramesOnEitherSide)
       {
         worst = std::max(worst, std::abs(St[p] - ((1 - t) * Sa[p] + t * Sb[p])));
       }
-      EXPECT_LT(worst, 0.01 * peak) << "at t = " << t << ": not the blend of the bracketing frames";
+      EXPECT_LT(worst, 0.02 * peak) << "at t = " << t << ": not the blend of the bracketing frames";
     }
-    // The training frames render as before (the nearest copies are 0.5 mm = 4.8 beam widths away).
+    // The training frames render almost as before: each copied Gaussian gave up what its copies add at
+    // its frame (to first order: exactly at its centre; 19 % before that compensation).
     for (const auto& pose : { a, b, s.Data.Poses[0] })
     {
       const std::vector<float> S0 = RenderS(before, pose), S1 = RenderS(s.Field, pose);
@@ -174,7 +192,7 @@ TEST(GapFilling, InTheGapTheFieldShowsTheBlendOfTheFramesOnEitherSide)
       {
         change = std::max(change, double(std::abs(S1[p] - S0[p])));
       }
-      EXPECT_LT(change, 1e-3 * peak);
+      EXPECT_LT(change, 0.02 * peak);
     }
   }
 }
@@ -189,9 +207,9 @@ TEST(GapFilling, ASweepWithoutGapsOrTooFewFramesIsLeftAlone)
   }
   const std::int64_t n = s.Field.Count();
   EXPECT_EQ(FillElevationGaps(s.Field, s.Data, Sigma).Added, 0);
-  // A gap narrower than the beam's reach (6 x sigma) is no gap.
+  // A gap narrower than twice the clearance (2 x 1.5 x sigma) is no gap.
   Sweep wide = MakeSweep(0);
-  EXPECT_EQ(FillElevationGaps(wide.Field, wide.Data, 1.0).Added, 0);
+  EXPECT_EQ(FillElevationGaps(wide.Field, wide.Data, 1.5).Added, 0);
   s.Data.TrainFrames = { 4, 5 };
   EXPECT_EQ(FillElevationGaps(s.Field, s.Data, Sigma).Added, 0);
   EXPECT_EQ(s.Field.Count(), n);

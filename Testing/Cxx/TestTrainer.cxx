@@ -531,6 +531,41 @@ TEST(Trainer, GrowthStopsAfterPatienceIntervalsWithoutImprovementAndTheHistoryRe
   }
 }
 
+TEST(Trainer, FillingAGapBetweenTrainingFramesRendersTheFramesInsideItBetter)
+{
+  // 14 consecutive frames (2.8 mm, beam sigma 0.2 mm) held out of the known field's sweep: with
+  // FillGaps the frames in the gap are rendered from the blended copies of the frames on either side.
+  std::vector<int> unused;
+  TrainingData data = SyntheticSweep(KnownField(400, 3), 0.2, unused);
+  std::vector<int> gap;
+  data.TrainFrames.clear();
+  for (int k = 0; k < data.Count(); ++k)
+  {
+    (k >= 23 && k < 37 ? gap : data.TrainFrames).push_back(k);
+  }
+  TrainerSettings s;
+  s.ElevationSigma = 0.2;
+  s.InitialGaussians = 3000;
+  s.Iterations = 1500;
+  double psnr[2];
+  for (int fill = 0; fill < 2; ++fill)
+  {
+    s.FillGaps = fill == 1;
+    Trainer trainer(data, s);
+    std::string error;
+    ASSERT_TRUE(trainer.Initialize(&error)) << error;
+    ASSERT_TRUE(trainer.Run(nullptr, nullptr, &error)) << error;
+    psnr[fill] = HeldOutPsnr(trainer, gap);
+    const GapFillingReport& g = trainer.GetReport().GapFilling;
+    std::printf("FillGaps %s: frames in the gap %.2f dB; %s\n", fill ? "on" : "off", psnr[fill],
+      DescribeGapFilling(g, s.GapFilling).c_str());
+    EXPECT_EQ(g.Gaps, fill);
+    EXPECT_EQ(g.Added > 0, fill == 1);
+    EXPECT_EQ(trainer.GetField().Count(), trainer.GetReport().Gaussians);
+  }
+  EXPECT_GT(psnr[1], psnr[0] + 0.5); // measured: 20.24 -> 21.76 dB
+}
+
 TEST(Trainer, APoseTheRendererRejectsFailsTheRunWithItsMessage)
 {
   // A sweep read with a looser shear limit than the renderer's (the reader's MaximumShearAngle at 10

@@ -132,6 +132,55 @@ def check_sweep_without_statuses(field, sweep, xml, out):
     assert [f["frame"] for f in metrics["frames"]] == [2, 6, 10, 14, 18], metrics["frames"]
 
 
+def read_field(path):
+    reader = vtk.vtkXMLPolyDataReader()
+    reader.SetFileName(path)
+    reader.Update()
+    return reader.GetOutput()
+
+
+def check_fill_gaps(sweep, xml, out):
+    """Frames 6 to 13 left out of training: bigus train --no-fill-gaps leaves the gap empty, bigus fill-gaps
+    bridges it (and only adds Gaussians); train bridges it by default; bad inputs are refused by name."""
+    frames = [str(k) for k in range(20) if not 6 <= k <= 13]
+    empty = os.path.join(out, "nwire_gap.vtp")
+    code, out_text, err = run("train", sweep, "--calibration", xml, "-o", empty, "--frames", *frames,
+                              "--iterations", "20", "--elevation-sigma", "0.1", "--no-fill-gaps")
+    assert code == 0 and "FillGaps = off" in out_text and "gap filling    off" in out_text, (out_text, err)
+    filled = os.path.join(out, "nwire_gap_filled.vtp")
+    code, out_text, err = run("fill-gaps", empty, "-o", filled)
+    assert code == 0 and "1 gaps bridged" in out_text, (out_text, err)
+    before, after = read_field(empty), read_field(filled)
+    added = after.GetNumberOfPoints() - before.GetNumberOfPoints()
+    assert added > 0, added
+    assert "%d Gaussians added" % added in after.GetFieldData().GetAbstractArray("GapFilling").GetValue(0)
+    for name in ("TrainingPoses", "ElevationSigma", "Gamma"):  # the field data travels with the field
+        assert after.GetFieldData().GetArray(name) is not None, name
+    for i in (0, before.GetNumberOfPoints() - 1):  # the trained Gaussians come first, unchanged
+        assert after.GetPoint(i) == before.GetPoint(i), i
+    trained = os.path.join(out, "nwire_gap_trained.vtp")
+    code, out_text, err = run("train", sweep, "--calibration", xml, "-o", trained, "--frames", *frames,
+                              "--iterations", "20", "--elevation-sigma", "0.1")
+    assert code == 0 and "FillGaps = on" in out_text and "gap filling    1 gaps bridged" in out_text, out_text
+    assert read_field(trained).GetNumberOfPoints() == after.GetNumberOfPoints()
+
+    kept = open(empty, "rb").read()
+    code, _, err = run("fill-gaps", empty, "-o", empty)
+    assert code == 1 and "overwrite" in err and open(empty, "rb").read() == kept, err
+    poly = read_field(empty)
+    poly.GetFieldData().RemoveArray("TrainingPoses")
+    poly.GetFieldData().RemoveArray("TrainingFrameSize")
+    poly.GetFieldData().RemoveArray("TrainingFanMask")
+    bare = os.path.join(out, "nwire_bare.vtp")
+    writer = vtk.vtkXMLPolyDataWriter()
+    writer.SetInputData(poly)
+    writer.SetFileName(bare)
+    writer.Write()
+    code, _, err = run("fill-gaps", bare, "-o", os.path.join(out, "bare_filled.vtp"))
+    assert code == 1 and err.count("\n") == 1 and "no field data TrainingPoses" in err, err
+    assert not os.path.exists(os.path.join(out, "bare_filled.vtp"))
+
+
 def main():
     global BIGUS
     data, _, BIGUS, out = sys.argv[1:5]
@@ -186,6 +235,8 @@ def main():
     reader.Update()
     frames = reader.GetOutput().GetFieldData().GetArray("TrainingFrames")
     assert sorted(int(frames.GetTuple1(k)) for k in range(frames.GetNumberOfTuples())) == [0, 1, 3]
+
+    check_fill_gaps(sweep, xml, out)
 
     rendered = os.path.join(out, "nwire_rendered.igs.mha")
     code, out_text, err = run("render", field, "--poses", sweep, "--calibration", xml, "--frames", "2", "6", "10",
