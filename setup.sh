@@ -97,7 +97,7 @@ case "$mode" in
     mkdir -p "$report"
     "$root/build/bin/bigus" info "$sweep"
     "$root/build/bin/bigus" train "$sweep" -o "$report/liver_field.vtp" --holdout-every 4 --holdout-offset 2 \
-      --time-budget "${BIGUS_TIME_BUDGET:-300}" --elevation-sigma 0.3 --evaluate-every 30
+      --time-budget "${BIGUS_TIME_BUDGET:-300}" --evaluate-every 30
     "$root/build/bin/bigus" evaluate "$report/liver_field.vtp" "$sweep" --holdout-every 4 --holdout-offset 2 \
       --report "$report"
     echo "report: $report (metrics.json, side-by-side PNGs, slice_orthogonal.png, slice_oblique.png," \

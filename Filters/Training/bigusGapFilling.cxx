@@ -1,5 +1,6 @@
 #include "bigusGapFilling.h"
 
+#include "bigusGaussianMath.h"
 #include "bigusSliceFrame.h"
 
 #include <Eigen/Geometry>
@@ -72,7 +73,7 @@ GapFillingReport FillElevationGaps(
       return report; // Initialize rejects such poses; nothing to bridge from
     }
   }
-  if (frames.size() < 3)
+  if (frames.size() < 3 || !(elevationSigma > 0) || !std::isfinite(elevationSigma))
   {
     return report;
   }
@@ -90,7 +91,7 @@ GapFillingReport FillElevationGaps(
   for (std::size_t k = 0; k + 1 < frames.size(); ++k)
   {
     if (spacing[k] > settings.MinimumGapSpacings * report.TypicalSpacing &&
-      spacing[k] > 2 * settings.ClearanceSigmas * elevationSigma)
+      spacing[k] > 2 * settings.ClearanceSigmas * elevationSigma && spacing[k] <= settings.MaximumGapMm)
     {
       gaps.push_back(k);
     }
@@ -114,6 +115,10 @@ GapFillingReport FillElevationGaps(
         nearest = z;
         owner[i] = static_cast<int>(k);
       }
+    }
+    if (owner[i] < 0) // a non-finite mean
+    {
+      continue;
     }
     const Plane& p = planes[owner[i]];
     if (!InsideImage(p, p.R.transpose() * (mu - p.Origin), data.Width, data.Height))
@@ -153,7 +158,8 @@ GapFillingReport FillElevationGaps(
         double v = sigma2;
         for (int c = 0; c < 3; ++c)
         {
-          const double sc = std::exp(double(field.LogScales[3 * i + c]));
+          const double l = field.LogScales[3 * i + c];
+          const double sc = std::exp(std::isfinite(l) ? std::clamp(l, MinimumLogScale, MaximumLogScale) : 0.0);
           v += R0(2, c) * R0(2, c) * sc * sc;
         }
         const double width = std::sqrt(v);
@@ -161,6 +167,10 @@ GapFillingReport FillElevationGaps(
         // place relative to the first frame to its place relative to the second, along the normal.
         const double gap = std::abs(middleNormal.dot(b.Centre + b.R * local - a.Centre - a.R * local));
         const double h = LatticeSpacing * width;
+        if (!std::isfinite(gap) || !std::isfinite(h) || gap > 2 * settings.MaximumGapMm)
+        {
+          continue; // a non-finite rotation
+        }
         const int count = static_cast<int>(std::floor(gap / h));
         const double scale = h / std::sqrt(2 * M_PI * v);
         for (int j = 1; j <= count; ++j)

@@ -42,6 +42,9 @@ struct GapFillingSettings
   /// A gap: two consecutive training frames (by index) whose image centres lie further apart along
   /// their normals than this many times the sweep's typical spacing (the median over consecutive pairs).
   double MinimumGapSpacings = 3.0;
+  /// Gaps wider than this (mm) are left empty: a linear blend across them would be a guess (two sweeps,
+  /// the probe moved elsewhere).
+  double MaximumGapMm = 25.0;
   /// Copies nearer a bracketing plane than this many of their beam widths sqrt(v) are left out.
   double ClearanceSigmas = 1.5;
 };
@@ -57,8 +60,9 @@ struct GapFillingReport
 /**
  * Adds the bridging copies to @p field (appended after its Gaussians; the existing ones are unchanged).
  * @param data            the training frames (TrainFrames, Poses, Width, Height).
- * @param elevationSigma  the beam sigma the field was trained with, mm.
- * @return what was done; no gap (or fewer than three training frames) adds nothing.
+ * @param elevationSigma  the beam sigma the field was trained with, mm (> 0; otherwise nothing is done).
+ * @return what was done; no gap (or fewer than three training frames, or a Gaussian with a non-finite
+ *         mean, which is skipped) adds nothing.
  */
 BIGUSTRAINING_EXPORT GapFillingReport FillElevationGaps(GaussianField& field, const TrainingData& data,
   double elevationSigma, const GapFillingSettings& settings = GapFillingSettings());

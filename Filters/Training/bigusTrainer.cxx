@@ -999,7 +999,7 @@ bool Trainer::Finish(std::string* error)
     return false;
   }
   this->Report.PrunedAtEnd = pruned;
-  if (s.FillGaps)
+  if (s.FillGaps && s.BeamIntegration)
   {
     if (!this->PullState(error))
     {

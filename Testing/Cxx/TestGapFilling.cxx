@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -213,4 +214,31 @@ TEST(GapFilling, ASweepWithoutGapsOrTooFewFramesIsLeftAlone)
   s.Data.TrainFrames = { 4, 5 };
   EXPECT_EQ(FillElevationGaps(s.Field, s.Data, Sigma).Added, 0);
   EXPECT_EQ(s.Field.Count(), n);
+}
+
+TEST(GapFilling, NonFiniteGaussiansAndAZeroBeamAddNothingAndNeverCrash)
+{
+  Sweep s = MakeSweep(0);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  // Gaussian 120 sits on frame 4 (the first frame of the gap): a NaN mean, then a NaN scale and rotation.
+  s.Field.Means[3 * 120] = nan;
+  s.Field.LogScales[3 * 121] = nan;
+  s.Field.Quaternions[4 * 122] = nan;
+  const GaussianField before = s.Field;
+  GaussianField field = s.Field;
+  EXPECT_EQ(FillElevationGaps(field, s.Data, 0.0).Added, 0); // no beam: nothing to extrude
+  EXPECT_EQ(field.Count(), before.Count());
+  const GapFillingReport report = FillElevationGaps(field, s.Data, Sigma);
+  EXPECT_EQ(report.Gaps, 1);
+  // The Gaussians of the two frames, less the NaN mean and the NaN rotation (skipped); the NaN scale
+  // counts as a scale of 1 mm, as the renderer takes it. Every copy is finite.
+  EXPECT_GT(report.Added, 0);
+  for (std::int64_t i = before.Count(); i < field.Count(); ++i)
+  {
+    for (int c = 0; c < 3; ++c)
+    {
+      ASSERT_TRUE(std::isfinite(field.Means[3 * i + c])) << "copy " << i;
+    }
+    ASSERT_TRUE(std::isfinite(field.Reflectivities[i])) << "copy " << i;
+  }
 }
