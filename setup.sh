@@ -61,7 +61,7 @@ run_tests() {
     -DBIGUS_ENABLE_SANITIZERS=ON -DBIGUS_CUDA=OFF
   cmake --build "$root/build-asan" -j "$jobs"
   ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-    ctest --test-dir "$root/build-asan" --output-on-failure -j "$jobs" -L "reader|filters|rendering|losses|reference"
+    ctest --test-dir "$root/build-asan" --output-on-failure -j "$jobs" -L "reader|filters|rendering|losses|reference|gapfilling"
 
   echo "== libFuzzer: sequence metafile header parser"
   cmake -S "$root/Testing/Fuzz" -B "$root/build-fuzz" -G Ninja -DCMAKE_CXX_COMPILER=clang++ \
