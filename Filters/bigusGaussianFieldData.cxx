@@ -146,6 +146,22 @@ const TrainingCoverage* FieldCache::GetCoverage(std::string* error) const
   return &this->Coverage;
 }
 
+bool FieldCache::GetOutputCoverage(bool wanted, const TrainingCoverage*& coverage, std::string* error) const
+{
+  coverage = nullptr;
+  if (!wanted)
+  {
+    return true;
+  }
+  const TrainingCoverage* c = this->GetCoverage(error);
+  if (!c)
+  {
+    return false;
+  }
+  coverage = c->IsEmpty() ? nullptr : c;
+  return true;
+}
+
 Renderer* RendererCache::Get(const std::string& name, std::string* error, std::string* notice)
 {
   if (!this->Held || name != this->Name)

@@ -157,6 +157,12 @@ public:
    * Only a render that outputs coverage asks, so a malformed geometry fails only such a render.
    */
   const TrainingCoverage* GetCoverage(std::string* error) const;
+  /**
+   * The coverage a render filter outputs (its OutputCoverage flag @p wanted): @p coverage is null when
+   * not wanted or when the field has no training geometry (no Coverage array then), else
+   * GetCoverage's. Returns false with @p error when wanted and the geometry is malformed.
+   */
+  bool GetOutputCoverage(bool wanted, const TrainingCoverage*& coverage, std::string* error) const;
 
 private:
   vtkWeakPointer<vtkPolyData> Source;

@@ -107,19 +107,11 @@ int vtkGaussianFieldSequenceRenderer::RequestData(
   {
     vtkWarningMacro("Backend: " << notice);
   }
-  const bigus::TrainingCoverage* coverage = nullptr;
-  if (this->OutputCoverage)
+  const bigus::TrainingCoverage* coverage = nullptr; // null: no Coverage array (see the class description)
+  if (!field.GetOutputCoverage(this->OutputCoverage, coverage, &error))
   {
-    coverage = field.GetCoverage(&error);
-    if (!coverage)
-    {
-      vtkErrorMacro(<< error << " (OutputCoverage off renders without the coverage image)");
-      return 0;
-    }
-    if (coverage->IsEmpty())
-    {
-      coverage = nullptr; // no training geometry: no Coverage array
-    }
+    vtkErrorMacro(<< error << " (OutputCoverage off renders without the coverage image)");
+    return 0;
   }
   int dims[3];
   sequence->GetDimensions(dims);
