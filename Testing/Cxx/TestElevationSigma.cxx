@@ -2,6 +2,7 @@
 // from known fields with a known beam sigma and frame spacing.
 #include "bigusElevationSigma.h"
 #include "bigusTrainer.h"
+#include "bigusTrainingTestUtilities.h"
 
 #include <gtest/gtest.h>
 
@@ -42,25 +43,13 @@ GaussianField SpeckleField(int n, double depth, unsigned seed)
 /// with elevation sigma @p sigma; every 4th frame (k mod 4 == 2) is held out.
 TrainingData Sweep(const GaussianField& truth, double sigma, double spacing, int frames, std::vector<int>& heldOut)
 {
-  TrainingData d;
-  d.Width = W;
-  d.Height = H;
-  d.Mask.assign(W * H, 1);
-  auto renderer = CreateCpuRenderer();
-  RenderOptions o;
-  o.ElevationSigma = sigma;
-  o.Gamma = 1.0;
-  std::vector<float> S(W * H), I(W * H);
+  std::vector<std::array<double, 16>> poses;
   for (int k = 0; k < frames; ++k)
   {
     const double z = (k - 0.5 * (frames - 1)) * spacing;
-    d.Poses.push_back({ Pixel, 0, 0, 0, 0, Pixel, 0, 0, 0, 0, 0, z, 0, 0, 0, 1 });
-    const SliceGeometry g = d.Slice(k);
-    EXPECT_TRUE(renderer->Forward(truth.View(), &g, 1, o, S.data(), I.data(), nullptr, nullptr));
-    d.Frames.insert(d.Frames.end(), I.begin(), I.end());
-    (k % 4 == 2 ? heldOut : d.TrainFrames).push_back(k);
+    poses.push_back({ Pixel, 0, 0, 0, 0, Pixel, 0, 0, 0, 0, 0, z, 0, 0, 0, 1 });
   }
-  return d;
+  return RenderedSweep(truth, poses, W, H, sigma, heldOut);
 }
 
 /// Mean PSNR of the held-out frames after training with @p sigma (fixed seed and steps).

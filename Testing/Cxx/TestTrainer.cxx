@@ -3,6 +3,7 @@
 #include "bigusTestUtilities.h"
 #include "bigusElevationSigma.h"
 #include "bigusTrainer.h"
+#include "bigusTrainingTestUtilities.h"
 
 #include "vtkCallbackCommand.h"
 #include "vtkDataArray.h"
@@ -76,27 +77,12 @@ GaussianField KnownField(int n, unsigned seed)
 /// 60 frames rendered from the known field; frames with k mod 4 == 2 are held out.
 TrainingData SyntheticSweep(const GaussianField& truth, double sigmaE, std::vector<int>& heldOut)
 {
-  TrainingData d;
-  d.Width = W;
-  d.Height = H;
-  d.Mask.assign(W * H, 1);
-  auto renderer = CreateCpuRenderer();
-  RenderOptions o;
-  o.ElevationSigma = sigmaE;
-  o.Gamma = 1.0;
-  std::vector<float> S(W * H), I(W * H);
+  std::vector<std::array<double, 16>> poses;
   for (int k = 0; k < 60; ++k)
   {
-    d.Poses.push_back(SweepPose(k));
-    SliceGeometry g;
-    std::copy(d.Poses.back().begin(), d.Poses.back().end(), g.ImageToReference);
-    g.Width = W;
-    g.Height = H;
-    EXPECT_TRUE(renderer->Forward(truth.View(), &g, 1, o, S.data(), I.data(), nullptr, nullptr));
-    d.Frames.insert(d.Frames.end(), I.begin(), I.end());
-    (k % 4 == 2 ? heldOut : d.TrainFrames).push_back(k);
+    poses.push_back(SweepPose(k));
   }
-  return d;
+  return RenderedSweep(truth, poses, W, H, sigmaE, heldOut);
 }
 
 double Psnr(const float* a, const float* b, int n)

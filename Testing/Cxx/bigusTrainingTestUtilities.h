@@ -1,0 +1,43 @@
+// Test helper for the trainer's tests: a sweep rendered from a known field (header only, so that the
+// tests that do not link BIGUS::Training keep bigusTestUtilities free of it).
+#ifndef bigusTrainingTestUtilities_h
+#define bigusTrainingTestUtilities_h
+
+#include "bigusRenderer.h"
+#include "bigusTrainingEngine.h"
+
+#include <gtest/gtest.h>
+
+#include <array>
+#include <vector>
+
+namespace bigus
+{
+/// Frames of @p width x @p height pixels at @p poses, rendered from @p truth by the CPU renderer with
+/// elevation sigma @p sigma (mm) and gamma 1, mask all ones; frames with k mod 4 == 2 go to @p heldOut,
+/// the others to TrainFrames.
+inline TrainingData RenderedSweep(const GaussianField& truth, const std::vector<std::array<double, 16>>& poses,
+  int width, int height, double sigma, std::vector<int>& heldOut)
+{
+  TrainingData d;
+  d.Width = width;
+  d.Height = height;
+  d.Mask.assign(std::size_t(width) * height, 1);
+  d.Poses = poses;
+  auto renderer = CreateCpuRenderer();
+  RenderOptions o;
+  o.ElevationSigma = sigma;
+  o.Gamma = 1.0;
+  std::vector<float> S(d.Mask.size()), I(d.Mask.size());
+  for (int k = 0; k < d.Count(); ++k)
+  {
+    const SliceGeometry g = d.Slice(k);
+    EXPECT_TRUE(renderer->Forward(truth.View(), &g, 1, o, S.data(), I.data(), nullptr, nullptr));
+    d.Frames.insert(d.Frames.end(), I.begin(), I.end());
+    (k % 4 == 2 ? heldOut : d.TrainFrames).push_back(k);
+  }
+  return d;
+}
+}
+
+#endif
