@@ -24,6 +24,7 @@ packages=(
   libgtest-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev
   clang libclang-rt-14-dev
   xvfb xauth
+  paraview paraview-dev
 )
 
 install_dependencies() {
@@ -42,8 +43,53 @@ install_dependencies() {
   $sudo apt-get install -y -q --no-install-recommends "${packages[@]}"
 }
 
+# ParaView 5.11's Python side (pvpython, the `paraview` package and ParaView's own `vtkmodules`) is in
+# python3-paraview, which conflicts with python3-vtk9 (a dependency of libvtk9-dev) because both put
+# `vtkmodules` in /usr/lib/python3/dist-packages. So it is unpacked, not installed, into a side prefix
+# that mirrors /usr: a real copy of ParaView's CMake package (its import files check that
+# vtkmodules/*.so exist next to their own prefix) and links to everything else in /usr. Nothing in
+# /usr changes; pvpython runs from there (build-paraview-prefix/usr/bin/pvpython).
+paraview_prefix="$root/build-paraview-prefix"
+prepare_paraview_prefix() {
+  local usr="$paraview_prefix/usr" version
+  dpkg-query -W -f='${Status}' paraview 2>/dev/null | grep -q "install ok installed" || return 0
+  version=$(dpkg-query -W -f='${Version}' paraview)
+  [ -e "$usr/lib/x86_64-linux-gnu/cmake/paraview-5.11/paraview-config.cmake" ] &&
+    [ "$(cat "$paraview_prefix/version" 2>/dev/null)" = "$version" ] && return 0
+  echo "setup: unpacking python3-paraview $version into $paraview_prefix"
+  rm -rf "$paraview_prefix"
+  mkdir -p "$paraview_prefix/deb"
+  if ! (cd "$paraview_prefix/deb" && apt-get download -q "python3-paraview=$version" ||
+    { apt-get update -q && apt-get download -q "python3-paraview=$version"; }); then
+    echo "setup: could not download python3-paraview $version; the ParaView plugin is not built"
+    rm -rf "$paraview_prefix"
+    return 0
+  fi
+  dpkg-deb -x "$paraview_prefix"/deb/python3-paraview_*.deb "$paraview_prefix"
+  rm -rf "$paraview_prefix/deb"
+  link_missing() {
+    mkdir -p "$2"
+    local entry
+    for entry in "$1"/*; do
+      [ -e "$2/${entry##*/}" ] || [ -L "$2/${entry##*/}" ] || ln -s "$entry" "$2/${entry##*/}"
+    done
+  }
+  mkdir -p "$usr/lib/x86_64-linux-gnu/cmake"
+  cp -r /usr/lib/x86_64-linux-gnu/cmake/paraview-5.11 "$usr/lib/x86_64-linux-gnu/cmake/"
+  for dir in bin include share lib lib/x86_64-linux-gnu lib/x86_64-linux-gnu/cmake \
+    lib/x86_64-linux-gnu/vtk/hierarchy lib/x86_64-linux-gnu/vtk/hierarchy/ParaView; do
+    link_missing "/usr/$dir" "$usr/$dir"
+  done
+  echo "$version" >"$paraview_prefix/version"
+}
+
 build() {
-  cmake -S "$root" -B "$root/build" -G Ninja -DCMAKE_BUILD_TYPE=Release
+  prepare_paraview_prefix
+  local paraview=()
+  if [ -e "$paraview_prefix/version" ]; then
+    paraview=(-DBIGUS_PARAVIEW_DIR="$paraview_prefix/usr/lib/x86_64-linux-gnu/cmake/paraview-5.11")
+  fi
+  cmake -S "$root" -B "$root/build" -G Ninja -DCMAKE_BUILD_TYPE=Release "${paraview[@]}"
   cmake --build "$root/build" -j "$jobs"
 }
 

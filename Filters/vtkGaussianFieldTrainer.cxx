@@ -17,6 +17,7 @@
 #include "vtkObjectFactory.h"
 #include "vtkPointData.h"
 #include "vtkPolyData.h"
+#include "vtkStreamingDemandDrivenPipeline.h"
 #include "vtkStringArray.h"
 
 #include <algorithm>
@@ -48,6 +49,32 @@ int vtkGaussianFieldTrainer::FillInputPortInformation(int port, vtkInformation* 
   if (port == 1)
   {
     info->Set(vtkAlgorithm::INPUT_IS_OPTIONAL(), 1);
+  }
+  return 1;
+}
+
+int vtkGaussianFieldTrainer::RequestInformation(
+  vtkInformation*, vtkInformationVector**, vtkInformationVector* outputVector)
+{
+  // The executive copies the input image's WHOLE_EXTENT to the output by default; a consumer of the
+  // field (an image filter that fails its own RequestInformation) would otherwise inherit it.
+  outputVector->GetInformationObject(0)->Remove(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT());
+  return 1;
+}
+
+int vtkGaussianFieldTrainer::RequestUpdateExtent(
+  vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector*)
+{
+  // The trainer needs every frame whatever a consumer of the field asks for (as the other sequence
+  // filters here do); the default would copy the output's update request upstream.
+  for (int port = 0; port < 2; ++port)
+  {
+    vtkInformation* inInfo = inputVector[port]->GetInformationObject(0);
+    if (inInfo && inInfo->Has(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT()))
+    {
+      inInfo->Set(vtkStreamingDemandDrivenPipeline::UPDATE_EXTENT(),
+        inInfo->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT()), 6);
+    }
   }
   return 1;
 }

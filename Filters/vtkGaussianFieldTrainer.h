@@ -93,7 +93,7 @@ public:
   /// Connect the fan mask (W x H x 1 unsigned char, or W x H x N: one mask per frame) to port 1.
   void SetMaskConnection(vtkAlgorithmOutput* output) { this->SetInputConnection(1, output); }
 
-  ///@{ Elevation beam standard deviation (mm). Default 0.5.
+  ///@{ Elevation beam standard deviation (mm). Default 0: chosen from the sweep (bigusElevationSigma.h).
   vtkSetClampMacro(ElevationSigma, double, 0.0, 1000.0);
   vtkGetMacro(ElevationSigma, double);
   ///@}
@@ -229,6 +229,10 @@ protected:
   ~vtkGaussianFieldTrainer() override;
 
   int FillInputPortInformation(int port, vtkInformation* info) override;
+  /// The field is point data: the sequence's whole extent, copied by default, is removed from it.
+  int RequestInformation(vtkInformation*, vtkInformationVector**, vtkInformationVector*) override;
+  /// Every frame of the sequence and the whole mask, whatever extent a consumer of the field asked for.
+  int RequestUpdateExtent(vtkInformation*, vtkInformationVector**, vtkInformationVector*) override;
   int RequestData(vtkInformation*, vtkInformationVector**, vtkInformationVector*) override;
 
   double ElevationSigma = 0;

@@ -8,7 +8,10 @@
 #include "vtkCallbackCommand.h"
 #include "vtkDataArray.h"
 #include "vtkDoubleArray.h"
+#include "vtkGaussianFieldReslice.h"
 #include "vtkGaussianFieldTrainer.h"
+#include "vtkInformation.h"
+#include "vtkStreamingDemandDrivenPipeline.h"
 #include "vtkIdList.h"
 #include "vtkPointData.h"
 #include "vtkPolyData.h"
@@ -959,4 +962,42 @@ TEST(GaussianFieldTrainer, PipelineOutputsTheFieldOfTheDataModel)
   ASSERT_EQ(messages->Errors.size(), 1u);
   EXPECT_NE(messages->Errors[0].find("frame " + std::to_string(data.Count()) + " is outside"), std::string::npos)
     << messages->Errors[0];
+}
+
+// A slice downstream of the trainer asks for its own small extent: the reader still reads every frame,
+// and the field, being points, does not carry the sequence's WHOLE_EXTENT (the executive copies it by
+// default; an image filter after the field that fails its RequestInformation kept it, and ParaView then
+// rendered the next valid slice on the sequence's 200 x 150 x 20 grid).
+TEST(GaussianFieldTrainer, ASliceDownstreamDoesNotCropTheSequence)
+{
+  const std::string dir = std::string(BIGUS_TEST_DATA) + "/nwire-phantom/";
+  vtkNew<vtkUltrasoundSequenceReader> reader;
+  reader->SetFileName((dir + "NwirePhantomFreehandCropped.igs.mha").c_str());
+  reader->SetCalibrationFileName((dir + "PlusDeviceSet_NwirePhantomFreehand_vtkVolumeReconstructorTest2.xml").c_str());
+  vtkNew<vtkGaussianFieldTrainer> trainer;
+  trainer->SetInputConnection(reader->GetOutputPort());
+  trainer->SetIterations(20);
+  trainer->SetInitialGaussians(300);
+  trainer->SetElevationSigma(0.5);
+  trainer->SetHoldOutEvery(4);
+  trainer->SetHoldOutOffset(2);
+  vtkNew<vtkGaussianFieldReslice> reslice;
+  reslice->SetInputConnection(trainer->GetOutputPort());
+  reslice->SetOutputSpacing(0.1, 0.1, 1);
+  reslice->SetOutputOrigin(0, 0, 0);
+  reslice->SetOutputExtent(0, 9, 0, 7, 0, 0);
+  reslice->Update();
+
+  int dims[3];
+  reader->GetOutput()->GetDimensions(dims);
+  EXPECT_EQ(dims[0], 200);
+  EXPECT_EQ(dims[1], 150);
+  EXPECT_EQ(dims[2], 20);
+  vtkDataArray* poses = trainer->GetOutput()->GetFieldData()->GetArray("TrainingPoses");
+  ASSERT_NE(poses, nullptr);
+  EXPECT_EQ(poses->GetNumberOfTuples(), 15); // 20 frames, k mod 4 == 2 held out
+  EXPECT_FALSE(trainer->GetOutputInformation(0)->Has(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT()));
+  reslice->GetOutput()->GetDimensions(dims);
+  EXPECT_EQ(dims[0], 10);
+  EXPECT_EQ(dims[1], 8);
 }

@@ -1,0 +1,149 @@
+"""pvpython (no display): the BIGUS plugin in ParaView reads, trains, slices and reports bad input.
+
+Usage: pvpython TestParaViewPlugin.py PLUGIN TEST_DATA_DIR OUTPUT_DIR
+
+Loads the plugin, reads the N-wire fixture through the plugin's reader (with its PLUS calibration),
+trains a field for 200 steps (about two seconds), saves it with ParaView's own XML writer, renders a
+slice with the plugin's slice filter at an oblique plane and saves the slice and the plane to
+OUTPUT_DIR (TestParaViewSliceMatchesVTK.py then renders the same plane with the VTK build and compares).
+Also checks: progress is reported and AbortExecute stops training early; a malformed sweep and a plane
+with a zero normal give an error message naming the problem and an empty output, not a crash.
+"""
+import json
+import os
+import sys
+
+import paraview.simple as pvs
+from vtkmodules.vtkCommonCore import vtkCommand, vtkOutputWindow, vtkStringOutputWindow
+
+
+def fail(message):
+    print("FAIL: " + message)
+    sys.exit(1)
+
+
+def main():
+    plugin, data, output = sys.argv[1:4]
+    os.makedirs(output, exist_ok=True)
+    pvs.LoadPlugin(plugin)  # adds the plugin's readers and filters to paraview.simple
+    for name in ("TrackedUltrasoundSequenceReader", "TrainGaussianField", "GaussianFieldSlice"):
+        if not hasattr(pvs, name):
+            fail("the plugin did not register " + name)
+
+    sweep = os.path.join(data, "nwire-phantom", "NwirePhantomFreehandCropped.igs.mha")
+    calibration = os.path.join(data, "nwire-phantom",
+                               "PlusDeviceSet_NwirePhantomFreehand_vtkVolumeReconstructorTest2.xml")
+    reader = pvs.TrackedUltrasoundSequenceReader(FileName=sweep, CalibrationFileName=calibration)
+    reader.UpdatePipeline()
+    info = reader.GetDataInformation()
+    if info.GetNumberOfPoints() != 200 * 150 * 20:
+        fail("reader: %d points, expected 200 x 150 x 20" % info.GetNumberOfPoints())
+
+    # Training, with progress counted and nothing aborted.
+    trainer = pvs.TrainGaussianField(Input=reader, Iterations=200, TimeBudget=0, Seed=1,
+                                     HoldOutEvery=4, HoldOutOffset=2, ElevationSigma=0.5,
+                                     InitialGaussians=2000, MaximumGaussians=4000)
+    algorithm = trainer.GetClientSideObject()
+    progress = []
+    tag = algorithm.AddObserver(vtkCommand.ProgressEvent, lambda o, e: progress.append(o.GetProgress()))
+    trainer.UpdatePipeline()
+    algorithm.RemoveObserver(tag)
+    field = trainer.GetClientSideObject().GetOutputDataObject(0)
+    steps = field.GetFieldData().GetArray("Iterations").GetValue(0)
+    if field.GetNumberOfPoints() < 100 or steps != 200:
+        fail("training: %d Gaussians after %d steps" % (field.GetNumberOfPoints(), steps))
+    if len(progress) < 10 or max(progress) < 0.99:
+        fail("training reported %d progress events, last %s" % (len(progress), progress[-1:]))
+    print("trained %d Gaussians in %d steps, %d progress events" % (field.GetNumberOfPoints(), steps,
+                                                                    len(progress)))
+    field_file = os.path.join(output, "paraview_field.vtp")
+    pvs.SaveData(field_file, proxy=trainer)
+
+    # The slice at an oblique plane through the middle of the sweep, written with ParaView's writer.
+    bounds = trainer.GetDataInformation().GetBounds()
+    centre = [0.5 * (bounds[2 * k] + bounds[2 * k + 1]) for k in range(3)]
+    plane = {"origin": centre, "normal": [0.3, -0.5, 0.8], "spacing": [0.1, 0.1, 1.0],
+             "dimensions": [160, 120, 1]}
+    slice_filter = pvs.GaussianFieldSlice(Input=trainer, SliceOrigin=plane["origin"],
+                                          SliceNormal=plane["normal"], SliceSpacing=plane["spacing"],
+                                          SliceDimensions=plane["dimensions"])
+    slice_filter.UpdatePipeline()
+    image = slice_filter.GetClientSideObject().GetOutputDataObject(0)
+    if image.GetDimensions() != (160, 120, 1):
+        fail("slice: dimensions %s, expected (160, 120, 1)" % (image.GetDimensions(),))
+    intensity = image.GetPointData().GetArray("Intensity")
+    if intensity is None or intensity.GetRange()[1] <= 0:
+        fail("slice: no Intensity, or all zero")
+    pvs.SaveData(os.path.join(output, "paraview_slice.vti"), proxy=slice_filter)
+    with open(os.path.join(output, "paraview_plane.json"), "w") as f:
+        json.dump(plane, f)
+
+    # A chain built before anything ran, updated from its end (the slice asks for a small extent): the
+    # trainer still gets every frame.
+    fresh = pvs.TrackedUltrasoundSequenceReader(FileName=sweep, CalibrationFileName=calibration)
+    fresh_field = pvs.TrainGaussianField(Input=fresh, Iterations=20, TimeBudget=0, InitialGaussians=300,
+                                         ElevationSigma=0.5, HoldOutEvery=4, HoldOutOffset=2)
+    fresh_slice = pvs.GaussianFieldSlice(Input=fresh_field, SliceOrigin=plane["origin"], SliceNormal=[0, 0, 1],
+                                         SliceSpacing=[0.2, 0.2, 1], SliceDimensions=[10, 8, 1])
+    fresh_slice.UpdatePipeline()
+    poses = fresh_field.GetClientSideObject().GetOutputDataObject(0).GetFieldData().GetArray("TrainingPoses")
+    if poses is None or poses.GetNumberOfTuples() != 15:
+        fail("a chain updated from its slice trained on %s frames, expected 15 of 20"
+             % (poses.GetNumberOfTuples() if poses else "no"))
+    if fresh_slice.GetDataInformation().GetNumberOfPoints() != 80:
+        fail("the slice of a fresh chain has %d points, expected 10 x 8"
+             % fresh_slice.GetDataInformation().GetNumberOfPoints())
+
+    # Abort: stop at the fifth progress event of a 100,000-step schedule.
+    aborting = pvs.TrainGaussianField(Input=reader, Iterations=100000, TimeBudget=0, Seed=1,
+                                      InitialGaussians=500, MaximumGaussians=1000)
+    algorithm = aborting.GetClientSideObject()
+    events = []
+
+    def stop(caller, event):
+        events.append(1)
+        if len(events) == 5:
+            caller.SetAbortExecute(1)
+    algorithm.AddObserver(vtkCommand.ProgressEvent, stop)
+    aborting.UpdatePipeline()
+    steps = algorithm.GetOutputDataObject(0).GetFieldData().GetArray("Iterations").GetValue(0)
+    if not 0 < steps < 1000:
+        fail("abort: training ran %d of 100,000 steps" % steps)
+    print("abort: training stopped after %d steps" % steps)
+
+    # Bad input: a malformed sweep, then a zero normal. Errors go to VTK's output window, which
+    # pvpython also uses for Python's own output: capture, restore, then check.
+    def errors_of(action):
+        default = vtkOutputWindow.GetInstance()
+        messages = vtkStringOutputWindow()
+        vtkOutputWindow.SetInstance(messages)
+        try:
+            action()
+        finally:
+            vtkOutputWindow.SetInstance(default)
+        return messages.GetOutput()
+
+    malformed = os.path.join(data, "Malformed", "corrupt_body.igs.mha")
+    bad = pvs.TrackedUltrasoundSequenceReader(FileName=malformed)
+    text = errors_of(bad.UpdatePipeline)
+    expected = "corrupt_body.igs.mha: corrupt compressed body"
+    if expected not in text or bad.GetDataInformation().GetNumberOfPoints() != 0:
+        fail("malformed sweep: no error %r in %r, or %d points" % (expected, text,
+                                                              bad.GetDataInformation().GetNumberOfPoints()))
+    print("malformed sweep: " + [line for line in text.splitlines() if expected in line][0].strip())
+    slice_filter.SliceNormal = [0, 0, 0]
+    text = errors_of(slice_filter.UpdatePipeline)
+    expected = "SliceNormal (0, 0, 0) is not a plane normal"
+    if expected not in text or slice_filter.GetDataInformation().GetNumberOfPoints() != 0:
+        fail("zero normal: no error %r in %r" % (expected, text))
+    print("zero normal: " + [line for line in text.splitlines() if expected in line][0].strip())
+    # A valid normal renders again.
+    slice_filter.SliceNormal = plane["normal"]
+    slice_filter.UpdatePipeline()
+    if slice_filter.GetDataInformation().GetNumberOfPoints() != 160 * 120:
+        fail("the slice did not render again after a valid normal: %d points, %s" % (slice_filter.GetDataInformation().GetNumberOfPoints(), slice_filter.GetClientSideObject().GetOutputDataObject(0).GetDimensions()))
+    print("ok")
+
+
+if __name__ == "__main__":
+    main()
