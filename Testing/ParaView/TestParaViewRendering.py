@@ -76,6 +76,16 @@ def main():
     lut.RescaleTransferFunction(0.0, 1.0)
     lut.AutomaticRescaleRangeMode = "Never"
 
+    # The field's default look in ParaView: points coloured by reflectivity (its active scalars).
+    points = pvs.Show(field, view)
+    look = (points.Representation, list(points.ColorArrayName))
+    print("the field shows as %s coloured by %s" % (look[0], look[1][1]))
+    if look[1][1] != "Reflectivity":
+        print("FAILED: the field is not coloured by Reflectivity by default")
+        sys.stdout.flush()
+        os._exit(1)
+    pvs.Hide(field, view)
+
     slice_filter = pvs.GaussianFieldSlice(Input=field, SliceOrigin=origin, SliceNormal=normal,
                                           SliceSpacing=[0.08, 0.08, 1.0], SliceDimensions=[200, 150, 1])
     shown = pvs.Show(slice_filter, view)
