@@ -9,6 +9,7 @@
 #include "vtkObjectFactory.h"
 #include "vtkStreamingDemandDrivenPipeline.h"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -19,12 +20,26 @@ vtkPVGaussianFieldReslice::vtkPVGaussianFieldReslice()
   this->UpdateAxesAndGrid();
 }
 
+namespace
+{
+/// Copies (x, y, z) into @p member; false when it held them already.
+template <typename T>
+bool Assign(T (&member)[3], T x, T y, T z)
+{
+  const T value[3] = { x, y, z };
+  if (std::equal(value, value + 3, member))
+  {
+    return false;
+  }
+  std::copy(value, value + 3, member);
+  return true;
+}
+}
+
 void vtkPVGaussianFieldReslice::SetSliceOrigin(double x, double y, double z)
 {
-  const double value[3] = { x, y, z };
-  if (!std::equal(value, value + 3, this->SliceOrigin))
+  if (Assign(this->SliceOrigin, x, y, z))
   {
-    std::copy(value, value + 3, this->SliceOrigin);
     this->UpdateAxesAndGrid();
     this->Modified();
   }
@@ -32,10 +47,8 @@ void vtkPVGaussianFieldReslice::SetSliceOrigin(double x, double y, double z)
 
 void vtkPVGaussianFieldReslice::SetSliceNormal(double x, double y, double z)
 {
-  const double value[3] = { x, y, z };
-  if (!std::equal(value, value + 3, this->SliceNormal))
+  if (Assign(this->SliceNormal, x, y, z))
   {
-    std::copy(value, value + 3, this->SliceNormal);
     this->UpdateAxesAndGrid();
     this->Modified();
   }
@@ -43,10 +56,8 @@ void vtkPVGaussianFieldReslice::SetSliceNormal(double x, double y, double z)
 
 void vtkPVGaussianFieldReslice::SetSliceSpacing(double x, double y, double z)
 {
-  const double value[3] = { x, y, z };
-  if (!std::equal(value, value + 3, this->SliceSpacing))
+  if (Assign(this->SliceSpacing, x, y, z))
   {
-    std::copy(value, value + 3, this->SliceSpacing);
     this->UpdateAxesAndGrid();
     this->Modified();
   }
@@ -54,10 +65,8 @@ void vtkPVGaussianFieldReslice::SetSliceSpacing(double x, double y, double z)
 
 void vtkPVGaussianFieldReslice::SetSliceDimensions(int x, int y, int z)
 {
-  const int value[3] = { x, y, z };
-  if (!std::equal(value, value + 3, this->SliceDimensions))
+  if (Assign(this->SliceDimensions, x, y, z))
   {
-    std::copy(value, value + 3, this->SliceDimensions);
     this->UpdateAxesAndGrid();
     this->Modified();
   }
