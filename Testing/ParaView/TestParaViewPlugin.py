@@ -6,8 +6,11 @@ Loads the plugin, reads the N-wire fixture through the plugin's reader (with its
 trains a field for 200 steps (about two seconds), saves it with ParaView's own XML writer, renders a
 slice with the plugin's slice filter at an oblique plane and saves the slice and the plane to
 OUTPUT_DIR (TestParaViewSliceMatchesVTK.py then renders the same plane with the VTK build and compares).
-Also checks: progress is reported and AbortExecute stops training early; a malformed sweep and a plane
-with a zero normal give an error message naming the problem and an empty output, not a crash.
+Also checks: the other proxies run (frame baselines, the field rendered at every pose and scored by the
+metrics filter, a compounded volume resampled at every pose); a chain updated only from its slice
+trains on every frame; progress is reported and AbortExecute stops training early; a malformed sweep
+and a plane with a zero normal give an error message naming the problem and an empty output, not a
+crash, and a valid normal renders again.
 """
 import json
 import os
