@@ -15,6 +15,7 @@
 // To regenerate a baseline after a deliberate change of rendering: delete it and run the test once
 // (`xvfb-run -a ctest --test-dir build -R RegressionImage`); vtkTesting writes the new image under the
 // baseline's name to build/Testing/Output and fails. Look at it, then copy it to Testing/Data/Baseline.
+#include "bigusReferenceGeometry.h"
 #include "bigusTestUtilities.h"
 
 #include "vtkCamera.h"
@@ -25,7 +26,6 @@
 #include "vtkImageData.h"
 #include "vtkImageMapper3D.h"
 #include "vtkImageProperty.h"
-#include "vtkMatrix4x4.h"
 #include "vtkNew.h"
 #include "vtkPiecewiseFunction.h"
 #include "vtkRegressionTestImage.h"
@@ -79,26 +79,7 @@ vtkSmartPointer<vtkGaussianFieldReslice> ReferenceReslice(const std::string& nam
   auto reslice = vtkSmartPointer<vtkGaussianFieldReslice>::New();
   reslice->SetInputConnection(reader->GetOutputPort());
   reslice->OutputCoverageOff();
-  if (geometry.contains("reslice_axes"))
-  {
-    const std::vector<double> m = geometry["reslice_axes"];
-    vtkNew<vtkMatrix4x4> axes;
-    axes->DeepCopy(m.data());
-    reslice->SetResliceAxes(axes);
-  }
-  const std::vector<double> spacing = geometry["output_spacing"];
-  reslice->SetOutputSpacing(spacing.data());
-  if (geometry.contains("output_origin"))
-  {
-    const std::vector<double> origin = geometry["output_origin"];
-    reslice->SetOutputOrigin(origin.data());
-  }
-  if (geometry.contains("output_extent"))
-  {
-    const std::vector<int> extent = geometry["output_extent"];
-    reslice->SetOutputExtent(extent.data());
-  }
-  reslice->SetOutputDimensionality(geometry["output_dimensionality"].get<int>());
+  bigus_test::ApplyReferenceGeometry(reslice, geometry);
   reslice->Update();
   if (reslice->GetOutput()->GetNumberOfPoints() == 0)
   {

@@ -6,6 +6,7 @@
 // tolerances here to make a change pass.
 #include "bigusBackend.h"
 #include "bigusGaussianFieldData.h"
+#include "bigusReferenceGeometry.h"
 #include "bigusTestUtilities.h"
 
 #include "vtkDataArray.h"
@@ -16,7 +17,6 @@
 #include "vtkGaussianFieldTrainer.h"
 #include "vtkIdList.h"
 #include "vtkImageData.h"
-#include "vtkMatrix4x4.h"
 #include "vtkMetaImageReader.h"
 #include "vtkMetaImageWriter.h"
 #include "vtkNew.h"
@@ -108,30 +108,7 @@ vtkSmartPointer<vtkImageData> RenderPlane(vtkPolyData* field, const nlohmann::js
 {
   vtkNew<vtkGaussianFieldReslice> reslice;
   reslice->SetInputData(field);
-  vtkNew<vtkMatrix4x4> axes;
-  if (plane.contains("reslice_axes"))
-  {
-    const std::vector<double> m = plane["reslice_axes"];
-    axes->DeepCopy(m.data());
-  }
-  for (int r = 0; r < 3; ++r)
-  {
-    axes->SetElement(r, 3, axes->GetElement(r, 3) + change.NormalShift * axes->GetElement(r, 2));
-  }
-  reslice->SetResliceAxes(axes);
-  const std::vector<double> spacing = plane["output_spacing"];
-  reslice->SetOutputSpacing(spacing.data());
-  if (plane.contains("output_origin"))
-  {
-    const std::vector<double> origin = plane["output_origin"];
-    reslice->SetOutputOrigin(origin.data());
-  }
-  if (plane.contains("output_extent"))
-  {
-    const std::vector<int> extent = plane["output_extent"];
-    reslice->SetOutputExtent(extent.data());
-  }
-  reslice->SetOutputDimensionality(plane["output_dimensionality"].get<int>());
+  bigus_test::ApplyReferenceGeometry(reslice, plane, change.NormalShift);
   if (change.SigmaFactor != 1)
   {
     reslice->SetElevationSigma(change.SigmaFactor * field->GetFieldData()->GetArray("ElevationSigma")->GetTuple1(0));

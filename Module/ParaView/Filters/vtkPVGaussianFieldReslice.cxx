@@ -72,7 +72,7 @@ void vtkPVGaussianFieldReslice::SetSliceDimensions(int x, int y, int z)
   }
 }
 
-bool vtkPVGaussianFieldReslice::UpdateAxesAndGrid()
+void vtkPVGaussianFieldReslice::UpdateAxesAndGrid()
 {
   this->PlaneError.clear();
   double n[3] = { this->SliceNormal[0], this->SliceNormal[1], this->SliceNormal[2] };
@@ -92,7 +92,7 @@ bool vtkPVGaussianFieldReslice::UpdateAxesAndGrid()
   this->PlaneError = error.str();
   if (!this->PlaneError.empty())
   {
-    return false;
+    return;
   }
   vtkMath::MultiplyScalar(n, 1.0 / length);
 
@@ -160,7 +160,6 @@ bool vtkPVGaussianFieldReslice::UpdateAxesAndGrid()
     }
     this->SetOutputSpacing(spacing);
   }
-  return true;
 }
 
 void vtkPVGaussianFieldReslice::SetOutputDimensionality(int dimensionality)

@@ -77,8 +77,8 @@ private:
   vtkPVGaussianFieldReslice(const vtkPVGaussianFieldReslice&) = delete;
   void operator=(const vtkPVGaussianFieldReslice&) = delete;
 
-  /// Sets the superclass's axes and grid from the plane; false (with the reason) for an invalid plane.
-  bool UpdateAxesAndGrid();
+  /// Sets the superclass's axes and grid from the plane, or PlaneError (the reason) for an invalid plane.
+  void UpdateAxesAndGrid();
   /// Reports an invalid plane with vtkErrorMacro; true when the plane is valid.
   bool CheckPlane();
   /// Moves the grid (origin in the reslice frame) to the world: origin and direction matrix, in the
