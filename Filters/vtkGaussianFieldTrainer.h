@@ -54,9 +54,9 @@
  *   intervals stopped growth on noise (liver: at iteration 1,800 of 3,600, 215k Gaussians).
  * - FillGaps on: a gap between training frames wider than the beam (frames dropped, the probe lifted)
  *   renders almost nothing from the trained Gaussians alone; bigus::FillElevationGaps extrudes the
- *   Gaussians of the two frames on its sides across it, blended linearly (liver, frames 66 to 73 out:
- *   28.62 -> 30.50 dB in the gap; 60 to 79 out: 21.46 -> 24.84), at the cost of 0.2 to 0.3 dB on the
- *   two bracketing training frames. A sweep without such gaps is unchanged.
+ *   two frames on its sides, as the field renders them, across it, blended linearly (liver, frames 66
+ *   to 73 out, 1,618 steps: 25.28 -> 29.62 dB in the gap, bracketing frames 31.35 / 34.21 -> 33.38 /
+ *   34.74 dB). A sweep without such gaps is unchanged.
  *
  * What limits held-out quality: held-out error is close to the training-frame error plus the error
  * of blending the two bracketing recorded frames (the part of a held-out frame that no neighbour

@@ -91,7 +91,7 @@ GapFillingReport FillElevationGaps(
   for (std::size_t k = 0; k + 1 < frames.size(); ++k)
   {
     if (spacing[k] > settings.MinimumGapSpacings * report.TypicalSpacing &&
-      spacing[k] > 2 * settings.ClearanceSigmas * elevationSigma && spacing[k] <= settings.MaximumGapMm)
+      spacing[k] > 2 * std::max(LatticeSpacing, settings.ClearanceSigmas) * elevationSigma && spacing[k] <= settings.MaximumGapMm)
     {
       gaps.push_back(k);
     }
@@ -100,35 +100,10 @@ GapFillingReport FillElevationGaps(
   {
     return report;
   }
-  // Each Gaussian's nearest training plane, where its mean projects inside that frame.
-  const std::int64_t n = field.Count();
-  std::vector<int> owner(n, -1);
-  for (std::int64_t i = 0; i < n; ++i)
-  {
-    const Eigen::Vector3d mu(field.Means[3 * i], field.Means[3 * i + 1], field.Means[3 * i + 2]);
-    double nearest = std::numeric_limits<double>::infinity();
-    for (std::size_t k = 0; k < planes.size(); ++k)
-    {
-      const double z = std::abs(planes[k].R.col(2).dot(mu - planes[k].Origin));
-      if (z < nearest)
-      {
-        nearest = z;
-        owner[i] = static_cast<int>(k);
-      }
-    }
-    if (owner[i] < 0) // a non-finite mean
-    {
-      continue;
-    }
-    const Plane& p = planes[owner[i]];
-    if (!InsideImage(p, p.R.transpose() * (mu - p.Origin), data.Width, data.Height))
-    {
-      owner[i] = -1;
-    }
-  }
   const double sigma2 = elevationSigma * elevationSigma;
-  // What the copies add at their Gaussian's own frame (relative to its own contribution there): taken
-  // off its reflectivity at the end, so that the training frames render as before.
+  const std::int64_t n = field.Count();
+  // What the copies add at the plane they were taken from, relative to what their Gaussian renders there:
+  // taken off its reflectivity at the end, so that the bracketing frames render as before.
   std::vector<double> added(n, 0.0);
   for (std::size_t k : gaps)
   {
@@ -139,21 +114,15 @@ GapFillingReport FillElevationGaps(
     for (int side = 0; side < 2; ++side)
     {
       const Plane& from = side == 0 ? a : b;
-      const int fromIndex = static_cast<int>(side == 0 ? k : k + 1);
       for (std::int64_t i = 0; i < n; ++i)
       {
-        if (owner[i] != fromIndex)
-        {
-          continue;
-        }
         const Eigen::Vector3d mu(field.Means[3 * i], field.Means[3 * i + 1], field.Means[3 * i + 2]);
-        const Eigen::Vector3d local = from.R.transpose() * (mu - from.Centre);
+        Eigen::Vector3d local = from.R.transpose() * (mu - from.Centre);
         const Eigen::Quaterniond q0 = Eigen::Quaterniond(field.Quaternions[4 * i], field.Quaternions[4 * i + 1],
           field.Quaternions[4 * i + 2], field.Quaternions[4 * i + 3])
                                         .normalized();
-        // Its profile across its own frame seen through the beam: exp(-z^2 / (2 v)), v = sigma_E^2 + its
-        // variance along the normal (bigusGaussianMath.h: P2[z,z]). Copies every h <= 2 sqrt(v) with
-        // weight h / sqrt(2 pi v) sum to that profile's peak wherever the lattice reaches.
+        // Its profile across the frame seen through the beam: exp(-(z - z_i)^2 / (2 v)), v = sigma_E^2 +
+        // its variance along the normal (bigusGaussianMath.h: P2[z,z]).
         const Eigen::Matrix3d R0 = from.R.transpose() * q0.toRotationMatrix();
         double v = sigma2;
         for (int c = 0; c < 3; ++c)
@@ -162,15 +131,29 @@ GapFillingReport FillElevationGaps(
           const double sc = std::exp(std::isfinite(l) ? std::clamp(l, MinimumLogScale, MaximumLogScale) : 0.0);
           v += R0(2, c) * R0(2, c) * sc * sc;
         }
-        const double width = std::sqrt(v);
+        const double width = std::sqrt(v), zi = local[2];
+        if (!std::isfinite(width) || !std::isfinite(zi) || std::abs(zi) > settings.ReachSigmas * width)
+        {
+          continue; // out of the frame's reach (or a non-finite mean or rotation)
+        }
+        // Taken onto the frame's plane with what it renders there: the copies carry the frame as the
+        // field renders it, from every Gaussian that contributes to it.
+        local[2] = 0;
+        if (!InsideImage(from, from.R.transpose() * (from.Centre - from.Origin) + local, data.Width, data.Height))
+        {
+          continue;
+        }
+        const double atPlane = std::exp(-zi * zi / (2 * v));
         // The gap's length where this Gaussian crosses it (the frames need not be parallel): from its
         // place relative to the first frame to its place relative to the second, along the normal.
         const double gap = std::abs(middleNormal.dot(b.Centre + b.R * local - a.Centre - a.R * local));
         const double h = LatticeSpacing * width;
-        if (!std::isfinite(gap) || !std::isfinite(h) || gap > 2 * settings.MaximumGapMm)
+        if (!std::isfinite(gap) || gap > 2 * settings.MaximumGapMm)
         {
-          continue; // a non-finite rotation
+          continue;
         }
+        // Copies every h = 1.5 sqrt(v) with weight h / sqrt(2 pi v) sum to the profile's peak wherever the
+        // lattice reaches (a partition of unity by Gaussian bumps).
         const int count = static_cast<int>(std::floor(gap / h));
         const double scale = h / std::sqrt(2 * M_PI * v);
         for (int j = 1; j <= count; ++j)
@@ -196,7 +179,9 @@ GapFillingReport FillElevationGaps(
           field.Quaternions[4 * c + 2] = static_cast<float>(q.y());
           field.Quaternions[4 * c + 3] = static_cast<float>(q.z());
           const double weight = (side == 0 ? 1 - t : t) * scale;
-          field.Reflectivities[c] = static_cast<float>(weight * field.Reflectivities[i]);
+          field.Reflectivities[c] = static_cast<float>(weight * atPlane * field.Reflectivities[i]);
+          // At the plane the Gaussian renders r exp(-z_i^2 / 2v) and this copy r weight exp(-z_i^2 / 2v)
+          // exp(-z^2 / 2v): relative to the Gaussian, weight exp(-z^2 / 2v), whatever z_i.
           added[i] += weight * std::exp(-z * z / (2 * v));
         }
       }

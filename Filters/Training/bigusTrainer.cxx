@@ -187,7 +187,7 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
   this->Report.Settings.push_back(s.FillGaps
       ? Format("FillGaps = on (after training, gaps between training frames over %.3g typical spacings ",
           s.GapFilling.MinimumGapSpacings) +
-        Format("are bridged by blended copies of the frames on either side, %.3g beam widths clear of them)",
+        Format("are bridged by blended copies of the frames on either side as rendered, %.3g beam widths clear of them)",
           s.GapFilling.ClearanceSigmas)
       : "FillGaps = off");
   this->Report.Settings.push_back(Format("Seed = %u, FramesPerStep = %d, Cutoff = %.3g", s.Seed, s.FramesPerStep, s.Cutoff));
