@@ -50,6 +50,7 @@
 #include <fstream>
 #include <functional>
 #include <limits>
+#include <numeric>
 #include <sstream>
 #include <string>
 #include <sys/stat.h>
@@ -546,22 +547,31 @@ CropReference RenderReference(const GaussianField& field, const RenderOptions& o
 struct Ablation
 {
   std::string Name;
-  std::function<void(TrainerSettings&)> Change;
+  /// Applies the switch; @p seeds is the mean seed count of the full method on the same sweep.
+  std::function<void(TrainerSettings&, std::int64_t seeds)> Change;
   std::string PaperDirection; ///< what the paper's Tables 3 and 4 say removing / adding it does
+  int PaperSign = -1;         ///< the sign of (variant - full method) in held-out PSNR that the paper reports
 };
 
 std::vector<Ablation> Ablations()
 {
   return {
-    { "random initialisation (not Harris)", [](TrainerSettings& s) { s.HarrisInitialisation = false; },
+    { "no EA-D (no densification)", [](TrainerSettings& s, std::int64_t) { s.Densify = false; }, "lower (EA-D helps)" },
+    { "random initialisation (not Harris)", [](TrainerSettings& s, std::int64_t) { s.HarrisInitialisation = false; },
       "lower (Harris initialisation helps)" },
-    { "no EA-D (no densification)", [](TrainerSettings& s) { s.Densify = false; }, "lower (EA-D helps)" },
-    { "L1 only (no D-SSIM)", [](TrainerSettings& s) { s.Loss.DSSIM = 0; }, "lower SSIM (D-SSIM helps structure)" },
-    { "L1 + D-SSIM + FFL (0.1)", [](TrainerSettings& s) { s.Loss.FFL = 0.1; }, "higher (FFL helps speckle)" },
-    { "non-negative reflectivity", [](TrainerSettings& s) { s.NonNegativeReflectivity = true; },
-      "lower (signed reflectivity helps)" },
-    { "thin plane (no beam integration)", [](TrainerSettings& s) { s.BeamIntegration = false; },
+    { "thin plane (no beam integration, UltraGauss)", [](TrainerSettings& s, std::int64_t) { s.BeamIntegration = false; },
       "lower (beam integration helps)" },
+    { "non-negative reflectivity", [](TrainerSettings& s, std::int64_t) { s.NonNegativeReflectivity = true; },
+      "lower (signed reflectivity helps)" },
+    { "L1 only (no D-SSIM)", [](TrainerSettings& s, std::int64_t) { s.Loss.DSSIM = 0; },
+      "lower (D-SSIM helps structure)" },
+    { "L1 + D-SSIM + FFL (0.1)", [](TrainerSettings& s, std::int64_t) { s.Loss.FFL = 0.1; }, "higher (FFL helps speckle)",
+      +1 },
+    { "capacity cap at the seed count", [](TrainerSettings& s, std::int64_t seeds) {
+        s.InitialGaussians = seeds;
+        s.MaximumGaussians = seeds;
+      },
+      "lower (adaptive capacity helps)" },
   };
 }
 
@@ -811,26 +821,36 @@ bool HoldOutSection(Sweep& sweep, std::size_t si, const std::string& root, bool 
 
 /// The volume protocol on the PLUS reconstruction of the spine phantom: train on parallel slices, test
 /// on in-between, oblique and orthogonal slices, against the compounded volume resliced.
-bool VolumeProtocolSection(const std::string& root, bool quick, Report& report, std::string* error)
+/// The volume protocol's sweeps: parallel training slices through the spine-phantom reconstruction and
+/// three test sweeps (in-between parallel, oblique, orthogonal slices).
+struct VolumeProtocol
 {
-  std::ostringstream& md = report.Markdown;
-  const std::vector<double> marks = quick ? std::vector<double>{ 5 } : std::vector<double>{ 30, 60, 180 };
-  const std::string file = root + "/Testing/Data/spine-phantom/SpinePhantomFreehandReconstructed.mha";
+  std::string File, Description;
+  vtkSmartPointer<vtkImageData> Volume;
+  vtkSmartPointer<vtkUltrasoundVolumeSweep> Train, Tests[3];
+  TrainingData TrainData, TestData[3];
+  std::vector<int> TestList[3];
+  double SliceSpacing = 0;
+};
+
+bool MakeVolumeProtocol(const std::string& root, bool quick, VolumeProtocol& vp, std::string* error)
+{
+  vp.File = root + "/Testing/Data/spine-phantom/SpinePhantomFreehandReconstructed.mha";
   vtkNew<vtkMetaImageReader> volumeReader;
-  volumeReader->SetFileName(file.c_str());
+  volumeReader->SetFileName(vp.File.c_str());
   volumeReader->Update();
-  vtkImageData* volume = volumeReader->GetOutput();
+  vp.Volume = volumeReader->GetOutput();
   int vdims[3];
-  volume->GetDimensions(vdims);
+  vp.Volume->GetDimensions(vdims);
   if (vdims[0] < 2 || vdims[1] < 2 || vdims[2] < 2)
   {
-    return Failed(file + ": cannot read the volume", error);
+    return Failed(vp.File + ": cannot read the volume", error);
   }
   const int trainFrames = quick ? 40 : 80;
   const int testFrames = quick ? 10 : 40;
   auto makeSweep = [&](int protocol, int frames, double offset) {
     auto sweep = vtkSmartPointer<vtkUltrasoundVolumeSweep>::New();
-    sweep->SetInputData(volume);
+    sweep->SetInputData(vp.Volume);
     sweep->SetProtocol(protocol);
     sweep->SetNumberOfFrames(frames);
     sweep->SetOffset(offset);
@@ -839,51 +859,59 @@ bool VolumeProtocolSection(const std::string& root, bool quick, Report& report, 
     sweep->Update();
     return sweep;
   };
-  auto train = makeSweep(vtkUltrasoundVolumeSweep::PARALLEL, trainFrames, 0);
-  const char* testNames[] = { "in-between parallel slices", "oblique slices (tilt up to 30 degrees)",
-    "orthogonal slices" };
-  vtkSmartPointer<vtkUltrasoundVolumeSweep> tests[] = {
-    makeSweep(vtkUltrasoundVolumeSweep::PARALLEL, trainFrames, 0.5),
-    makeSweep(vtkUltrasoundVolumeSweep::OBLIQUE, testFrames, 0),
-    makeSweep(vtkUltrasoundVolumeSweep::ORTHOGONAL, testFrames, 0),
-  };
-  TrainingData trainData;
-  if (!TrainingDataFromSequence(train->GetOutput(), train->GetMaskOutput(), trainData, error))
+  vp.Train = makeSweep(vtkUltrasoundVolumeSweep::PARALLEL, trainFrames, 0);
+  vp.Tests[0] = makeSweep(vtkUltrasoundVolumeSweep::PARALLEL, trainFrames, 0.5);
+  vp.Tests[1] = makeSweep(vtkUltrasoundVolumeSweep::OBLIQUE, testFrames, 0);
+  vp.Tests[2] = makeSweep(vtkUltrasoundVolumeSweep::ORTHOGONAL, testFrames, 0);
+  if (!TrainingDataFromSequence(vp.Train->GetOutput(), vp.Train->GetMaskOutput(), vp.TrainData, error))
   {
     return Failed("volume protocol: " + *error, error);
   }
-  for (int k = 0; k < trainData.Count(); ++k)
+  for (int k = 0; k < vp.TrainData.Count(); ++k)
   {
-    trainData.TrainFrames.push_back(k);
+    vp.TrainData.TrainFrames.push_back(k);
   }
-  TrainingData testData[3];
-  std::vector<int> testList[3];
   for (int t = 0; t < 3; ++t)
   {
-    if (!TrainingDataFromSequence(tests[t]->GetOutput(), tests[t]->GetMaskOutput(), testData[t], error))
+    if (!TrainingDataFromSequence(vp.Tests[t]->GetOutput(), vp.Tests[t]->GetMaskOutput(), vp.TestData[t], error))
     {
       return Failed("volume protocol: " + *error, error);
     }
-    for (int k = 0; k < testData[t].Count(); ++k)
+    for (int k = 0; k < vp.TestData[t].Count(); ++k)
     {
-      testList[t].push_back(k);
+      vp.TestList[t].push_back(k);
     }
   }
-  const double sliceSpacing = train->GetSliceSpacing();
+  vp.SliceSpacing = vp.Train->GetSliceSpacing();
   std::ostringstream d;
-  d << "`" << file.substr(root.size() + 1) << "` (" << vdims[0] << " x " << vdims[1] << " x " << vdims[2]
+  d << "`" << vp.File.substr(root.size() + 1) << "` (" << vdims[0] << " x " << vdims[1] << " x " << vdims[2]
     << " voxels of 0.5 mm). Training sweep: " << trainFrames << " parallel slices along z, "
-    << Format("%.3f", sliceSpacing) << " mm apart, frames of " << trainData.Width << " x " << trainData.Height
+    << Format("%.3f", vp.SliceSpacing) << " mm apart, frames of " << vp.TrainData.Width << " x " << vp.TrainData.Height
     << " pixels; per-frame masks of where the volume has data (PLUS leaves unreconstructed voxels at 0). "
     << "Test sweeps: " << trainFrames << " in-between parallel slices (offset half a slice), " << testFrames
     << " oblique slices (random tilt up to 30 degrees, seed 1) and " << testFrames
     << " orthogonal slices (along x). BIGUS elevation sigma = half the slice spacing.";
-  std::printf("volume protocol: %s\n", d.str().c_str());
+  vp.Description = d.str();
+  return true;
+}
+
+bool VolumeProtocolSection(const std::string& root, bool quick, Report& report, std::string* error)
+{
+  std::ostringstream& md = report.Markdown;
+  const std::vector<double> marks = quick ? std::vector<double>{ 5 } : std::vector<double>{ 30, 60, 180 };
+  VolumeProtocol vp;
+  if (!MakeVolumeProtocol(root, quick, vp, error))
+  {
+    return false;
+  }
+  const char* testNames[] = { "in-between parallel slices", "oblique slices (tilt up to 30 degrees)",
+    "orthogonal slices" };
+  std::printf("volume protocol: %s\n", vp.Description.c_str());
 
   // Baseline: compound the training slices (0.5 mm, the volume's own grid spacing) and reslice.
   vtkNew<vtkUltrasoundVolumeCompounder> compound;
-  compound->SetInputConnection(train->GetOutputPort());
-  compound->SetFanMaskConnection(train->GetMaskOutputPort());
+  compound->SetInputConnection(vp.Train->GetOutputPort());
+  compound->SetFanMaskConnection(vp.Train->GetMaskOutputPort());
   compound->SetOutputSpacing(0.5, 0.5, 0.5);
   double t0 = Now();
   compound->Update();
@@ -893,29 +921,29 @@ bool VolumeProtocolSection(const std::string& root, bool quick, Report& report, 
   {
     vtkNew<vtkUltrasoundSequenceReslice> reslice;
     reslice->SetInputConnection(compound->GetOutputPort());
-    reslice->SetPoseConnection(tests[t]->GetOutputPort());
+    reslice->SetPoseConnection(vp.Tests[t]->GetOutputPort());
     reslice->MaskEmptyVoxelsOff();
     t0 = Now();
     reslice->Update();
     Row r;
     r.Method = "compounded volume + trilinear reslice";
     r.Seconds = compoundSeconds;
-    r.MsPerFrame = 1e3 * (Now() - t0) / testList[t].size();
-    r.Quality = Score(static_cast<float*>(reslice->GetOutput()->GetScalarPointer()), 1.0, testData[t], testList[t]);
+    r.MsPerFrame = 1e3 * (Now() - t0) / vp.TestList[t].size();
+    r.Quality = Score(static_cast<float*>(reslice->GetOutput()->GetScalarPointer()), 1.0, vp.TestData[t], vp.TestList[t]);
     baselineRows[t].push_back(r);
     Print("volume", r);
   }
   TrainerSettings s;
-  s.ElevationSigma = 0.5 * sliceSpacing;
+  s.ElevationSigma = 0.5 * vp.SliceSpacing;
   s.Iterations = quick ? 300 : 15000;
   std::vector<Row> bigusRows[3];
-  const bool ok = TrainWithMarks(trainData, s, marks, {}, "BIGUS",
+  const bool ok = TrainWithMarks(vp.TrainData, s, marks, {}, "BIGUS",
     [&](double, const Row& mark, Trainer& trainer) {
       for (int t = 0; t < 3; ++t)
       {
         Row r = mark;
         double secondsPerFrame = 0;
-        if (!trainer.EvaluateOn(testData[t], testList[t], r.Quality, error, &secondsPerFrame))
+        if (!trainer.EvaluateOn(vp.TestData[t], vp.TestList[t], r.Quality, error, &secondsPerFrame))
         {
           return false;
         }
@@ -930,7 +958,7 @@ bool VolumeProtocolSection(const std::string& root, bool quick, Report& report, 
   {
     return Failed("volume protocol: " + *error, error);
   }
-  md << "\n## Volume protocol (spine-phantom reconstruction)\n\n" << d.str() << "\n";
+  md << "\n## Volume protocol (spine-phantom reconstruction)\n\n" << vp.Description << "\n";
   for (int t = 0; t < 3; ++t)
   {
     md << "\n### " << testNames[t] << "\n\n" << TableHeader();
@@ -1249,68 +1277,328 @@ bool BlockHoldOutSection(Sweep& liver, bool quick, Report& report, std::string* 
   return ok;
 }
 
-/// The ablations on the liver and the spine (the first two of @p sweeps) against the full method.
-bool AblationSection(const std::vector<Sweep>& sweeps, const HoldOutResults& results, bool quick, Report& report,
+/// One sweep of the ablation section: where the field is trained and where it is scored.
+struct AblationExperiment
+{
+  std::string Name;
+  const TrainingData* Train = nullptr; ///< TrainFrames: the frames trained on
+  const TrainingData* Test = nullptr;  ///< the held-out frames' data (Train itself for a hold-out sweep)
+  std::vector<int> TestFrames;         ///< scored held out
+  std::vector<int> FitFrames;          ///< training frames scored for the fit (every 4th)
+  double Seconds = 60;                 ///< training time of the equal-time table
+};
+
+/// One training run of the ablation section: the settings' schedule to its end, then the final prune.
+struct AblationRun
+{
+  ImageMetrics HeldOut;
+  double Fit = NaN;     ///< PSNR of the training frames (dB)
+  double Gaussians = 0;
+  double Seeds = 0;
+  double Steps = 0;
+  double Seconds = 0;   ///< wall clock: initialisation, training and final prune
+};
+
+bool RunAblation(const AblationExperiment& e, const TrainerSettings& settings, AblationRun& run, std::string* error)
+{
+  const double start = Now();
+  Trainer trainer(*e.Train, settings);
+  if (!trainer.Initialize(error) || !trainer.Train(nullptr, nullptr, error) || !trainer.Finish(error))
+  {
+    return false;
+  }
+  run.Seconds = Now() - start;
+  ImageMetrics fit;
+  if (!trainer.EvaluateOn(*e.Test, e.TestFrames, run.HeldOut, error) || !trainer.Evaluate(e.FitFrames, fit, error))
+  {
+    return false;
+  }
+  run.Fit = fit.PSNR;
+  run.Gaussians = static_cast<double>(trainer.GetField().Count());
+  run.Seeds = static_cast<double>(trainer.GetReport().InitialGaussians);
+  run.Steps = trainer.GetReport().Iterations;
+  return true;
+}
+
+/// Mean and spread (max - min) over seeds of one quantity.
+struct Spread
+{
+  double Mean = NaN, Range = NaN;
+  static Spread Of(const std::vector<double>& values)
+  {
+    Spread s;
+    if (values.empty())
+    {
+      return s;
+    }
+    s.Mean = std::accumulate(values.begin(), values.end(), 0.0) / values.size();
+    const auto [lo, hi] = std::minmax_element(values.begin(), values.end());
+    s.Range = *hi - *lo;
+    return s;
+  }
+  std::string Text(const char* format) const
+  {
+    return Format(format, this->Mean) + " (" + Format(format, this->Range) + ")";
+  }
+};
+
+/// Mean and spread of every column of a variant's runs over seeds.
+struct AblationCell
+{
+  std::vector<AblationRun> Runs;
+  Spread Get(const std::function<double(const AblationRun&)>& field) const
+  {
+    std::vector<double> v;
+    for (const AblationRun& r : this->Runs)
+    {
+      v.push_back(field(r));
+    }
+    return Spread::Of(v);
+  }
+  Spread PSNR() const { return this->Get([](const AblationRun& r) { return r.HeldOut.PSNR; }); }
+  Spread Fit() const { return this->Get([](const AblationRun& r) { return r.Fit; }); }
+  Spread Steps() const { return this->Get([](const AblationRun& r) { return r.Steps; }); }
+  Spread Gaussians() const { return this->Get([](const AblationRun& r) { return r.Gaussians; }); }
+};
+
+/**
+ * The sentence under an ablation table for one component: whether the held-out PSNR moves the way the
+ * paper says (@p paperSign: the sign of variant - full), against the noise (the larger of the two
+ * spreads over seeds), and for a disagreement what was measured to differ: steps done, Gaussians at the
+ * end, and the fit (training frames) against the held-out frames.
+ */
+std::string AblationVerdict(const Ablation& a, const AblationCell& full, const AblationCell& variant, std::string& verdict)
+{
+  const Spread f = full.PSNR(), v = variant.PSNR();
+  const double delta = v.Mean - f.Mean, noise = std::max(f.Range, v.Range);
+  std::ostringstream text;
+  text << "**" << a.Name << "**: ";
+  if (full.Runs.size() < 2 || variant.Runs.size() < 2)
+  {
+    verdict = "one seed";
+    text << "one seed, so no spread to judge " << Format("%+.2f", delta) << " dB by.";
+    return text.str();
+  }
+  if (!(std::abs(delta) > noise))
+  {
+    verdict = "within noise";
+    text << "within noise (" << Format("%+.2f", delta) << " dB, spread " << Format("%.2f", noise) << ").";
+    return text.str();
+  }
+  const bool agrees = (delta > 0) == (a.PaperSign > 0);
+  verdict = agrees ? "agrees" : "disagrees";
+  text << (agrees ? "agrees with" : "disagrees with") << " the paper (" << Format("%+.2f", delta) << " dB, spread "
+       << Format("%.2f", noise) << ")";
+  if (agrees)
+  {
+    text << ".";
+    return text.str();
+  }
+  std::vector<std::string> reasons;
+  const double steps = variant.Steps().Mean / full.Steps().Mean;
+  if (std::abs(steps - 1) > 0.05)
+  {
+    reasons.push_back(Format("it did %.2f", steps) + " times the full method's steps (" +
+      Format("%.0f", variant.Steps().Mean) + " against " + Format("%.0f", full.Steps().Mean) + ")");
+  }
+  const double gaussians = variant.Gaussians().Mean / full.Gaussians().Mean;
+  if (std::abs(gaussians - 1) > 0.1)
+  {
+    reasons.push_back(Format("it ended with %.2f", gaussians) + " times the Gaussians (" +
+      Format("%.0f", variant.Gaussians().Mean) + " against " + Format("%.0f", full.Gaussians().Mean) + ")");
+  }
+  const Spread vf = variant.Fit(), ff = full.Fit();
+  const double fitDelta = vf.Mean - ff.Mean;
+  const double gapFull = ff.Mean - f.Mean, gapVariant = vf.Mean - v.Mean;
+  if (std::abs(fitDelta) > std::max(vf.Range, ff.Range))
+  {
+    reasons.push_back("its fit of the training frames is " + Format("%.2f", std::abs(fitDelta)) + " dB " +
+      (fitDelta > 0 ? "higher" : "lower"));
+  }
+  else
+  {
+    reasons.push_back("its fit of the training frames is the same within noise (" + Format("%+.2f", fitDelta) + " dB)");
+  }
+  reasons.push_back("fit minus held-out: " + Format("%.2f", gapVariant) + " dB against " + Format("%.2f", gapFull) +
+    " dB for the full method" + (gapFull > gapVariant + 0.5 ? " (the full method overfits more)" : ""));
+  text << ": ";
+  for (std::size_t i = 0; i < reasons.size(); ++i)
+  {
+    text << (i ? "; " : "") << reasons[i];
+  }
+  text << ".";
+  return text.str();
+}
+
+/**
+ * Issue 21: every switch of the method against the full method (the trainer's defaults) at equal
+ * iterations and at equal wall time, on the liver, the spine phantom, the N-wire phantom and the volume
+ * protocol, 3 seeds per cell (1 and one switch with --quick). Equal time: each run's time budget is the
+ * schedule (TrainerSettings::TimeBudget). Equal iterations: the mean number of steps the full method did
+ * in that time, as the schedule. Every run ends with the final prune; its time counts.
+ */
+bool AblationSection(const std::vector<Sweep>& sweeps, const std::string& root, bool quick, Report& report,
   std::string* error)
 {
-  std::ostringstream& md = report.Markdown;
-  const double ablationSeconds = AblationSeconds(quick);
-  md << "\n## Ablations (" << Format("%.0f", ablationSeconds) << " s of training each)\n\n"
-     << "The paper's Tables 3 and 4 report that each part of the method helps; the last column says "
-     << "whether our measurement goes the same way as the paper on held-out PSNR and SSIM against the full "
-     << "method trained for the same time.\n";
-  for (std::size_t si = 0; si < 2; ++si)
+  VolumeProtocol vp;
+  if (!MakeVolumeProtocol(root, quick, vp, error))
   {
-    const Sweep& sweep = sweeps[si];
-    const Row full = results.FullAtAblationTime[si];
-    md << "\n### " << sweep.Name << "\n\n"
-       << "| variant | PSNR (dB) | SSIM | NCC | speckle | Gaussians | steps | paper | ours |\n"
-       << "|---|---|---|---|---|---|---|---|---|\n"
-       << "| full method (Harris, EA-D, L1 + D-SSIM, signed, beam) | " << Format("%.2f", full.Quality.PSNR) << " | "
-       << Format("%.4f", full.Quality.SSIM) << " | " << Format("%.4f", full.Quality.NCC) << " | "
-       << Format("%.4f", full.Quality.Speckle) << " | " << full.Gaussians << " | " << full.Note << " | | |\n";
-    report.Json["ablations"][sweep.Name].push_back(ToJson(full));
-    for (const Ablation& a : Ablations())
+    return false;
+  }
+  std::vector<AblationExperiment> experiments;
+  const double seconds[] = { 40, 20, 15 }; // liver, spine phantom, N-wire: about 100 minutes on 2 cores in all
+  for (std::size_t si = 0; si < 3; ++si)
+  {
+    AblationExperiment e;
+    e.Name = sweeps[si].Name;
+    e.Train = e.Test = &sweeps[si].Data;
+    e.TestFrames = sweeps[si].HeldOut;
+    e.Seconds = quick ? 3 : seconds[si];
+    experiments.push_back(e);
+  }
+  AblationExperiment volume;
+  volume.Name = "volume protocol (in-between slices)";
+  volume.Train = &vp.TrainData;
+  volume.Test = &vp.TestData[0];
+  volume.TestFrames = vp.TestList[0];
+  volume.Seconds = quick ? 3 : 15;
+  experiments.push_back(volume);
+  for (AblationExperiment& e : experiments)
+  {
+    for (std::size_t k = 0; k < e.Train->TrainFrames.size(); k += 4)
     {
-      TrainerSettings s;
-      s.ElevationSigma = sweep.ElevationSigma;
-      s.Iterations = sweep.Iterations;
-      a.Change(s);
-      Row row;
-      const bool ok = TrainWithMarks(sweep.Data, s, { ablationSeconds }, sweep.HeldOut, a.Name,
-        [&](double, const Row& r, Trainer&) {
-          row = r;
-          return true;
-        },
-        error);
-      if (!ok)
-      {
-        return Failed("ablation " + a.Name + ": " + *error, error);
-      }
-      Print(sweep.Name, row);
-      // The paper's direction: the variant is worse than the full method, except adding FFL (better).
-      const bool adds = a.Name.find("FFL") != std::string::npos;
-      auto agrees = [&](double variant, double reference) { return adds ? variant > reference : variant < reference; };
-      const std::string ours = std::string("PSNR ") + (agrees(row.Quality.PSNR, full.Quality.PSNR) ? "agrees" : "disagrees") +
-        ", SSIM " + (agrees(row.Quality.SSIM, full.Quality.SSIM) ? "agrees" : "disagrees");
-      md << "| " << a.Name << " | " << Format("%.2f", row.Quality.PSNR) << " | " << Format("%.4f", row.Quality.SSIM)
-         << " | " << Format("%.4f", row.Quality.NCC) << " | " << Format("%.4f", row.Quality.Speckle) << " | "
-         << row.Gaussians << " | " << row.Note << " | " << a.PaperDirection << " | " << ours << " |\n";
-      nlohmann::json j = ToJson(row);
-      j["ours"] = ours;
-      report.Json["ablations"][sweep.Name].push_back(j);
+      e.FitFrames.push_back(e.Train->TrainFrames[k]);
     }
+  }
+  const std::vector<unsigned> seeds = quick ? std::vector<unsigned>{ 1 } : std::vector<unsigned>{ 1, 2, 3 };
+  std::vector<Ablation> ablations = Ablations();
+  if (quick)
+  {
+    ablations.resize(1);
+  }
+
+  std::ostringstream& md = report.Markdown;
+  md << "\n## Ablations at equal iterations and at equal time\n\n"
+     << "The paper's Tables 3 and 4 compare its components at equal iterations. Each switch below is trained "
+     << "from the trainer's defaults (the full method) with that one change, with " << seeds.size()
+     << " seed" << (seeds.size() > 1 ? "s" : "") << " per cell: **equal time**, the time budget as the "
+     << "schedule, and **equal iterations**, the mean number of steps the full method did in that time as "
+     << "the schedule. Each cell gives the mean over seeds and, in brackets, the spread (largest minus "
+     << "smallest). A difference is called real only when it exceeds the larger of the two spreads. Held-out: "
+     << "the sweep's held-out frames (i mod 4 == 2; the volume protocol's in-between slices); fit: every 4th "
+     << "training frame. Time includes initialisation and the final prune. The capacity cap fixes the number "
+     << "of Gaussians at the full method's seed count (densification only replaces what pruning removes).\n";
+  nlohmann::json& json = report.Json["ablations"];
+  for (const AblationExperiment& e : experiments)
+  {
+    const double started = Now();
+    TrainerSettings timed;
+    timed.Iterations = 0;
+    timed.TimeBudget = e.Seconds;
+    // The full method at equal time first: its steps set the equal-iteration schedule, its seeds the cap.
+    auto runCell = [&](const TrainerSettings& base, const Ablation* a, std::int64_t seedCount, AblationCell& cell) {
+      for (unsigned seed : seeds)
+      {
+        TrainerSettings s = base;
+        s.Seed = seed;
+        if (a)
+        {
+          a->Change(s, seedCount);
+        }
+        AblationRun run;
+        if (!RunAblation(e, s, run, error))
+        {
+          return Failed("ablation " + e.Name + ", " + (a ? a->Name : std::string("full method")) + ": " + *error, error);
+        }
+        std::printf("  ablation %-16s %-44s seed %u  %6.1f s  %6.0f steps  held-out %6.2f dB  fit %6.2f dB  %8.0f Gaussians\n",
+          e.Name.substr(0, 16).c_str(), a ? a->Name.c_str() : "full method", seed, run.Seconds, run.Steps,
+          run.HeldOut.PSNR, run.Fit, run.Gaussians);
+        std::fflush(stdout);
+        cell.Runs.push_back(run);
+      }
+      return true;
+    };
+    AblationCell fullTimed, fullIterations;
+    if (!runCell(timed, nullptr, 0, fullTimed))
+    {
+      return false;
+    }
+    TrainerSettings counted;
+    counted.Iterations = std::max(1, static_cast<int>(std::lround(fullTimed.Steps().Mean)));
+    if (!runCell(counted, nullptr, 0, fullIterations))
+    {
+      return false;
+    }
+    const std::int64_t seedCount = std::llround(fullTimed.Get([](const AblationRun& r) { return r.Seeds; }).Mean);
+    md << "\n### " << e.Name << "\n";
+    for (int table = 0; table < 2; ++table)
+    {
+      const bool equalTime = table == 0;
+      const TrainerSettings& base = equalTime ? timed : counted;
+      const AblationCell& full = equalTime ? fullTimed : fullIterations;
+      std::vector<AblationCell> cells(ablations.size());
+      for (std::size_t ai = 0; ai < ablations.size(); ++ai)
+      {
+        if (!runCell(base, &ablations[ai], seedCount, cells[ai]))
+        {
+          return false;
+        }
+      }
+      md << "\n#### " << (equalTime ? "Equal time: " + Format("%.0f", e.Seconds) + " s"
+                                    : "Equal iterations: " + std::to_string(counted.Iterations) + " steps")
+         << "\n\n| variant | held-out PSNR (dB) | SSIM | NCC | speckle | fit PSNR (dB) | Gaussians | steps | "
+            "time (s) | paper | ours |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
+      std::ostringstream sentences;
+      nlohmann::json jt;
+      jt["schedule"] = equalTime ? Format("%.0f s", e.Seconds) : std::to_string(counted.Iterations) + " steps";
+      for (std::size_t ai = 0; ai <= ablations.size(); ++ai)
+      {
+        const AblationCell& cell = ai == 0 ? full : cells[ai - 1];
+        std::string verdict;
+        if (ai > 0)
+        {
+          sentences << "- " << AblationVerdict(ablations[ai - 1], full, cell, verdict) << "\n";
+        }
+        md << "| " << (ai == 0 ? std::string("full method (defaults)") : ablations[ai - 1].Name) << " | "
+           << cell.PSNR().Text("%.2f") << " | "
+           << cell.Get([](const AblationRun& r) { return r.HeldOut.SSIM; }).Text("%.4f") << " | "
+           << cell.Get([](const AblationRun& r) { return r.HeldOut.NCC; }).Text("%.4f") << " | "
+           << cell.Get([](const AblationRun& r) { return r.HeldOut.Speckle; }).Text("%.4f") << " | "
+           << cell.Fit().Text("%.2f") << " | " << cell.Gaussians().Text("%.0f") << " | " << cell.Steps().Text("%.0f")
+           << " | " << cell.Get([](const AblationRun& r) { return r.Seconds; }).Text("%.1f") << " | "
+           << (ai == 0 ? "" : ablations[ai - 1].PaperDirection) << " | " << verdict << " |\n";
+        nlohmann::json jc;
+        jc["variant"] = ai == 0 ? std::string("full method") : ablations[ai - 1].Name;
+        jc["verdict"] = verdict;
+        for (const AblationRun& r : cell.Runs)
+        {
+          jc["runs"].push_back({ { "psnr", r.HeldOut.PSNR }, { "ssim", r.HeldOut.SSIM }, { "ncc", r.HeldOut.NCC },
+            { "speckle", r.HeldOut.Speckle }, { "fit_psnr", r.Fit }, { "gaussians", r.Gaussians },
+            { "steps", r.Steps }, { "seconds", r.Seconds } });
+        }
+        jt["cells"].push_back(jc);
+      }
+      md << "\n" << sentences.str();
+      json[e.Name][equalTime ? "equal_time" : "equal_iterations"] = jt;
+    }
+    const double took = Now() - started;
+    md << "\nThis sweep's ablations took " << Format("%.1f", took / 60) << " minutes.\n";
+    json[e.Name]["seconds"] = took;
   }
   return true;
 }
 
-/// Adds the total run time (@p seconds) and writes @p output/BENCHMARKS.md and results.json next to the plots.
-bool WriteReport(const std::string& output, double seconds, Report& report, std::string* error)
+/// Adds the total run time (@p seconds) and writes the report to @p output: BENCHMARKS.md for every
+/// section, BENCHMARKS_<section>.md for one alone (so that it does not replace the full report), and
+/// results[_<section>].json next to the plots.
+bool WriteReport(const std::string& output, const std::string& section, double seconds, Report& report,
+  std::string* error)
 {
   report.Markdown << "\nTotal run time of the command: " << Format("%.1f", seconds / 60) << " minutes.\n";
   report.Json["total_seconds"] = seconds;
-  const std::string markdown = output + "/BENCHMARKS.md";
-  const std::string json = report.PlotFolder + "/results.json";
+  const std::string suffix = section == "all" ? "" : "_" + section;
+  const std::string markdown = output + "/BENCHMARKS" + suffix + ".md";
+  const std::string json = report.PlotFolder + "/results" + suffix + ".json";
   for (const auto& [path, text] :
     { std::pair<std::string, std::string>{ markdown, report.Markdown.str() }, { json, report.Json.dump(2) + "\n" } })
   {
@@ -1324,6 +1612,7 @@ bool WriteReport(const std::string& output, double seconds, Report& report, std:
       return Failed(path + ": cannot write", error);
     }
   }
+  std::printf("wrote %s and %s\n", markdown.c_str(), json.c_str());
   return true;
 }
 }
@@ -1341,45 +1630,63 @@ int RunBenchmark(const BenchmarkOptions& options)
     return Fail(options.Output + ": cannot create the output folder");
   }
   const std::string& section = options.Section;
-  if (section != "all" && section != "defaults" && section != "volume" && section != "blocks")
+  if (section != "all" && section != "defaults" && section != "volume" && section != "blocks" && section != "ablations")
   {
-    return Fail("--section " + section + ": expected all, defaults, volume or blocks");
+    return Fail("--section " + section + ": expected all, defaults, volume, blocks or ablations");
   }
   Introduction(root, quick, report);
   std::vector<Sweep> sweeps = BundledSweeps(root, quick);
   std::string error;
   HoldOutResults results;
   const bool all = section == "all";
+  // Each section's wall time, listed at the end of the report.
+  std::vector<std::pair<std::string, double>> times;
+  auto run = [&](const std::string& name, bool wanted, const std::function<bool()>& measure) {
+    if (!wanted)
+    {
+      return true;
+    }
+    const double t0 = Now();
+    const bool ok = measure();
+    times.emplace_back(name, Now() - t0);
+    report.Json["section_seconds"][name] = times.back().second;
+    return ok;
+  };
   bool ok = true;
   for (std::size_t si = 0; ok && si < sweeps.size(); ++si)
   {
     if (all)
     {
-      ok = HoldOutSection(sweeps[si], si, root, quick, report, results, &error);
+      ok = run(sweeps[si].Name, true, [&] { return HoldOutSection(sweeps[si], si, root, quick, report, results, &error); });
     }
-    else if (section == "defaults" || (section == "blocks" && si == 0))
+    else if (section == "defaults" || (section == "blocks" && si == 0) || (section == "ablations" && si < 3))
     {
       ok = Load(sweeps[si], &error);
     }
   }
-  ok = ok && ((!all && section != "volume") || VolumeProtocolSection(root, quick, report, &error));
-  ok = ok && (!all || (CapacitySection(sweeps[0], results.FullAtAblationTime[0], quick, report, &error) &&
-                        RenderSection(sweeps[0], results, quick, report, &error) &&
-                        AblationSection(sweeps, results, quick, report, &error)));
-  ok = ok && ((!all && section != "defaults") || DefaultsSection(sweeps, results, quick, report, &error));
-  ok = ok && ((!all && section != "blocks") || BlockHoldOutSection(sweeps[0], quick, report, &error));
+  ok = ok && run("volume protocol", all || section == "volume", [&] { return VolumeProtocolSection(root, quick, report, &error); });
+  ok = ok && run("capacity", all, [&] { return CapacitySection(sweeps[0], results.FullAtAblationTime[0], quick, report, &error); });
+  ok = ok && run("render cutoffs", all, [&] { return RenderSection(sweeps[0], results, quick, report, &error); });
+  ok = ok && run("ablations", all || section == "ablations", [&] { return AblationSection(sweeps, root, quick, report, &error); });
+  ok = ok && run("defaults against hand-tuned", all || section == "defaults",
+               [&] { return DefaultsSection(sweeps, results, quick, report, &error); });
+  ok = ok && run("block hold-outs", all || section == "blocks", [&] { return BlockHoldOutSection(sweeps[0], quick, report, &error); });
   if (!ok)
   {
     return Fail(error);
   }
-
+  report.Markdown << "\nTime per section:";
+  for (std::size_t i = 0; i < times.size(); ++i)
+  {
+    report.Markdown << (i ? "; " : " ") << times[i].first << " " << Format("%.1f", times[i].second / 60) << " min";
+  }
+  report.Markdown << ".\n";
   const double total = Now() - started;
-  if (!WriteReport(options.Output, total, report, &error))
+  if (!WriteReport(options.Output, section, total, report, &error))
   {
     return Fail(error);
   }
-  std::printf("wrote %s/BENCHMARKS.md and %s/results.json (%.1f minutes)\n", options.Output.c_str(),
-    report.PlotFolder.c_str(), total / 60);
+  std::printf("benchmark done in %.1f minutes\n", total / 60);
   return 0;
 }
 }

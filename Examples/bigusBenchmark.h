@@ -11,9 +11,10 @@ struct BenchmarkOptions
   std::string Output = "docs";  ///< folder of BENCHMARKS.md; plots and results.json go to Output/benchmarks
   std::string SourceDirectory;  ///< project root holding Examples/Data and Testing/Data
   bool Quick = false;           ///< a few minutes instead of about 80 (smoke test)
-  /// "all", or one section alone: "defaults" (defaults against hand-tuned, without the fixed-schedule
-  /// column), "volume" (the volume protocol) or "blocks" (block hold-outs on the liver); the hold-out
-  /// sections feed the others, which run only in "all".
+  /// "all" (written to Output/BENCHMARKS.md), or one section alone (Output/BENCHMARKS_<section>.md):
+  /// "defaults" (defaults against hand-tuned, without the fixed-schedule column), "volume" (the volume
+  /// protocol), "blocks" (block hold-outs on the liver) or "ablations" (every switch at equal iterations
+  /// and equal time, 3 seeds); the hold-out sections feed the others, which run only in "all".
   std::string Section = "all";
 };
 
