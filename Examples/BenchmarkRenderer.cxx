@@ -1,4 +1,7 @@
-// BenchmarkRenderer: Google Benchmark timings of the CPU backend of the beam-integrated Gaussian renderer.
+// BenchmarkRenderer: Google Benchmark timings of the CPU backend of the beam-integrated Gaussian renderer,
+// and of the CUDA backend wherever the registry offers it (a build with nvcc on a machine with a GPU):
+// its rows, BM_Forward/cuda and BM_Backward/cuda, stand next to the CPU rows in Google Benchmark's table
+// (the summary below is the CPU's).
 //
 // The scene is realistic in extent and pose: Gaussians spread uniformly over the bounding box of every
 // frame corner of the liver sweep (Examples/Data/liver/liver_sweep.igs.mha), sliced with the pose of its
@@ -14,6 +17,7 @@
 //   - a cutoff sweep: forward time at 100k / 512 and max |I_cpu - I_naive| at 10k / 128.
 //
 // Usage: BenchmarkRenderer [--benchmark_filter=...] [other Google Benchmark flags]
+#include "bigusBackend.h"
 #include "bigusGaussianMath.h"
 #include "bigusReferenceRenderer.h"
 #include "bigusRenderer.h"
@@ -432,7 +436,20 @@ const std::vector<float>& GetGradientImage(int width, int height)
   return image;
 }
 
-void RunForward(benchmark::State& state)
+/// The renderer of @p backend, or null after marking @p state skipped with the registry's reason.
+std::unique_ptr<bigus::Renderer> MakeRenderer(benchmark::State& state, const std::string& backend)
+{
+  std::string error;
+  std::unique_ptr<bigus::Renderer> renderer = bigus::CreateRenderer(backend, &error);
+  if (!renderer)
+  {
+    state.SkipWithError(error.c_str());
+  }
+  return renderer;
+}
+
+/// Forward timings of @p backend; the CPU's also feed the summary.
+void RunForward(benchmark::State& state, const std::string& backend)
 {
   const std::int64_t n = state.range(0);
   const int width = static_cast<int>(state.range(1));
@@ -440,7 +457,11 @@ void RunForward(benchmark::State& state)
   const bigus::FieldView field = GetField(n).View();
   const bigus::SliceGeometry slice = MakeSlice(width, width);
   const bigus::RenderOptions options = Options(cutoff10 / 10.0);
-  auto renderer = bigus::CreateCpuRenderer();
+  auto renderer = MakeRenderer(state, backend);
+  if (!renderer)
+  {
+    return;
+  }
   std::vector<float> S(std::size_t(width) * width), I(S.size());
   std::string error;
   if (!renderer->Forward(field, &slice, 1, options, S.data(), I.data(), nullptr, &error)) // warm-up
@@ -465,7 +486,10 @@ void RunForward(benchmark::State& state)
   r.Kept = static_cast<std::int64_t>(total.GaussiansVisible / it);
   r.Evals = static_cast<std::int64_t>(total.PixelEvaluations / it);
   r.TileEntries = static_cast<std::int64_t>(total.TileEntries / it);
-  ForwardResults[{ n, width, cutoff10 }] = r;
+  if (backend == "cpu")
+  {
+    ForwardResults[{ n, width, cutoff10 }] = r;
+  }
   const double phase2 = r.Evals / (r.RasterMs * 1e-3);
   state.counters["ms/slice"] = r.Ms;
   state.counters["setup_ms"] = r.SetupMs;
@@ -478,17 +502,7 @@ void RunForward(benchmark::State& state)
   state.counters["lib_peak_frac"] = phase2 / GetPeak().Library();
 }
 
-void BM_Forward(benchmark::State& state)
-{
-  RunForward(state);
-}
-
-void BM_ForwardCutoff(benchmark::State& state)
-{
-  RunForward(state);
-}
-
-void BM_Backward(benchmark::State& state)
+void BM_Backward(benchmark::State& state, const std::string& backend)
 {
   const std::int64_t n = state.range(0);
   const int width = static_cast<int>(state.range(1));
@@ -496,7 +510,11 @@ void BM_Backward(benchmark::State& state)
   const bigus::FieldView field = host.View();
   const bigus::SliceGeometry slice = MakeSlice(width, width);
   const bigus::RenderOptions options = Options(4.0);
-  auto renderer = bigus::CreateCpuRenderer();
+  auto renderer = MakeRenderer(state, backend);
+  if (!renderer)
+  {
+    return;
+  }
   std::vector<float> S(std::size_t(width) * width), I(S.size());
   std::string error;
   bigus::RenderStats forward;
@@ -526,7 +544,10 @@ void BM_Backward(benchmark::State& state)
   r.Ms = 1e3 * wall / static_cast<double>(state.iterations());
   r.Kept = forward.GaussiansVisible; // Backward's stats hold only the time; the work is forward's
   r.Evals = forward.PixelEvaluations;
-  BackwardResults[{ n, width }] = r;
+  if (backend == "cpu")
+  {
+    BackwardResults[{ n, width }] = r;
+  }
   state.counters["ms/slice"] = r.Ms;
   state.counters["kept"] = static_cast<double>(r.Kept);
   state.counters["pix_evals"] = static_cast<double>(r.Evals);
@@ -575,19 +596,29 @@ const std::vector<std::int64_t> Cutoffs10 = { 20, 30, 35, 40, 50, 60 };
 
 void Register()
 {
-  benchmark::RegisterBenchmark("BM_Forward", BM_Forward)
-    ->ArgsProduct({ Sizes, Widths, { 40 } })
-    ->ArgNames({ "N", "W", "k10" })
-    ->UseRealTime()
-    ->MinTime(0.5)
-    ->Unit(benchmark::kMillisecond);
-  benchmark::RegisterBenchmark("BM_Backward", BM_Backward)
-    ->ArgsProduct({ Sizes, Widths })
-    ->ArgNames({ "N", "W" })
-    ->UseRealTime()
-    ->MinTime(0.5)
-    ->Unit(benchmark::kMillisecond);
-  benchmark::RegisterBenchmark("BM_ForwardCutoff", BM_ForwardCutoff)
+  const std::vector<std::string> names = bigus::AvailableBackends();
+  const bool cuda = std::find(names.begin(), names.end(), "cuda") != names.end();
+  for (const std::string backend : { "cpu", "cuda" })
+  {
+    if (backend == "cuda" && !cuda)
+    {
+      continue;
+    }
+    const std::string suffix = backend == "cpu" ? "" : "/" + backend;
+    benchmark::RegisterBenchmark(("BM_Forward" + suffix).c_str(), RunForward, backend)
+      ->ArgsProduct({ Sizes, Widths, { 40 } })
+      ->ArgNames({ "N", "W", "k10" })
+      ->UseRealTime()
+      ->MinTime(0.5)
+      ->Unit(benchmark::kMillisecond);
+    benchmark::RegisterBenchmark(("BM_Backward" + suffix).c_str(), BM_Backward, backend)
+      ->ArgsProduct({ Sizes, Widths })
+      ->ArgNames({ "N", "W" })
+      ->UseRealTime()
+      ->MinTime(0.5)
+      ->Unit(benchmark::kMillisecond);
+  }
+  benchmark::RegisterBenchmark("BM_ForwardCutoff", RunForward, std::string("cpu"))
     ->ArgsProduct({ { 100000 }, { 512 }, Cutoffs10 })
     ->ArgNames({ "N", "W", "k10" })
     ->UseRealTime()

@@ -2,7 +2,12 @@
 #include "bigusBackend.h"
 
 #include <algorithm>
+#include <map>
 #include <mutex>
+
+#if defined(BIGUS_CUDA_BACKEND_LIBRARY)
+#include <dlfcn.h>
+#endif
 
 namespace bigus
 {
@@ -30,12 +35,57 @@ std::vector<Entry>& Registry(std::unique_lock<std::mutex>& lock)
   lock = std::unique_lock<std::mutex>(mutex);
   return entries;
 }
+
+/// Backends built but not usable here, and why (guarded by the registry's lock).
+std::map<std::string, std::string>& Unavailable()
+{
+  static std::map<std::string, std::string> reasons;
+  return reasons;
+}
+
+/**
+ * Loads the run-time backend modules once, before the registry is first read. Their registration
+ * calls RegisterBackend, so this runs outside the registry's lock and RegisterBackend never calls it.
+ */
+void LoadBackendModules()
+{
+#if defined(BIGUS_CUDA_BACKEND_LIBRARY)
+  static std::once_flag once;
+  std::call_once(once, [] {
+    const std::string library = BIGUS_CUDA_BACKEND_LIBRARY;
+    std::string folder;
+    Dl_info self;
+    if (dladdr(reinterpret_cast<void*>(&LoadBackendModules), &self) && self.dli_fname)
+    {
+      folder = self.dli_fname;
+      folder = folder.substr(0, folder.find_last_of('/') + 1);
+    }
+    void* handle = folder.empty() ? nullptr : dlopen((folder + library).c_str(), RTLD_NOW | RTLD_LOCAL);
+    if (!handle)
+    {
+      handle = dlopen(library.c_str(), RTLD_NOW | RTLD_LOCAL);
+    }
+    using Registration = void (*)();
+    const Registration reg = handle ? reinterpret_cast<Registration>(dlsym(handle, "bigusCudaRegisterBackend")) : nullptr;
+    if (reg)
+    {
+      reg();
+    }
+    else
+    {
+      const char* why = dlerror();
+      RegisterUnavailableBackend("cuda", "cannot load " + library + ": " + (why ? why : "unknown error"));
+    }
+  });
+#endif
+}
 }
 
 void RegisterBackend(const std::string& name, RendererFactory factory, int priority)
 {
   std::unique_lock<std::mutex> lock;
   std::vector<Entry>& entries = Registry(lock);
+  Unavailable().erase(name);
   entries.erase(
     std::remove_if(entries.begin(), entries.end(), [&](const Entry& e) { return e.Name == name; }), entries.end());
   entries.push_back({ name, factory, priority });
@@ -43,8 +93,16 @@ void RegisterBackend(const std::string& name, RendererFactory factory, int prior
     entries.begin(), entries.end(), [](const Entry& a, const Entry& b) { return a.Priority > b.Priority; });
 }
 
+void RegisterUnavailableBackend(const std::string& name, const std::string& why)
+{
+  std::unique_lock<std::mutex> lock;
+  Registry(lock);
+  Unavailable()[name] = why;
+}
+
 std::vector<std::string> AvailableBackends()
 {
+  LoadBackendModules();
   std::unique_lock<std::mutex> lock;
   std::vector<std::string> names;
   for (const Entry& e : Registry(lock))
@@ -72,7 +130,15 @@ std::string ResolveBackend(const std::string& name, std::string* error)
     {
       list += (list.empty() ? "" : ", ") + n;
     }
-    *error = "backend '" + name + "' is not available in this build; available: auto, " + list;
+    std::string why;
+    {
+      std::unique_lock<std::mutex> lock;
+      Registry(lock);
+      const auto found = Unavailable().find(name);
+      why = found == Unavailable().end() ? std::string() : found->second;
+    }
+    *error = "backend '" + name + "' " + (why.empty() ? "is not available in this build" : "cannot run here: " + why) +
+      "; available: auto, " + list;
   }
   return std::string();
 }

@@ -3,9 +3,12 @@
  * @brief The one place a rendering backend is chosen (DESIGN section 5): a registry of renderer
  *        factories by name. Every filter, the trainer and every command create their renderer here.
  *
- * Names: "cpu" (always registered, bigus::CreateCpuRenderer) and any backend that registers itself
- * (BIGUS::Cuda registers "cuda" when it is built and a device is usable). "auto" is the available
- * backend of highest priority, so "cuda" wherever it registered and "cpu" otherwise.
+ * Names: "cpu" (always registered, bigus::CreateCpuRenderer) and any backend that registers itself.
+ * BIGUS::Cuda is a run-time module: where it was built, the registry loads its library (from the
+ * folder of this library, then the loader's search path) on first use, and it registers "cuda" when
+ * a usable device exists, or else records why not. So every program, Python and ParaView included,
+ * gets the GPU without linking to it. "auto" is the available backend of highest priority, so "cuda"
+ * wherever it registered and "cpu" otherwise.
  */
 #ifndef bigusBackend_h
 #define bigusBackend_h
@@ -29,13 +32,21 @@ using RendererFactory = std::unique_ptr<Renderer> (*)(std::string* error);
  */
 BIGUSRENDERING_EXPORT void RegisterBackend(const std::string& name, RendererFactory factory, int priority);
 
+/**
+ * Records that backend @p name exists in this build but cannot run here, and @p why ("no CUDA device
+ * is visible"); ResolveBackend's error for that name says so. Registering the name later clears it.
+ */
+BIGUSRENDERING_EXPORT void RegisterUnavailableBackend(const std::string& name, const std::string& why);
+
 /// The registered backend names, highest priority first ("cpu" is always among them).
 BIGUSRENDERING_EXPORT std::vector<std::string> AvailableBackends();
 
 /**
  * The backend that @p name selects: @p name itself when it is registered, the highest-priority one
  * for "auto" (or an empty name). Returns an empty string with @p error ("backend 'cuda' is not
- * available in this build; available: cpu") for an unknown or unbuilt backend.
+ * available in this build; available: auto, cpu", or for a built backend that cannot run here "backend
+ * 'cuda' cannot run here: no CUDA device is visible; available: auto, cpu") for an unknown, unbuilt or
+ * unusable backend.
  */
 BIGUSRENDERING_EXPORT std::string ResolveBackend(const std::string& name, std::string* error);
 

@@ -3,8 +3,8 @@
 // backward pass without atomics. Multi-threaded with vtkSMPTools; results do not depend on the
 // number of threads (every pixel sums its Gaussians in index order).
 #include "bigusGaussianMath.h"
+#include "bigusRasterGeometry.h"
 #include "bigusRenderer.h"
-#include "bigusSliceFrame.h"
 
 #include "vtkSMPThreadLocal.h"
 #include "vtkSMPTools.h"
@@ -31,63 +31,11 @@ Renderer::~Renderer() = default;
 
 namespace
 {
-constexpr int TileSize = 16;
 constexpr std::int64_t ChunkSize = 2048; // Gaussians per binning chunk (fixed: keeps binning deterministic)
 
 double Now()
 {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-
-/// A slice ready to render: orthonormal frame and the pixel -> plane map.
-struct PreparedSlice
-{
-  SliceFrameD Frame;
-  double PixelToPlane[3]; // x = i P0 + j P1, y = j P2 (mm)
-  int Width, Height, TilesX, TilesY;
-};
-
-bool PrepareSlice(const SliceGeometry& g, const RenderOptions& o, int index, PreparedSlice& p, std::string* error)
-{
-  if (g.Width <= 0 || g.Height <= 0 || g.Width > 65536 || g.Height > 65536)
-  {
-    if (error)
-    {
-      *error = "slice " + std::to_string(index) + ": grid " + std::to_string(g.Width) + " x " +
-        std::to_string(g.Height) + " is not between 1 and 65536 pixels per side";
-    }
-    return false;
-  }
-  const PoseStatus status =
-    ComputeRenderingFrame(g.ImageToReference, o.MaximumShearAngle, p.Frame.F, p.Frame.Origin, p.PixelToPlane);
-  if (status != PoseStatus::Ok)
-  {
-    if (error)
-    {
-      *error = "slice " + std::to_string(index) + ": ImageToReference " + PoseStatusText(status);
-    }
-    return false;
-  }
-  p.Width = g.Width;
-  p.Height = g.Height;
-  p.TilesX = (g.Width + TileSize - 1) / TileSize;
-  p.TilesY = (g.Height + TileSize - 1) / TileSize;
-  return true;
-}
-
-/// Every slice of a call, checked before anything is written.
-bool PrepareSlices(const SliceGeometry* slices, int count, const RenderOptions& o, std::vector<PreparedSlice>& prepared,
-  std::string* error)
-{
-  prepared.resize(count);
-  for (int k = 0; k < count; ++k)
-  {
-    if (!PrepareSlice(slices[k], o, k, prepared[k], error))
-    {
-      return false;
-    }
-  }
-  return true;
 }
 
 /**
@@ -138,38 +86,6 @@ struct Splat
   std::int64_t Index; // Gaussian index
 };
 
-/// Pixel bounding box of the footprint's cutoff ellipse; false when it misses the image.
-bool FootprintBox(const Footprint& f, const PreparedSlice& s, int box[4])
-{
-  const double cutoff = std::sqrt(std::max(f.CutoffSquared, 0.0));
-  const double P0 = s.PixelToPlane[0], P1 = s.PixelToPlane[1], P2 = s.PixelToPlane[2];
-  // pixel = K^-1 plane, K = [[P0, P1], [0, P2]].
-  const double k00 = 1 / P0, k01 = -P1 / (P0 * P2), k11 = 1 / P2;
-  const double ci = k00 * f.Center[0] + k01 * f.Center[1];
-  const double cj = k11 * f.Center[1];
-  const double vi = k00 * k00 * f.Cov[0] + 2 * k00 * k01 * f.Cov[1] + k01 * k01 * f.Cov[2];
-  const double vj = k11 * k11 * f.Cov[2];
-  const double hi = cutoff * std::sqrt(std::max(vi, 0.0));
-  const double hj = cutoff * std::sqrt(std::max(vj, 0.0));
-  const double lo[2] = { std::ceil(ci - hi), std::ceil(cj - hj) };
-  const double up[2] = { std::floor(ci + hi), std::floor(cj + hj) };
-  if (!(lo[0] <= s.Width - 1) || !(up[0] >= 0) || !(lo[1] <= s.Height - 1) || !(up[1] >= 0) || !(lo[0] <= up[0]) ||
-    !(lo[1] <= up[1]))
-  {
-    return false;
-  }
-  box[0] = static_cast<int>(std::max(lo[0], 0.0));
-  box[1] = static_cast<int>(std::min(up[0], s.Width - 1.0));
-  box[2] = static_cast<int>(std::max(lo[1], 0.0));
-  box[3] = static_cast<int>(std::min(up[1], s.Height - 1.0));
-  return true;
-}
-
-double EffectiveReflectivity(double r, const RenderOptions& o)
-{
-  return o.NonNegativeReflectivity ? std::max(r, 0.0) : r;
-}
-
 /// Phase 1 for one slice: the visible splats, in Gaussian index order.
 void SetupSlice(const FieldView& field, const CullBounds& bounds, const PreparedSlice& s,
   const RenderOptions& o, std::vector<std::vector<Splat>>& perChunk, std::vector<Splat>& splats)
@@ -190,7 +106,7 @@ void SetupSlice(const FieldView& field, const CullBounds& bounds, const Prepared
           continue;
         }
         const GaussianParams g = LoadGaussian(field.Means, field.LogScales, field.Quaternions, field.Reflectivities, i);
-        const double r = EffectiveReflectivity(g.Reflectivity, o);
+        const double r = EffectiveReflectivity(g.Reflectivity, o.NonNegativeReflectivity);
         if (r == 0)
         {
           continue;
@@ -286,31 +202,6 @@ struct TileFrame
   double X0, Y0;      // in-plane position of pixel (I0, J0), mm
   float P0, P1, P2;   // pixel -> plane map
 };
-
-/**
- * The columns of one pixel row that can lie inside a footprint's cutoff ellipse. With dx = q P0 + x0
- * the in-plane offset of column q and dy the row's, the form a dx^2 + 2 b dx dy + c dy^2 <= k2 holds
- * for dx between (-b dy -+ sqrt(a k2 - det dy^2)) / a (det = ac - b^2). The span is widened by a pixel
- * on each side and slightly in k2 so that float rounding never drops a pixel the exact test keeps;
- * the caller still tests every pixel. Returns [first, end) clipped to [lo, hi), empty when the row
- * misses the ellipse.
- */
-inline void RowSpan(float a, float b, float det, float k2, float dy, float x0, float P0, int lo, int hi, int& first,
-  int& end)
-{
-  const float disc = a * (k2 * 1.001f + 1e-6f) - det * dy * dy;
-  if (!(disc >= 0))
-  {
-    first = end = lo;
-    return;
-  }
-  const float root = std::sqrt(disc);
-  const float q0 = ((-b * dy - root) / a - x0) / P0, q1 = ((-b * dy + root) / a - x0) / P0;
-  // fmax / fmin also map a NaN bound (a degenerate conic) to the whole range.
-  first = std::max(lo, static_cast<int>(std::fmax(std::floor(q0), float(lo - 1))) - 1);
-  end = std::min(hi, static_cast<int>(std::fmin(std::ceil(q1), float(hi + 1))) + 2);
-  end = std::max(first, end);
-}
 
 /**
  * Phase 2 for one tile: adds every listed splat, in order, into the TileSize x TileSize accumulator.
@@ -535,7 +426,7 @@ public:
           }
           const GaussianParams g =
             LoadGaussian(field.Means, field.LogScales, field.Quaternions, field.Reflectivities, i);
-          const double r = EffectiveReflectivity(g.Reflectivity, options);
+          const double r = EffectiveReflectivity(g.Reflectivity, options.NonNegativeReflectivity);
           SetupCache cache;
           const Footprint f = SetupFootprint(g, s.Frame, sigmaE, options.Cutoff, &cache);
           int box[4];

@@ -1,0 +1,145 @@
+/**
+ * @file bigusRasterGeometry.h
+ * @brief The slice and footprint geometry that every rasterizing backend shares (DESIGN section 3):
+ *        a checked slice ready to render (orthonormal frame, pixel -> plane map, tile grid) and the
+ *        pixel bounding box of a footprint's cutoff ellipse. Private to the backends (not installed):
+ *        the CPU renderer and the CUDA renderer include it so that both cull and bin by the same rules.
+ */
+#ifndef bigusRasterGeometry_h
+#define bigusRasterGeometry_h
+
+#include "bigusGaussianMath.h"
+#include "bigusRenderer.h"
+#include "bigusSliceFrame.h"
+
+#include <string>
+#include <vector>
+
+namespace bigus
+{
+
+/// Pixels per side of a raster tile (CPU: one work item; CUDA: one thread block of TileSize^2 threads).
+constexpr int TileSize = 16;
+
+/// A slice ready to render: orthonormal frame and the pixel -> plane map.
+struct PreparedSlice
+{
+  SliceFrameD Frame;
+  double PixelToPlane[3]; ///< x = i P0 + j P1, y = j P2 (mm)
+  int Width, Height, TilesX, TilesY;
+};
+
+/**
+ * Checks slice @p index of a call and prepares it. Returns false with @p error ("slice 3: grid 0 x 20
+ * is not between 1 and 65536 pixels per side", "slice 1: ImageToReference contains NaN or Inf") for a
+ * bad grid or pose.
+ */
+inline bool PrepareSlice(const SliceGeometry& g, const RenderOptions& o, int index, PreparedSlice& p, std::string* error)
+{
+  if (g.Width <= 0 || g.Height <= 0 || g.Width > 65536 || g.Height > 65536)
+  {
+    if (error)
+    {
+      *error = "slice " + std::to_string(index) + ": grid " + std::to_string(g.Width) + " x " +
+        std::to_string(g.Height) + " is not between 1 and 65536 pixels per side";
+    }
+    return false;
+  }
+  const PoseStatus status =
+    ComputeRenderingFrame(g.ImageToReference, o.MaximumShearAngle, p.Frame.F, p.Frame.Origin, p.PixelToPlane);
+  if (status != PoseStatus::Ok)
+  {
+    if (error)
+    {
+      *error = "slice " + std::to_string(index) + ": ImageToReference " + PoseStatusText(status);
+    }
+    return false;
+  }
+  p.Width = g.Width;
+  p.Height = g.Height;
+  p.TilesX = (g.Width + TileSize - 1) / TileSize;
+  p.TilesY = (g.Height + TileSize - 1) / TileSize;
+  return true;
+}
+
+/// Every slice of a call, checked before anything is written.
+inline bool PrepareSlices(const SliceGeometry* slices, int count, const RenderOptions& o,
+  std::vector<PreparedSlice>& prepared, std::string* error)
+{
+  prepared.resize(count);
+  for (int k = 0; k < count; ++k)
+  {
+    if (!PrepareSlice(slices[k], o, k, prepared[k], error))
+    {
+      return false;
+    }
+  }
+  return true;
+}
+
+/**
+ * Pixel bounding box of the footprint's cutoff ellipse (columns box[0..1], rows box[2..3], inclusive,
+ * clipped to the image); false when it misses the image.
+ */
+BIGUS_HD bool FootprintBox(const Footprint& f, const PreparedSlice& s, int box[4])
+{
+  const double cutoff = std::sqrt(std::fmax(f.CutoffSquared, 0.0));
+  const double P0 = s.PixelToPlane[0], P1 = s.PixelToPlane[1], P2 = s.PixelToPlane[2];
+  // pixel = K^-1 plane, K = [[P0, P1], [0, P2]].
+  const double k00 = 1 / P0, k01 = -P1 / (P0 * P2), k11 = 1 / P2;
+  const double ci = k00 * f.Center[0] + k01 * f.Center[1];
+  const double cj = k11 * f.Center[1];
+  const double vi = k00 * k00 * f.Cov[0] + 2 * k00 * k01 * f.Cov[1] + k01 * k01 * f.Cov[2];
+  const double vj = k11 * k11 * f.Cov[2];
+  const double hi = cutoff * std::sqrt(std::fmax(vi, 0.0));
+  const double hj = cutoff * std::sqrt(std::fmax(vj, 0.0));
+  const double lo[2] = { std::ceil(ci - hi), std::ceil(cj - hj) };
+  const double up[2] = { std::floor(ci + hi), std::floor(cj + hj) };
+  if (!(lo[0] <= s.Width - 1) || !(up[0] >= 0) || !(lo[1] <= s.Height - 1) || !(up[1] >= 0) || !(lo[0] <= up[0]) ||
+    !(lo[1] <= up[1]))
+  {
+    return false;
+  }
+  box[0] = static_cast<int>(std::fmax(lo[0], 0.0));
+  box[1] = static_cast<int>(std::fmin(up[0], s.Width - 1.0));
+  box[2] = static_cast<int>(std::fmax(lo[1], 0.0));
+  box[3] = static_cast<int>(std::fmin(up[1], s.Height - 1.0));
+  return true;
+}
+
+/// The reflectivity the renderer uses: r, or max(r, 0) with RenderOptions::NonNegativeReflectivity.
+BIGUS_HD double EffectiveReflectivity(double r, bool nonNegative)
+{
+  return nonNegative && r < 0 ? 0.0 : r;
+}
+
+/**
+ * The columns of one pixel row that can lie inside a footprint's cutoff ellipse. With dx = q P0 + x0
+ * the in-plane offset of column q and dy the row's, the form a dx^2 + 2 b dx dy + c dy^2 <= k2 holds
+ * for dx between (-b dy -+ sqrt(a k2 - det dy^2)) / a (det = ac - b^2). The span is widened by a pixel
+ * on each side and slightly in k2 so that float rounding never drops a pixel the exact test keeps;
+ * the caller still tests every pixel. Returns [first, end) clipped to [lo, hi), empty when the row
+ * misses the ellipse.
+ */
+BIGUS_HD void RowSpan(float a, float b, float det, float k2, float dy, float x0, float P0, int lo, int hi, int& first,
+  int& end)
+{
+  const float disc = a * (k2 * 1.001f + 1e-6f) - det * dy * dy;
+  if (!(disc >= 0))
+  {
+    first = end = lo;
+    return;
+  }
+  const float root = std::sqrt(disc);
+  const float q0 = ((-b * dy - root) / a - x0) / P0, q1 = ((-b * dy + root) / a - x0) / P0;
+  // fmax / fmin also map a NaN bound (a degenerate conic) to the whole range.
+  const int f = static_cast<int>(std::fmax(std::floor(q0), float(lo - 1))) - 1;
+  const int e = static_cast<int>(std::fmin(std::ceil(q1), float(hi + 1))) + 2;
+  first = f > lo ? f : lo;
+  end = e < hi ? e : hi;
+  end = end > first ? end : first;
+}
+
+} // namespace bigus
+
+#endif
