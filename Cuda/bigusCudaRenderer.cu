@@ -78,7 +78,7 @@ constexpr std::int64_t FieldBytes = 11 * sizeof(float);
 constexpr std::int64_t GradientBytes = 12 * sizeof(float) + sizeof(int);
 constexpr std::int64_t BinningBytes = sizeof(DeviceSplat) + 2 * sizeof(unsigned long long);
 constexpr std::int64_t EntryBytes = 4 * sizeof(std::uint32_t); // keys and values, unsorted and sorted
-constexpr std::int64_t PixelBytes = 3 * sizeof(float) + 2 * sizeof(int) / RasterThreads + 1;
+constexpr std::int64_t PixelBytes = 3 * sizeof(float);          // forward S, I; backward S, dL, dL/dS
 
 // ------------------------------------------------------------------------------------------------
 // Kernels.
@@ -547,8 +547,11 @@ public:
       }
       ScatteringGradientKernel<<<Blocks(pixels, SetupBlock), SetupBlock, 0, this->Stream>>>(
         dS, dG, pixels, gradientIsWithRespectToS, options.Gamma, dGS);
-      BackwardKernel<<<Blocks(n * WarpSize, BackwardBlock), BackwardBlock, 0, this->Stream>>>(this->Field(n), s,
-        sigmaE, options.Cutoff, options.NonNegativeReflectivity, dGS, out, this->Count.As<Counters>());
+      if (n > 0)
+      {
+        BackwardKernel<<<Blocks(n * WarpSize, BackwardBlock), BackwardBlock, 0, this->Stream>>>(this->Field(n), s,
+          sigmaE, options.Cutoff, options.NonNegativeReflectivity, dGS, out, this->Count.As<Counters>());
+      }
       if (!Check(cudaGetLastError(), "backward kernel", error))
       {
         return false;
@@ -600,14 +603,12 @@ private:
   }
 
   /**
-   * Refuses, before allocating, a call whose buffers do not fit: @p bytes more than this renderer
-   * holds already, against the device's free memory.
+   * Refuses, before allocating, a call whose buffers do not fit: @p bytes in the buffers @p reused
+   * (which hold @p held bytes already and are reallocated if too small) against those plus the
+   * device's free memory.
    */
-  bool Fits(std::int64_t bytes, const std::string& what, std::string* error) const
+  bool Fits(std::int64_t bytes, std::int64_t held, const std::string& what, std::string* error) const
   {
-    const std::int64_t held = this->FieldData.Bytes + this->Gradients.Bytes + this->Splats.Bytes +
-      this->Touched.Bytes + this->Image.Bytes + this->TileStart.Bytes + this->TileEnd.Bytes + this->Keys.Bytes +
-      this->SortedKeys.Bytes + this->Values.Bytes + this->SortedValues.Bytes + this->Temporary.Bytes;
     std::size_t freeBytes = 0, totalBytes = 0;
     if (!Check(cudaMemGetInfo(&freeBytes, &totalBytes), "cudaMemGetInfo", error))
     {
@@ -623,7 +624,7 @@ private:
       char text[320];
       std::snprintf(text, sizeof(text),
         "CUDA renderer: %s need %.1f MiB of device memory; the device has %.1f MiB free and this renderer holds "
-        "%.1f MiB (of %.1f MiB); render fewer Gaussians or smaller slices, or use the cpu backend",
+        "%.1f MiB for them (of %.1f MiB in all); render fewer Gaussians or smaller slices, or use the cpu backend",
         what.c_str(), bytes / MiB, freeBytes / MiB, held / MiB, totalBytes / MiB);
       *error = text;
     }
@@ -640,7 +641,7 @@ private:
       pixels = std::max(pixels, std::int64_t(s.Width) * s.Height);
       tiles = std::max(tiles, std::int64_t(s.TilesX) * s.TilesY);
     }
-    const std::int64_t perGaussian = FieldBytes + (backward ? GradientBytes : BinningBytes);
+    const std::int64_t perGaussian = DeviceBytesPerGaussian(backward);
     const std::string what = "a field of " + std::to_string(n) + " Gaussians and slices of " + std::to_string(pixels) +
       " pixels";
     if (n >= (std::int64_t(1) << 31))
@@ -651,7 +652,10 @@ private:
       }
       return false;
     }
-    if (!this->Fits(n * perGaussian + pixels * PixelBytes + 2 * tiles * std::int64_t(sizeof(int)), what, error) ||
+    const std::int64_t held = this->FieldData.Bytes + this->Image.Bytes +
+      (backward ? this->Gradients.Bytes
+                : this->Splats.Bytes + this->Touched.Bytes + this->TileStart.Bytes + this->TileEnd.Bytes);
+    if (!this->Fits(n * perGaussian + pixels * PixelBytes + 2 * tiles * std::int64_t(sizeof(int)), held, what, error) ||
       !this->FieldData.Reserve(std::max<std::int64_t>(1, n) * FieldBytes, "allocating the field", error) ||
       !this->Image.Reserve(3 * pixels * std::int64_t(sizeof(float)), "allocating the image buffers", error) ||
       !this->Count.Reserve(sizeof(Counters), "allocating the counters", error) ||
@@ -747,8 +751,8 @@ private:
                  this->SortedKeys.As<std::uint32_t>(), this->Values.As<std::uint32_t>(),
                  this->SortedValues.As<std::uint32_t>(), static_cast<int>(entries), 0, bits, this->Stream),
           "sort size", error) ||
-      !this->Fits(this->FieldData.Bytes + this->Splats.Bytes + this->Touched.Bytes + this->Image.Bytes +
-            entries * EntryBytes + static_cast<std::int64_t>(sortBytes),
+      !this->Fits(entries * EntryBytes + static_cast<std::int64_t>(sortBytes),
+        this->Keys.Bytes + this->SortedKeys.Bytes + this->Values.Bytes + this->SortedValues.Bytes + this->Temporary.Bytes,
         "the " + std::to_string(entries) + " (tile, Gaussian) entries of one slice", error))
     {
       return false;
@@ -800,9 +804,9 @@ std::unique_ptr<Renderer> MakeCudaRenderer(std::string* error)
 }
 } // namespace
 
-std::int64_t DeviceBytesPerGaussian()
+std::int64_t DeviceBytesPerGaussian(bool backward)
 {
-  return FieldBytes + std::max(GradientBytes, BinningBytes);
+  return FieldBytes + (backward ? GradientBytes : BinningBytes);
 }
 
 std::int64_t DeviceBytesPerPixel()

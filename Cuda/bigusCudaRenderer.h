@@ -6,8 +6,10 @@
  * (BIGUS_HD) and bigusRasterGeometry.h on the device. Phase 1 runs one thread per Gaussian; tile
  * binning sorts (tile, Gaussian) pairs with CUB's radix sort on the tile id (stable, so every tile's
  * list stays in Gaussian index order); phase 2 runs one 16 x 16 thread block per tile with the
- * tile's footprints staged in shared memory; the backward pass runs one warp per Gaussian over its
- * footprint's row spans and reduces the warp's partial sums in a fixed order.
+ * tile's footprints staged in shared memory; the backward pass runs one warp per Gaussian over the
+ * pixels of its footprint's bounding box (those within the cutoff, the CPU's pixel set) and reduces the
+ * warp's partial sums in a fixed order. RenderStats::PixelEvaluations of Backward counts the box's
+ * pixels, not the CPU's row spans.
  *
  * Deterministic by construction: every pixel sums its Gaussians in index order (as on the CPU) and
  * every Gaussian's gradient is summed by one warp in a fixed order; no float atomics are used, so
@@ -32,11 +34,13 @@ namespace bigus
 namespace cuda
 {
 
-/// Device bytes a call needs for each Gaussian of the field (field, footprints, binning, gradients).
-BIGUSCUDA_EXPORT std::int64_t DeviceBytesPerGaussian();
+/// Device bytes a call needs for each Gaussian of the field: Forward (field, footprints, binning
+/// counts) or Backward (field, gradients).
+BIGUSCUDA_EXPORT std::int64_t DeviceBytesPerGaussian(bool backward = false);
 /// Device bytes a call needs for each pixel of the largest slice (S, I, dL, dL/dS, tile ranges).
 BIGUSCUDA_EXPORT std::int64_t DeviceBytesPerPixel();
-/// Device bytes of one (tile, Gaussian) entry of the binning, sort buffers included.
+/// Device bytes of one (tile, Gaussian) entry of the binning: keys and values, unsorted and sorted
+/// (CUB's radix sort adds scratch space of about one key and value per entry on top).
 BIGUSCUDA_EXPORT std::int64_t DeviceBytesPerTileEntry();
 
 /**

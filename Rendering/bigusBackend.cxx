@@ -60,10 +60,21 @@ void LoadBackendModules()
       folder = self.dli_fname;
       folder = folder.substr(0, folder.find_last_of('/') + 1);
     }
-    void* handle = folder.empty() ? nullptr : dlopen((folder + library).c_str(), RTLD_NOW | RTLD_LOCAL);
-    if (!handle)
+    // The library beside this one first (build and install trees), then the loader's search path; the
+    // first failure is the telling one (a missing libcudart, say).
+    std::string why;
+    void* handle = nullptr;
+    for (const std::string& path : { folder.empty() ? std::string() : folder + library, library })
     {
-      handle = dlopen(library.c_str(), RTLD_NOW | RTLD_LOCAL);
+      if (!path.empty() && !(handle = dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL)) && why.empty())
+      {
+        const char* text = dlerror();
+        why = text ? text : "unknown error";
+      }
+      if (handle)
+      {
+        break;
+      }
     }
     using Registration = void (*)();
     const Registration reg = handle ? reinterpret_cast<Registration>(dlsym(handle, "bigusCudaRegisterBackend")) : nullptr;
@@ -73,8 +84,7 @@ void LoadBackendModules()
     }
     else
     {
-      const char* why = dlerror();
-      RegisterUnavailableBackend("cuda", "cannot load " + library + ": " + (why ? why : "unknown error"));
+      RegisterUnavailableBackend("cuda", "cannot load " + library + ": " + (handle ? "no registration function" : why));
     }
   });
 #endif
