@@ -45,17 +45,6 @@ struct DeviceField
   std::int64_t Count;
 };
 
-/// Gradient outputs on the device; null where the caller asked for none.
-struct DeviceGradients
-{
-  float* Means;          // [N, 3]
-  float* LogScales;      // [N, 3]
-  float* Quaternions;    // [N, 4]
-  float* Reflectivities; // [N]
-  float* Attribution;    // [N]
-  int* VisibleCount;     // [N]
-};
-
 /// A visible footprint as phase 2 uses it (the CPU backend's Splat without the index).
 struct DeviceSplat
 {
@@ -261,7 +250,7 @@ __global__ void ScatteringGradientKernel(const float* S, const float* dL, std::i
  * lane 0 runs the setup's backward and adds to the Gaussian's gradients, which no other warp touches.
  */
 __global__ void BackwardKernel(DeviceField field, PreparedSlice s, double sigmaE, double cutoff, bool nonNegative,
-  const float* gS, DeviceGradients out, Counters* counters)
+  const float* gS, FieldGradients out, Counters* counters)
 {
   const std::int64_t i = (std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x) / WarpSize;
   const int lane = threadIdx.x & (WarpSize - 1);
@@ -328,36 +317,7 @@ __global__ void BackwardKernel(DeviceField field, PreparedSlice s, double sigmaE
   {
     return;
   }
-  const FootprintGrad gf = FootprintGradFromSums(sum, r);
-  GaussianGrad gg = {};
-  SetupFootprintBackward(f, cache, s.Frame, sigmaE, gf, gg);
-  gg.Reflectivity = (nonNegative && g.Reflectivity <= 0) ? 0.0 : f.Amplitude * sum[5];
-  for (int k = 0; k < 3; ++k)
-  {
-    if (out.Means)
-    {
-      out.Means[3 * i + k] += static_cast<float>(gg.Mean[k]);
-    }
-    if (out.LogScales)
-    {
-      out.LogScales[3 * i + k] += static_cast<float>(gg.LogScale[k]);
-    }
-  }
-  if (out.Quaternions)
-  {
-    for (int k = 0; k < 4; ++k)
-    {
-      out.Quaternions[4 * i + k] += static_cast<float>(gg.Quaternion[k]);
-    }
-  }
-  if (out.Reflectivities)
-  {
-    out.Reflectivities[i] += static_cast<float>(gg.Reflectivity);
-  }
-  if (out.Attribution)
-  {
-    out.Attribution[i] += static_cast<float>(sum[6]);
-  }
+  AddGaussianGradients(f, cache, s.Frame, sigmaE, sum, r, g.Reflectivity, nonNegative, out, i);
   if (out.VisibleCount)
   {
     out.VisibleCount[i] += 1;
@@ -504,7 +464,7 @@ public:
     float* base = this->Gradients.As<float>();
     const GradientSlot slots[] = { { gradients.Means, 3, 0 }, { gradients.LogScales, 3, 3 },
       { gradients.Quaternions, 4, 6 }, { gradients.Reflectivities, 1, 10 }, { gradients.Attribution, 1, 11 } };
-    DeviceGradients out = {};
+    FieldGradients out; // device pointers: [N, 3] means, [N, 3] log-scales, [N, 4] quaternions, [N] r, E, counts
     float** outputs[] = { &out.Means, &out.LogScales, &out.Quaternions, &out.Reflectivities, &out.Attribution };
     for (int k = 0; k < 5; ++k)
     {

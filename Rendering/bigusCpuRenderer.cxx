@@ -451,39 +451,8 @@ public:
           {
             gradients.VisibleCount[i] += 1;
           }
-          const FootprintGrad gf = FootprintGradFromSums(sum, r);
-          GaussianGrad gg = {};
-          SetupFootprintBackward(f, cache, s.Frame, sigmaE, gf, gg);
-          gg.Reflectivity = (options.NonNegativeReflectivity && g.Reflectivity <= 0) ? 0.0 : f.Amplitude * sum[5];
-          if (gradients.Means)
-          {
-            for (int q = 0; q < 3; ++q)
-            {
-              gradients.Means[3 * i + q] += static_cast<float>(gg.Mean[q]);
-            }
-          }
-          if (gradients.LogScales)
-          {
-            for (int q = 0; q < 3; ++q)
-            {
-              gradients.LogScales[3 * i + q] += static_cast<float>(gg.LogScale[q]);
-            }
-          }
-          if (gradients.Quaternions)
-          {
-            for (int q = 0; q < 4; ++q)
-            {
-              gradients.Quaternions[4 * i + q] += static_cast<float>(gg.Quaternion[q]);
-            }
-          }
-          if (gradients.Reflectivities)
-          {
-            gradients.Reflectivities[i] += static_cast<float>(gg.Reflectivity);
-          }
-          if (gradients.Attribution)
-          {
-            gradients.Attribution[i] += static_cast<float>(sum[6]);
-          }
+          AddGaussianGradients(f, cache, s.Frame, sigmaE, sum, r, g.Reflectivity, options.NonNegativeReflectivity,
+            gradients, i);
         }
       });
       for (const auto& counter : counters)

@@ -140,6 +140,46 @@ BIGUS_HD void RowSpan(float a, float b, float det, float k2, float dy, float x0,
   end = end > first ? end : first;
 }
 
+/**
+ * The backward pass of Gaussian @p i on one slice from its pixel sums @p sums (PixelWeightBackward's
+ * terms over its footprint): its mean, log-scale, quaternion and reflectivity gradients and its share
+ * of the attribution, added to the non-null outputs of @p out (host or device pointers). @p r is the
+ * effective reflectivity, @p reflectivity the stored one (no gradient reaches a clamped one).
+ */
+BIGUS_HD void AddGaussianGradients(const Footprint& f, const SetupCache& cache, const SliceFrameD& frame, double sigmaE,
+  const double sums[7], double r, double reflectivity, bool nonNegative, const FieldGradients& out, std::int64_t i)
+{
+  GaussianGrad gg = {};
+  SetupFootprintBackward(f, cache, frame, sigmaE, FootprintGradFromSums(sums, r), gg);
+  gg.Reflectivity = (nonNegative && reflectivity <= 0) ? 0.0 : f.Amplitude * sums[5];
+  for (int k = 0; k < 3; ++k)
+  {
+    if (out.Means)
+    {
+      out.Means[3 * i + k] += static_cast<float>(gg.Mean[k]);
+    }
+    if (out.LogScales)
+    {
+      out.LogScales[3 * i + k] += static_cast<float>(gg.LogScale[k]);
+    }
+  }
+  if (out.Quaternions)
+  {
+    for (int k = 0; k < 4; ++k)
+    {
+      out.Quaternions[4 * i + k] += static_cast<float>(gg.Quaternion[k]);
+    }
+  }
+  if (out.Reflectivities)
+  {
+    out.Reflectivities[i] += static_cast<float>(gg.Reflectivity);
+  }
+  if (out.Attribution)
+  {
+    out.Attribution[i] += static_cast<float>(sums[6]);
+  }
+}
+
 } // namespace bigus
 
 #endif
