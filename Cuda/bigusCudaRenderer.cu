@@ -45,17 +45,6 @@ struct DeviceField
   std::int64_t Count;
 };
 
-/// A visible footprint as phase 2 uses it (the CPU backend's Splat without the index).
-struct DeviceSplat
-{
-  double Cx, Cy;                  // centre in the plane, mm
-  float Cos, Sin;                 // major axis of the footprint
-  float InvMajor, InvMinor;       // 1 / standard deviations along the axes, 1/mm
-  float Weight;                   // r_eff * amp
-  float CutoffSquared;            // of the in-plane form (Footprint::CutoffSquared)
-  int X0, X1, Y0, Y1;             // pixel bounding box, inclusive
-};
-
 /// Running counters of a call: visible Gaussians, pixel evaluations.
 struct Counters
 {
@@ -65,7 +54,7 @@ struct Counters
 
 constexpr std::int64_t FieldBytes = 11 * sizeof(float);
 constexpr std::int64_t GradientBytes = 12 * sizeof(float) + sizeof(int);
-constexpr std::int64_t BinningBytes = sizeof(DeviceSplat) + 2 * sizeof(unsigned long long);
+constexpr std::int64_t BinningBytes = sizeof(Splat) + 2 * sizeof(unsigned long long);
 constexpr std::int64_t EntryBytes = 4 * sizeof(std::uint32_t); // keys and values, unsorted and sorted
 constexpr std::int64_t PixelBytes = 3 * sizeof(float);          // forward S, I; backward S, dL, dL/dS
 
@@ -74,7 +63,7 @@ constexpr std::int64_t PixelBytes = 3 * sizeof(float);          // forward S, I;
 
 /// Phase 1: footprint and number of tiles touched of Gaussian i (0 when culled).
 __global__ void SetupKernel(DeviceField field, PreparedSlice s, double sigmaE, double cutoff, bool nonNegative,
-  DeviceSplat* splats, unsigned long long* touched, Counters* counters)
+  Splat* splats, unsigned long long* touched, Counters* counters)
 {
   const std::int64_t i = std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i >= field.Count)
@@ -90,20 +79,7 @@ __global__ void SetupKernel(DeviceField field, PreparedSlice s, double sigmaE, d
     int box[4];
     if (f.Visible && FootprintBox(f, s, box))
     {
-      DeviceSplat sp;
-      sp.Cx = f.Center[0];
-      sp.Cy = f.Center[1];
-      sp.Cos = static_cast<float>(f.Axes[0]);
-      sp.Sin = static_cast<float>(f.Axes[1]);
-      sp.InvMajor = static_cast<float>(f.Axes[2]);
-      sp.InvMinor = static_cast<float>(f.Axes[3]);
-      sp.Weight = static_cast<float>(r * f.Amplitude);
-      sp.CutoffSquared = static_cast<float>(f.CutoffSquared);
-      sp.X0 = box[0];
-      sp.X1 = box[1];
-      sp.Y0 = box[2];
-      sp.Y1 = box[3];
-      splats[i] = sp;
+      splats[i] = MakeSplat(f, r, box);
       tiles = static_cast<unsigned long long>(box[1] / TileSize - box[0] / TileSize + 1) *
         static_cast<unsigned long long>(box[3] / TileSize - box[2] / TileSize + 1);
       atomicAdd(&counters->Visible, 1ull);
@@ -113,7 +89,7 @@ __global__ void SetupKernel(DeviceField field, PreparedSlice s, double sigmaE, d
 }
 
 /// Binning: Gaussian i writes (tile, i) for every tile it touches, at its offset of the inclusive scan.
-__global__ void EmitKernel(const DeviceSplat* splats, const unsigned long long* touched,
+__global__ void EmitKernel(const Splat* splats, const unsigned long long* touched,
   const unsigned long long* inclusive, std::int64_t count, int tilesX, std::uint32_t* keys, std::uint32_t* values)
 {
   const std::int64_t i = std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
@@ -121,7 +97,7 @@ __global__ void EmitKernel(const DeviceSplat* splats, const unsigned long long* 
   {
     return;
   }
-  const DeviceSplat sp = splats[i];
+  const Splat sp = splats[i];
   unsigned long long next = inclusive[i] - touched[i];
   for (int ty = sp.Y0 / TileSize; ty <= sp.Y1 / TileSize; ++ty)
   {
@@ -168,10 +144,10 @@ __device__ unsigned long long WarpSum(unsigned long long v)
  * RasterThreads at a time and every pixel adds them in Gaussian index order, as the CPU backend does,
  * with offsets relative to the tile's first pixel.
  */
-__global__ void RasterKernel(const DeviceSplat* splats, const std::uint32_t* values, const int* start,
+__global__ void RasterKernel(const Splat* splats, const std::uint32_t* values, const int* start,
   const int* end, PreparedSlice s, float gamma, float* S, float* I, Counters* counters)
 {
-  __shared__ DeviceSplat staged[RasterThreads];
+  __shared__ Splat staged[RasterThreads];
   const int tile = blockIdx.x;
   const int q = threadIdx.x, r = threadIdx.y;
   const int I0 = (tile % s.TilesX) * TileSize, J0 = (tile / s.TilesX) * TileSize;
@@ -199,7 +175,7 @@ __global__ void RasterKernel(const DeviceSplat* splats, const std::uint32_t* val
     {
       for (int k = 0; k < n; ++k)
       {
-        const DeviceSplat& sp = staged[k];
+        const Splat& sp = staged[k];
         if (i < sp.X0 || i > sp.X1 || j < sp.Y0 || j > sp.Y1)
         {
           continue;
@@ -267,18 +243,7 @@ __global__ void BackwardKernel(DeviceField field, PreparedSlice s, double sigmaE
   {
     return;
   }
-  const double X0 = box[0] * s.PixelToPlane[0] + box[2] * s.PixelToPlane[1];
-  const double Y0 = box[2] * s.PixelToPlane[2];
-  const float dcx = static_cast<float>(f.Center[0] - X0), dcy = static_cast<float>(f.Center[1] - Y0);
-  const float a = static_cast<float>(f.Conic[0]), b = static_cast<float>(f.Conic[1]);
-  const float c = static_cast<float>(f.Conic[2]);
-  const float w = static_cast<float>(r * f.Amplitude);
-  const float axes[4] = { static_cast<float>(f.Axes[0]), static_cast<float>(f.Axes[1]), static_cast<float>(f.Axes[2]),
-    static_cast<float>(f.Axes[3]) };
-  const float cutoffSquared = static_cast<float>(f.CutoffSquared);
-  const float P0 = static_cast<float>(s.PixelToPlane[0]);
-  const float P1 = static_cast<float>(s.PixelToPlane[1]);
-  const float P2 = static_cast<float>(s.PixelToPlane[2]);
+  const BoxFootprint fp = MakeBoxFootprint(f, s, box, r);
   const int boxWidth = box[1] - box[0] + 1;
   const std::int64_t boxPixels = std::int64_t(boxWidth) * (box[3] - box[2] + 1);
   double sum[7] = { 0, 0, 0, 0, 0, 0, 0 };
@@ -287,13 +252,13 @@ __global__ void BackwardKernel(DeviceField field, PreparedSlice s, double sigmaE
   for (std::int64_t k = lane; k < boxPixels; k += WarpSize)
   {
     const int row = static_cast<int>(k / boxWidth), col = static_cast<int>(k % boxWidth);
-    const float dy = row * P2 - dcy;
-    const float dx = col * P0 + (row * P1 - dcx);
-    const float form = AxesForm(axes[0], axes[1], axes[2], axes[3], dx, dy);
-    if (form <= cutoffSquared)
+    const float dy = row * fp.P2 - fp.Dcy;
+    const float dx = col * fp.P0 + (row * fp.P1 - fp.Dcx);
+    const float form = AxesForm(fp.Axes[0], fp.Axes[1], fp.Axes[2], fp.Axes[3], dx, dy);
+    if (form <= fp.CutoffSquared)
     {
       const float gv = gS[std::int64_t(box[2] + row) * s.Width + box[0] + col];
-      PixelWeightBackward(gv, w, FastExp(-0.5f * form), a, b, c, dx, dy, part, 1);
+      PixelWeightBackward(gv, fp.Weight, FastExp(-0.5f * form), fp.A, fp.B, fp.C, dx, dy, part, 1);
       if (++pending == 8)
       {
         for (int t = 0; t < 7; ++t)
@@ -417,7 +382,7 @@ public:
       }
       const double t1 = Now();
       const int tiles = s.TilesX * s.TilesY;
-      RasterKernel<<<tiles, dim3(TileSize, TileSize), 0, this->Stream>>>(this->Splats.As<DeviceSplat>(),
+      RasterKernel<<<tiles, dim3(TileSize, TileSize), 0, this->Stream>>>(this->Splats.As<Splat>(),
         this->SortedValues.As<std::uint32_t>(), this->TileStart.As<int>(), this->TileEnd.As<int>(), s,
         static_cast<float>(options.Gamma), this->Image.As<float>(), I ? this->Image.As<float>() + pixels : nullptr,
         this->Count.As<Counters>());
@@ -621,7 +586,7 @@ private:
       !this->Count.Reserve(sizeof(Counters), "allocating the counters", error) ||
       (backward && !this->Gradients.Reserve(std::max<std::int64_t>(1, n) * GradientBytes, "allocating gradients", error)) ||
       (!backward &&
-        (!this->Splats.Reserve(std::max<std::int64_t>(1, n) * std::int64_t(sizeof(DeviceSplat)), "allocating footprints",
+        (!this->Splats.Reserve(std::max<std::int64_t>(1, n) * std::int64_t(sizeof(Splat)), "allocating footprints",
            error) ||
           !this->Touched.Reserve(2 * std::max<std::int64_t>(1, n) * std::int64_t(sizeof(unsigned long long)),
             "allocating tile counts", error) ||
@@ -671,7 +636,7 @@ private:
       return true;
     }
     SetupKernel<<<Blocks(n, SetupBlock), SetupBlock, 0, this->Stream>>>(this->Field(n), s, sigmaE, options.Cutoff,
-      options.NonNegativeReflectivity, this->Splats.As<DeviceSplat>(), touched, this->Count.As<Counters>());
+      options.NonNegativeReflectivity, this->Splats.As<Splat>(), touched, this->Count.As<Counters>());
     std::size_t scanBytes = 0;
     if (!Check(cudaGetLastError(), "setup kernel", error) ||
       !Check(cub::DeviceScan::InclusiveSum(nullptr, scanBytes, touched, inclusive, n, this->Stream), "scan size", error) ||
@@ -726,7 +691,7 @@ private:
     {
       return false;
     }
-    EmitKernel<<<Blocks(n, SetupBlock), SetupBlock, 0, this->Stream>>>(this->Splats.As<DeviceSplat>(), touched,
+    EmitKernel<<<Blocks(n, SetupBlock), SetupBlock, 0, this->Stream>>>(this->Splats.As<Splat>(), touched,
       inclusive, n, s.TilesX, this->Keys.As<std::uint32_t>(), this->Values.As<std::uint32_t>());
     if (!Check(cudaGetLastError(), "binning kernel", error) ||
       !Check(cub::DeviceRadixSort::SortPairs(this->Temporary.Data, sortBytes, this->Keys.As<std::uint32_t>(),
@@ -745,7 +710,7 @@ private:
   std::int64_t FieldCount = 0;
   Buffer FieldData;    // [N, 11] floats: means [N, 3], log-scales [N, 3], quaternions [N, 4], reflectivities [N]
   Buffer Gradients;    // [N, 12] floats + [N] ints: as FieldData, then attribution [N], visible counts [N]
-  Buffer Splats;       // [N] DeviceSplat
+  Buffer Splats;       // [N] Splat
   Buffer Touched;      // [2, N] unsigned long long: tiles touched, their inclusive scan
   Buffer Image;        // [3, H, W] floats: forward S, I; backward S, dL, dL/dS
   Buffer TileStart;    // [tiles] int

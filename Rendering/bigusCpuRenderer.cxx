@@ -74,18 +74,6 @@ bool MayBeVisible(const FieldView& field, const CullBounds& bounds, std::int64_t
   return dz * dz <= k * k * (double(bounds.MaxVariance[i]) * 1.001 + sigmaE * sigmaE);
 }
 
-/// A visible Gaussian's footprint as phase 2 uses it.
-struct Splat
-{
-  double Cx, Cy;      // centre in the plane, mm
-  float Cos, Sin;     // major axis of the footprint in the plane
-  float InvMajor, InvMinor; // 1 / standard deviations along the axes, 1/mm
-  float Weight;       // r_eff * amp
-  float CutoffSquared; // of the in-plane form (Footprint::CutoffSquared)
-  int X0, X1, Y0, Y1; // pixel bounding box, inclusive, clipped to the image
-  std::int64_t Index; // Gaussian index
-};
-
 /// Phase 1 for one slice: the visible splats, in Gaussian index order.
 void SetupSlice(const FieldView& field, const CullBounds& bounds, const PreparedSlice& s,
   const RenderOptions& o, std::vector<std::vector<Splat>>& perChunk, std::vector<Splat>& splats)
@@ -112,26 +100,12 @@ void SetupSlice(const FieldView& field, const CullBounds& bounds, const Prepared
           continue;
         }
         const Footprint f = SetupFootprint(g, s.Frame, sigmaE, o.Cutoff, nullptr);
-        Splat splat;
         int box[4];
         if (!f.Visible || !FootprintBox(f, s, box))
         {
           continue;
         }
-        splat.Cx = f.Center[0];
-        splat.Cy = f.Center[1];
-        splat.Cos = static_cast<float>(f.Axes[0]);
-        splat.Sin = static_cast<float>(f.Axes[1]);
-        splat.InvMajor = static_cast<float>(f.Axes[2]);
-        splat.InvMinor = static_cast<float>(f.Axes[3]);
-        splat.Weight = static_cast<float>(r * f.Amplitude);
-        splat.CutoffSquared = static_cast<float>(f.CutoffSquared);
-        splat.X0 = box[0];
-        splat.X1 = box[1];
-        splat.Y0 = box[2];
-        splat.Y1 = box[3];
-        splat.Index = i;
-        out.push_back(splat);
+        out.push_back(MakeSplat(f, r, box));
       }
     }
   });
@@ -286,19 +260,22 @@ constexpr int Lanes = 8;
 
 /**
  * The per-Gaussian pixel sums of the backward pass over the row spans (RowSpan) of its bounding box
- * @p box (columns box[0..1], rows box[2..3]); @p gS points at row box[2] of dL/dS; @p w = r amp.
- * sum[q] is the sum over those pixels of PixelWeightBackward's term q, with e from the principal-axes
- * form (@p axes) and the cutoff, as in phase 2. Columns are processed in groups of Lanes with one
+ * @p box (columns box[0..1], rows box[2..3]); @p gS points at row box[2] of dL/dS; @p fp is the
+ * footprint relative to the box (MakeBoxFootprint). sum[q] is the sum over those pixels of
+ * PixelWeightBackward's term q, with e from the principal-axes form and the cutoff, as in phase 2. Columns are processed in groups of Lanes with one
  * partial sum per lane (vectorisable without reassociation, deterministic order).
  * Returns the number of pixels in the row spans (RenderStats::PixelEvaluations).
  */
-BIGUS_TARGET_CLONES std::int64_t FootprintSums(const float* gS, int width, const int box[4], float dcx, float dcy,
-  float a, float b, float c, const float axes[4], float w, float P0, float P1, float P2, float cutoffSquared, double sum[7])
+BIGUS_TARGET_CLONES std::int64_t FootprintSums(
+  const float* gS, int width, const int box[4], const BoxFootprint& fp, double sum[7])
 {
   for (int q = 0; q < 7; ++q)
   {
     sum[q] = 0;
   }
+  const float a = fp.A, b = fp.B, c = fp.C, w = fp.Weight, cutoffSquared = fp.CutoffSquared;
+  const float P0 = fp.P0, P1 = fp.P1, P2 = fp.P2, dcx = fp.Dcx, dcy = fp.Dcy;
+  const float axes[4] = { fp.Axes[0], fp.Axes[1], fp.Axes[2], fp.Axes[3] };
   const float det = a * c - b * b;
   std::int64_t evaluations = 0;
   for (int row = box[2]; row <= box[3]; ++row)
@@ -412,9 +389,6 @@ public:
             : static_cast<float>(dL[offset + p] * ImageFromScatteringDerivative<double>(S[offset + p], gamma));
         }
       });
-      const float P0 = static_cast<float>(s.PixelToPlane[0]);
-      const float P1 = static_cast<float>(s.PixelToPlane[1]);
-      const float P2 = static_cast<float>(s.PixelToPlane[2]);
       vtkSMPThreadLocal<std::array<std::int64_t, 2>> counters(std::array<std::int64_t, 2>{ { 0, 0 } });
       vtkSMPTools::For(0, field.Count, 256, [&](std::int64_t begin, std::int64_t end) {
         std::array<std::int64_t, 2>& counter = counters.Local(); // visible, pixel evaluations
@@ -434,18 +408,9 @@ public:
           {
             continue;
           }
-          // Offsets relative to the box's first pixel, as in phase 2 relative to the tile.
-          const double X0 = box[0] * s.PixelToPlane[0] + box[2] * s.PixelToPlane[1];
-          const double Y0 = box[2] * s.PixelToPlane[2];
-          const float dcx = static_cast<float>(f.Center[0] - X0), dcy = static_cast<float>(f.Center[1] - Y0);
-          const float a = static_cast<float>(f.Conic[0]), b = static_cast<float>(f.Conic[1]);
-          const float c = static_cast<float>(f.Conic[2]);
-          const float w = static_cast<float>(r * f.Amplitude);
-          const float axes[4] = { static_cast<float>(f.Axes[0]), static_cast<float>(f.Axes[1]),
-            static_cast<float>(f.Axes[2]), static_cast<float>(f.Axes[3]) };
           double sum[7];
-          counter[1] += FootprintSums(gS.data() + std::int64_t(box[2]) * s.Width, s.Width, box, dcx, dcy, a, b, c,
-            axes, w, P0, P1, P2, static_cast<float>(f.CutoffSquared), sum);
+          counter[1] += FootprintSums(gS.data() + std::int64_t(box[2]) * s.Width, s.Width, box,
+            MakeBoxFootprint(f, s, box, r), sum);
           counter[0] += 1;
           if (gradients.VisibleCount)
           {

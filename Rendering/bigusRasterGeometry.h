@@ -107,6 +107,74 @@ BIGUS_HD bool FootprintBox(const Footprint& f, const PreparedSlice& s, int box[4
   return true;
 }
 
+/// A visible Gaussian's footprint as phase 2 uses it (float where the per-pixel arithmetic is float).
+struct Splat
+{
+  double Cx, Cy;            ///< centre in the plane, mm
+  float Cos, Sin;           ///< major axis of the footprint in the plane
+  float InvMajor, InvMinor; ///< 1 / standard deviations along the axes, 1/mm
+  float Weight;             ///< r_eff * amp
+  float CutoffSquared;      ///< of the in-plane form (Footprint::CutoffSquared)
+  int X0, X1, Y0, Y1;       ///< pixel bounding box (FootprintBox), inclusive, clipped to the image
+};
+
+/// The splat of the visible footprint @p f with effective reflectivity @p r and pixel box @p box.
+BIGUS_HD Splat MakeSplat(const Footprint& f, double r, const int box[4])
+{
+  Splat sp;
+  sp.Cx = f.Center[0];
+  sp.Cy = f.Center[1];
+  sp.Cos = static_cast<float>(f.Axes[0]);
+  sp.Sin = static_cast<float>(f.Axes[1]);
+  sp.InvMajor = static_cast<float>(f.Axes[2]);
+  sp.InvMinor = static_cast<float>(f.Axes[3]);
+  sp.Weight = static_cast<float>(r * f.Amplitude);
+  sp.CutoffSquared = static_cast<float>(f.CutoffSquared);
+  sp.X0 = box[0];
+  sp.X1 = box[1];
+  sp.Y0 = box[2];
+  sp.Y1 = box[3];
+  return sp;
+}
+
+/**
+ * A footprint as the backward passes evaluate it: in float, with in-plane offsets relative to the first
+ * pixel of its box (as phase 2 takes them relative to the tile), so that float keeps its precision
+ * whatever the size of the image. Pixel (col, row) of the box lies at dx = col P0 + (row P1 - Dcx),
+ * dy = row P2 - Dcy from the footprint's centre (mm).
+ */
+struct BoxFootprint
+{
+  float Dcx, Dcy;      ///< centre relative to the box's first pixel, mm
+  float A, B, C;       ///< conic (Footprint::Conic), 1/mm^2
+  float Axes[4];       ///< Footprint::Axes
+  float Weight;        ///< r_eff * amp
+  float CutoffSquared; ///< Footprint::CutoffSquared
+  float P0, P1, P2;    ///< pixel -> plane map of the slice
+};
+
+BIGUS_HD BoxFootprint MakeBoxFootprint(const Footprint& f, const PreparedSlice& s, const int box[4], double r)
+{
+  const double X0 = box[0] * s.PixelToPlane[0] + box[2] * s.PixelToPlane[1];
+  const double Y0 = box[2] * s.PixelToPlane[2];
+  BoxFootprint b;
+  b.Dcx = static_cast<float>(f.Center[0] - X0);
+  b.Dcy = static_cast<float>(f.Center[1] - Y0);
+  b.A = static_cast<float>(f.Conic[0]);
+  b.B = static_cast<float>(f.Conic[1]);
+  b.C = static_cast<float>(f.Conic[2]);
+  for (int k = 0; k < 4; ++k)
+  {
+    b.Axes[k] = static_cast<float>(f.Axes[k]);
+  }
+  b.Weight = static_cast<float>(r * f.Amplitude);
+  b.CutoffSquared = static_cast<float>(f.CutoffSquared);
+  b.P0 = static_cast<float>(s.PixelToPlane[0]);
+  b.P1 = static_cast<float>(s.PixelToPlane[1]);
+  b.P2 = static_cast<float>(s.PixelToPlane[2]);
+  return b;
+}
+
 /// The reflectivity the renderer uses: r, or max(r, 0) with RenderOptions::NonNegativeReflectivity.
 BIGUS_HD double EffectiveReflectivity(double r, bool nonNegative)
 {
