@@ -619,7 +619,7 @@ double AblationSeconds(bool quick)
 
 /**
  * The bundled real sweeps, each with its training schedule and time marks (s): liver, spine phantom,
- * N-wire phantom, and 20 frames of the liver. The default run takes about 80 minutes on 2 cores,
+ * N-wire phantom, and 20 frames of the liver. The default run takes about 2.5 hours on 2 cores,
  * --quick a few minutes.
  */
 std::vector<Sweep> BundledSweeps(const std::string& root, bool quick)

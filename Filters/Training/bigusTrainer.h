@@ -35,12 +35,19 @@ struct TrainerSettings
   // Model
   /// mm; 0 = chosen from the training frames (bigus::ChooseElevationSigma, bigusElevationSigma.h)
   double ElevationSigma = 0;
+  // The switches below follow the ablations of docs/BENCHMARKS_ablations.md (bigus benchmark --section
+  // ablations: each against the defaults at equal time and equal iterations, 3 seeds) and docs/FINDINGS.md.
+  /// Beam integration (false: the thin plane, UltraGauss): on; at equal time it pays on the spine
+  /// phantom (+12.8 dB) and the N-wire phantom (+1.8 dB), costs 0.5 dB on the liver (fewer steps).
   bool BeamIntegration = true;
+  /// Signed reflectivity (true: clamped to >= 0): off; signed pays 0.5 dB on the liver at equal time.
   bool NonNegativeReflectivity = false;
   double Cutoff = 4.0;                ///< renderer cutoff k while training (Evaluate renders at the filters' 5):
                                       ///< a liver step is 1.6 times faster than at 5, max |delta I| ~1e-3
   // Initialisation
-  bool HarrisInitialisation = true;  ///< false: uniform random in the sweep's bounding box
+  /// false: uniform random in the sweep's bounding box; Harris pays on every sweep at equal time
+  /// (liver +2.7 dB, spine +1.3, N-wire +0.4, volume protocol +1.1).
+  bool HarrisInitialisation = true;
   /// Seeds; 0 = automatic: one per 200 masked pixels of the training frames, at least 20,000 and at
   /// most half of MaximumGaussians (liver sweep, 105 frames of ~280k fan pixels: 147k seeds).
   std::int64_t InitialGaussians = 0;
@@ -57,9 +64,13 @@ struct TrainerSettings
   double LogScaleLearningRate = 0.01;
   double QuaternionLearningRate = 0.005;
   double ReflectivityLearningRate = 0.01;
+  /// L1 0.8 + D-SSIM 0.2 (D-SSIM pays 0.6 dB on the liver at equal time, costs 0.3 dB on the spine);
+  /// FFL 0: at equal time it costs on every sweep (liver -1.6 dB: its DFTs take a fifth of the steps).
   ImageLossWeights Loss;
   double ConvergenceTolerance = 0;   ///< stop when the mean loss of the last 200 steps improved by less (relative); 0 = off
   // Densification (EA-D)
+  /// On: within noise in the 15 to 40 s ablations (two densifications at most), but at the main job's
+  /// 300 s on the liver 36.78 dB against 36.11 without, in 3,990 steps against 4,997 (docs/FINDINGS.md).
   bool Densify = true;
   int DensifyStart = 200, DensifyEnd = -1, DensifyInterval = 200; ///< End -1: 60 % of the schedule
   double DensifyPercentile = 5.0;    ///< top share (%) of the attribution score densified each time
