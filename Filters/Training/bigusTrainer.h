@@ -70,7 +70,8 @@ struct TrainerSettings
   double ConvergenceTolerance = 0;   ///< stop when the mean loss of the last 200 steps improved by less (relative); 0 = off
   // Densification (EA-D)
   /// On: within noise in the 15 to 40 s ablations (two densifications at most), but at the main job's
-  /// 300 s on the liver 36.78 dB against 36.11 without, in 3,990 steps against 4,997 (docs/FINDINGS.md).
+  /// 300 s on the liver 36.88 dB against 36.19 without (2 seeds; about 4,000 steps against 5,100;
+  /// docs/FINDINGS.md).
   bool Densify = true;
   int DensifyStart = 200, DensifyEnd = -1, DensifyInterval = 200; ///< End -1: 60 % of the schedule
   double DensifyPercentile = 5.0;    ///< top share (%) of the attribution score densified each time
