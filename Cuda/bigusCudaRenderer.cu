@@ -395,9 +395,7 @@ public:
           !Check(cudaMemcpyAsync(I + offset, this->Image.As<float>() + pixels, sizeof(float) * pixels,
                    cudaMemcpyDeviceToHost, this->Stream),
             "copying I to the host", error)) ||
-        !Check(cudaMemcpyAsync(&counters, this->Count.Data, sizeof(Counters), cudaMemcpyDeviceToHost, this->Stream),
-          "copying the counters", error) ||
-        !Check(cudaStreamSynchronize(this->Stream), "raster", error))
+        !this->ReadCounters(counters, "raster", error))
       {
         return false;
       }
@@ -498,9 +496,7 @@ public:
           !Check(cudaMemcpyAsync(gradients.VisibleCount, out.VisibleCount, sizeof(int) * n, cudaMemcpyDeviceToHost,
                    this->Stream),
             "copying visibility counts to the host", error)) ||
-      !Check(cudaMemcpyAsync(&counters, this->Count.Data, sizeof(Counters), cudaMemcpyDeviceToHost, this->Stream),
-        "copying the counters", error) ||
-      !Check(cudaStreamSynchronize(this->Stream), "backward", error))
+      !this->ReadCounters(counters, "backward", error))
     {
       return false;
     }
@@ -615,6 +611,14 @@ private:
       }
     }
     return Check(cudaMemsetAsync(this->Count.Data, 0, sizeof(Counters), this->Stream), "clearing counters", error);
+  }
+
+  /// Copies the counters to the host after the work queued so far and waits for it (@p what names it).
+  bool ReadCounters(Counters& counters, const char* what, std::string* error)
+  {
+    return Check(cudaMemcpyAsync(&counters, this->Count.Data, sizeof(Counters), cudaMemcpyDeviceToHost, this->Stream),
+             "copying the counters", error) &&
+      Check(cudaStreamSynchronize(this->Stream), what, error);
   }
 
   /// Phase 1 and the binning of one slice: footprints, (tile, Gaussian) pairs sorted by tile, tile ranges.
