@@ -11,7 +11,8 @@
 //   test on in-between, oblique and orthogonal slices;
 // - quality against the number of Gaussians (capped runs against the adaptive stop);
 // - render time per slice against the error from the naive double-precision renderer, per cutoff;
-// - ablations (initialisation, EA-D, loss terms, signed reflectivity, beam integration).
+// - ablations: every switch (EA-D, Harris, beam integration, signed reflectivity, D-SSIM, FFL, capacity cap)
+//   at equal iterations and at equal time, 3 seeds, on four sweeps;
 // Times are wall-clock seconds on this machine; training time excludes the evaluations, which stop the
 // clock, and the rows at the time marks are of the field as trained so far (no final prune).
 #include "bigusBenchmark.h"
@@ -610,9 +611,9 @@ bool Failed(const std::string& what, std::string* error)
   return false;
 }
 
-/// Training time (s) of each ablation and capacity run, and the time mark of the full method they are
+/// Training time (s) of each capacity run, and the time mark of the liver's full method they are
 /// compared with.
-double AblationSeconds(bool quick)
+double CapacitySeconds(bool quick)
 {
   return quick ? 4 : 60;
 }
@@ -703,21 +704,20 @@ struct HoldOutResults
 {
   GaussianField LiverField; ///< the liver's field at the end of its run (render speed against error)
   RenderOptions LiverOptions;
-  Row FullAtAblationTime[2]; ///< liver and spine: the default run at the ablation time (the full method)
+  Row LiverAtCapacityTime; ///< the liver's default run at CapacitySeconds (the full method)
   std::vector<std::vector<Row>> Bigus; ///< per sweep, its BIGUS rows at the time marks
 };
 
 /**
  * The section of sweep @p si of BundledSweeps with the hold-out protocol: the baselines, BIGUS at the
  * sweep's time marks, the blurred truth for scale, where the held-out error comes from, and the plot
- * psnr_time_<si>.png. The liver and the spine (si 0 and 1) also run to the ablation time; the liver
- * keeps its field.
+ * psnr_time_<si>.png. The liver (si 0) also runs to the capacity section's time and keeps its field.
  */
 bool HoldOutSection(Sweep& sweep, std::size_t si, const std::string& root, bool quick, Report& report,
   HoldOutResults& results, std::string* error)
 {
   std::ostringstream& md = report.Markdown;
-  const double ablationSeconds = AblationSeconds(quick);
+  const double capacitySeconds = CapacitySeconds(quick);
   if (!Load(sweep, error))
   {
     return false;
@@ -732,9 +732,9 @@ bool HoldOutSection(Sweep& sweep, std::size_t si, const std::string& root, bool 
   s.ElevationSigma = sweep.ElevationSigma;
   s.Iterations = sweep.Iterations;
   std::vector<double> marks = sweep.Marks;
-  if (si < 2 && std::find(marks.begin(), marks.end(), ablationSeconds) == marks.end())
+  if (si == 0 && std::find(marks.begin(), marks.end(), capacitySeconds) == marks.end())
   {
-    marks.push_back(ablationSeconds);
+    marks.push_back(capacitySeconds);
     std::sort(marks.begin(), marks.end());
   }
   std::vector<Row> bigus;
@@ -753,12 +753,12 @@ bool HoldOutSection(Sweep& sweep, std::size_t si, const std::string& root, bool 
         // Its renders are freed again: the next row's peak memory is the training's own.
         ResetPeakMemory();
       }
-      if (mark == ablationSeconds && si < 2)
-      {
-        results.FullAtAblationTime[si] = r;
-      }
       if (si == 0)
       {
+        if (mark == capacitySeconds)
+        {
+          results.LiverAtCapacityTime = r;
+        }
         results.LiverField = trainer.GetField();
         results.LiverOptions = trainer.Options();
       }
@@ -771,9 +771,9 @@ bool HoldOutSection(Sweep& sweep, std::size_t si, const std::string& root, bool 
   }
   results.Bigus.resize(std::max(results.Bigus.size(), si + 1));
   results.Bigus[si] = bigus;
-  if (si < 2 && !std::isfinite(results.FullAtAblationTime[si].Seconds))
+  if (si == 0 && !std::isfinite(results.LiverAtCapacityTime.Seconds))
   {
-    results.FullAtAblationTime[si] = bigus.back(); // the schedule ended before the ablation time
+    results.LiverAtCapacityTime = bigus.back(); // the schedule ended before the capacity time
   }
   md << "\n## " << sweep.Name << "\n\n`" << sweep.File.substr(root.size() + 1) << "`: " << sweep.Description
      << ".\n\n"
@@ -993,11 +993,11 @@ bool VolumeProtocolSection(const std::string& root, bool quick, Report& report, 
 }
 
 /// Quality against the number of Gaussians on the liver: capped runs against the adaptive stop
-/// (@p full, the default run at the ablation time).
+/// (@p full, the default run at the capacity time).
 bool CapacitySection(const Sweep& liver, const Row& full, bool quick, Report& report, std::string* error)
 {
   std::ostringstream& md = report.Markdown;
-  const double ablationSeconds = AblationSeconds(quick);
+  const double capacitySeconds = CapacitySeconds(quick);
   const std::vector<long long> caps = quick ? std::vector<long long>{ 2000, 4000 }
                                             : std::vector<long long>{ 10000, 40000, 160000 };
   const TrainerSettings defaults;
@@ -1010,7 +1010,7 @@ bool CapacitySection(const Sweep& liver, const Row& full, bool quick, Report& re
     s.InitialGaussians = cap / 2;
     s.MaximumGaussians = cap;
     s.GrowthMargin = 0; // grow while it improves at all, up to the cap
-    const bool ok = TrainWithMarks(liver.Data, s, { ablationSeconds }, liver.HeldOut,
+    const bool ok = TrainWithMarks(liver.Data, s, { capacitySeconds }, liver.HeldOut,
       "cap " + std::to_string(cap) + " (start at " + std::to_string(cap / 2) + ")",
       [&](double, const Row& r, Trainer&) {
         rows.push_back(r);
@@ -1027,7 +1027,7 @@ bool CapacitySection(const Sweep& liver, const Row& full, bool quick, Report& re
   adaptive.Method = "adaptive stop (default: automatic seeds, margin " + Format("%.1f", 100 * defaults.GrowthMargin) +
     " %, cap " + std::to_string(defaults.MaximumGaussians) + ")";
   rows.push_back(adaptive);
-  md << "\n## Quality against the number of Gaussians (liver, " << Format("%.0f", ablationSeconds)
+  md << "\n## Quality against the number of Gaussians (liver, " << Format("%.0f", capacitySeconds)
      << " s of training each)\n\n"
      << "A capped run starts at half its cap and densifies until the cap (growth margin 0); the adaptive run is "
      << "the default trainer, whose growth stops when a validation subset of the training frames stops "
@@ -1665,7 +1665,7 @@ int RunBenchmark(const BenchmarkOptions& options)
     }
   }
   ok = ok && run("volume protocol", all || section == "volume", [&] { return VolumeProtocolSection(root, quick, report, &error); });
-  ok = ok && run("capacity", all, [&] { return CapacitySection(sweeps[0], results.FullAtAblationTime[0], quick, report, &error); });
+  ok = ok && run("capacity", all, [&] { return CapacitySection(sweeps[0], results.LiverAtCapacityTime, quick, report, &error); });
   ok = ok && run("render cutoffs", all, [&] { return RenderSection(sweeps[0], results, quick, report, &error); });
   ok = ok && run("ablations", all || section == "ablations", [&] { return AblationSection(sweeps, root, quick, report, &error); });
   ok = ok && run("defaults against hand-tuned", all || section == "defaults",
