@@ -1247,6 +1247,12 @@ int main(int argc, char** argv)
       "Copies stay this many beam widths away from the frames on either side")
     ->capture_default_str()
     ->check(CLI::NonNegativeNumber);
+  fillGapsCommand
+    ->add_option("--blend-margin", fillGaps.Settings.BlendMarginSigmas,
+      "Within this many beam widths of a frame (at most a quarter of the gap) the copies carry that frame alone; "
+      "between the margins the blend is linear")
+    ->capture_default_str()
+    ->check(CLI::NonNegativeNumber);
 
   bigus::BenchmarkOptions benchmark;
   benchmark.SourceDirectory = BIGUS_SOURCE_DIR;

@@ -819,6 +819,44 @@ bool HoldOutSection(Sweep& sweep, std::size_t si, const std::string& root, bool 
   return true;
 }
 
+/// Trains @p data with @p settings through Finish (early stopping, final prune, gap filling) and fills
+/// @p row (method, time, Gaussians, peak memory, a note with the steps and the sigma used); then
+/// @p evaluate scores the finished field into the row (and may copy it).
+bool TrainToBudget(const TrainingData& data, const TrainerSettings& settings, const std::string& method, Row& row,
+  const std::function<bool(Trainer&, Row&)>& evaluate, std::string* error)
+{
+  ResetPeakMemory();
+  const double start = Now();
+  Trainer trainer(data, settings);
+  if (!trainer.Initialize(error) || !trainer.Train(nullptr, nullptr, error) || !trainer.Finish(error))
+  {
+    return false;
+  }
+  row.Method = method;
+  row.Seconds = Now() - start;
+  const TrainerReport& report = trainer.GetReport();
+  row.Gaussians = trainer.GetField().Count();
+  row.PeakMiB = PeakMemoryMiB();
+  row.Note = std::to_string(report.Iterations) + " steps, sigma " + Format("%.3f", report.ElevationSigma) + " mm" +
+    (report.BestIteration < report.Iterations ? ", field of step " + std::to_string(report.BestIteration) + " kept"
+                                              : "");
+  return evaluate(trainer, row);
+}
+
+/// TrainToBudget on a hold-out sweep, scored on its held-out frames.
+bool TrainToBudget(const Sweep& sweep, const TrainerSettings& settings, const std::string& method, Row& row,
+  std::string* error)
+{
+  return TrainToBudget(sweep.Data, settings, method, row,
+    [&](Trainer& trainer, Row& r) {
+      double secondsPerFrame = 0;
+      const bool ok = trainer.Evaluate(sweep.HeldOut, r.Quality, error, &secondsPerFrame);
+      r.MsPerFrame = 1e3 * secondsPerFrame;
+      return ok;
+    },
+    error);
+}
+
 /// The volume protocol on the PLUS reconstruction of the spine phantom: train on parallel slices, test
 /// on in-between, oblique and orthogonal slices, against the compounded volume resliced.
 /// The volume protocol's sweeps: parallel training slices through the spine-phantom reconstruction and
@@ -831,6 +869,15 @@ struct VolumeProtocol
   TrainingData TrainData, TestData[3];
   std::vector<int> TestList[3];
   double SliceSpacing = 0;
+};
+
+/// The volume protocol's runs that the defaults table reads (issue 19), per test sweep (in-between,
+/// oblique, orthogonal): the compounded volume resliced, the trainer's defaults with only a time budget,
+/// and the same budget with the hand-tuned sigma (half the slice spacing).
+struct VolumeBudgetResults
+{
+  double Budget = 0; ///< s; 0 until the runs are done
+  Row Compounded[3], Defaults[3], Tuned[3];
 };
 
 bool MakeVolumeProtocol(const std::string& root, bool quick, VolumeProtocol& vp, std::string* error)
@@ -895,7 +942,75 @@ bool MakeVolumeProtocol(const std::string& root, bool quick, VolumeProtocol& vp,
   return true;
 }
 
-bool VolumeProtocolSection(const std::string& root, bool quick, Report& report, std::string* error)
+/// The baseline of the volume protocol: the training slices compounded (0.5 mm, the volume's own grid
+/// spacing) and resliced trilinearly at each test sweep's poses, into @p rows.
+void CompoundVolume(const VolumeProtocol& vp, Row rows[3])
+{
+  vtkNew<vtkUltrasoundVolumeCompounder> compound;
+  compound->SetInputConnection(vp.Train->GetOutputPort());
+  compound->SetFanMaskConnection(vp.Train->GetMaskOutputPort());
+  compound->SetOutputSpacing(0.5, 0.5, 0.5);
+  double t0 = Now();
+  compound->Update();
+  const double compoundSeconds = Now() - t0;
+  for (int t = 0; t < 3; ++t)
+  {
+    vtkNew<vtkUltrasoundSequenceReslice> reslice;
+    reslice->SetInputConnection(compound->GetOutputPort());
+    reslice->SetPoseConnection(vp.Tests[t]->GetOutputPort());
+    reslice->MaskEmptyVoxelsOff();
+    t0 = Now();
+    reslice->Update();
+    Row& r = rows[t];
+    r.Method = "compounded volume + trilinear reslice";
+    r.Seconds = compoundSeconds;
+    r.MsPerFrame = 1e3 * (Now() - t0) / vp.TestList[t].size();
+    r.Quality = Score(static_cast<float*>(reslice->GetOutput()->GetScalarPointer()), 1.0, vp.TestData[t], vp.TestList[t]);
+  }
+}
+
+/// The volume protocol's defaults and hand-tuned runs at a time budget (600 s, issue 19's 10 minutes; 4 s
+/// quick), each scored on the three test sweeps, into @p out.
+bool VolumeBudgetRuns(const VolumeProtocol& vp, bool quick, VolumeBudgetResults& out, std::string* error)
+{
+  const double budget = quick ? 4 : 600;
+  TrainerSettings defaults;
+  defaults.Iterations = 0;
+  defaults.TimeBudget = budget;
+  TrainerSettings tuned = defaults;
+  tuned.ElevationSigma = 0.5 * vp.SliceSpacing;
+  auto run = [&](const TrainerSettings& settings, const std::string& method, Row rows[3]) {
+    Row row;
+    return TrainToBudget(vp.TrainData, settings, method, row,
+      [&](Trainer& trainer, Row& r) {
+        for (int t = 0; t < 3; ++t)
+        {
+          rows[t] = r;
+          double secondsPerFrame = 0;
+          if (!trainer.EvaluateOn(vp.TestData[t], vp.TestList[t], rows[t].Quality, error, &secondsPerFrame))
+          {
+            return false;
+          }
+          rows[t].MsPerFrame = 1e3 * secondsPerFrame;
+          Print("volume", rows[t]);
+        }
+        return true;
+      },
+      error);
+  };
+  if (!run(defaults, "BIGUS defaults, time budget only", out.Defaults) ||
+    !run(tuned, "BIGUS, same budget, hand-tuned sigma", out.Tuned))
+  {
+    return Failed("volume protocol at " + Format("%.0f", budget) + " s: " + *error, error);
+  }
+  out.Budget = budget;
+  return true;
+}
+
+/// The volume protocol section: the compounded baseline, BIGUS (hand-tuned sigma, a fixed schedule) at
+/// time marks, and the budget runs of VolumeBudgetRuns (kept in @p budgetRuns for the defaults table).
+bool VolumeProtocolSection(const std::string& root, bool quick, Report& report, VolumeBudgetResults& budgetRuns,
+  std::string* error)
 {
   std::ostringstream& md = report.Markdown;
   const std::vector<double> marks = quick ? std::vector<double>{ 5 } : std::vector<double>{ 30, 60, 180 };
@@ -907,31 +1022,12 @@ bool VolumeProtocolSection(const std::string& root, bool quick, Report& report, 
   const char* testNames[] = { "in-between parallel slices", "oblique slices (tilt up to 30 degrees)",
     "orthogonal slices" };
   std::printf("volume protocol: %s\n", vp.Description.c_str());
-
-  // Baseline: compound the training slices (0.5 mm, the volume's own grid spacing) and reslice.
-  vtkNew<vtkUltrasoundVolumeCompounder> compound;
-  compound->SetInputConnection(vp.Train->GetOutputPort());
-  compound->SetFanMaskConnection(vp.Train->GetMaskOutputPort());
-  compound->SetOutputSpacing(0.5, 0.5, 0.5);
-  double t0 = Now();
-  compound->Update();
-  const double compoundSeconds = Now() - t0;
   std::vector<Row> baselineRows[3];
+  CompoundVolume(vp, budgetRuns.Compounded);
   for (int t = 0; t < 3; ++t)
   {
-    vtkNew<vtkUltrasoundSequenceReslice> reslice;
-    reslice->SetInputConnection(compound->GetOutputPort());
-    reslice->SetPoseConnection(vp.Tests[t]->GetOutputPort());
-    reslice->MaskEmptyVoxelsOff();
-    t0 = Now();
-    reslice->Update();
-    Row r;
-    r.Method = "compounded volume + trilinear reslice";
-    r.Seconds = compoundSeconds;
-    r.MsPerFrame = 1e3 * (Now() - t0) / vp.TestList[t].size();
-    r.Quality = Score(static_cast<float*>(reslice->GetOutput()->GetScalarPointer()), 1.0, vp.TestData[t], vp.TestList[t]);
-    baselineRows[t].push_back(r);
-    Print("volume", r);
+    baselineRows[t].push_back(budgetRuns.Compounded[t]);
+    Print("volume", budgetRuns.Compounded[t]);
   }
   TrainerSettings s;
   s.ElevationSigma = 0.5 * vp.SliceSpacing;
@@ -958,7 +1054,13 @@ bool VolumeProtocolSection(const std::string& root, bool quick, Report& report, 
   {
     return Failed("volume protocol: " + *error, error);
   }
-  md << "\n## Volume protocol (spine-phantom reconstruction)\n\n" << vp.Description << "\n";
+  if (!VolumeBudgetRuns(vp, quick, budgetRuns, error))
+  {
+    return false;
+  }
+  md << "\n## Volume protocol (spine-phantom reconstruction)\n\n" << vp.Description << " The last two rows "
+     << "train with only a time budget of " << Format("%.0f", budgetRuns.Budget) << " s as the schedule (the "
+     << "trainer's defaults, then the hand-tuned sigma) and include the final prune and gap filling.\n";
   for (int t = 0; t < 3; ++t)
   {
     md << "\n### " << testNames[t] << "\n\n" << TableHeader();
@@ -972,6 +1074,11 @@ bool VolumeProtocolSection(const std::string& root, bool quick, Report& report, 
     {
       md << TableRow(r);
       j["bigus"].push_back(ToJson(r));
+    }
+    for (const Row* r : { &budgetRuns.Defaults[t], &budgetRuns.Tuned[t] })
+    {
+      md << TableRow(*r);
+      j["budget_runs"].push_back(ToJson(*r));
     }
     report.Json["volume_protocol"][testNames[t]] = j;
   }
@@ -1123,45 +1230,14 @@ bool RenderSection(const Sweep& liver, const HoldOutResults& results, bool quick
 }
 
 /**
- * Trains with @p settings (its TimeBudget is the schedule) through Finish (early stopping, final prune)
- * and evaluates @p heldOut; the row's note gives the steps, the elevation sigma trained with and whether
- * an earlier field was kept.
- */
-bool TrainToBudget(const Sweep& sweep, const TrainerSettings& settings, const std::string& method, Row& row,
-  std::string* error)
-{
-  ResetPeakMemory();
-  const double start = Now();
-  Trainer trainer(sweep.Data, settings);
-  if (!trainer.Initialize(error) || !trainer.Train(nullptr, nullptr, error) || !trainer.Finish(error))
-  {
-    return false;
-  }
-  row.Method = method;
-  row.Seconds = Now() - start;
-  double secondsPerFrame = 0;
-  if (!trainer.Evaluate(sweep.HeldOut, row.Quality, error, &secondsPerFrame))
-  {
-    return false;
-  }
-  const TrainerReport& report = trainer.GetReport();
-  row.MsPerFrame = 1e3 * secondsPerFrame;
-  row.Gaussians = trainer.GetField().Count();
-  row.PeakMiB = PeakMemoryMiB();
-  row.Note = std::to_string(report.Iterations) + " steps, sigma " + Format("%.3f", report.ElevationSigma) + " mm" +
-    (report.BestIteration < report.Iterations ? ", field of step " + std::to_string(report.BestIteration) + " kept"
-                                              : "");
-  return true;
-}
-
-/**
  * Defaults against hand-tuned (issue 19's aims): per hold-out sweep, the trainer's defaults with only a
  * time budget (what `bigus train SWEEP --time-budget T` does) against the same budget with the
  * elevation sigma chosen by hand for that sweep, and against the hand-tuned fixed-schedule run of the
- * sweep's section at the same time (@p results, when it ran).
+ * sweep's section at the same time (@p results, when it ran); then the volume protocol's in-between and
+ * oblique test sweeps from @p volume (its runs are made here when the volume section did not run).
  */
-bool DefaultsSection(const std::vector<Sweep>& sweeps, const HoldOutResults& results, bool quick, Report& report,
-  std::string* error)
+bool DefaultsSection(const std::vector<Sweep>& sweeps, const HoldOutResults& results, const std::string& root,
+  bool quick, VolumeBudgetResults& volume, Report& report, std::string* error)
 {
   std::ostringstream& md = report.Markdown;
   md << "\n## Defaults against hand-tuned\n\n"
@@ -1172,6 +1248,20 @@ bool DefaultsSection(const std::vector<Sweep>& sweeps, const HoldOutResults& res
      << "better hand-tuned run.\n\n"
      << "| sweep | budget (s) | defaults PSNR (dB) | defaults | hand-tuned PSNR (dB) | hand-tuned | fixed schedule "
      << "PSNR (dB) | difference (dB) |\n|---|---|---|---|---|---|---|---|\n";
+  auto addRow = [&](const std::string& name, double budget, const Row& d, const Row& t, double fixed) {
+    const double best = std::isfinite(fixed) ? std::max(t.Quality.PSNR, fixed) : t.Quality.PSNR;
+    md << "| " << name << " | " << Format("%.0f", budget) << " | " << Format("%.2f", d.Quality.PSNR) << " | " << d.Note
+       << ", " << d.Gaussians << " Gaussians | " << Format("%.2f", t.Quality.PSNR) << " | " << t.Note << ", "
+       << t.Gaussians << " Gaussians | " << Format("%.2f", fixed) << " | " << Format("%+.2f", d.Quality.PSNR - best)
+       << " |\n";
+    nlohmann::json j;
+    j["budget_seconds"] = budget;
+    j["defaults"] = ToJson(d);
+    j["hand_tuned"] = ToJson(t);
+    j["fixed_schedule_psnr"] = std::isfinite(fixed) ? nlohmann::json(fixed) : nlohmann::json(nullptr);
+    j["difference_db"] = d.Quality.PSNR - best;
+    report.Json["defaults_against_hand_tuned"][name] = j;
+  };
   for (std::size_t si = 0; si < sweeps.size(); ++si)
   {
     const Sweep& sweep = sweeps[si];
@@ -1187,7 +1277,6 @@ bool DefaultsSection(const std::vector<Sweep>& sweeps, const HoldOutResults& res
     }
     Print(sweep.Name, d);
     Print(sweep.Name, t);
-    double best = t.Quality.PSNR;
     double fixed = NaN;
     if (si < results.Bigus.size())
     {
@@ -1199,19 +1288,28 @@ bool DefaultsSection(const std::vector<Sweep>& sweeps, const HoldOutResults& res
         }
       }
     }
-    best = std::isfinite(fixed) ? std::max(best, fixed) : best;
-    md << "| " << sweep.Name << " | " << Format("%.0f", sweep.DefaultsBudget) << " | " << Format("%.2f", d.Quality.PSNR)
-       << " | " << d.Note << ", " << d.Gaussians << " Gaussians | " << Format("%.2f", t.Quality.PSNR) << " | " << t.Note
-       << ", " << t.Gaussians << " Gaussians | " << Format("%.2f", fixed) << " | " << Format("%+.2f", d.Quality.PSNR - best)
-       << " |\n";
-    nlohmann::json j;
-    j["budget_seconds"] = sweep.DefaultsBudget;
-    j["defaults"] = ToJson(d);
-    j["hand_tuned"] = ToJson(t);
-    j["fixed_schedule_psnr"] = std::isfinite(fixed) ? nlohmann::json(fixed) : nlohmann::json(nullptr);
-    j["difference_db"] = d.Quality.PSNR - best;
-    report.Json["defaults_against_hand_tuned"][sweep.Name] = j;
+    addRow(sweep.Name, sweep.DefaultsBudget, d, t, fixed);
   }
+  if (!(volume.Budget > 0))
+  {
+    VolumeProtocol vp;
+    if (!MakeVolumeProtocol(root, quick, vp, error))
+    {
+      return false;
+    }
+    CompoundVolume(vp, volume.Compounded);
+    if (!VolumeBudgetRuns(vp, quick, volume, error))
+    {
+      return false;
+    }
+  }
+  // The volume protocol's fixed schedule is read at marks below its budget: no column.
+  addRow("volume protocol, in-between slices", volume.Budget, volume.Defaults[0], volume.Tuned[0], NaN);
+  addRow("volume protocol, oblique slices", volume.Budget, volume.Defaults[1], volume.Tuned[1], NaN);
+  md << "\nThe volume protocol's baseline, the compounded volume resliced: " << Format("%.2f", volume.Compounded[0].Quality.PSNR)
+     << " dB on the in-between slices, " << Format("%.2f", volume.Compounded[1].Quality.PSNR) << " dB on the oblique.\n";
+  report.Json["defaults_against_hand_tuned_volume_compounded_psnr"] = { volume.Compounded[0].Quality.PSNR,
+    volume.Compounded[1].Quality.PSNR };
   return true;
 }
 
@@ -1664,12 +1762,14 @@ int RunBenchmark(const BenchmarkOptions& options)
       ok = Load(sweeps[si], &error);
     }
   }
-  ok = ok && run("volume protocol", all || section == "volume", [&] { return VolumeProtocolSection(root, quick, report, &error); });
+  VolumeBudgetResults volume;
+  ok = ok && run("volume protocol", all || section == "volume",
+               [&] { return VolumeProtocolSection(root, quick, report, volume, &error); });
   ok = ok && run("capacity", all, [&] { return CapacitySection(sweeps[0], results.LiverAtCapacityTime, quick, report, &error); });
   ok = ok && run("render cutoffs", all, [&] { return RenderSection(sweeps[0], results, quick, report, &error); });
   ok = ok && run("ablations", all || section == "ablations", [&] { return AblationSection(sweeps, root, quick, report, &error); });
   ok = ok && run("defaults against hand-tuned", all || section == "defaults",
-               [&] { return DefaultsSection(sweeps, results, quick, report, &error); });
+               [&] { return DefaultsSection(sweeps, results, root, quick, volume, report, &error); });
   ok = ok && run("block hold-outs", all || section == "blocks", [&] { return BlockHoldOutSection(sweeps[0], quick, report, &error); });
   if (!ok)
   {

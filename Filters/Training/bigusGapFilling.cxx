@@ -156,11 +156,14 @@ GapFillingReport FillElevationGaps(
         // lattice reaches (a partition of unity by Gaussian bumps).
         const int count = static_cast<int>(std::floor(gap / h));
         const double scale = h / std::sqrt(2 * M_PI * v);
+        const double margin = std::min(settings.BlendMarginSigmas * width, 0.25 * gap);
         for (int j = 1; j <= count; ++j)
         {
           const double z = j * h; // from its own frame, towards the other
           const double t = side == 0 ? z / gap : 1 - z / gap;
-          if (z < settings.ClearanceSigmas * width || gap - z < settings.ClearanceSigmas * width)
+          // The share of its own frame: 1 within the margin of it, 0 within the margin of the other.
+          const double own = 1 - std::clamp((z - margin) / (gap - 2 * margin), 0.0, 1.0);
+          if (own <= 0 || z < settings.ClearanceSigmas * width || gap - z < settings.ClearanceSigmas * width)
           {
             continue;
           }
@@ -178,7 +181,7 @@ GapFillingReport FillElevationGaps(
           field.Quaternions[4 * c + 1] = static_cast<float>(q.x());
           field.Quaternions[4 * c + 2] = static_cast<float>(q.y());
           field.Quaternions[4 * c + 3] = static_cast<float>(q.z());
-          const double weight = (side == 0 ? 1 - t : t) * scale;
+          const double weight = own * scale;
           field.Reflectivities[c] = static_cast<float>(weight * atPlane * field.Reflectivities[i]);
           // At the plane the Gaussian renders r exp(-z_i^2 / 2v) and this copy r weight exp(-z_i^2 / 2v)
           // exp(-z^2 / 2v): relative to the Gaussian, weight exp(-z^2 / 2v), whatever z_i.
@@ -205,9 +208,9 @@ std::string DescribeGapFilling(const GapFillingReport& report, const GapFillingS
   char text[300];
   std::snprintf(text, sizeof(text),
     "%d gaps bridged (widest %.2f mm; typical spacing %.3f mm), %lld Gaussians added (a gap: over %.3g typical "
-    "spacings; clearance %.3g beam widths)",
+    "spacings; clearance %.3g beam widths; blend margin %.3g beam widths)",
     report.Gaps, report.WidestGap, report.TypicalSpacing, static_cast<long long>(report.Added),
-    settings.MinimumGapSpacings, settings.ClearanceSigmas);
+    settings.MinimumGapSpacings, settings.ClearanceSigmas, settings.BlendMarginSigmas);
   return text;
 }
 

@@ -187,8 +187,9 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
   this->Report.Settings.push_back(s.FillGaps
       ? Format("FillGaps = on (after training, gaps between training frames over %.3g typical spacings ",
           s.GapFilling.MinimumGapSpacings) +
-        Format("are bridged by blended copies of the frames on either side as rendered, %.3g beam widths clear of them)",
-          s.GapFilling.ClearanceSigmas)
+        Format("are bridged by blended copies of the frames on either side as rendered, %.3g beam widths clear of them, ",
+          s.GapFilling.ClearanceSigmas) +
+        Format("each frame alone within %.3g beam widths of it)", s.GapFilling.BlendMarginSigmas)
       : "FillGaps = off");
   this->Report.Settings.push_back(Format("Seed = %u, FramesPerStep = %d, Cutoff = %.3g", s.Seed, s.FramesPerStep, s.Cutoff));
   this->Engine->SetData(this->Data.get(), nullptr);

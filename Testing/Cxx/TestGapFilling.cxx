@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <random>
 #include <vector>
@@ -174,17 +175,21 @@ TEST(GapFilling, InTheGapTheFieldShowsTheBlendOfTheFramesOnEitherSide)
       }
     }
 
-    // At t = 1/4, 1/2 and 0.6: the blend (1 - t) S_a + t S_b (the sum of the copies' profiles ripples
-    // by 3e-4; the blend weight varies linearly under each copy's profile). The Gaussians up to one beam
-    // width off their frame are carried with what they render there: copied at full weight they would
-    // show up to exp(1/2) = 1.65 times too bright.
+    // At t = 1/4, 1/2 and 0.6: the blend (1 - w) S_a + w S_b (the sum of the copies' profiles ripples
+    // by 3e-4; the blend weight varies linearly under each copy's profile), w = t but for the margins of
+    // BlendMarginSigmas (2) beam widths sqrt(0.1^2 + 0.03^2) = 0.104 mm at each end, where each frame
+    // alone is carried: w = (t x gap - margin) / (gap - 2 margin), the gap 4 mm. The Gaussians up to
+    // one beam width off their frame are carried with what they render there: copied at full weight
+    // they would show up to exp(1/2) = 1.65 times too bright.
+    const double margin = 2 * std::hypot(Sigma, 0.03), gap = report.WidestGap;
     for (double t : { 0.25, 0.5, 0.6 })
     {
       const std::vector<float> St = RenderS(s.Field, poseAt(t));
+      const double w = (t * gap - margin) / (gap - 2 * margin);
       double worst = 0;
       for (int p = 0; p < W * H; ++p)
       {
-        worst = std::max(worst, std::abs(St[p] - ((1 - t) * Sa[p] + t * Sb[p])));
+        worst = std::max(worst, std::abs(St[p] - ((1 - w) * Sa[p] + w * Sb[p])));
       }
       EXPECT_LT(worst, 0.02 * peak) << "at t = " << t << ": not the blend of the bracketing frames";
     }
@@ -201,6 +206,38 @@ TEST(GapFilling, InTheGapTheFieldShowsTheBlendOfTheFramesOnEitherSide)
       EXPECT_LT(change, 0.02 * peak);
     }
   }
+}
+
+TEST(GapFilling, TheCopiesOfOneFrameStayOffTheOther)
+{
+  // Only the first frame's side carries scattering: what the filled field renders at the second
+  // bracketing frame is what the first frame's copies spill onto it. Linear across the whole gap
+  // (margin 0), the copies within a beam width of the second frame still carry a few % of the first
+  // (share d / gap at distance d); with the margin of 2 beam widths they are left out and those beyond
+  // carry (d - 2 widths) / gap at most exp(-2) of their peak there.
+  Sweep s = MakeSweep(0);
+  for (std::int64_t i = 0; i < s.Field.Count(); ++i)
+  {
+    if (s.Owner[i] >= 5)
+    {
+      s.Field.Reflectivities[i] = 0;
+    }
+  }
+  const double peak = MaxAbs(RenderS(s.Field, s.Data.Poses[4]));
+  double spill[2];
+  for (int k = 0; k < 2; ++k)
+  {
+    GapFillingSettings settings;
+    settings.BlendMarginSigmas = k == 0 ? 0.0 : GapFillingSettings().BlendMarginSigmas;
+    GaussianField field = s.Field;
+    ASSERT_GT(FillElevationGaps(field, s.Data, Sigma, settings).Added, 0);
+    spill[k] = MaxAbs(RenderS(field, s.Data.Poses[5])) / peak;
+  }
+  std::printf("spill onto the second frame, relative to the first frame's peak: %.5f linear, %.5f with the margin\n",
+    spill[0], spill[1]);
+  EXPECT_GT(spill[0], 0.005) << "the linear blend spills";
+  EXPECT_LT(spill[1], 0.25 * spill[0]);
+  EXPECT_LT(spill[1], 0.002);
 }
 
 TEST(GapFilling, ASweepWithoutGapsOrTooFewFramesIsLeftAlone)

@@ -148,14 +148,31 @@ def main():
                 source["blended_renders_psnr"], source["fit_plus_blend_psnr"]) in report, (name, source)
     for test, rows in results["volume_protocol"].items():
         assert len(rows["baselines"]) == 1 and rows["bigus"], test
+        # The budget runs: the defaults, then the hand-tuned sigma (half the slice spacing), each one run
+        # scored on every test sweep, so both runs' steps and Gaussians agree across the test sweeps.
+        assert [r["method"] for r in rows["budget_runs"]] == [
+            "BIGUS defaults, time budget only", "BIGUS, same budget, hand-tuned sigma"], test
+        for k, r in enumerate(rows["budget_runs"]):
+            first = results["volume_protocol"]["in-between parallel slices"]["budget_runs"][k]
+            assert (r["note"], r["gaussians"]) == (first["note"], first["gaussians"]), (test, r, first)
     check_ablations(results["ablations"], report)
     # Defaults against hand-tuned: every hold-out sweep, the hand-tuned run trained with its sweep's sigma,
     # the difference against the better of the two hand-tuned runs recomputed here.
     hand_sigma = {"liver": 0.3, "spine phantom": 1.5, "N-wire phantom": 1.0, "liver, frames 40 to 59": 0.3}
     defaults = results["defaults_against_hand_tuned"]
-    assert sorted(defaults) == sorted(results["sweeps"]), sorted(defaults)
+    volume_tests = {"volume protocol, in-between slices": "in-between parallel slices",
+                    "volume protocol, oblique slices": "oblique slices (tilt up to 30 degrees)"}
+    assert sorted(defaults) == sorted(list(results["sweeps"]) + list(volume_tests)), sorted(defaults)
+    for name, test in volume_tests.items():
+        # The volume protocol's rows are the volume section's budget runs, and its baseline is the section's.
+        volume = results["volume_protocol"][test]
+        assert [defaults[name]["defaults"], defaults[name]["hand_tuned"]] == volume["budget_runs"], name
+        assert defaults[name]["fixed_schedule_psnr"] is None, name
+    assert results["defaults_against_hand_tuned_volume_compounded_psnr"] == [
+        results["volume_protocol"][t]["baselines"][0]["psnr"] for t in volume_tests.values()]
     for name, row in defaults.items():
-        assert "sigma %.3f mm" % hand_sigma[name] in row["hand_tuned"]["note"], (name, row)
+        if name not in volume_tests:
+            assert "sigma %.3f mm" % hand_sigma[name] in row["hand_tuned"]["note"], (name, row)
         best = row["hand_tuned"]["psnr"]
         if row["fixed_schedule_psnr"] is not None:
             best = max(best, row["fixed_schedule_psnr"])
