@@ -10,7 +10,7 @@ struct BenchmarkOptions
 {
   std::string Output = "docs";  ///< folder of BENCHMARKS.md; plots and results.json go to Output/benchmarks
   std::string SourceDirectory;  ///< project root holding Examples/Data and Testing/Data
-  bool Quick = false;           ///< a few minutes instead of about 2.5 hours (smoke test)
+  bool Quick = false;           ///< a few minutes instead of about 3 hours (smoke test)
   /// "all" (written to Output/BENCHMARKS.md), or one section alone (Output/BENCHMARKS_<section>.md):
   /// "defaults" (defaults against hand-tuned, without the fixed-schedule column), "volume" (the volume
   /// protocol), "blocks" (block hold-outs on the liver) or "ablations" (every switch at equal iterations
