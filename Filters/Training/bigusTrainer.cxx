@@ -184,13 +184,14 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
         Format("; growth stops when the validation loss improves by less than %.3g %%", 100 * s.GrowthMargin) +
         Format(" over %d intervals", s.GrowthPatience)
       : "Densification = off");
-  this->Report.Settings.push_back(s.FillGaps
+  this->Report.Settings.push_back(s.FillGaps && s.BeamIntegration
       ? Format("FillGaps = on (after training, gaps between training frames over %.3g typical spacings ",
           s.GapFilling.MinimumGapSpacings) +
         Format("are bridged by blended copies of the frames on either side as rendered, %.3g beam widths clear of them, ",
           s.GapFilling.ClearanceSigmas) +
         Format("each frame alone within %.3g beam widths of it)", s.GapFilling.BlendMarginSigmas)
-      : "FillGaps = off");
+      : s.FillGaps ? "FillGaps = off (BeamIntegration is off: the thin plane has no beam to bridge gaps with)"
+                   : "FillGaps = off");
   this->Report.Settings.push_back(Format("Seed = %u, FramesPerStep = %d, Cutoff = %.3g", s.Seed, s.FramesPerStep, s.Cutoff));
   this->Engine->SetData(this->Data.get(), nullptr);
 }

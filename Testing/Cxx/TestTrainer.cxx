@@ -653,6 +653,11 @@ TEST(Trainer, EveryAblationSwitchRuns)
     }
     EXPECT_LT(late, early) << names[variant] << ": the loss must go down";
     EXPECT_TRUE(AllFinite(trainer.GetField())) << names[variant];
+    // The settings lines say what Finish does: no gap filling without an elevation beam.
+    const std::vector<std::string>& lines = trainer.GetReport().Settings;
+    const bool fillsGaps = std::any_of(lines.begin(), lines.end(),
+      [](const std::string& line) { return line.rfind("FillGaps = on", 0) == 0; });
+    EXPECT_EQ(fillsGaps, s.BeamIntegration) << names[variant];
   }
 }
 

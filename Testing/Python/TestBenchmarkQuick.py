@@ -67,6 +67,36 @@ def liver_baselines(example_data, block=None):
     return float(np.mean(nearest)), float(np.mean(blend)), blurred
 
 
+def check_volume_error_sources(example_data, inbetween, report):
+    """The volume protocol's account of the in-between error (--quick: 40 training slices): one row, of the
+    defaults budget run, and the recorded blend recomputed here from the sweeps (in-between slice k midway
+    between training slices k and k + 1: their mean, masked PSNR per slice, averaged over slices 0 to 38)."""
+    reader = vtk.vtkMetaImageReader()
+    reader.SetFileName(os.path.join(example_data, "..", "..", "Testing", "Data", "spine-phantom",
+                                    "SpinePhantomFreehandReconstructed.mha"))
+    reader.Update()
+    sweeps = []
+    for offset in (0.0, 0.5):
+        sweep = bigus.vtkUltrasoundVolumeSweep()
+        sweep.SetInputConnection(reader.GetOutputPort())
+        sweep.SetNumberOfFrames(40)
+        sweep.SetOffset(offset)
+        sweep.Update()
+        w, h, n = sweep.GetOutput().GetDimensions()
+        images = vtk_to_numpy(sweep.GetOutput().GetPointData().GetScalars()).reshape(n, h, w).astype(np.float64)
+        masks = vtk_to_numpy(sweep.GetMaskOutput().GetPointData().GetScalars()).reshape(n, h, w) > 0
+        sweeps.append((images, masks))
+    (train, _), (between, masks) = sweeps
+    blend = [masked_psnr(0.5 * (train[k] + train[k + 1]), between[k], masks[k])
+             for k in range(len(between) - 1) if masks[k].any()]
+    assert abs(inbetween["recorded_blend"]["psnr"] - float(np.mean(blend))) < 1e-3, (inbetween["recorded_blend"], blend)
+    (source,) = inbetween["error_sources"]
+    assert source["seconds"] == inbetween["budget_runs"][0]["seconds"], (source, inbetween["budget_runs"][0])
+    for key in ("training_psnr", "held_out_psnr", "blended_renders_psnr"):
+        assert math.isfinite(source[key]) and source[key] > 5, source
+    assert "the blend of the recorded frames scores %.2f dB" % inbetween["recorded_blend"]["psnr"] in report
+
+
 def check_ablations(ablations, report):
     """One cell per table with --quick (the full method and the first switch, one seed, so no verdict): the equal-iteration
     schedule is the full method's mean step count at equal time, every run of that table did exactly that
@@ -155,6 +185,7 @@ def main():
         for k, r in enumerate(rows["budget_runs"]):
             first = results["volume_protocol"]["in-between parallel slices"]["budget_runs"][k]
             assert (r["note"], r["gaussians"]) == (first["note"], first["gaussians"]), (test, r, first)
+    check_volume_error_sources(example_data, results["volume_protocol"]["in-between parallel slices"], report)
     check_ablations(results["ablations"], report)
     # Defaults against hand-tuned: every hold-out sweep, the hand-tuned run trained with its sweep's sigma,
     # the difference against the better of the two hand-tuned runs recomputed here.
