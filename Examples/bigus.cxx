@@ -1178,7 +1178,7 @@ int main(int argc, char** argv)
   trainCommand->add_option("--threads", train.Threads, "Threads (0: all cores)");
   trainCommand->add_option("--seed", train.Seed, "Random seed")->capture_default_str();
   trainCommand->add_option("--checkpoint", train.Checkpoint, "Checkpoint file, written every 200 steps");
-  trainCommand->add_option("--resume", train.Resume, "Continue from this checkpoint (same settings)")
+  trainCommand->add_option("--resume", train.Resume, "Continue from this checkpoint (same settings; the seconds trained before it count towards --time-budget)")
     ->check(CLI::ExistingFile);
   trainCommand->add_option("--evaluate-every", train.EvaluationInterval,
     "Record the held-out PSNR every S seconds (field data HeldOutPSNR)");

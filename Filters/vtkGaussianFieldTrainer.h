@@ -190,7 +190,8 @@ public:
   ///@}
 
   ///@{ Checkpoints: written every CheckpointInterval steps (0 = never) to CheckpointFile;
-  /// ResumeFile continues from one.
+  /// ResumeFile continues from one, schedule included: the seconds trained before it count towards
+  /// TimeBudget (a run stopped at 70 % of its budget and resumed trains for the remaining 30 %).
   vtkSetStringMacro(CheckpointFile);
   vtkGetStringMacro(CheckpointFile);
   vtkSetClampMacro(CheckpointInterval, int, 0, VTK_INT_MAX);

@@ -518,13 +518,18 @@ bool Trainer::FitReflectivityScale(std::string* error)
   return this->PushState(error);
 }
 
+double Trainer::TrainingSeconds() const
+{
+  return this->TrainStart > 0 ? this->TrainedBefore + (Seconds() - this->TrainStart) : this->State.TrainingSeconds;
+}
+
 double Trainer::ScheduleFraction() const
 {
   const TrainerSettings& s = this->Settings;
   double f = s.Iterations > 0 ? double(this->State.Iteration) / s.Iterations : 0.0;
-  if (s.TimeBudget > 0 && this->TrainStart > 0)
+  if (s.TimeBudget > 0)
   {
-    f = std::max(f, (Seconds() - this->TrainStart) / s.TimeBudget);
+    f = std::max(f, this->TrainingSeconds() / s.TimeBudget);
   }
   return std::min(1.0, f);
 }
@@ -876,6 +881,7 @@ bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>
   }
   const double start = Seconds();
   this->TrainStart = start;
+  this->TrainedBefore = this->State.TrainingSeconds;
   const TrainerSettings& s = this->Settings;
   const TrainingState& state = this->State;
   this->Report.StopReason = "iterations";
@@ -890,7 +896,7 @@ bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>
       this->Report.StopReason = "aborted";
       break;
     }
-    if (s.TimeBudget > 0 && Seconds() - start >= s.TimeBudget)
+    if (s.TimeBudget > 0 && this->TrainingSeconds() >= s.TimeBudget)
     {
       this->Report.StopReason = "time budget";
       break;
@@ -963,6 +969,7 @@ bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>
   this->Report.LastLoss = h ? last / std::min<std::size_t>(h, 50) : 0;
   this->Report.Gaussians = this->GetField().Count();
   this->DensificationEnded = !this->InDensificationWindow();
+  this->State.TrainingSeconds = this->TrainingSeconds();
   this->TrainStart = 0;
   return ok;
 }
@@ -1031,6 +1038,7 @@ bool Trainer::Run(const std::function<void(double, int, double, std::int64_t)>& 
 
 bool Trainer::SaveCheckpoint(const std::string& file, std::string* error)
 {
+  this->State.TrainingSeconds = this->TrainingSeconds();
   return this->PullState(error) && this->State.Save(file, this->Gamma, error);
 }
 

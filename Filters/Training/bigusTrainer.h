@@ -57,7 +57,9 @@ struct TrainerSettings
   /// Steps; 0 = no step limit when a TimeBudget is given (the budget is then the schedule), 3000 when
   /// neither is. With both, whichever ends first, and the schedule follows the one further along.
   int Iterations = 3000;
-  double TimeBudget = 0;             ///< seconds of training per Train call; 0 = no limit
+  /// Seconds of training of the run, 0 = no limit: every Train call counts, and a run resumed from a
+  /// checkpoint counts the seconds trained before it (TrainingState::TrainingSeconds).
+  double TimeBudget = 0;
   int FramesPerStep = 1;             ///< training frames rendered per step (the batch); losses are averaged
   double MeanLearningRate = 0.02;    ///< mm per step at the start ...
   double MeanLearningRateFinal = 0.002; ///< ... decaying exponentially to this at the end of the schedule
@@ -151,7 +153,8 @@ public:
   bool SetField(const GaussianField& field, std::string* error);
 
   /**
-   * Train until Iterations, TimeBudget (counted from this call), convergence or @p abort; the field is
+   * Train until Iterations, TimeBudget (the run's training seconds, this call's included), convergence
+   * or @p abort; the field is
    * not pruned (Finish does that), so training may go on with another call. @p progress(fraction,
    * iteration, loss, gaussians) is called every few steps. Returns false with @p error on an
    * unrecoverable problem (a step the renderer refuses, every step non-finite, a checkpoint not written).
@@ -226,11 +229,13 @@ private:
   /// Measures the validation loss; keeps a copy of the field when it is the best so far.
   bool CheckValidation(double& loss, std::string* error);
   /**
-   * How far through its schedule the run is, in [0, 1]: the larger of iterations / Iterations and,
-   * inside Train, seconds / TimeBudget; with a budget alone, the budget is the schedule. The mean
+   * How far through its schedule the run is, in [0, 1]: the larger of iterations / Iterations and the
+   * run's training seconds / TimeBudget; with a budget alone, the budget is the schedule. The mean
    * learning rate decays and the densification window closes along it.
    */
   double ScheduleFraction() const;
+  /// The run's seconds inside Train so far (TrainingState::TrainingSeconds, plus the call in progress).
+  double TrainingSeconds() const;
   double MeanLearningRateAt(double fraction) const;
   bool InDensificationWindow() const;
   /// The host state becomes the engine's (a no-op when nothing changed since the last pull).
@@ -247,6 +252,7 @@ private:
   double PixelSpacing = 1; // mean in-plane pixel spacing of the training frames, mm
   TrainerReport Report;
   double TrainStart = 0;           // Seconds() at the start of the Train call in progress, 0 outside
+  double TrainedBefore = 0;        // the run's training seconds before that call
   bool DensificationEnded = false; // the last Train call ended past the densification window
   std::vector<float> S; // scratch for RenderFrame
 };

@@ -4,6 +4,7 @@
 #include "bigusBackend.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
@@ -150,7 +151,7 @@ bool TrainingState::Save(const std::string& file, double gamma, std::string* err
   const std::string temporary = file + ".tmp";
   {
     std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
-    out.write("BIGUSCK2", 8);
+    out.write("BIGUSCK3", 8);
     Put(out, std::int32_t(this->Iteration));
     Put(out, this->LearningRateScale);
     Put(out, gamma);
@@ -176,6 +177,7 @@ bool TrainingState::Save(const std::string& file, double gamma, std::string* err
     Put(out, std::int32_t(this->BestFieldIteration));
     Put(out, std::int64_t(this->BestField.Count()));
     WriteField(out, this->BestField);
+    Put(out, this->TrainingSeconds);
     out.close();
     if (!out)
     {
@@ -214,11 +216,11 @@ bool TrainingState::Load(const std::string& file, double& gamma, std::string* er
     return fail("cannot open the checkpoint");
   }
   char magic[8];
-  if (!in.read(magic, 8) || (std::memcmp(magic, "BIGUSCK1", 8) != 0 && std::memcmp(magic, "BIGUSCK2", 8) != 0))
+  if (!in.read(magic, 8) || std::memcmp(magic, "BIGUSCK", 7) != 0 || magic[7] < '1' || magic[7] > '3')
   {
     return fail("not a BIGUS checkpoint (bad magic)");
   }
-  const bool withBest = magic[7] == '2';
+  const bool withBest = magic[7] >= '2', withSeconds = magic[7] >= '3';
   TrainingState s;
   std::int32_t iteration, growing, stalled, rolled;
   double storedGamma;
@@ -250,6 +252,10 @@ bool TrainingState::Load(const std::string& file, double& gamma, std::string* er
       best > (std::int64_t(1) << 32) || !ReadField(in, s.BestField, best)))
   {
     return fail("truncated best field");
+  }
+  if (withSeconds && (!Get(in, s.TrainingSeconds) || !(s.TrainingSeconds >= 0) || !std::isfinite(s.TrainingSeconds)))
+  {
+    return fail("truncated or invalid training seconds");
   }
   s.BestFieldIteration = bestIteration;
   std::istringstream state(text);

@@ -89,6 +89,7 @@ struct BIGUSTRAINING_EXPORT TrainingState
   int RolledBackSteps = 0;
   std::vector<double> LossHistory; ///< loss of every completed step
   std::mt19937_64 Random;          ///< draws the frames of each step
+  double TrainingSeconds = 0;      ///< seconds spent in Trainer::Train so far (TrainerSettings::TimeBudget)
   // Early stopping (bigus::Trainer::Finish)
   GaussianField BestField;         ///< the field with the lowest validation loss seen so far
   double BestFieldLoss = -1;       ///< its validation loss; -1: none measured yet
@@ -96,13 +97,14 @@ struct BIGUSTRAINING_EXPORT TrainingState
 
   /**
    * Writes the state to @p file (written to FILE.tmp, then renamed; the previous file survives a
-   * failure). Little-endian binary, "BIGUSCK2" | int32 iteration | float64 learning-rate scale |
+   * failure). Little-endian binary, "BIGUSCK3" | int32 iteration | float64 learning-rate scale |
    * float64 gamma | int32 growing | float64 best validation loss | int32 stalled growth steps |
    * int32 rolled-back steps | uint32 length + text of the random engine state | int64 N | field, Adam
    * m, Adam v: each [N,3] means, [N,3] log-scales, [N,4] quaternions, [N] reflectivities as float32 |
    * [N] float32 attribution | [N] int32 seen counts | int64 H + H float64 loss history | float64 best
-   * field's validation loss | int32 its iteration | int64 M | best field as above. Load also reads
-   * "BIGUSCK1" files (no best field: early stopping starts afresh).
+   * field's validation loss | int32 its iteration | int64 M | best field as above | float64 training
+   * seconds. Load also reads "BIGUSCK2" files (no training seconds: a time budget starts afresh) and
+   * "BIGUSCK1" files (neither those nor a best field: early stopping starts afresh too).
    * Returns false with @p error naming the file.
    */
   bool Save(const std::string& file, double gamma, std::string* error) const;

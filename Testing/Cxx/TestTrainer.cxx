@@ -25,10 +25,12 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdint>
-#include <fstream>
 #include <cstdio>
+#include <fstream>
+#include <iterator>
 #include <random>
 
 using namespace bigus;
@@ -348,6 +350,59 @@ TEST(Trainer, ResumingFromACheckpointGivesTheSameField)
   EXPECT_NE(error.find("bad magic"), std::string::npos) << error;
 }
 
+TEST(Trainer, AResumedRunCountsTheSecondsBeforeItsCheckpointTowardsItsTimeBudget)
+{
+  // The budget is the run's schedule: a run stopped at 70 % of it and resumed trains for the rest, with
+  // the densification window (60 % of the schedule) already closed, instead of a fresh budget.
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(150, 4), 0.5, heldOut);
+  TrainerSettings s = ShortSettings();
+  s.Iterations = 0;
+  s.TimeBudget = 2.0;
+  s.DensifyEnd = -1;
+  const std::string checkpoint = std::string(BIGUS_TEST_OUTPUT) + "/budget.ckpt";
+  std::string error;
+  Trainer first(data, s);
+  ASSERT_TRUE(first.Initialize(&error)) << error;
+  const auto start = std::chrono::steady_clock::now();
+  auto since = [](std::chrono::steady_clock::time_point t) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+  };
+  ASSERT_TRUE(first.Train(nullptr, [&]() { return since(start) >= 0.7 * s.TimeBudget + 0.05; }, &error)) << error;
+  ASSERT_TRUE(first.SaveCheckpoint(checkpoint, &error)) << error;
+  const double saved = first.GetState().TrainingSeconds;
+  EXPECT_GE(saved, 0.7 * s.TimeBudget);
+  EXPECT_LT(saved, s.TimeBudget);
+
+  Trainer second(data, s);
+  ASSERT_TRUE(second.Initialize(&error)) << error;
+  ASSERT_TRUE(second.LoadCheckpoint(checkpoint, &error)) << error;
+  EXPECT_EQ(second.GetState().TrainingSeconds, saved);
+  const std::int64_t loaded = second.GetField().Count();
+  const int iteration = second.GetIteration();
+  const auto resumed = std::chrono::steady_clock::now();
+  ASSERT_TRUE(second.Train(nullptr, nullptr, &error)) << error;
+  EXPECT_EQ(second.GetReport().StopReason, "time budget");
+  EXPECT_GE(second.GetState().TrainingSeconds, s.TimeBudget);
+  EXPECT_LT(since(resumed), s.TimeBudget - 0.25) << "the resumed run took a fresh budget";
+  EXPECT_GT(second.GetIteration(), iteration);
+  EXPECT_EQ(second.GetField().Count(), loaded) << "densified after the window had closed";
+
+  // A checkpoint of the previous format (no training seconds) still loads, with none counted.
+  std::ifstream in(checkpoint, std::ios::binary);
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_EQ(bytes.compare(0, 8, "BIGUSCK3"), 0);
+  bytes[7] = '2';
+  std::ofstream(checkpoint + ".v2", std::ios::binary) << bytes.substr(0, bytes.size() - sizeof(double));
+  TrainingState old;
+  double gamma = 0;
+  ASSERT_TRUE(old.Load(checkpoint + ".v2", gamma, &error)) << error;
+  EXPECT_EQ(old.TrainingSeconds, 0);
+  EXPECT_EQ(old.Iteration, iteration);
+  std::remove(checkpoint.c_str());
+  std::remove((checkpoint + ".v2").c_str());
+}
+
 TEST(Trainer, CheckpointHoldsTheWholeTrainingState)
 {
   // Save and Load are inverse: every member of the state survives the file, bit for bit, and a
@@ -376,6 +431,8 @@ TEST(Trainer, CheckpointHoldsTheWholeTrainingState)
   EXPECT_EQ(loaded.RolledBackSteps, saved.RolledBackSteps);
   EXPECT_EQ(loaded.LossHistory, saved.LossHistory);
   EXPECT_TRUE(loaded.Random == saved.Random);
+  EXPECT_EQ(loaded.TrainingSeconds, saved.TrainingSeconds);
+  EXPECT_GT(saved.TrainingSeconds, 0);
   for (const auto& pair : { std::make_pair(&loaded.Gaussians.Field, &saved.Gaussians.Field),
          std::make_pair(&loaded.Gaussians.FirstMoment, &saved.Gaussians.FirstMoment),
          std::make_pair(&loaded.Gaussians.SecondMoment, &saved.Gaussians.SecondMoment) })
