@@ -1156,7 +1156,7 @@ int main(int argc, char** argv)
     "densification window) and training runs until it");
   auto* iterations = trainCommand->add_option("--iterations", train.Iterations,
     "Optimisation steps (with --time-budget: whichever ends first)")->capture_default_str();
-  trainCommand->add_option("--max-gaussians", train.MaxGaussians, "Hard maximum of Gaussians")->capture_default_str();
+  trainCommand->add_option("--max-gaussians", train.MaxGaussians, "Hard maximum of Gaussians (gap filling's copies included)")->capture_default_str();
   trainCommand->add_option("--initial-gaussians", train.InitialGaussians,
     "Seeds (0: one per 200 fan pixels of the training frames, 20,000 to half the maximum)")
     ->capture_default_str()
@@ -1251,6 +1251,11 @@ int main(int argc, char** argv)
     ->add_option("--blend-margin", fillGaps.Settings.BlendMarginSigmas,
       "Within this many beam widths of a frame (at most a quarter of the gap) the copies carry that frame alone; "
       "between the margins the blend is linear")
+    ->capture_default_str()
+    ->check(CLI::NonNegativeNumber);
+  fillGapsCommand
+    ->add_option("--max-gaussians", fillGaps.Settings.MaximumGaussians,
+      "The most Gaussians the filled field may hold (0: no limit); a gap whose copies would exceed it is left empty")
     ->capture_default_str()
     ->check(CLI::NonNegativeNumber);
 

@@ -290,8 +290,9 @@ int vtkGaussianFieldTrainer::RequestData(
     validationHistory->InsertNextTuple(tuple);
   }
   output->GetFieldData()->AddArray(validationHistory);
-  addText("GapFilling", this->FillGaps ? bigus::DescribeGapFilling(report.GapFilling, bigus::GapFillingSettings())
-                                       : std::string("off"));
+  bigus::GapFillingSettings gaps;
+  gaps.MaximumGaussians = this->MaximumGaussians;
+  addText("GapFilling", this->FillGaps ? bigus::DescribeGapFilling(report.GapFilling, gaps) : std::string("off"));
   addText("StopReason", report.StopReason);
   addText("GrowthStopReason", report.GrowthStopReason);
   addText("Backend", this->BackendInUse);

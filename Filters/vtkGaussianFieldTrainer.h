@@ -124,7 +124,8 @@ public:
   vtkSetClampMacro(ConvergenceTolerance, double, 0.0, 1.0);
   vtkGetMacro(ConvergenceTolerance, double);
   ///@}
-  ///@{ Field size: seeds (0 = automatic, see above) and hard maximum.
+  ///@{ Field size: seeds (0 = automatic, see above) and hard maximum (gap filling's copies included: a gap
+  /// that would exceed it is left empty and field data `GapFilling` says so).
   vtkSetClampMacro(InitialGaussians, vtkIdType, 0, VTK_ID_MAX);
   vtkGetMacro(InitialGaussians, vtkIdType);
   vtkSetClampMacro(MaximumGaussians, vtkIdType, 1, VTK_ID_MAX);

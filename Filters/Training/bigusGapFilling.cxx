@@ -111,6 +111,7 @@ GapFillingReport FillElevationGaps(
     const Eigen::Quaterniond qa(a.R), qb(b.R);
     const Eigen::Vector3d middleNormal = qa.slerp(0.5, qb).toRotationMatrix().col(2);
     const std::int64_t before = field.Count();
+    const std::vector<double> addedBefore = settings.MaximumGaussians > 0 ? added : std::vector<double>();
     for (int side = 0; side < 2; ++side)
     {
       const Plane& from = side == 0 ? a : b;
@@ -189,7 +190,13 @@ GapFillingReport FillElevationGaps(
         }
       }
     }
-    if (field.Count() > before)
+    if (settings.MaximumGaussians > 0 && field.Count() > settings.MaximumGaussians)
+    {
+      field.Resize(before); // this gap's copies would not fit: leave it empty
+      added = addedBefore;
+      report.Skipped += 1;
+    }
+    else if (field.Count() > before)
     {
       report.Gaps += 1;
       report.WidestGap = std::max(report.WidestGap, spacing[k]);
@@ -205,13 +212,20 @@ GapFillingReport FillElevationGaps(
 
 std::string DescribeGapFilling(const GapFillingReport& report, const GapFillingSettings& settings)
 {
-  char text[300];
+  char text[400];
   std::snprintf(text, sizeof(text),
     "%d gaps bridged (widest %.2f mm; typical spacing %.3f mm), %lld Gaussians added (a gap: over %.3g typical "
     "spacings; clearance %.3g beam widths; blend margin %.3g beam widths)",
     report.Gaps, report.WidestGap, report.TypicalSpacing, static_cast<long long>(report.Added),
     settings.MinimumGapSpacings, settings.ClearanceSigmas, settings.BlendMarginSigmas);
-  return text;
+  std::string line = text;
+  if (report.Skipped > 0)
+  {
+    std::snprintf(text, sizeof(text), "; %d gaps left empty: their copies would exceed the maximum of %lld Gaussians",
+      report.Skipped, static_cast<long long>(settings.MaximumGaussians));
+    line += text;
+  }
+  return line;
 }
 
 } // namespace bigus

@@ -68,6 +68,9 @@ struct GapFillingSettings
   /// The Gaussians copied from a bracketing frame: those within this many of their beam widths sqrt(v)
   /// of its plane (their profile there is above exp(-ReachSigmas^2 / 2): 1 % at 3).
   double ReachSigmas = 3.0;
+  /// The most Gaussians the filled field may hold (0: no limit): a gap whose copies would take the field
+  /// past it is left empty (GapFillingReport::Skipped), the gaps before and after it are still bridged.
+  std::int64_t MaximumGaussians = 0;
 };
 
 struct GapFillingReport
@@ -76,6 +79,7 @@ struct GapFillingReport
   int Gaps = 0;              ///< gaps bridged
   double WidestGap = 0;      ///< mm, the widest of them (0 when none)
   std::int64_t Added = 0;    ///< Gaussians added
+  int Skipped = 0;           ///< gaps left empty: their copies would exceed MaximumGaussians
 };
 
 /**
@@ -88,7 +92,8 @@ struct GapFillingReport
 BIGUSTRAINING_EXPORT GapFillingReport FillElevationGaps(GaussianField& field, const TrainingData& data,
   double elevationSigma, const GapFillingSettings& settings = GapFillingSettings());
 
-/// One line: "2 gaps bridged (widest 4.51 mm; typical spacing 0.645 mm), 31210 Gaussians added (...)".
+/// One line: "2 gaps bridged (widest 4.51 mm; typical spacing 0.645 mm), 31210 Gaussians added (...)", and
+/// the gaps left empty by the maximum of Gaussians, if any.
 BIGUSTRAINING_EXPORT std::string DescribeGapFilling(const GapFillingReport& report, const GapFillingSettings& settings);
 
 } // namespace bigus

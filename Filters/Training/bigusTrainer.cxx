@@ -1014,8 +1014,9 @@ bool Trainer::Finish(std::string* error)
     {
       return false;
     }
-    this->Report.GapFilling =
-      FillElevationGaps(this->State.Gaussians.Field, *this->Data, s.ElevationSigma, s.GapFilling);
+    GapFillingSettings gaps = s.GapFilling;
+    gaps.MaximumGaussians = s.MaximumGaussians;
+    this->Report.GapFilling = FillElevationGaps(this->State.Gaussians.Field, *this->Data, s.ElevationSigma, gaps);
     if (this->Report.GapFilling.Added > 0)
     {
       this->State.Gaussians.ResizeToField();

@@ -81,7 +81,7 @@ struct TrainerSettings
   double PruneReflectivity = 1e-3;   ///< |r| below this is pruned (after the first densification)
   double GrowthMargin = 0.005;       ///< growth stops when the validation loss improves by less (relative) ...
   int GrowthPatience = 4;            ///< ... than the best so far over this many densification intervals in a row
-  std::int64_t MaximumGaussians = 400000;
+  std::int64_t MaximumGaussians = 400000; ///< hard maximum, gap filling's copies included (GapFillingSettings)
   double FinalPruneTolerance = 1.0 / 512; ///< final prune: max change of any training pixel's I
   /// After the final prune, bridge gaps between training frames wider than the beam (FillElevationGaps).
   bool FillGaps = true;

@@ -107,6 +107,15 @@ std::vector<float> RenderS(const GaussianField& field, const std::array<double, 
   return S;
 }
 
+/// Every parameter of every Gaussian equal, bit for bit.
+void ExpectSameField(const GaussianField& a, const GaussianField& b)
+{
+  EXPECT_EQ(a.Means, b.Means);
+  EXPECT_EQ(a.LogScales, b.LogScales);
+  EXPECT_EQ(a.Quaternions, b.Quaternions);
+  EXPECT_EQ(a.Reflectivities, b.Reflectivities);
+}
+
 double MaxAbs(const std::vector<float>& a)
 {
   double m = 0;
@@ -256,6 +265,32 @@ TEST(GapFilling, ASweepWithoutGapsOrTooFewFramesIsLeftAlone)
   s.Data.TrainFrames = { 4, 5 };
   EXPECT_EQ(FillElevationGaps(s.Field, s.Data, Sigma).Added, 0);
   EXPECT_EQ(s.Field.Count(), n);
+}
+
+TEST(GapFilling, AGapWhoseCopiesWouldExceedTheMaximumOfGaussiansIsLeftEmpty)
+{
+  // The maximum a user trains with holds for the filled field too: one Gaussian short of what the gap
+  // needs, the field is left exactly as it was (the bracketing frames' Gaussians keep their
+  // reflectivity); with room for every copy it is filled as without a maximum.
+  const Sweep s = MakeSweep(0);
+  const std::int64_t n = s.Field.Count();
+  GaussianField unlimited = s.Field;
+  const std::int64_t needed = FillElevationGaps(unlimited, s.Data, Sigma).Added;
+  ASSERT_GT(needed, 0);
+  GapFillingSettings settings;
+  settings.MaximumGaussians = n + needed - 1;
+  GaussianField limited = s.Field;
+  const GapFillingReport report = FillElevationGaps(limited, s.Data, Sigma, settings);
+  EXPECT_EQ(report.Added, 0);
+  EXPECT_EQ(report.Gaps, 0);
+  EXPECT_EQ(report.Skipped, 1);
+  ExpectSameField(limited, s.Field);
+  EXPECT_NE(DescribeGapFilling(report, settings).find("1 gaps left empty"), std::string::npos)
+    << DescribeGapFilling(report, settings);
+  settings.MaximumGaussians = n + needed;
+  GaussianField room = s.Field;
+  EXPECT_EQ(FillElevationGaps(room, s.Data, Sigma, settings).Added, needed);
+  ExpectSameField(room, unlimited);
 }
 
 TEST(GapFilling, NonFiniteGaussiansAndAZeroBeamAddNothingAndNeverCrash)
