@@ -6,6 +6,7 @@
 #include "bigusGapFilling.h"
 #include "bigusRenderer.h"
 #include "bigusTrainingEngine.h"
+#include "bigusTrainingTestUtilities.h"
 
 #include <gtest/gtest.h>
 
@@ -105,15 +106,6 @@ std::vector<float> RenderS(const GaussianField& field, const std::array<double, 
   std::string error;
   EXPECT_TRUE(renderer->Forward(field.View(), &g, 1, o, S.data(), I.data(), nullptr, &error)) << error;
   return S;
-}
-
-/// Every parameter of every Gaussian equal, bit for bit.
-void ExpectSameField(const GaussianField& a, const GaussianField& b)
-{
-  EXPECT_EQ(a.Means, b.Means);
-  EXPECT_EQ(a.LogScales, b.LogScales);
-  EXPECT_EQ(a.Quaternions, b.Quaternions);
-  EXPECT_EQ(a.Reflectivities, b.Reflectivities);
 }
 
 double MaxAbs(const std::vector<float>& a)

@@ -157,15 +157,6 @@ TrainerSettings ShortSettings()
   return s;
 }
 
-void ExpectSameField(const GaussianField& a, const GaussianField& b)
-{
-  ASSERT_EQ(a.Count(), b.Count());
-  EXPECT_EQ(a.Means, b.Means);
-  EXPECT_EQ(a.LogScales, b.LogScales);
-  EXPECT_EQ(a.Quaternions, b.Quaternions);
-  EXPECT_EQ(a.Reflectivities, b.Reflectivities);
-}
-
 bool AllFinite(const GaussianField& f)
 {
   for (const std::vector<float>* v : { &f.Means, &f.LogScales, &f.Quaternions, &f.Reflectivities })

@@ -38,6 +38,16 @@ inline TrainingData RenderedSweep(const GaussianField& truth, const std::vector<
   }
   return d;
 }
+
+/// Every parameter of every Gaussian of @p a and @p b equal, bit for bit.
+inline void ExpectSameField(const GaussianField& a, const GaussianField& b)
+{
+  ASSERT_EQ(a.Count(), b.Count());
+  EXPECT_EQ(a.Means, b.Means);
+  EXPECT_EQ(a.LogScales, b.LogScales);
+  EXPECT_EQ(a.Quaternions, b.Quaternions);
+  EXPECT_EQ(a.Reflectivities, b.Reflectivities);
+}
 }
 
 #endif
