@@ -2,6 +2,8 @@
 // with vtkSMPTools, over any renderer with host buffers. See bigusTrainingEngine.h.
 #include "bigusTrainingEngine.h"
 
+#include "bigusBasisNorms.h"
+
 #include "vtkSMPTools.h"
 
 #include <atomic>
@@ -17,13 +19,27 @@ constexpr double AdamBeta1 = 0.9;
 constexpr double AdamBeta2 = 0.999;
 constexpr double AdamEpsilon = 1e-12;
 
-/// A step that the renderer refused: its message, prefixed with the training frame.
-StepStatus Failed(int frame, std::string* error)
+/// The options of the linear map S = A r: reflectivities used as given.
+RenderOptions Linear(RenderOptions options)
+{
+  options.NonNegativeReflectivity = false;
+  return options;
+}
+
+/// A call that the renderer refused: its message, prefixed with the training frame. Returns false.
+bool FrameError(int frame, std::string* error)
 {
   if (error)
   {
     *error = "training frame " + std::to_string(frame) + ": " + *error;
   }
+  return false;
+}
+
+/// A step that the renderer refused (FrameError).
+StepStatus Failed(int frame, std::string* error)
+{
+  FrameError(frame, error);
   return StepStatus::Failed;
 }
 
@@ -85,6 +101,67 @@ public:
   }
 
   StepStatus Step(const StepRequest& request, double* loss, std::string* error) override;
+
+  bool ApplyBasis(const float* r, const int* frames, int count, const RenderOptions& options, float* S,
+    std::string* error) override
+  {
+    FieldView view = this->State.Field.View();
+    view.Reflectivities = r;
+    const RenderOptions linear = Linear(options);
+    const std::size_t pixels = std::size_t(this->Data->Width) * this->Data->Height;
+    for (int k = 0; k < count; ++k)
+    {
+      const SliceGeometry slice = this->Data->Slice(frames[k]);
+      if (!this->Backend->Forward(view, &slice, 1, linear, S + pixels * k, nullptr, nullptr, error))
+      {
+        return FrameError(frames[k], error);
+      }
+    }
+    return true;
+  }
+
+  bool ApplyBasisTranspose(const float* y, const int* frames, int count, const RenderOptions& options, double* out,
+    std::string* error) override
+  {
+    // One frame at a time into float, summed over frames in double.
+    const std::int64_t n = this->State.Count();
+    const std::size_t pixels = std::size_t(this->Data->Width) * this->Data->Height;
+    const RenderOptions linear = Linear(options);
+    FieldGradients grads;
+    for (int k = 0; k < count; ++k)
+    {
+      this->Gradients.assign(n, 0.f);
+      grads.Reflectivities = this->Gradients.data();
+      const SliceGeometry slice = this->Data->Slice(frames[k]);
+      if (!this->Backend->Backward(this->State.Field.View(), &slice, 1, linear, y + pixels * k, y + pixels * k, true,
+            grads, nullptr, error))
+      {
+        return FrameError(frames[k], error);
+      }
+      vtkSMPTools::For(0, n, 8192, [&](std::int64_t b, std::int64_t e) {
+        for (std::int64_t i = b; i < e; ++i)
+        {
+          out[i] += this->Gradients[i];
+        }
+      });
+    }
+    return true;
+  }
+
+  bool BasisNorms(const float* weights, const int* frames, int count, const RenderOptions& options, double* out,
+    std::string* error) override
+  {
+    const std::size_t pixels = std::size_t(this->Data->Width) * this->Data->Height;
+    for (int k = 0; k < count; ++k)
+    {
+      const SliceGeometry slice = this->Data->Slice(frames[k]);
+      if (!AccumulateBasisNorms(this->State.Field.View(), &slice, 1, options, weights + pixels * k, out, error))
+      {
+        return FrameError(frames[k], error);
+      }
+    }
+    return true;
+  }
 
 private:
   /// Adam (Kingma and Ba 2015, algorithm 1) on every Gaussian in one pass that also keeps each

@@ -163,6 +163,31 @@ public:
   /// Renders the engine's current field at @p count slices (bigus::Renderer::Forward).
   virtual bool Render(const SliceGeometry* slices, int count, const RenderOptions& options, float* S, float* I,
     std::string* error) = 0;
+
+  // The reflectivity solve's operators (bigusReflectivitySolve.h, DESIGN section 4). For the engine's
+  // current geometry the scattering field of a frame is linear in the reflectivities, S = A r, column i
+  // of A being Gaussian i's beam-integrated weight w_i(p). The matrix is never formed: a backend gives
+  // the solve these three products, and nothing else. RenderOptions::NonNegativeReflectivity does not
+  // enter (A is linear). Frames index the engine's TrainingData; each has that data's [H, W] grid.
+
+  /**
+   * A r: with @p r ([N]) in place of the field's reflectivities, the scattering field S of each of the
+   * @p count @p frames into @p S ([count, H, W]). False with @p error for a pose the renderer rejects.
+   */
+  virtual bool ApplyBasis(const float* r, const int* frames, int count, const RenderOptions& options, float* S,
+    std::string* error) = 0;
+  /**
+   * A^T y: adds to @p out ([N]) sum over the @p count @p frames and their pixels p of y(p) w_i(p), for
+   * @p y ([count, H, W]). False with @p error for a pose the renderer rejects.
+   */
+  virtual bool ApplyBasisTranspose(const float* y, const int* frames, int count, const RenderOptions& options,
+    double* out, std::string* error) = 0;
+  /**
+   * diag(A^T W A): adds to @p out ([N]) sum over the @p count @p frames and their pixels p of
+   * weights(p) w_i(p)^2, for @p weights ([count, H, W]; bigusBasisNorms.h).
+   */
+  virtual bool BasisNorms(const float* weights, const int* frames, int count, const RenderOptions& options,
+    double* out, std::string* error) = 0;
 };
 
 /// The CPU engine over @p renderer (normally bigus::CreateRenderer("cpu", ...)).

@@ -1,0 +1,216 @@
+// The reflectivity solve: preconditioned CGLS over the engine's basis products (see bigusReflectivitySolve.h).
+#include "bigusReflectivitySolve.h"
+
+#include "vtkSMPTools.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+namespace bigus
+{
+
+namespace
+{
+constexpr std::int64_t Chunk = 1 << 16;
+
+double Now()
+{
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+/// sum_k f(k) over [0, n) in fixed chunks summed in order: the same result for any thread count.
+template <typename F>
+double Sum(std::int64_t n, F f)
+{
+  std::vector<double> partial((n + Chunk - 1) / Chunk, 0.0);
+  vtkSMPTools::For(0, static_cast<std::int64_t>(partial.size()), 1, [&](std::int64_t b, std::int64_t e) {
+    for (std::int64_t c = b; c < e; ++c)
+    {
+      double s = 0;
+      for (std::int64_t k = c * Chunk; k < std::min(n, (c + 1) * Chunk); ++k)
+      {
+        s += f(k);
+      }
+      partial[c] = s;
+    }
+  });
+  double total = 0;
+  for (double s : partial)
+  {
+    total += s;
+  }
+  return total;
+}
+
+/// f(k) for every k in [0, n), in parallel.
+template <typename F>
+void ForEach(std::int64_t n, F f)
+{
+  vtkSMPTools::For(0, n, Chunk, [&](std::int64_t b, std::int64_t e) {
+    for (std::int64_t k = b; k < e; ++k)
+    {
+      f(k);
+    }
+  });
+}
+
+bool Fail(std::string* error, const std::string& message)
+{
+  if (error)
+  {
+    *error = message;
+  }
+  return false;
+}
+}
+
+bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const std::vector<int>& frames,
+  const RenderOptions& options, const ReflectivitySolveSettings& settings, std::vector<float>& reflectivities,
+  ReflectivitySolveReport* report, std::string* error)
+{
+  const double start = Now();
+  const std::int64_t n = static_cast<std::int64_t>(reflectivities.size());
+  const std::int64_t pixels = std::int64_t(data.Width) * data.Height;
+  const int count = static_cast<int>(frames.size());
+  const std::int64_t m = pixels * count;
+  if (count == 0)
+  {
+    return Fail(error, "nothing to solve: no frame given");
+  }
+  // Per pixel of the frames solved: sqrt(g) = gamma (1 - I) inside the fan, 0 outside, and the target t.
+  const double gamma = options.Gamma;
+  std::vector<const float*> recorded(count);
+  std::vector<const unsigned char*> masks(count);
+  for (int k = 0; k < count; ++k)
+  {
+    recorded[k] = &data.Frames[pixels * frames[k]];
+    masks[k] = data.MaskOf(frames[k]);
+  }
+  auto intensity = [&](std::int64_t k) {
+    return std::min(std::max(double(recorded[k / pixels][k % pixels]), 0.0), settings.MaximumIntensity);
+  };
+  auto root = [&](std::int64_t k) { return masks[k / pixels][k % pixels] ? gamma * (1 - intensity(k)) : 0.0; };
+  if (Sum(m, [&](std::int64_t k) { return root(k) > 0 ? 1.0 : 0.0; }) == 0)
+  {
+    return Fail(error, "nothing to solve: the fan masks of the " + std::to_string(count) + " frames are empty");
+  }
+  // Data-space vectors: the residual rho and q (A p, the weights G, the input of A^T).
+  std::vector<float> rho(m), q(m);
+  // Jacobi preconditioner P = (diag(A^T G A) + lambda)^(-1/2).
+  ForEach(m, [&](std::int64_t k) { q[k] = static_cast<float>(root(k) * root(k)); });
+  std::vector<double> diagonal(n, 0.0);
+  if (!engine.BasisNorms(q.data(), frames.data(), count, options, diagonal.data(), error))
+  {
+    return false;
+  }
+  std::int64_t seen = 0;
+  double meanDiagonal = 0;
+  for (double d : diagonal)
+  {
+    seen += d > 0 ? 1 : 0;
+    meanDiagonal += d;
+  }
+  if (seen == 0)
+  {
+    return Fail(error, "nothing to solve: no Gaussian of the field reaches a pixel inside the fan masks of the " +
+        std::to_string(count) + " frames");
+  }
+  const double lambda = settings.Ridge * meanDiagonal / seen;
+  const double rootLambda = std::sqrt(lambda);
+  std::vector<double> P(n);
+  ForEach(n, [&](std::int64_t i) { P[i] = 1 / std::sqrt(diagonal[i] + lambda); });
+
+  // CGLS on B y = b, B = [G^1/2 A P; sqrt(lambda) P], b = [G^1/2 t; 0], r = P y.
+  std::vector<double> y(n), s(n), direction(n), ridge(n);
+  std::vector<float> applied(n);
+  ForEach(n, [&](std::int64_t i) { applied[i] = reflectivities[i]; });
+  if (!engine.ApplyBasis(applied.data(), frames.data(), count, options, q.data(), error))
+  {
+    return false;
+  }
+  ForEach(m, [&](std::int64_t k) {
+    const double target = -std::log1p(-intensity(k)) / gamma;
+    rho[k] = static_cast<float>(root(k) * (target - q[k]));
+  });
+  ForEach(n, [&](std::int64_t i) {
+    y[i] = reflectivities[i] / P[i];
+    ridge[i] = -rootLambda * reflectivities[i];
+  });
+  auto objective = [&]() {
+    return Sum(m, [&](std::int64_t k) { return double(rho[k]) * rho[k]; }) +
+      Sum(n, [&](std::int64_t i) { return ridge[i] * ridge[i]; });
+  };
+  // s = B^T residual; q is scratch here.
+  auto transpose = [&]() {
+    ForEach(m, [&](std::int64_t k) { q[k] = static_cast<float>(root(k) * rho[k]); });
+    std::fill(s.begin(), s.end(), 0.0);
+    if (!engine.ApplyBasisTranspose(q.data(), frames.data(), count, options, s.data(), error))
+    {
+      return false;
+    }
+    ForEach(n, [&](std::int64_t i) { s[i] = P[i] * (s[i] + rootLambda * ridge[i]); });
+    return true;
+  };
+  ReflectivitySolveReport local;
+  ReflectivitySolveReport& r = report ? *report : local;
+  r = ReflectivitySolveReport();
+  r.Lambda = lambda;
+  r.UnseenGaussians = n - seen;
+  r.Objective.push_back(objective());
+  if (!transpose())
+  {
+    return false;
+  }
+  direction = s;
+  double norm = Sum(n, [&](std::int64_t i) { return s[i] * s[i]; });
+  const double norm0 = norm;
+  for (int it = 0; it < settings.MaximumIterations && norm > 0 && norm > settings.Tolerance * settings.Tolerance * norm0;
+       ++it)
+  {
+    ForEach(n, [&](std::int64_t i) { applied[i] = static_cast<float>(P[i] * direction[i]); });
+    if (!engine.ApplyBasis(applied.data(), frames.data(), count, options, q.data(), error))
+    {
+      return false;
+    }
+    ForEach(m, [&](std::int64_t k) { q[k] = static_cast<float>(q[k] * root(k)); });
+    const double delta = Sum(m, [&](std::int64_t k) { return double(q[k]) * q[k]; }) +
+      lambda * Sum(n, [&](std::int64_t i) { return applied[i] * double(applied[i]); });
+    const double alpha = norm / delta;
+    if (!std::isfinite(alpha))
+    {
+      return Fail(error, "the reflectivity solve met a non-finite step at iteration " + std::to_string(it + 1));
+    }
+    ForEach(n, [&](std::int64_t i) {
+      y[i] += alpha * direction[i];
+      ridge[i] -= alpha * rootLambda * applied[i];
+    });
+    ForEach(m, [&](std::int64_t k) { rho[k] -= static_cast<float>(alpha * q[k]); });
+    r.Objective.push_back(objective());
+    r.Iterations = it + 1;
+    if (!transpose())
+    {
+      return false;
+    }
+    const double next = Sum(n, [&](std::int64_t i) { return s[i] * s[i]; });
+    const double beta = next / norm;
+    norm = next;
+    ForEach(n, [&](std::int64_t i) { direction[i] = s[i] + beta * direction[i]; });
+  }
+  std::vector<float> solved(n);
+  bool finite = true;
+  for (std::int64_t i = 0; i < n; ++i)
+  {
+    solved[i] = static_cast<float>(P[i] * y[i]);
+    finite = finite && std::isfinite(solved[i]);
+  }
+  if (!finite || !std::isfinite(r.Objective.back()))
+  {
+    return Fail(error, "the reflectivity solve produced a non-finite value");
+  }
+  reflectivities.swap(solved);
+  r.Seconds = Now() - start;
+  return true;
+}
+
+} // namespace bigus

@@ -1,0 +1,71 @@
+/**
+ * @file bigusReflectivitySolve.h
+ * @brief The reflectivities of a fixed geometry by least squares (DESIGN section 4, "Solve what is
+ *        linear").
+ *
+ * For a fixed geometry S(p) = sum_i r_i w_i(p) = (A r)(p) is linear in the reflectivities, and the image
+ * map I = 1 - exp(-gamma max(S, 0)) is monotone. The solve inverts the map on each recorded pixel,
+ * t(p) = -ln(1 - min(I(p), MaximumIntensity)) / gamma, and minimises the Gauss-Newton linearisation of
+ * the squared intensity error,
+ *
+ *     sum_f sum_{p in fan_f} g(p) ((A r)(p) - t(p))^2 + lambda ||r||^2,   g(p) = (dI/dS at t)^2 = gamma^2 (1 - I)^2,
+ *
+ * with lambda = Ridge * mean_i diag(A^T G A) (Tikhonov). The solver is CGLS (Hestenes and Stiefel 1952;
+ * Paige and Saunders 1982, section 7.1) on the column-scaled system, Jacobi-preconditioned with
+ * diag(A^T G A) + lambda (BasisNorms): matrix free, through the TrainingEngine's ApplyBasis (A) and
+ * ApplyBasisTranspose (A^T), so a CUDA or distributed engine solves by implementing the same products.
+ * In exact arithmetic each iteration lowers the objective; it starts from the field's reflectivities.
+ *
+ * Eigen's iterative solvers were not used: their matrix-free path needs a wrapper type with Eigen's
+ * traits and a custom preconditioner, while CGLS itself is a dozen lines here, keeps the residual in
+ * data space (better conditioned than CG on the normal equations) and reports the objective per
+ * iteration, which the trainer and the tests read.
+ *
+ * Memory: two float vectors over every pixel of the frames solved ([frames, H, W]: the residual and
+ * A p) and four double vectors over the Gaussians (32 bytes per Gaussian).
+ */
+#ifndef bigusReflectivitySolve_h
+#define bigusReflectivitySolve_h
+
+#include "bigusTrainingEngine.h"
+#include "bigusTrainingModule.h" // For export macro
+
+#include <string>
+#include <vector>
+
+namespace bigus
+{
+
+struct ReflectivitySolveSettings
+{
+  int MaximumIterations = 12;     ///< CGLS iterations (each one A and one A^T over every frame)
+  double Tolerance = 1e-3;        ///< stop when |A^T G residual| falls below this share of its start
+  double Ridge = 1e-4;            ///< lambda as a share of the mean of diag(A^T G A) over the Gaussians
+  double MaximumIntensity = 0.98; ///< recorded intensities are clamped to this before the map is inverted
+};
+
+struct ReflectivitySolveReport
+{
+  int Iterations = 0;
+  /// The objective (weighted squared error plus the ridge term) at the start and after every iteration.
+  std::vector<double> Objective;
+  double Lambda = 0;                ///< the ridge weight used
+  std::int64_t UnseenGaussians = 0; ///< Gaussians that no pixel of the frames weighs (their r goes to 0)
+  double Seconds = 0;
+};
+
+/**
+ * Solves for the reflectivities of the @p engine's current field on @p frames of @p data (the data
+ * the engine was given), and returns them in @p reflectivities ([N]; on entry the starting point, for
+ * example the field's own). @p options: gamma, sigma_E, cutoff of the renderer.
+ * Returns false with @p error when the engine fails (a rejected pose), when no frame is given or no
+ * pixel of them is inside the fan mask ("nothing to solve: ..."), or when the solve meets a non-finite
+ * value; @p reflectivities are unchanged then.
+ */
+BIGUSTRAINING_EXPORT bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data,
+  const std::vector<int>& frames, const RenderOptions& options, const ReflectivitySolveSettings& settings,
+  std::vector<float>& reflectivities, ReflectivitySolveReport* report, std::string* error);
+
+} // namespace bigus
+
+#endif

@@ -1,0 +1,369 @@
+// The reflectivity solve (bigusReflectivitySolve.h) and the engine's basis products it runs on:
+// the adjoint identity on hard-case geometries, the Jacobi diagonal against squared columns of A,
+// the solve against a dense direct solve (Eigen), recovery of known reflectivities, a residual that
+// never increases, and clear errors where nothing can be solved.
+#include "bigusReflectivitySolve.h"
+#include "bigusTrainingEngine.h"
+#include "bigusTrainingTestUtilities.h"
+
+#include <Eigen/Dense>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+using namespace bigus;
+
+namespace
+{
+constexpr double Spacing = 0.3;
+
+/// Frame k of a small fan of tilted planes through the region [0, W Spacing] x [0, H Spacing] x [-2, 2] mm.
+std::array<double, 16> FramePose(int k)
+{
+  const double tilt = (-12.0 + 8.0 * k) * M_PI / 180.0, c = std::cos(tilt), s = std::sin(tilt);
+  return { Spacing, 0, 0, 0.0, 0, c * Spacing, 0, 0.0, 0, s * Spacing, 0, -1.0 + 0.6 * k, 0, 0, 0, 1 };
+}
+
+/// Needles (scale ratio 100), pancakes, round blobs, Gaussians a little and far off the planes, with
+/// signed reflectivities.
+GaussianField HardCaseField(int n, unsigned seed, double extentX, double extentY)
+{
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u01(0, 1);
+  std::normal_distribution<double> normal(0, 1);
+  GaussianField f;
+  for (int i = 0; i < n; ++i)
+  {
+    const int kind = i % 5;
+    const double far = kind == 4 ? 3.0 + 20.0 * u01(rng) : 0.0; // kind 4: off the planes, some beyond reach
+    f.Means.push_back(static_cast<float>(extentX * u01(rng)));
+    f.Means.push_back(static_cast<float>(extentY * u01(rng)));
+    f.Means.push_back(static_cast<float>(-1.5 + 3.0 * u01(rng) + far));
+    const double base = 0.3 + 0.6 * u01(rng);
+    const double scales[5][3] = { { base, base, base }, { 100 * 0.02, 0.02, 0.02 }, { 1.5, 1.5, 0.015 },
+      { base, 0.5 * base, 2 * base }, { base, base, base } };
+    for (int k = 0; k < 3; ++k)
+    {
+      f.LogScales.push_back(static_cast<float>(std::log(scales[kind][k])));
+    }
+    double q[4], n2 = 0;
+    for (double& v : q)
+    {
+      v = normal(rng);
+      n2 += v * v;
+    }
+    for (double v : q)
+    {
+      f.Quaternions.push_back(static_cast<float>(v / std::sqrt(n2)));
+    }
+    f.Reflectivities.push_back(static_cast<float>(normal(rng)));
+  }
+  return f;
+}
+
+/// @p frames frames of W x H at FramePose, intensities rendered from @p truth (gamma 1), mask all ones,
+/// every frame a training frame.
+TrainingData Frames(const GaussianField& truth, int frames, int width, int height, double sigmaE)
+{
+  std::vector<std::array<double, 16>> poses;
+  for (int k = 0; k < frames; ++k)
+  {
+    poses.push_back(FramePose(k));
+  }
+  std::vector<int> heldOut;
+  TrainingData d = RenderedSweep(truth, poses, width, height, sigmaE, heldOut);
+  d.TrainFrames.resize(frames);
+  for (int k = 0; k < frames; ++k)
+  {
+    d.TrainFrames[k] = k;
+  }
+  return d;
+}
+
+RenderOptions Options(double sigmaE)
+{
+  RenderOptions o;
+  o.ElevationSigma = sigmaE;
+  o.Gamma = 1.0;
+  return o;
+}
+
+std::unique_ptr<TrainingEngine> EngineFor(const TrainingData& data, const GaussianField& field)
+{
+  std::unique_ptr<TrainingEngine> engine = CreateCpuTrainingEngine(CreateCpuRenderer());
+  std::string error;
+  EXPECT_TRUE(engine->SetData(&data, &error)) << error;
+  OptimizerState state;
+  state.Field = field;
+  EXPECT_TRUE(engine->Push(state, &error)) << error;
+  return engine;
+}
+
+/// The dense matrix A ([pixels of all frames, N]) of the engine's basis, column by column.
+Eigen::MatrixXd DenseBasis(TrainingEngine& engine, const TrainingData& data, std::int64_t n, const RenderOptions& o)
+{
+  const std::size_t size = std::size_t(data.Width) * data.Height * data.TrainFrames.size();
+  Eigen::MatrixXd A(size, n);
+  std::vector<float> unit(n, 0.f), S(size);
+  std::string error;
+  for (std::int64_t i = 0; i < n; ++i)
+  {
+    unit[i] = 1.f;
+    EXPECT_TRUE(engine.ApplyBasis(unit.data(), data.TrainFrames.data(), static_cast<int>(data.TrainFrames.size()), o,
+      S.data(), &error))
+      << error;
+    unit[i] = 0.f;
+    for (std::size_t p = 0; p < size; ++p)
+    {
+      A(p, i) = S[p];
+    }
+  }
+  return A;
+}
+}
+
+TEST(ReflectivitySolve, TheTransposeProductIsTheAdjointOfTheBasisProductOnHardCases)
+{
+  // <A x, y> = <x, A^T y> for random signed x and y, for a thin and a thick beam.
+  for (double sigmaE : { 0.05, 0.5, 2.0 })
+  {
+    const GaussianField field = HardCaseField(300, 3, 40 * Spacing, 36 * Spacing);
+    const TrainingData data = Frames(field, 4, 40, 36, sigmaE);
+    auto engine = EngineFor(data, field);
+    const RenderOptions o = Options(sigmaE);
+    std::mt19937_64 rng(11);
+    std::uniform_real_distribution<double> u(-1, 1);
+    const std::size_t size = data.Frames.size();
+    for (int trial = 0; trial < 3; ++trial)
+    {
+      std::vector<float> x(field.Count()), y(size), Ax(size);
+      for (float& v : x)
+      {
+        v = static_cast<float>(u(rng));
+      }
+      for (float& v : y)
+      {
+        v = static_cast<float>(u(rng));
+      }
+      std::vector<double> ATy(field.Count(), 0.0);
+      std::string error;
+      ASSERT_TRUE(engine->ApplyBasis(x.data(), data.TrainFrames.data(), 4, o, Ax.data(), &error)) << error;
+      ASSERT_TRUE(engine->ApplyBasisTranspose(y.data(), data.TrainFrames.data(), 4, o, ATy.data(), &error)) << error;
+      double left = 0, right = 0, scale = 0;
+      for (std::size_t p = 0; p < size; ++p)
+      {
+        left += double(Ax[p]) * y[p];
+        scale += std::abs(double(Ax[p]) * y[p]);
+      }
+      for (std::int64_t i = 0; i < field.Count(); ++i)
+      {
+        right += x[i] * ATy[i];
+      }
+      // Relative to the sum of the absolute terms: with signed x and y the inner product itself cancels
+      // (a sum of terms of random sign), while float rounding scales with the terms.
+      EXPECT_GT(scale, 1.0) << "the frames must see the field";
+      EXPECT_NEAR(left, right, 1e-6 * scale) << "sigma_E " << sigmaE << ", trial " << trial << ", sum of |terms| "
+                                              << scale;
+    }
+  }
+}
+
+TEST(ReflectivitySolve, BasisNormsAreTheWeightedSquaredColumnsOfTheBasisProduct)
+{
+  const double sigmaE = 0.5;
+  const GaussianField field = HardCaseField(40, 5, 32 * Spacing, 28 * Spacing);
+  const TrainingData data = Frames(field, 3, 32, 28, sigmaE);
+  auto engine = EngineFor(data, field);
+  const RenderOptions o = Options(sigmaE);
+  const Eigen::MatrixXd A = DenseBasis(*engine, data, field.Count(), o);
+  std::vector<float> weights(data.Frames.size());
+  std::mt19937_64 rng(2);
+  std::uniform_real_distribution<double> u(0, 2);
+  Eigen::VectorXd w(weights.size());
+  for (std::size_t p = 0; p < weights.size(); ++p)
+  {
+    weights[p] = static_cast<float>(p % 7 == 0 ? 0.0 : u(rng)); // zeros as outside a fan
+    w[p] = weights[p];
+  }
+  std::vector<double> norms(field.Count(), 0.0);
+  std::string error;
+  ASSERT_TRUE(engine->BasisNorms(weights.data(), data.TrainFrames.data(), 3, o, norms.data(), &error)) << error;
+  int visible = 0;
+  for (std::int64_t i = 0; i < field.Count(); ++i)
+  {
+    const double expected = (A.col(i).array().square() * w.array()).sum();
+    EXPECT_NEAR(norms[i], expected, 1e-5 * expected + 1e-12) << "Gaussian " << i;
+    visible += expected > 0 ? 1 : 0;
+  }
+  EXPECT_GT(visible, 20);
+}
+
+TEST(ReflectivitySolve, MatchesADenseDirectSolveOnATinyProblem)
+{
+  // The frames come from one field, the geometry solved is another: the least-squares residual is not
+  // zero, and the ridge matters. (A^T G A + lambda I) r = A^T G t by LDLT in double is the truth.
+  const double sigmaE = 0.5;
+  const GaussianField truth = HardCaseField(30, 8, 24 * Spacing, 20 * Spacing);
+  GaussianField geometry = HardCaseField(12, 9, 24 * Spacing, 20 * Spacing);
+  TrainingData data = Frames(truth, 3, 24, 20, sigmaE);
+  for (std::size_t p = 0; p < data.Mask.size(); ++p)
+  {
+    data.Mask[p] = (p % 24) < 22; // a fan that leaves out two columns
+  }
+  auto engine = EngineFor(data, geometry);
+  const RenderOptions o = Options(sigmaE);
+  const Eigen::MatrixXd A = DenseBasis(*engine, data, geometry.Count(), o);
+  const std::size_t pixels = data.Mask.size();
+  Eigen::VectorXd g(data.Frames.size()), t(data.Frames.size());
+  for (std::size_t p = 0; p < data.Frames.size(); ++p)
+  {
+    const double I = std::min(std::max(double(data.Frames[p]), 0.0), 0.98);
+    g[p] = data.Mask[p % pixels] ? (1 - I) * (1 - I) : 0.0;
+    t[p] = -std::log1p(-I);
+  }
+  ReflectivitySolveSettings settings;
+  settings.MaximumIterations = 200;
+  settings.Tolerance = 1e-10;
+  settings.Ridge = 1e-2;
+  std::vector<float> r(geometry.Count(), 0.f);
+  ReflectivitySolveReport report;
+  std::string error;
+  ASSERT_TRUE(SolveReflectivities(*engine, data, data.TrainFrames, o, settings, r, &report, &error)) << error;
+  const Eigen::MatrixXd normal = A.transpose() * g.asDiagonal() * A +
+    report.Lambda * Eigen::MatrixXd::Identity(geometry.Count(), geometry.Count());
+  const Eigen::VectorXd expected = normal.ldlt().solve(A.transpose() * (g.array() * t.array()).matrix());
+  const Eigen::ArrayXd diagonal = (A.array().square().colwise() * g.array()).colwise().sum().transpose();
+  const double diagonalMean = diagonal.sum() / (diagonal > 0).count(); // over the Gaussians the frames see
+  EXPECT_NEAR(report.Lambda, settings.Ridge * diagonalMean, 1e-6 * report.Lambda);
+  Eigen::VectorXd got(geometry.Count());
+  for (std::int64_t i = 0; i < geometry.Count(); ++i)
+  {
+    got[i] = r[i];
+  }
+  EXPECT_LT((got - expected).norm(), 1e-6 * expected.norm()) << "got\n" << got << "\nexpected\n" << expected;
+}
+
+TEST(ReflectivitySolve, RecoversKnownReflectivitiesWhereTheProblemIsWellPosed)
+{
+  // Separate Gaussians near the planes, positive reflectivities (S >= 0: the image map inverts exactly),
+  // many pixels each: the solve from zero finds the reflectivities that rendered the frames.
+  const double sigmaE = 0.4;
+  GaussianField truth;
+  std::mt19937_64 rng(4);
+  std::uniform_real_distribution<double> u01(0, 1);
+  for (int a = 0; a < 6; ++a)
+  {
+    for (int b = 0; b < 5; ++b)
+    {
+      const float mean[3] = { static_cast<float>(1.0 + 1.6 * a), static_cast<float>(1.0 + 1.6 * b),
+        static_cast<float>(-0.3 + 0.6 * u01(rng)) };
+      truth.Means.insert(truth.Means.end(), mean, mean + 3);
+      for (int k = 0; k < 3; ++k)
+      {
+        truth.LogScales.push_back(static_cast<float>(std::log(0.35 + 0.2 * u01(rng))));
+      }
+      truth.Quaternions.insert(truth.Quaternions.end(), { 1.f, 0.f, 0.f, 0.f });
+      truth.Reflectivities.push_back(static_cast<float>(0.2 + 0.6 * u01(rng)));
+    }
+  }
+  const TrainingData data = Frames(truth, 4, 36, 32, sigmaE);
+  GaussianField start = truth;
+  std::fill(start.Reflectivities.begin(), start.Reflectivities.end(), 0.f);
+  auto engine = EngineFor(data, start);
+  ReflectivitySolveSettings settings;
+  settings.MaximumIterations = 100;
+  settings.Tolerance = 1e-9;
+  settings.Ridge = 1e-9;
+  std::vector<float> r = start.Reflectivities;
+  ReflectivitySolveReport report;
+  std::string error;
+  ASSERT_TRUE(SolveReflectivities(*engine, data, data.TrainFrames, Options(sigmaE), settings, r, &report, &error))
+    << error;
+  EXPECT_EQ(report.UnseenGaussians, 0);
+  for (std::int64_t i = 0; i < truth.Count(); ++i)
+  {
+    EXPECT_NEAR(r[i], truth.Reflectivities[i], 1e-3 * truth.Reflectivities[i]) << "Gaussian " << i;
+  }
+}
+
+TEST(ReflectivitySolve, TheObjectiveNeverIncreasesBetweenIterations)
+{
+  const double sigmaE = 0.5;
+  const GaussianField truth = HardCaseField(200, 21, 40 * Spacing, 36 * Spacing);
+  const GaussianField geometry = HardCaseField(120, 22, 40 * Spacing, 36 * Spacing);
+  const TrainingData data = Frames(truth, 4, 40, 36, sigmaE);
+  auto engine = EngineFor(data, geometry);
+  ReflectivitySolveSettings settings;
+  settings.MaximumIterations = 40;
+  settings.Tolerance = 0;
+  std::vector<float> r = geometry.Reflectivities;
+  ReflectivitySolveReport report;
+  std::string error;
+  ASSERT_TRUE(SolveReflectivities(*engine, data, data.TrainFrames, Options(sigmaE), settings, r, &report, &error))
+    << error;
+  ASSERT_EQ(report.Objective.size(), std::size_t(report.Iterations) + 1);
+  EXPECT_GT(report.Iterations, 10);
+  for (std::size_t k = 1; k < report.Objective.size(); ++k)
+  {
+    EXPECT_LE(report.Objective[k], report.Objective[k - 1] * (1 + 1e-6)) << "iteration " << k;
+  }
+  EXPECT_LT(report.Objective.back(), 0.5 * report.Objective.front());
+}
+
+TEST(ReflectivitySolve, IntensitiesAtOneGiveFiniteReflectivities)
+{
+  const double sigmaE = 0.5;
+  const GaussianField geometry = HardCaseField(60, 31, 32 * Spacing, 28 * Spacing);
+  TrainingData data = Frames(geometry, 3, 32, 28, sigmaE);
+  for (std::size_t p = 0; p < data.Frames.size(); ++p)
+  {
+    data.Frames[p] = p % 3 == 0 ? 1.0f : (p % 3 == 1 ? 0.9999999f : 1.5f); // saturated, and beyond the range
+  }
+  auto engine = EngineFor(data, geometry);
+  std::vector<float> r = geometry.Reflectivities;
+  std::string error;
+  ASSERT_TRUE(SolveReflectivities(*engine, data, data.TrainFrames, Options(sigmaE), ReflectivitySolveSettings(), r,
+    nullptr, &error))
+    << error;
+  for (float v : r)
+  {
+    ASSERT_TRUE(std::isfinite(v));
+  }
+}
+
+TEST(ReflectivitySolve, NothingToSolveIsAClearErrorAndLeavesTheReflectivities)
+{
+  const double sigmaE = 0.5;
+  const GaussianField geometry = HardCaseField(20, 41, 32 * Spacing, 28 * Spacing);
+  TrainingData data = Frames(geometry, 2, 32, 28, sigmaE);
+  const RenderOptions o = Options(sigmaE);
+  std::string error;
+  {
+    TrainingData empty = data;
+    std::fill(empty.Mask.begin(), empty.Mask.end(), 0);
+    auto engine = EngineFor(empty, geometry);
+    std::vector<float> r = geometry.Reflectivities;
+    EXPECT_FALSE(SolveReflectivities(*engine, empty, empty.TrainFrames, o, ReflectivitySolveSettings(), r, nullptr, &error));
+    EXPECT_NE(error.find("the fan masks of the 2 frames are empty"), std::string::npos) << error;
+    EXPECT_EQ(r, geometry.Reflectivities);
+  }
+  {
+    GaussianField away = geometry;
+    for (std::int64_t i = 0; i < away.Count(); ++i)
+    {
+      away.Means[3 * i + 2] += 500.f; // far beyond every frame's beam
+    }
+    auto engine = EngineFor(data, away);
+    std::vector<float> r = away.Reflectivities;
+    EXPECT_FALSE(SolveReflectivities(*engine, data, data.TrainFrames, o, ReflectivitySolveSettings(), r, nullptr, &error));
+    EXPECT_NE(error.find("no Gaussian of the field reaches a pixel"), std::string::npos) << error;
+    EXPECT_EQ(r, away.Reflectivities);
+  }
+  {
+    auto engine = EngineFor(data, geometry);
+    std::vector<float> r = geometry.Reflectivities;
+    EXPECT_FALSE(SolveReflectivities(*engine, data, {}, o, ReflectivitySolveSettings(), r, nullptr, &error));
+    EXPECT_NE(error.find("no frame given"), std::string::npos) << error;
+  }
+}
