@@ -366,7 +366,7 @@ struct TrainOptions
   long long MaxGaussians = 0, InitialGaussians = 0;
   double GrowthMargin = 0;
   int GrowthPatience = 0;
-  bool NoFillGaps = false;
+  bool NoFillGaps = false, ReflectivitySolve = false, DenseStart = false;
   unsigned Seed = 0;
 
   /// The filter's own defaults, so that `bigus train` and vtkGaussianFieldTrainer agree.
@@ -423,6 +423,8 @@ int RunTrain(const TrainOptions& o)
   trainer->SetGrowthMargin(o.GrowthMargin);
   trainer->SetGrowthPatience(o.GrowthPatience);
   trainer->SetFillGaps(!o.NoFillGaps);
+  trainer->SetReflectivitySolve(o.ReflectivitySolve);
+  trainer->SetDenseInitialisation(o.DenseStart);
   trainer->SetElevationSigma(o.ElevationSigma);
   trainer->SetSeed(o.Seed);
   trainer->SetEvaluationInterval(o.EvaluationInterval);
@@ -1169,6 +1171,12 @@ int main(int argc, char** argv)
     "... over this many densification intervals in a row")
     ->capture_default_str()
     ->check(CLI::PositiveNumber);
+  trainCommand->add_flag("--reflectivity-solve", train.ReflectivitySolve,
+    "Variable projection: solve the reflectivities by least squares after seeding and after every densification, "
+    "Adam between the solves (default: Adam alone)");
+  trainCommand->add_flag("--dense-start", train.DenseStart,
+    "Start from Gaussians on the training frames' pixel grid (--initial-gaussians of them, default half of "
+    "--max-gaussians) instead of Harris seeds");
   trainCommand->add_flag("--no-fill-gaps", train.NoFillGaps,
     "Leave gaps between training frames wider than the beam empty (default: bridged, as bigus fill-gaps does)");
   trainCommand->add_option("--elevation-sigma", train.ElevationSigma, "Elevation beam sigma, mm (FWHM / 2.355); 0: chosen from the sweep (frame spacing, speckle decorrelation)")

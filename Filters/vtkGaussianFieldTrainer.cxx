@@ -143,6 +143,8 @@ int vtkGaussianFieldTrainer::RequestData(
   s.NonNegativeReflectivity = this->NonNegativeReflectivity;
   s.HarrisInitialisation = this->HarrisInitialisation;
   s.Densify = this->Densify;
+  s.ReflectivitySolve = this->ReflectivitySolve;
+  s.DenseInitialisation = this->DenseInitialisation;
   s.InitialGaussians = this->InitialGaussians;
   s.MaximumGaussians = this->MaximumGaussians;
   s.Iterations = this->Iterations;
@@ -333,6 +335,8 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "NonNegativeReflectivity: " << this->NonNegativeReflectivity << "\n";
   os << indent << "HarrisInitialisation: " << this->HarrisInitialisation << "\n";
   os << indent << "Densify: " << this->Densify << "\n";
+  os << indent << "ReflectivitySolve: " << this->ReflectivitySolve << "\n";
+  os << indent << "DenseInitialisation: " << this->DenseInitialisation << "\n";
   os << indent << "Iterations: " << this->Iterations << "\n";
   os << indent << "TimeBudget: " << this->TimeBudget << "\n";
   os << indent << "ConvergenceTolerance: " << this->ConvergenceTolerance << "\n";

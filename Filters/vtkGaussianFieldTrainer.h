@@ -108,6 +108,19 @@ public:
   vtkSetMacro(Densify, bool);
   vtkGetMacro(Densify, bool);
   ///@}
+  ///@{ Variable projection: the reflectivities solved by least squares after seeding and after every
+  /// densification, Adam between the solves (default off: Adam alone, until the liver measures it better). See
+  /// bigus::TrainerSettings::ReflectivitySolve.
+  vtkSetMacro(ReflectivitySolve, bool);
+  vtkGetMacro(ReflectivitySolve, bool);
+  vtkBooleanMacro(ReflectivitySolve, bool);
+  ///@}
+  ///@{ A dense start: Gaussians on the training frames' pixel grid instead of Harris seeds (default
+  /// off; bigus::TrainerSettings::DenseInitialisation).
+  vtkSetMacro(DenseInitialisation, bool);
+  vtkGetMacro(DenseInitialisation, bool);
+  vtkBooleanMacro(DenseInitialisation, bool);
+  ///@}
   ///@{
   /**
    * Stopping and schedule: Iterations (steps), TimeBudget (wall-clock seconds, 0 = none),
@@ -242,6 +255,8 @@ protected:
   bool NonNegativeReflectivity = false;
   bool HarrisInitialisation = true;
   bool Densify = true;
+  bool ReflectivitySolve = false;
+  bool DenseInitialisation = false;
   int Iterations = 3000;
   double TimeBudget = 0;
   double ConvergenceTolerance = 0;

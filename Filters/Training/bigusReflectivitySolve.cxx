@@ -6,6 +6,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
+
+#include <unistd.h>
 
 namespace bigus
 {
@@ -13,6 +16,9 @@ namespace bigus
 namespace
 {
 constexpr std::int64_t Chunk = 1 << 16;
+/// The solve's vectors per Gaussian: y, s, direction, ridge and the diagonal (double), P (double), the
+/// reflectivities applied (float).
+constexpr double BytesPerGaussian = 6 * sizeof(double) + sizeof(float);
 
 double Now()
 {
@@ -77,6 +83,17 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
   if (count == 0)
   {
     return Fail(error, "nothing to solve: no frame given");
+  }
+  // Refused before anything is allocated when its vectors alone would not fit in this machine's memory.
+  const double needed = double(m) * 2 * sizeof(float) + double(n) * BytesPerGaussian;
+  const double physical = double(sysconf(_SC_PHYS_PAGES)) * double(sysconf(_SC_PAGE_SIZE));
+  if (physical > 0 && needed > physical)
+  {
+    char text[300];
+    std::snprintf(text, sizeof(text),
+      "the reflectivity solve needs %.0f MB (%d frames of %d x %d pixels, %lld Gaussians) and this machine has %.0f MB",
+      needed / 1e6, count, data.Width, data.Height, static_cast<long long>(n), physical / 1e6);
+    return Fail(error, text);
   }
   // Per pixel of the frames solved: sqrt(g) = gamma (1 - I) inside the fan, 0 outside, and the target t.
   const double gamma = options.Gamma;

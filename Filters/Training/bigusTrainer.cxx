@@ -192,6 +192,12 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
         Format("each frame alone within %.3g beam widths of it)", s.GapFilling.BlendMarginSigmas)
       : s.FillGaps ? "FillGaps = off (BeamIntegration is off: the thin plane has no beam to bridge gaps with)"
                    : "FillGaps = off");
+  this->Report.Settings.push_back(!s.ReflectivitySolve ? "ReflectivitySolve = off (Adam alone)"
+      : s.NonNegativeReflectivity
+      ? "ReflectivitySolve = off (NonNegativeReflectivity: the model is not linear in r)"
+      : Format("ReflectivitySolve = on (CGLS, at most %d iterations, ridge %.3g, after seeding, after every "
+               "densification", s.Solve.MaximumIterations, s.Solve.Ridge) +
+        (s.SolveInterval > 0 ? Format(" and every %d steps)", s.SolveInterval) : std::string(")")));
   this->Report.Settings.push_back(Format("Seed = %u, FramesPerStep = %d, Cutoff = %.3g", s.Seed, s.FramesPerStep, s.Cutoff));
   this->Engine->SetData(this->Data.get(), nullptr);
 }
@@ -311,6 +317,30 @@ bool Trainer::Initialize(std::string* error)
     ? this->Settings.InitialGaussians
     : std::max<std::int64_t>(std::min<std::int64_t>(20000, this->Settings.MaximumGaussians / 2),
         std::min<std::int64_t>(count / 200, this->Settings.MaximumGaussians / 2));
+  if (this->Settings.InitialGaussians > this->Settings.MaximumGaussians)
+  {
+    if (error)
+    {
+      *error = Format("InitialGaussians (%lld) exceeds MaximumGaussians (%lld)",
+        static_cast<long long>(this->Settings.InitialGaussians), static_cast<long long>(this->Settings.MaximumGaussians));
+    }
+    return false;
+  }
+  GaussianField& field = this->State.Gaussians.Field;
+  if (this->Settings.DenseInitialisation)
+  {
+    const std::int64_t wanted = this->Settings.InitialGaussians > 0 ? this->Settings.InitialGaussians
+                                                                    : this->Settings.MaximumGaussians / 2;
+    const std::string grid = this->InitializeGrid(wanted, field);
+    this->Report.InitialGaussians = field.Count();
+    this->Report.Settings.push_back(Format("InitialGaussians = %lld (dense start: ", static_cast<long long>(field.Count())) +
+      grid + ")");
+    if (!this->PushState(error))
+    {
+      return false;
+    }
+    return this->SolvesReflectivities() ? this->SolveFieldReflectivities(error) : this->FitReflectivityScale(error);
+  }
   this->Report.InitialGaussians = seeds;
   this->Report.Settings.push_back(Format("InitialGaussians = %lld (", static_cast<long long>(seeds)) +
     (this->Settings.InitialGaussians > 0
@@ -318,7 +348,6 @@ bool Trainer::Initialize(std::string* error)
         : Format("chosen: one per 200 of the %ld fan pixels of the training frames, 20,000 to half the maximum", count)) +
     (this->Settings.HarrisInitialisation ? "; Harris seeding)" : "; uniform random seeding)"));
   std::mt19937_64 rng(this->Settings.Seed * 7919ULL + 17);
-  GaussianField& field = this->State.Gaussians.Field;
   if (this->Settings.HarrisInitialisation)
   {
     this->InitializeHarris(seeds, rng, field);
@@ -327,7 +356,36 @@ bool Trainer::Initialize(std::string* error)
   {
     this->InitializeRandom(seeds, rng, field);
   }
-  return this->FitReflectivityScale(error);
+  if (!this->PushState(error))
+  {
+    return false;
+  }
+  return this->SolvesReflectivities() ? this->SolveFieldReflectivities(error) : this->FitReflectivityScale(error);
+}
+
+bool Trainer::SolveFieldReflectivities(std::string* error)
+{
+  if (!this->PullState(error))
+  {
+    return false;
+  }
+  OptimizerState& G = this->State.Gaussians;
+  std::vector<float> r = G.Field.Reflectivities;
+  if (!SolveReflectivities(*this->Engine, *this->Data, this->Data->TrainFrames, this->Options(), this->Settings.Solve, r,
+        &this->Report.LastSolve, error))
+  {
+    if (error)
+    {
+      *error = "reflectivity solve: " + *error;
+    }
+    return false;
+  }
+  G.Field.Reflectivities.swap(r);
+  std::fill(G.FirstMoment.Reflectivities.begin(), G.FirstMoment.Reflectivities.end(), 0.f);
+  std::fill(G.SecondMoment.Reflectivities.begin(), G.SecondMoment.Reflectivities.end(), 0.f);
+  this->Report.Solves += 1;
+  this->Report.SolveSeconds += this->Report.LastSolve.Seconds;
+  return this->PushState(error);
 }
 
 bool Trainer::SetField(const GaussianField& field, std::string* error)
@@ -473,6 +531,88 @@ void Trainer::InitializeRandom(std::int64_t total, std::mt19937_64& rng, Gaussia
   }
 }
 
+std::string Trainer::InitializeGrid(std::int64_t total, GaussianField& field)
+{
+  // Planes: the training frames in order, each kept when its centre lies at least sigma_E (or 1 pixel
+  // without a beam) from the plane of the last one kept, so that the planes' Gaussians do not repeat
+  // each other within a beam width.
+  const TrainingData& data = *this->Data;
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
+  const double sigmaE = this->Settings.BeamIntegration ? this->Settings.ElevationSigma : 0.0;
+  const double minimumGap = std::max(sigmaE, this->PixelSpacing);
+  std::vector<int> planes;
+  std::vector<SliceFrame> frames;
+  double masked = 0, gaps = 0;
+  for (int f : data.TrainFrames)
+  {
+    SliceFrame frame;
+    ComputeSliceFrame(data.Poses[f].data(), 90, frame);
+    double centre[3];
+    Apply(data.Poses[f], 0.5 * (data.Width - 1), 0.5 * (data.Height - 1), centre);
+    if (!frames.empty())
+    {
+      const SliceFrame& last = frames.back();
+      double d = 0;
+      for (int k = 0; k < 3; ++k)
+      {
+        d += last.n[k] * (centre[k] - last.origin[k]);
+      }
+      if (std::abs(d) < minimumGap)
+      {
+        continue;
+      }
+      gaps += std::abs(d);
+    }
+    planes.push_back(f);
+    frames.push_back(frame);
+    const unsigned char* mask = data.MaskOf(f);
+    masked += static_cast<double>(std::count_if(mask, mask + pixels, [](unsigned char v) { return v != 0; }));
+  }
+  const double planeSpacing = planes.size() > 1 ? gaps / (planes.size() - 1) : minimumGap;
+  // The stride from the count wanted, widened until the grid's own count stays within it.
+  auto gridCount = [&](int stride) {
+    std::int64_t c = 0;
+    for (int f : planes)
+    {
+      const unsigned char* mask = data.MaskOf(f);
+      for (int j = stride / 2; j < data.Height; j += stride)
+      {
+        for (int i = stride / 2; i < data.Width; i += stride)
+        {
+          c += mask[std::size_t(j) * data.Width + i] ? 1 : 0;
+        }
+      }
+    }
+    return c;
+  };
+  int stride = std::max(1, static_cast<int>(std::ceil(std::sqrt(masked / std::max<std::int64_t>(1, total)))));
+  while (gridCount(stride) > total)
+  {
+    ++stride;
+  }
+  const double inPlane = 0.6 * stride * this->PixelSpacing;
+  const double elevation = std::max(0.5 * planeSpacing, this->PixelSpacing);
+  field = GaussianField();
+  for (int f : planes)
+  {
+    const unsigned char* mask = data.MaskOf(f);
+    const float* frame = &data.Frames[pixels * f];
+    for (int j = stride / 2; j < data.Height; j += stride)
+    {
+      for (int i = stride / 2; i < data.Width; i += stride)
+      {
+        const std::size_t p = std::size_t(j) * data.Width + i;
+        if (mask[p])
+        {
+          AddSeed(field, data.Poses[f], i, j, inPlane, elevation, InvertImage(frame[p], this->Gamma));
+        }
+      }
+    }
+  }
+  return Format("%zu planes %.3g mm apart, every %d pixels, in-plane scale %.3g mm, elevation scale %.3g mm",
+    planes.size(), planeSpacing, stride, inPlane, elevation);
+}
+
 bool Trainer::FitReflectivityScale(std::string* error)
 {
   // Overlapping seeds add up: one least-squares factor c on every reflectivity makes the rendered
@@ -481,10 +621,6 @@ bool Trainer::FitReflectivityScale(std::string* error)
   const std::size_t pixels = std::size_t(data.Width) * data.Height;
   const int frames = static_cast<int>(data.TrainFrames.size());
   const RenderOptions o = this->Options();
-  if (!this->PushState(error))
-  {
-    return false;
-  }
   std::vector<float> S(pixels);
   double num = 0, den = 0;
   for (int n = 0; n < std::min(frames, 5); ++n)
@@ -928,8 +1064,14 @@ bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>
       ok = false;
       break;
     }
-    if (s.Densify && it >= s.DensifyStart && it % s.DensifyInterval == 0 && this->InDensificationWindow() &&
-      !this->DensifyAndPrune(validation, error))
+    const bool densify = s.Densify && it >= s.DensifyStart && it % s.DensifyInterval == 0 && this->InDensificationWindow();
+    if (densify && !this->DensifyAndPrune(validation, error))
+    {
+      ok = false;
+      break;
+    }
+    if (this->SolvesReflectivities() && (densify || (s.SolveInterval > 0 && it % s.SolveInterval == 0)) &&
+      !this->SolveFieldReflectivities(error))
     {
       ok = false;
       break;

@@ -15,6 +15,7 @@
 #include "bigusGapFilling.h"
 #include "bigusImageLoss.h"
 #include "bigusImageMetrics.h"
+#include "bigusReflectivitySolve.h"
 #include "bigusRenderer.h"
 #include "bigusTrainingEngine.h"
 
@@ -51,8 +52,24 @@ struct TrainerSettings
   /// Seeds; 0 = automatic: one per 200 masked pixels of the training frames, at least 20,000 and at
   /// most half of MaximumGaussians (liver sweep, 105 frames of ~280k fan pixels: 147k seeds).
   std::int64_t InitialGaussians = 0;
+  /// A dense start instead of Harris seeds: Gaussians on the pixel grid of the training frames (every
+  /// frame at least sigma_E from the previous one kept) at the stride that gives InitialGaussians
+  /// (0 = automatic: half of MaximumGaussians), in-plane scale 0.6 strides, elevation scale half the
+  /// spacing of the planes kept; reflectivities from the solve (InitializeGrid).
+  bool DenseInitialisation = false;
   double UniformShare = 0.1;         ///< share of Harris seeds drawn uniformly inside the mask
   double InitialScalePixels = 1.5;   ///< in-plane standard deviation of a seed, pixels
+  // Variable projection (DESIGN section 4, "Solve what is linear")
+  /// On: the reflectivities are solved by least squares (bigus::SolveReflectivities over every training
+  /// frame) after seeding, after every densification and every SolveInterval steps, and Adam moves every
+  /// parameter between the solves. Off (default until the liver measures it better): one least-squares
+  /// scale of the seeds' reflectivities, then Adam alone. Measured (docs/FINDINGS.md): volume protocol,
+  /// oblique slices at 60 s, 35.25 dB against 34.89 for Adam alone; on the liver one solve over the 105
+  /// training frames costs about 30 s on 2 cores, a tenth of the main job's budget per densification.
+  /// Ignored (off) with NonNegativeReflectivity, whose model is not linear in r.
+  bool ReflectivitySolve = false;
+  ReflectivitySolveSettings Solve;
+  int SolveInterval = 0; ///< steps between solves besides those after densification; 0 = none
   // Optimisation
   /// Steps; 0 = no step limit when a TimeBudget is given (the budget is then the schedule), 3000 when
   /// neither is. With both, whichever ends first, and the schedule follows the one further along.
@@ -103,6 +120,9 @@ struct TrainerReport
   std::int64_t Gaussians = 0;
   std::int64_t PrunedAtEnd = 0;
   GapFillingReport GapFilling;      ///< what Finish's gap filling added (FillGaps)
+  int Solves = 0;                   ///< reflectivity solves run (ReflectivitySolve)
+  double SolveSeconds = 0;          ///< their time, s (inside Train it counts towards TimeBudget)
+  ReflectivitySolveReport LastSolve; ///< the last solve: iterations, objective per iteration
   double Gamma = 0;
   double LastLoss = 0;              ///< mean loss of the last 50 steps
   double ElevationSigma = 0;        ///< mm, the sigma trained with (given or chosen)
@@ -223,7 +243,13 @@ private:
   /// @p total seeds, drawn from the Harris response / uniformly (the ablation), into @p field.
   void InitializeHarris(std::int64_t total, std::mt19937_64& rng, GaussianField& field);
   void InitializeRandom(std::int64_t total, std::mt19937_64& rng, GaussianField& field);
+  /// The dense start (DenseInitialisation) of about @p total Gaussians; returns a description.
+  std::string InitializeGrid(std::int64_t total, GaussianField& field);
   bool FitReflectivityScale(std::string* error);
+  /// The reflectivities of the current geometry by least squares (ReflectivitySolve); fresh Adam
+  /// moments for them.
+  bool SolveFieldReflectivities(std::string* error);
+  bool SolvesReflectivities() const { return this->Settings.ReflectivitySolve && !this->Settings.NonNegativeReflectivity; }
   bool DensifyAndPrune(double validation, std::string* error);
   bool ValidationLoss(double& loss, std::string* error);
   /// Measures the validation loss; keeps a copy of the field when it is the best so far.

@@ -1054,3 +1054,54 @@ TEST(GaussianFieldTrainer, ASliceDownstreamDoesNotCropTheSequence)
   EXPECT_EQ(dims[0], 10);
   EXPECT_EQ(dims[1], 8);
 }
+
+TEST(Trainer, VariableProjectionEndsWithALowerTrainingLossThanAdamAloneOnTheSpinePhantom)
+{
+  // The same seed and the same 300 steps (equal steps, not equal time: a test never depends on the
+  // clock; the solves cost extra time, measured in the note), with and without the solve.
+  std::vector<int> heldOut;
+  const TrainingData data = SpineData(heldOut);
+  double loss[2];
+  for (int solve = 0; solve < 2; ++solve)
+  {
+    TrainerSettings s = SpineSettings(300);
+    s.ReflectivitySolve = solve == 1;
+    Trainer trainer(data, s);
+    std::string error;
+    ASSERT_TRUE(trainer.Initialize(&error)) << error;
+    ASSERT_TRUE(trainer.Run(nullptr, nullptr, &error)) << error;
+    EXPECT_EQ(trainer.GetReport().Solves > 0, solve == 1);
+    loss[solve] = trainer.GetReport().LastValidationLoss; // the image loss on training frames (every 8th)
+  }
+  EXPECT_LT(loss[1], loss[0]);
+}
+
+TEST(Trainer, ADenseStartKeepsToItsCountAndSolvesTheReflectivities)
+{
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(200, 7), 0.5, heldOut);
+  TrainerSettings s = ShortSettings();
+  s.DenseInitialisation = true;
+  s.ReflectivitySolve = true;
+  s.InitialGaussians = 6000;
+  s.MaximumGaussians = 20000;
+  Trainer trainer(data, s);
+  std::string error;
+  ASSERT_TRUE(trainer.Initialize(&error)) << error;
+  EXPECT_LE(trainer.GetField().Count(), 6000);
+  EXPECT_GT(trainer.GetField().Count(), 3000);
+  EXPECT_EQ(trainer.GetReport().Solves, 1);
+  const std::vector<double>& objective = trainer.GetReport().LastSolve.Objective;
+  ASSERT_GE(objective.size(), 2u);
+  EXPECT_LT(objective.back(), 0.1 * objective.front()) << "the solve fits the frames from the seeds' guess";
+  ImageMetrics m;
+  ASSERT_TRUE(trainer.Evaluate(data.TrainFrames, m, &error)) << error;
+  EXPECT_GT(m.PSNR, 35.0) << "training frames right after the dense start";
+
+  // More seeds than the maximum is refused before any is made.
+  s.InitialGaussians = 30000;
+  Trainer refused(data, s);
+  EXPECT_FALSE(refused.Initialize(&error));
+  EXPECT_NE(error.find("InitialGaussians (30000) exceeds MaximumGaussians (20000)"), std::string::npos) << error;
+  EXPECT_EQ(refused.GetField().Count(), 0);
+}
