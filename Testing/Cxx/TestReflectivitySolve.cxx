@@ -47,16 +47,7 @@ GaussianField HardCaseField(int n, unsigned seed, double extentX, double extentY
     {
       f.LogScales.push_back(static_cast<float>(std::log(scales[kind][k])));
     }
-    double q[4], n2 = 0;
-    for (double& v : q)
-    {
-      v = normal(rng);
-      n2 += v * v;
-    }
-    for (double v : q)
-    {
-      f.Quaternions.push_back(static_cast<float>(v / std::sqrt(n2)));
-    }
+    AppendRandomRotation(f, rng, normal);
     f.Reflectivities.push_back(static_cast<float>(normal(rng)));
   }
   return f;

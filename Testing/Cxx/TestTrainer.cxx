@@ -64,16 +64,7 @@ GaussianField KnownField(int n, unsigned seed)
     {
       f.LogScales.push_back(static_cast<float>(std::log(0.4 + 0.8 * u01(rng))));
     }
-    double q[4], n2 = 0;
-    for (double& v : q)
-    {
-      v = normal(rng);
-      n2 += v * v;
-    }
-    for (double v : q)
-    {
-      f.Quaternions.push_back(static_cast<float>(v / std::sqrt(n2)));
-    }
+    AppendRandomRotation(f, rng, normal);
     f.Reflectivities.push_back(static_cast<float>(0.25 + 0.2 * normal(rng)));
   }
   return f;

@@ -9,6 +9,8 @@
 #include <gtest/gtest.h>
 
 #include <array>
+#include <cmath>
+#include <random>
 #include <vector>
 
 namespace bigus
@@ -37,6 +39,22 @@ inline TrainingData RenderedSweep(const GaussianField& truth, const std::vector<
     (k % 4 == 2 ? heldOut : d.TrainFrames).push_back(k);
   }
   return d;
+}
+
+/// Appends a uniformly random unit quaternion (a normalised 4-vector of draws of the standard @p normal)
+/// to @p field's rotations.
+inline void AppendRandomRotation(GaussianField& field, std::mt19937_64& rng, std::normal_distribution<double>& normal)
+{
+  double q[4], n2 = 0;
+  for (double& v : q)
+  {
+    v = normal(rng);
+    n2 += v * v;
+  }
+  for (double v : q)
+  {
+    field.Quaternions.push_back(static_cast<float>(v / std::sqrt(n2)));
+  }
 }
 
 /// Every parameter of every Gaussian of @p a and @p b equal, bit for bit.
