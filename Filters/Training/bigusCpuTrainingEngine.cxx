@@ -133,6 +133,7 @@ public:
       this->Gradients.assign(n, 0.f);
       grads.Reflectivities = this->Gradients.data();
       const SliceGeometry slice = this->Data->Slice(frames[k]);
+      // With the gradient taken with respect to S the forward S is not read; y stands in for it.
       if (!this->Backend->Backward(this->State.Field.View(), &slice, 1, linear, y + pixels * k, y + pixels * k, true,
             grads, nullptr, error))
       {

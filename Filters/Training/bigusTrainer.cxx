@@ -335,11 +335,7 @@ bool Trainer::Initialize(std::string* error)
     this->Report.InitialGaussians = field.Count();
     this->Report.Settings.push_back(Format("InitialGaussians = %lld (dense start: ", static_cast<long long>(field.Count())) +
       grid + ")");
-    if (!this->PushState(error))
-    {
-      return false;
-    }
-    return this->SolvesReflectivities() ? this->SolveFieldReflectivities(error) : this->FitReflectivityScale(error);
+    return this->FitInitialReflectivities(error);
   }
   this->Report.InitialGaussians = seeds;
   this->Report.Settings.push_back(Format("InitialGaussians = %lld (", static_cast<long long>(seeds)) +
@@ -356,6 +352,11 @@ bool Trainer::Initialize(std::string* error)
   {
     this->InitializeRandom(seeds, rng, field);
   }
+  return this->FitInitialReflectivities(error);
+}
+
+bool Trainer::FitInitialReflectivities(std::string* error)
+{
   if (!this->PushState(error))
   {
     return false;

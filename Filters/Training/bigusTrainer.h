@@ -246,6 +246,8 @@ private:
   /// The dense start (DenseInitialisation) of about @p total Gaussians; returns a description.
   std::string InitializeGrid(std::int64_t total, GaussianField& field);
   bool FitReflectivityScale(std::string* error);
+  /// The engine takes the seeded field; its reflectivities are then solved (ReflectivitySolve) or scaled.
+  bool FitInitialReflectivities(std::string* error);
   /// The reflectivities of the current geometry by least squares (ReflectivitySolve); fresh Adam
   /// moments for them.
   bool SolveFieldReflectivities(std::string* error);
