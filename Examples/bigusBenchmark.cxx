@@ -13,6 +13,8 @@
 // - render time per slice against the error from the naive double-precision renderer, per cutoff;
 // - ablations: every switch (EA-D, Harris, beam integration, signed reflectivity, D-SSIM, FFL, capacity cap)
 //   at equal iterations and at equal time, 3 seeds, on four sweeps;
+// - held-out PSNR against the number of Gaussians and against time (a Pareto table): Adam alone, variable
+//   projection and a regular grid with the same reflectivity solve;
 // Times are wall-clock seconds on this machine; training time excludes the evaluations, which stop the
 // clock, and the rows at the time marks are of the field as trained so far (no final prune).
 #include "bigusBenchmark.h"
@@ -1446,6 +1448,40 @@ struct AblationExperiment
   double Seconds = 60;                 ///< training time of the equal-time table
 };
 
+/// Every 4th training frame of @p e, scored for the fit.
+void SetFitFrames(AblationExperiment& e)
+{
+  for (std::size_t k = 0; k < e.Train->TrainFrames.size(); k += 4)
+  {
+    e.FitFrames.push_back(e.Train->TrainFrames[k]);
+  }
+}
+
+/// A bundled sweep with its hold-out protocol (frames i mod 4 == 2 scored).
+AblationExperiment HoldOutExperiment(const Sweep& sweep, double seconds)
+{
+  AblationExperiment e;
+  e.Name = sweep.Name;
+  e.Train = e.Test = &sweep.Data;
+  e.TestFrames = sweep.HeldOut;
+  e.Seconds = seconds;
+  SetFitFrames(e);
+  return e;
+}
+
+/// The volume protocol: trained on the parallel slices, scored on the in-between slices.
+AblationExperiment VolumeExperiment(const VolumeProtocol& vp, double seconds)
+{
+  AblationExperiment e;
+  e.Name = "volume protocol (in-between slices)";
+  e.Train = &vp.TrainData;
+  e.Test = &vp.TestData[0];
+  e.TestFrames = vp.TestList[0];
+  e.Seconds = seconds;
+  SetFitFrames(e);
+  return e;
+}
+
 /// One training run of the ablation section: the settings' schedule to its end, then the final prune.
 struct AblationRun
 {
@@ -1457,11 +1493,13 @@ struct AblationRun
   double Seconds = 0;   ///< wall clock: initialisation, training and final prune
 };
 
-bool RunAblation(const AblationExperiment& e, const TrainerSettings& settings, AblationRun& run, std::string* error)
+/// @p train false: the seeded field (Initialize: seeds and their reflectivities) goes straight to Finish.
+bool RunAblation(const AblationExperiment& e, const TrainerSettings& settings, AblationRun& run, std::string* error,
+  bool train = true)
 {
   const double start = Now();
   Trainer trainer(*e.Train, settings);
-  if (!trainer.Initialize(error) || !trainer.Train(nullptr, nullptr, error) || !trainer.Finish(error))
+  if (!trainer.Initialize(error) || (train && !trainer.Train(nullptr, nullptr, error)) || !trainer.Finish(error))
   {
     return false;
   }
@@ -1607,27 +1645,9 @@ bool AblationSection(const std::vector<Sweep>& sweeps, const std::string& root, 
   const double seconds[] = { 40, 20, 15 }; // liver, spine phantom, N-wire: about 100 minutes on 2 cores in all
   for (std::size_t si = 0; si < 3; ++si)
   {
-    AblationExperiment e;
-    e.Name = sweeps[si].Name;
-    e.Train = e.Test = &sweeps[si].Data;
-    e.TestFrames = sweeps[si].HeldOut;
-    e.Seconds = quick ? 3 : seconds[si];
-    experiments.push_back(e);
+    experiments.push_back(HoldOutExperiment(sweeps[si], quick ? 3 : seconds[si]));
   }
-  AblationExperiment volume;
-  volume.Name = "volume protocol (in-between slices)";
-  volume.Train = &vp.TrainData;
-  volume.Test = &vp.TestData[0];
-  volume.TestFrames = vp.TestList[0];
-  volume.Seconds = quick ? 3 : 15;
-  experiments.push_back(volume);
-  for (AblationExperiment& e : experiments)
-  {
-    for (std::size_t k = 0; k < e.Train->TrainFrames.size(); k += 4)
-    {
-      e.FitFrames.push_back(e.Train->TrainFrames[k]);
-    }
-  }
+  experiments.push_back(VolumeExperiment(vp, quick ? 3 : 15));
   const std::vector<unsigned> seeds = quick ? std::vector<unsigned>{ 1 } : std::vector<unsigned>{ 1, 2, 3 };
   std::vector<Ablation> ablations = Ablations();
   if (quick)
@@ -1746,6 +1766,198 @@ bool AblationSection(const std::vector<Sweep>& sweeps, const std::string& root, 
   return true;
 }
 
+/// One run of the Pareto section: a trainer to a time budget, or the regular grid (no training).
+struct ParetoRun
+{
+  std::string Method;
+  double Budget = NaN;         ///< s: the trainer's time budget (NaN for the grid)
+  std::int64_t Requested = 0;  ///< the grid: the count asked for (the count an adaptive run ended with)
+  AblationRun Run;
+  bool CountFront = false;     ///< no other run has at most its Gaussians and a higher held-out PSNR
+  bool TimeFront = false;      ///< no other run took at most its time and has a higher held-out PSNR
+};
+
+/// Marks the runs on the front of held-out PSNR against @p cost (lower cost, higher PSNR).
+void MarkFront(std::vector<ParetoRun>& runs, double AblationRun::*cost, bool ParetoRun::*front)
+{
+  for (ParetoRun& a : runs)
+  {
+    a.*front = std::none_of(runs.begin(), runs.end(), [&](const ParetoRun& b) {
+      return &a != &b && b.Run.*cost <= a.Run.*cost && b.Run.HeldOut.PSNR > a.Run.HeldOut.PSNR;
+    });
+  }
+}
+
+/**
+ * Issue 31, item 4: held-out PSNR against the number of Gaussians and against time, on the liver (20 of
+ * its frames with --quick), the spine phantom and the volume protocol (in-between slices). Three methods:
+ * the trainer's defaults (Adam alone, Harris seeds), variable projection (the same, with the reflectivities
+ * solved after seeding and after every densification; TrainerSettings::ReflectivitySolve), each to time
+ * budgets of 30 and 120 s; and the regular grid with the same solve and no training (DenseInitialisation:
+ * Gaussians on the training frames' pixel grid) at the count each adaptive run ended with. Every run ends
+ * with the final prune and gap filling, and its time counts them and the initialisation (seeding, solves).
+ * The adaptive field should lie above the grid at every count; where it does not, the report says by how
+ * much and compares the two fits of the training frames.
+ */
+bool ParetoSection(const std::vector<Sweep>& sweeps, const std::string& root, bool quick, Report& report,
+  std::string* error)
+{
+  VolumeProtocol vp;
+  if (!MakeVolumeProtocol(root, quick, vp, error))
+  {
+    return false;
+  }
+  // A solve passes over every training frame twice per iteration: --quick takes the 20 liver frames.
+  const std::vector<AblationExperiment> experiments = { HoldOutExperiment(sweeps[quick ? 3 : 0], 0),
+    HoldOutExperiment(sweeps[1], 0), VolumeExperiment(vp, 0) };
+  const std::vector<double> budgets = quick ? std::vector<double>{ 3 } : std::vector<double>{ 30, 120 };
+  const std::pair<std::string, bool> adaptive[] = { { "Adam alone (defaults)", false },
+    { "variable projection", true } };
+  const std::string grid = "regular grid + solve";
+
+  std::ostringstream& md = report.Markdown;
+  md << "\n## Held-out PSNR against Gaussians and time: the adaptive field and the regular grid\n\n"
+     << "Trainer defaults (Adam alone) and variable projection (`--reflectivity-solve`: the reflectivities solved "
+     << "by least squares after seeding and after every densification, Adam between) to time budgets of ";
+  for (std::size_t b = 0; b < budgets.size(); ++b)
+  {
+    md << (b ? " and " : "") << Format("%.0f", budgets[b]);
+  }
+  md << " s, and a regular grid (`--dense-start`: Gaussians on the training frames' pixel grid, reflectivities "
+     << "by the same solve, no training) at the count each adaptive run ended with (one grid for counts within "
+     << "10 %). Time includes seeding, the solves, the final prune and gap filling. Held-out as in the ablations; "
+     << "fit: every 4th training frame. *count front* / *time front*: no other run of the sweep has at most "
+     << "its Gaussians / its time and a higher held-out PSNR.\n";
+  nlohmann::json& json = report.Json["pareto"];
+  for (const AblationExperiment& e : experiments)
+  {
+    std::vector<ParetoRun> runs;
+    auto measure = [&](ParetoRun& p, const TrainerSettings& s, bool train) {
+      if (!RunAblation(e, s, p.Run, error, train))
+      {
+        return Failed("Pareto " + e.Name + ", " + p.Method + ": " + *error, error);
+      }
+      std::printf("  pareto   %-16s %-24s %6.1f s  %6.0f steps  held-out %6.2f dB  fit %6.2f dB  %8.0f Gaussians\n",
+        e.Name.substr(0, 16).c_str(), p.Method.c_str(), p.Run.Seconds, p.Run.Steps, p.Run.HeldOut.PSNR, p.Run.Fit,
+        p.Run.Gaussians);
+      std::fflush(stdout);
+      runs.push_back(p);
+      return true;
+    };
+    for (const auto& [name, solve] : adaptive)
+    {
+      for (double budget : budgets)
+      {
+        TrainerSettings s;
+        s.Iterations = 0;
+        s.TimeBudget = budget;
+        s.ReflectivitySolve = solve;
+        ParetoRun p;
+        p.Method = name;
+        p.Budget = budget;
+        if (!measure(p, s, true))
+        {
+          return false;
+        }
+      }
+    }
+    const std::size_t adaptiveRuns = runs.size();
+    for (std::size_t a = 0; a < adaptiveRuns; ++a)
+    {
+      const auto count = static_cast<std::int64_t>(runs[a].Run.Gaussians);
+      if (std::any_of(runs.begin() + adaptiveRuns, runs.end(),
+            [&](const ParetoRun& g) { return std::abs(double(g.Requested - count)) <= 0.1 * count; }))
+      {
+        continue;
+      }
+      TrainerSettings s;
+      s.DenseInitialisation = true;
+      s.ReflectivitySolve = true;
+      s.InitialGaussians = count;
+      ParetoRun p;
+      p.Method = grid;
+      p.Requested = count;
+      if (!measure(p, s, false))
+      {
+        return false;
+      }
+    }
+    MarkFront(runs, &AblationRun::Gaussians, &ParetoRun::CountFront);
+    MarkFront(runs, &AblationRun::Seconds, &ParetoRun::TimeFront);
+
+    md << "\n### " << e.Name << "\n\n| method | budget (s) | time (s) | Gaussians | held-out PSNR (dB) | SSIM | "
+       << "fit PSNR (dB) | steps | count front | time front |\n|---|---|---|---|---|---|---|---|---|---|\n";
+    nlohmann::json je;
+    PlotSpec byCount, byTime;
+    byCount.Title = e.Name + ": held-out PSNR against Gaussians";
+    byCount.XLabel = "Gaussians";
+    byCount.LogX = true;
+    byTime.Title = e.Name + ": held-out PSNR against time";
+    byTime.XLabel = "time (s)";
+    byCount.YLabel = byTime.YLabel = "held-out PSNR (dB)";
+    for (const ParetoRun& p : runs)
+    {
+      const AblationRun& r = p.Run;
+      md << "| " << p.Method << " | " << Format("%.0f", p.Budget) << " | " << Format("%.1f", r.Seconds) << " | "
+         << Format("%.0f", r.Gaussians) << " | " << Format("%.2f", r.HeldOut.PSNR) << " | "
+         << Format("%.4f", r.HeldOut.SSIM) << " | " << Format("%.2f", r.Fit) << " | " << Format("%.0f", r.Steps)
+         << " | " << (p.CountFront ? "yes" : "") << " | " << (p.TimeFront ? "yes" : "") << " |\n";
+      je["runs"].push_back({ { "method", p.Method }, { "budget", std::isfinite(p.Budget) ? nlohmann::json(p.Budget) : nlohmann::json(nullptr) },
+        { "requested", p.Requested }, { "seconds", r.Seconds }, { "gaussians", r.Gaussians }, { "seeds", r.Seeds },
+        { "steps", r.Steps }, { "psnr", r.HeldOut.PSNR }, { "ssim", r.HeldOut.SSIM }, { "fit_psnr", r.Fit },
+        { "count_front", p.CountFront }, { "time_front", p.TimeFront } });
+      for (PlotSpec* spec : { &byCount, &byTime })
+      {
+        auto series = std::find_if(spec->Series.begin(), spec->Series.end(),
+          [&](const PlotSeries& s) { return s.Name == p.Method; });
+        if (series == spec->Series.end())
+        {
+          series = spec->Series.insert(spec->Series.end(), PlotSeries{ p.Method, {} });
+        }
+        series->Points.emplace_back(spec == &byCount ? r.Gaussians : r.Seconds, r.HeldOut.PSNR);
+      }
+    }
+    for (PlotSpec* spec : { &byCount, &byTime })
+    {
+      for (PlotSeries& s : spec->Series)
+      {
+        std::sort(s.Points.begin(), s.Points.end());
+      }
+    }
+    // Each adaptive run against the grid made at (or within 10 % of) its count.
+    md << "\n";
+    for (std::size_t a = 0; a < adaptiveRuns; ++a)
+    {
+      const ParetoRun& p = runs[a];
+      const auto g = std::min_element(runs.begin() + adaptiveRuns, runs.end(), [&](const ParetoRun& x, const ParetoRun& y) {
+        return std::abs(x.Requested - p.Run.Gaussians) < std::abs(y.Requested - p.Run.Gaussians);
+      });
+      const double delta = p.Run.HeldOut.PSNR - g->Run.HeldOut.PSNR;
+      const bool above = delta > 0;
+      md << "- " << p.Method << ", " << Format("%.0f", p.Budget) << " s (" << Format("%.0f", p.Run.Gaussians)
+         << " Gaussians): " << (above ? "above" : "below") << " the grid of " << Format("%.0f", g->Run.Gaussians)
+         << " by " << Format("%.2f", std::abs(delta)) << " dB";
+      if (!above)
+      {
+        md << "; fit of the training frames " << Format("%.2f", p.Run.Fit) << " dB against the grid's "
+           << Format("%.2f", g->Run.Fit) << " (" << (p.Run.Fit < g->Run.Fit ? "the adaptive field fits less: "
+              "its geometry is not yet where the budget's steps would take it" : "the adaptive field fits more "
+              "and generalises less between frames") << ")";
+      }
+      md << ".\n";
+      je["verdicts"].push_back({ { "method", p.Method }, { "budget", p.Budget }, { "grid_gaussians", g->Run.Gaussians },
+        { "delta_psnr", delta }, { "above_grid", above } });
+    }
+    const std::string tag = std::to_string(&e - experiments.data());
+    if (!report.Plot(byCount, "pareto_gaussians_" + tag + ".png") || !report.Plot(byTime, "pareto_time_" + tag + ".png"))
+    {
+      return Failed("cannot write the Pareto plots to " + report.PlotFolder, error);
+    }
+    json[e.Name] = je;
+  }
+  return true;
+}
+
 /// Adds the total run time (@p seconds) and writes the report to @p output: BENCHMARKS.md for every
 /// section, BENCHMARKS_<section>.md for one alone (so that it does not replace the full report), and
 /// results[_<section>].json next to the plots.
@@ -1788,9 +2000,10 @@ int RunBenchmark(const BenchmarkOptions& options)
     return Fail(options.Output + ": cannot create the output folder");
   }
   const std::string& section = options.Section;
-  if (section != "all" && section != "defaults" && section != "volume" && section != "blocks" && section != "ablations")
+  if (section != "all" && section != "defaults" && section != "volume" && section != "blocks" && section != "ablations" &&
+    section != "pareto")
   {
-    return Fail("--section " + section + ": expected all, defaults, volume, blocks or ablations");
+    return Fail("--section " + section + ": expected all, defaults, volume, blocks, ablations or pareto");
   }
   Introduction(root, quick, report);
   std::vector<Sweep> sweeps = BundledSweeps(root, quick);
@@ -1817,7 +2030,8 @@ int RunBenchmark(const BenchmarkOptions& options)
     {
       ok = run(sweeps[si].Name, true, [&] { return HoldOutSection(sweeps[si], si, root, quick, report, results, &error); });
     }
-    else if (section == "defaults" || (section == "blocks" && si == 0) || (section == "ablations" && si < 3))
+    else if (section == "defaults" || (section == "blocks" && si == 0) || (section == "ablations" && si < 3) ||
+      (section == "pareto" && si != 2))
     {
       ok = Load(sweeps[si], &error);
     }
@@ -1828,6 +2042,7 @@ int RunBenchmark(const BenchmarkOptions& options)
   ok = ok && run("capacity", all, [&] { return CapacitySection(sweeps[0], results.LiverAtCapacityTime, quick, report, &error); });
   ok = ok && run("render cutoffs", all, [&] { return RenderSection(sweeps[0], results, quick, report, &error); });
   ok = ok && run("ablations", all || section == "ablations", [&] { return AblationSection(sweeps, root, quick, report, &error); });
+  ok = ok && run("Pareto", all || section == "pareto", [&] { return ParetoSection(sweeps, root, quick, report, &error); });
   ok = ok && run("defaults against hand-tuned", all || section == "defaults",
                [&] { return DefaultsSection(sweeps, results, root, quick, volume, report, &error); });
   ok = ok && run("block hold-outs", all || section == "blocks", [&] { return BlockHoldOutSection(sweeps[0], quick, report, &error); });

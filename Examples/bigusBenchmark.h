@@ -14,7 +14,9 @@ struct BenchmarkOptions
   /// "all" (written to Output/BENCHMARKS.md), or one section alone (Output/BENCHMARKS_<section>.md):
   /// "defaults" (defaults against hand-tuned, without the fixed-schedule column), "volume" (the volume
   /// protocol), "blocks" (block hold-outs on the liver) or "ablations" (every switch at equal iterations
-  /// and equal time, 3 seeds); the hold-out sections feed the others, which run only in "all".
+  /// and equal time, 3 seeds) or "pareto" (held-out PSNR against Gaussians and time: Adam alone, variable
+  /// projection, the regular grid with the same solve); the hold-out sections feed the others, which run
+  /// only in "all".
   std::string Section = "all";
 };
 

@@ -361,7 +361,18 @@ bool Trainer::FitInitialReflectivities(std::string* error)
   {
     return false;
   }
-  return this->SolvesReflectivities() ? this->SolveFieldReflectivities(error) : this->FitReflectivityScale(error);
+  if (!this->SolvesReflectivities())
+  {
+    return this->FitReflectivityScale(error);
+  }
+  // The first solve is training, not seeding: its time counts towards TimeBudget like the later ones.
+  if (!this->SolveFieldReflectivities(error))
+  {
+    return false;
+  }
+  this->State.TrainingSeconds += this->Report.LastSolve.Seconds;
+  this->Report.Seconds += this->Report.LastSolve.Seconds;
+  return true;
 }
 
 bool Trainer::SolveFieldReflectivities(std::string* error)
@@ -570,47 +581,49 @@ std::string Trainer::InitializeGrid(std::int64_t total, GaussianField& field)
     masked += static_cast<double>(std::count_if(mask, mask + pixels, [](unsigned char v) { return v != 0; }));
   }
   const double planeSpacing = planes.size() > 1 ? gaps / (planes.size() - 1) : minimumGap;
-  // The stride from the count wanted, widened until the grid's own count stays within it.
-  auto gridCount = [&](int stride) {
-    std::int64_t c = 0;
-    for (int f : planes)
+  // Grid points at the centres of stride x stride blocks of pixels (pixel centres at integer indices:
+  // (stride - 1)/2 + a stride), kept inside the fan mask. The stride
+  // is real-valued, so that the grid's count falls short of the count wanted by less than a row and a
+  // column (an integer stride can land at a quarter of it): widened from the estimate in steps of 1 %
+  // until the count stays within it.
+  auto forEachPoint = [&](int f, double stride, const auto& visit) {
+    const unsigned char* mask = data.MaskOf(f);
+    for (double y = 0.5 * (stride - 1); y <= data.Height - 1; y += stride)
     {
-      const unsigned char* mask = data.MaskOf(f);
-      for (int j = stride / 2; j < data.Height; j += stride)
+      for (double x = 0.5 * (stride - 1); x <= data.Width - 1; x += stride)
       {
-        for (int i = stride / 2; i < data.Width; i += stride)
+        const std::size_t p = std::size_t(std::lround(y)) * data.Width + std::size_t(std::lround(x));
+        if (mask[p])
         {
-          c += mask[std::size_t(j) * data.Width + i] ? 1 : 0;
+          visit(x, y, p);
         }
       }
     }
+  };
+  auto gridCount = [&](double stride) {
+    std::int64_t c = 0;
+    for (int f : planes)
+    {
+      forEachPoint(f, stride, [&](double, double, std::size_t) { ++c; });
+    }
     return c;
   };
-  int stride = std::max(1, static_cast<int>(std::ceil(std::sqrt(masked / std::max<std::int64_t>(1, total)))));
+  double stride = std::max(1.0, std::sqrt(masked / std::max<std::int64_t>(1, total)));
   while (gridCount(stride) > total)
   {
-    ++stride;
+    stride *= 1.01;
   }
   const double inPlane = 0.6 * stride * this->PixelSpacing;
   const double elevation = std::max(0.5 * planeSpacing, this->PixelSpacing);
   field = GaussianField();
   for (int f : planes)
   {
-    const unsigned char* mask = data.MaskOf(f);
     const float* frame = &data.Frames[pixels * f];
-    for (int j = stride / 2; j < data.Height; j += stride)
-    {
-      for (int i = stride / 2; i < data.Width; i += stride)
-      {
-        const std::size_t p = std::size_t(j) * data.Width + i;
-        if (mask[p])
-        {
-          AddSeed(field, data.Poses[f], i, j, inPlane, elevation, InvertImage(frame[p], this->Gamma));
-        }
-      }
-    }
+    forEachPoint(f, stride, [&](double x, double y, std::size_t p) {
+      AddSeed(field, data.Poses[f], x, y, inPlane, elevation, InvertImage(frame[p], this->Gamma));
+    });
   }
-  return Format("%zu planes %.3g mm apart, every %d pixels, in-plane scale %.3g mm, elevation scale %.3g mm",
+  return Format("%zu planes %.3g mm apart, every %.2f pixels, in-plane scale %.3g mm, elevation scale %.3g mm",
     planes.size(), planeSpacing, stride, inPlane, elevation);
 }
 

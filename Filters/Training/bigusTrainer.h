@@ -53,9 +53,9 @@ struct TrainerSettings
   /// most half of MaximumGaussians (liver sweep, 105 frames of ~280k fan pixels: 147k seeds).
   std::int64_t InitialGaussians = 0;
   /// A dense start instead of Harris seeds: Gaussians on the pixel grid of the training frames (every
-  /// frame at least sigma_E from the previous one kept) at the stride that gives InitialGaussians
-  /// (0 = automatic: half of MaximumGaussians), in-plane scale 0.6 strides, elevation scale half the
-  /// spacing of the planes kept; reflectivities from the solve (InitializeGrid).
+  /// frame at least sigma_E from the previous one kept) at the real-valued stride that gives at most
+  /// InitialGaussians, short of it by less than a row and a column of the grid (0 = automatic: half of MaximumGaussians), in-plane scale 0.6 strides, elevation
+  /// scale half the spacing of the planes kept; reflectivities from the solve (InitializeGrid).
   bool DenseInitialisation = false;
   double UniformShare = 0.1;         ///< share of Harris seeds drawn uniformly inside the mask
   double InitialScalePixels = 1.5;   ///< in-plane standard deviation of a seed, pixels
@@ -113,7 +113,7 @@ struct TrainerSettings
 struct TrainerReport
 {
   int Iterations = 0;
-  double Seconds = 0;
+  double Seconds = 0;               ///< s: Train, Finish and the first reflectivity solve (not the seeding)
   std::string StopReason;
   std::string GrowthStopReason;
   std::int64_t InitialGaussians = 0; ///< seeds the run started from
@@ -121,7 +121,7 @@ struct TrainerReport
   std::int64_t PrunedAtEnd = 0;
   GapFillingReport GapFilling;      ///< what Finish's gap filling added (FillGaps)
   int Solves = 0;                   ///< reflectivity solves run (ReflectivitySolve)
-  double SolveSeconds = 0;          ///< their time, s (inside Train it counts towards TimeBudget)
+  double SolveSeconds = 0;          ///< their time, s (all count towards TimeBudget, the first one's too)
   ReflectivitySolveReport LastSolve; ///< the last solve: iterations, objective per iteration
   double Gamma = 0;
   double LastLoss = 0;              ///< mean loss of the last 50 steps

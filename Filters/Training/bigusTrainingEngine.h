@@ -89,7 +89,7 @@ struct BIGUSTRAINING_EXPORT TrainingState
   int RolledBackSteps = 0;
   std::vector<double> LossHistory; ///< loss of every completed step
   std::mt19937_64 Random;          ///< draws the frames of each step
-  double TrainingSeconds = 0;      ///< seconds spent in Trainer::Train so far (TrainerSettings::TimeBudget)
+  double TrainingSeconds = 0;      ///< seconds spent in Trainer::Train and the first reflectivity solve so far (TrainerSettings::TimeBudget)
   // Early stopping (bigus::Trainer::Finish)
   GaussianField BestField;         ///< the field with the lowest validation loss seen so far
   double BestFieldLoss = -1;       ///< its validation loss; -1: none measured yet

@@ -1080,7 +1080,8 @@ TEST(Trainer, ADenseStartKeepsToItsCountAndSolvesTheReflectivities)
   std::string error;
   ASSERT_TRUE(trainer.Initialize(&error)) << error;
   EXPECT_LE(trainer.GetField().Count(), 6000);
-  EXPECT_GT(trainer.GetField().Count(), 3000);
+  // The real-valued stride lands within a row and a column of the grid (here about 20 x 20 per plane).
+  EXPECT_GE(trainer.GetField().Count(), 5400);
   EXPECT_EQ(trainer.GetReport().Solves, 1);
   const std::vector<double>& objective = trainer.GetReport().LastSolve.Objective;
   ASSERT_GE(objective.size(), 2u);

@@ -128,6 +128,37 @@ def check_ablations(ablations, report):
             assert "| %.2f (%.2f) |" % (np.mean(psnr(variant)), np.ptp(psnr(variant))) in report, (name, variant)
 
 
+def check_pareto(pareto, report):
+    """Held-out PSNR against Gaussians and time (--quick: one budget of 3 s): per sweep the two adaptive runs
+    (Adam alone, variable projection), then one regular grid per adaptive count (counts within 10 % share
+    one), untrained and seeded below the count it was asked for; the fronts and the comparison with the
+    grid recomputed here from the runs."""
+    assert sorted(pareto) == sorted(["liver, frames 40 to 59", "spine phantom",
+                                     "volume protocol (in-between slices)"]), sorted(pareto)
+    for name, sweep in pareto.items():
+        runs = sweep["runs"]
+        adaptive = [r for r in runs if r["budget"] is not None]
+        grids = [r for r in runs if r["budget"] is None]
+        assert [r["method"] for r in adaptive] == ["Adam alone (defaults)", "variable projection"], name
+        assert all(r["steps"] > 0 for r in adaptive) and all(r["steps"] == 0 for r in grids), name
+        expected = []
+        for r in adaptive:
+            if not any(abs(g - r["gaussians"]) <= 0.1 * r["gaussians"] for g in expected):
+                expected.append(r["gaussians"])
+        assert [g["requested"] for g in grids] == expected, (name, grids, expected)
+        for g in grids:
+            assert g["method"] == "regular grid + solve" and g["seeds"] <= g["requested"], (name, g)
+        for r in runs:
+            assert math.isfinite(r["psnr"]) and math.isfinite(r["fit_psnr"]) and r["gaussians"] > 0, (name, r)
+            for cost, front in (("gaussians", "count_front"), ("seconds", "time_front")):
+                dominated = any(o is not r and o[cost] <= r[cost] and o["psnr"] > r["psnr"] for o in runs)
+                assert r[front] == (not dominated), (name, r, front)
+            assert "| %.0f | %.2f | %.4f | %.2f |" % (r["gaussians"], r["psnr"], r["ssim"], r["fit_psnr"]) in report, r
+        for r, v in zip(adaptive, sweep["verdicts"]):
+            grid = min(grids, key=lambda g: abs(g["requested"] - r["gaussians"]))
+            assert abs(v["delta_psnr"] - (r["psnr"] - grid["psnr"])) < 1e-9 and v["above_grid"] == (r["psnr"] > grid["psnr"]), v
+
+
 def main():
     example_data, executable, out = sys.argv[1:4]
     os.makedirs(out, exist_ok=True)
@@ -142,7 +173,8 @@ def main():
                     "## Ablations at equal iterations and at equal time", "### liver", "### spine phantom",
                     "### N-wire phantom", "### volume protocol (in-between slices)", "#### Equal time: 3 s",
                     "#### Equal iterations: ", "Time per section:", "## Defaults against hand-tuned",
-                    "## Block hold-outs (liver)", "### 8 consecutive frames held out"):
+                    "## Block hold-outs (liver)", "### 8 consecutive frames held out",
+                    "## Held-out PSNR against Gaussians and time"):
         assert heading in report, heading
     assert results["commit"] and results["machine"] and results["quick"] is True
 
@@ -187,6 +219,7 @@ def main():
             assert (r["note"], r["gaussians"]) == (first["note"], first["gaussians"]), (test, r, first)
     check_volume_error_sources(example_data, results["volume_protocol"]["in-between parallel slices"], report)
     check_ablations(results["ablations"], report)
+    check_pareto(results["pareto"], report)
     # Defaults against hand-tuned: every hold-out sweep, the hand-tuned run trained with its sweep's sigma,
     # the difference against the better of the two hand-tuned runs recomputed here.
     hand_sigma = {"liver": 0.3, "spine phantom": 1.5, "N-wire phantom": 1.0, "liver, frames 40 to 59": 0.3}
