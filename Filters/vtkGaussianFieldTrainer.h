@@ -109,7 +109,8 @@ public:
   vtkGetMacro(Densify, bool);
   ///@}
   ///@{ Variable projection: the reflectivities solved by least squares after seeding and after every
-  /// densification, Adam between the solves (default off: Adam alone, until the liver measures it better). See
+  /// densification, Adam between the solves (default off: Adam alone measured better at 120 s on the
+  /// liver, the spine phantom and the volume protocol, docs/BENCHMARKS_pareto.md). See
   /// bigus::TrainerSettings::ReflectivitySolve.
   vtkSetMacro(ReflectivitySolve, bool);
   vtkGetMacro(ReflectivitySolve, bool);

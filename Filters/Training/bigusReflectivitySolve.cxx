@@ -8,7 +8,6 @@
 #include <cmath>
 #include <cstdio>
 
-#include <unistd.h>
 
 namespace bigus
 {
@@ -16,9 +15,6 @@ namespace bigus
 namespace
 {
 constexpr std::int64_t Chunk = 1 << 16;
-/// The solve's vectors per Gaussian: y, s, direction, ridge and the diagonal (double), P (double), the
-/// reflectivities applied (float).
-constexpr double BytesPerGaussian = 6 * sizeof(double) + sizeof(float);
 
 double Now()
 {
@@ -71,6 +67,13 @@ bool Fail(std::string* error, const std::string& message)
 }
 }
 
+double ReflectivitySolveBytes(std::int64_t gaussians, std::int64_t pixels)
+{
+  // Per Gaussian: y, s, direction, ridge, the diagonal and P (double), the reflectivities applied (float);
+  // per pixel: the residual and A p (float).
+  return double(gaussians) * (6 * sizeof(double) + sizeof(float)) + double(pixels) * 2 * sizeof(float);
+}
+
 bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const std::vector<int>& frames,
   const RenderOptions& options, const ReflectivitySolveSettings& settings, std::vector<float>& reflectivities,
   ReflectivitySolveReport* report, std::string* error)
@@ -85,8 +88,8 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
     return Fail(error, "nothing to solve: no frame given");
   }
   // Refused before anything is allocated when its vectors alone would not fit in this machine's memory.
-  const double needed = double(m) * 2 * sizeof(float) + double(n) * BytesPerGaussian;
-  const double physical = double(sysconf(_SC_PHYS_PAGES)) * double(sysconf(_SC_PAGE_SIZE));
+  const double needed = ReflectivitySolveBytes(n, m);
+  const double physical = PhysicalMemoryBytes();
   if (physical > 0 && needed > physical)
   {
     char text[300];

@@ -56,6 +56,10 @@ struct ReflectivitySolveReport
   double Seconds = 0;
 };
 
+/// Bytes a solve allocates for @p gaussians Gaussians over @p pixels pixels (frames x H x W): 52 per
+/// Gaussian and 8 per pixel.
+BIGUSTRAINING_EXPORT double ReflectivitySolveBytes(std::int64_t gaussians, std::int64_t pixels);
+
 /**
  * Solves for the reflectivities of the @p engine's current field on @p frames of @p data (the data
  * the engine was given), and returns them in @p reflectivities ([N]; on entry the starting point, for

@@ -326,6 +326,24 @@ bool Trainer::Initialize(std::string* error)
     }
     return false;
   }
+  // A field that could not grow to MaximumGaussians in this machine's memory is refused before any seed is
+  // made (the training frames are already held).
+  const std::int64_t trainingPixels =
+    std::int64_t(this->Data->Width) * this->Data->Height * std::int64_t(this->Data->TrainFrames.size());
+  const double needed = this->Settings.MaximumGaussians * TrainingBytesPerGaussian +
+    (this->SolvesReflectivities() ? ReflectivitySolveBytes(this->Settings.MaximumGaussians, trainingPixels) : 0.0);
+  const double physical = PhysicalMemoryBytes();
+  if (physical > 0 && needed > physical)
+  {
+    if (error)
+    {
+      *error = Format("MaximumGaussians (%lld) needs %.0f MB of training state (%.0f bytes per Gaussian%s) and this "
+                      "machine has %.0f MB",
+        static_cast<long long>(this->Settings.MaximumGaussians), needed / 1e6, TrainingBytesPerGaussian,
+        this->SolvesReflectivities() ? " and the reflectivity solve's vectors" : "", physical / 1e6);
+    }
+    return false;
+  }
   GaussianField& field = this->State.Gaussians.Field;
   if (this->Settings.DenseInitialisation)
   {

@@ -62,10 +62,11 @@ struct TrainerSettings
   // Variable projection (DESIGN section 4, "Solve what is linear")
   /// On: the reflectivities are solved by least squares (bigus::SolveReflectivities over every training
   /// frame) after seeding, after every densification and every SolveInterval steps, and Adam moves every
-  /// parameter between the solves. Off (default until the liver measures it better): one least-squares
-  /// scale of the seeds' reflectivities, then Adam alone. Measured (docs/FINDINGS.md): volume protocol,
-  /// oblique slices at 60 s, 35.25 dB against 34.89 for Adam alone; on the liver one solve over the 105
-  /// training frames costs about 30 s on 2 cores, a tenth of the main job's budget per densification.
+  /// parameter between the solves. Off (default): one least-squares scale of the seeds' reflectivities,
+  /// then Adam alone. At 120 s Adam alone measured better on every sweep (docs/BENCHMARKS_pareto.md:
+  /// liver 35.83 against 33.09 dB held out, spine phantom 21.18 against 20.59, volume protocol 36.82
+  /// against 35.71): a liver solve costs 30 to 100 s on 2 cores, and on 1.5-pixel Harris seeds it fits
+  /// the frames to 18 dB only (docs/FINDINGS.md).
   /// Ignored (off) with NonNegativeReflectivity, whose model is not linear in r.
   bool ReflectivitySolve = false;
   ReflectivitySolveSettings Solve;
@@ -108,6 +109,17 @@ struct TrainerSettings
   int CheckpointInterval = 0;        ///< steps between checkpoints (0 = none)
   std::string CheckpointFile;
 };
+
+/**
+ * Host memory of a training run per Gaussian, bytes, with the CPU engine (the documented table is in
+ * docs/FINDINGS.md, "Memory"): the trainer's optimiser state (the field 44: means, log-scales,
+ * quaternions, reflectivity in float; Adam's two moments 88; attribution and visibility count 8), the
+ * engine's copy of it (140), the engine's last known-good field and moments (132) and its gradients
+ * (44), and the best field kept for early stopping (44). The reflectivity solve adds
+ * ReflectivitySolveBytes while it runs. The training frames (4 bytes per pixel, 1 per mask pixel)
+ * come on top.
+ */
+constexpr double TrainingBytesPerGaussian = 140 + 140 + 132 + 44 + 44;
 
 /// What a run did.
 struct TrainerReport

@@ -10,10 +10,18 @@
 #include <fstream>
 #include <sstream>
 
+#include <unistd.h>
+
 namespace bigus
 {
 
 TrainingEngine::~TrainingEngine() = default;
+
+double PhysicalMemoryBytes()
+{
+  const long pages = sysconf(_SC_PHYS_PAGES), size = sysconf(_SC_PAGE_SIZE);
+  return pages > 0 && size > 0 ? double(pages) * double(size) : 0.0;
+}
 
 SliceGeometry TrainingData::Slice(int frame) const
 {

@@ -125,6 +125,10 @@ struct StepRequest
   ImageLossWeights Loss;
 };
 
+/// This machine's physical memory, bytes (sysconf); 0 when unknown. Sizes are checked against it
+/// before large allocations (the reflectivity solve, a trainer's MaximumGaussians).
+BIGUSTRAINING_EXPORT double PhysicalMemoryBytes();
+
 enum class StepStatus
 {
   Done,      ///< the state took the step

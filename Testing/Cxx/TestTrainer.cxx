@@ -1096,4 +1096,17 @@ TEST(Trainer, ADenseStartKeepsToItsCountAndSolvesTheReflectivities)
   EXPECT_FALSE(refused.Initialize(&error));
   EXPECT_NE(error.find("InitialGaussians (30000) exceeds MaximumGaussians (20000)"), std::string::npos) << error;
   EXPECT_EQ(refused.GetField().Count(), 0);
+
+  // A maximum whose training state cannot fit in this machine's memory is refused before any seed is made,
+  // with what it needs: 10^12 Gaussians of TrainingBytesPerGaussian and the solve's 52 bytes each.
+  s.InitialGaussians = 6000;
+  s.MaximumGaussians = 1000000000000LL;
+  Trainer tooLarge(data, s);
+  EXPECT_FALSE(tooLarge.Initialize(&error));
+  const double megabytes = 1e12 * (TrainingBytesPerGaussian + 52) / 1e6 +
+    double(data.Width) * data.Height * data.TrainFrames.size() * 8 / 1e6;
+  EXPECT_NE(error.find("MaximumGaussians (1000000000000) needs " + std::to_string(std::llround(megabytes)) + " MB"),
+    std::string::npos) << error;
+  EXPECT_NE(error.find("and this machine has"), std::string::npos) << error;
+  EXPECT_EQ(tooLarge.GetField().Count(), 0);
 }
