@@ -366,7 +366,7 @@ struct TrainOptions
   long long MaxGaussians = 0, InitialGaussians = 0;
   double GrowthMargin = 0;
   int GrowthPatience = 0;
-  bool NoFillGaps = false, ReflectivitySolve = false, DenseStart = false;
+  bool NoFillGaps = false, ReflectivitySolve = false, DenseStart = false, SparseAdam = false;
   unsigned Seed = 0;
 
   /// The filter's own defaults, so that `bigus train` and vtkGaussianFieldTrainer agree.
@@ -425,6 +425,7 @@ int RunTrain(const TrainOptions& o)
   trainer->SetFillGaps(!o.NoFillGaps);
   trainer->SetReflectivitySolve(o.ReflectivitySolve);
   trainer->SetDenseInitialisation(o.DenseStart);
+  trainer->SetSparseAdam(o.SparseAdam);
   trainer->SetElevationSigma(o.ElevationSigma);
   trainer->SetSeed(o.Seed);
   trainer->SetEvaluationInterval(o.EvaluationInterval);
@@ -1174,6 +1175,9 @@ int main(int argc, char** argv)
   trainCommand->add_flag("--reflectivity-solve", train.ReflectivitySolve,
     "Variable projection: solve the reflectivities by least squares after seeding and after every densification, "
     "Adam between the solves (default: Adam alone)");
+  trainCommand->add_flag("--sparse-adam", train.SparseAdam,
+    "Adam over the Gaussians a step touched only: the others keep their parameters and moments (default: every "
+    "Gaussian every step)");
   trainCommand->add_flag("--dense-start", train.DenseStart,
     "Start from Gaussians on the training frames' pixel grid (--initial-gaussians of them, default half of "
     "--max-gaussians) instead of Harris seeds");

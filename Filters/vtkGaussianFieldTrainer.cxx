@@ -145,6 +145,7 @@ int vtkGaussianFieldTrainer::RequestData(
   s.Densify = this->Densify;
   s.ReflectivitySolve = this->ReflectivitySolve;
   s.DenseInitialisation = this->DenseInitialisation;
+  s.SparseAdam = this->SparseAdam;
   s.InitialGaussians = this->InitialGaussians;
   s.MaximumGaussians = this->MaximumGaussians;
   s.Iterations = this->Iterations;
@@ -337,6 +338,7 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "Densify: " << this->Densify << "\n";
   os << indent << "ReflectivitySolve: " << this->ReflectivitySolve << "\n";
   os << indent << "DenseInitialisation: " << this->DenseInitialisation << "\n";
+  os << indent << "SparseAdam: " << this->SparseAdam << "\n";
   os << indent << "Iterations: " << this->Iterations << "\n";
   os << indent << "TimeBudget: " << this->TimeBudget << "\n";
   os << indent << "ConvergenceTolerance: " << this->ConvergenceTolerance << "\n";

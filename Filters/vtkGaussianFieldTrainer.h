@@ -122,6 +122,11 @@ public:
   vtkGetMacro(DenseInitialisation, bool);
   vtkBooleanMacro(DenseInitialisation, bool);
   ///@}
+  ///@{ Adam over the Gaussians a step touched only (default off; bigus::TrainerSettings::SparseAdam).
+  vtkSetMacro(SparseAdam, bool);
+  vtkGetMacro(SparseAdam, bool);
+  vtkBooleanMacro(SparseAdam, bool);
+  ///@}
   ///@{
   /**
    * Stopping and schedule: Iterations (steps), TimeBudget (wall-clock seconds, 0 = none),
@@ -258,6 +263,7 @@ protected:
   bool Densify = true;
   bool ReflectivitySolve = false;
   bool DenseInitialisation = false;
+  bool SparseAdam = false;
   int Iterations = 3000;
   double TimeBudget = 0;
   double ConvergenceTolerance = 0;

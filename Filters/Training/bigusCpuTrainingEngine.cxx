@@ -6,6 +6,7 @@
 
 #include "vtkSMPTools.h"
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <limits>
@@ -258,6 +259,13 @@ bool CpuTrainingEngine::Adam(const StepRequest& request)
     };
     for (std::int64_t i = begin; i < end; ++i)
     {
+      if (request.SparseAdam && gReflectivities[i] == 0.f &&
+        std::all_of(gMeans + 3 * i, gMeans + 3 * i + 3, [](float g) { return g == 0.f; }) &&
+        std::all_of(gLogScales + 3 * i, gLogScales + 3 * i + 3, [](float g) { return g == 0.f; }) &&
+        std::all_of(gQuaternions + 4 * i, gQuaternions + 4 * i + 4, [](float g) { return g == 0.f; }))
+      {
+        continue;
+      }
       adam(F.Means, M.Means, V.Means, gMeans, 3 * i, 3, request.MeanRate);
       adam(F.LogScales, M.LogScales, V.LogScales, gLogScales, 3 * i, 3, request.LogScaleRate);
       adam(F.Quaternions, M.Quaternions, V.Quaternions, gQuaternions, 4 * i, 4, request.QuaternionRate);

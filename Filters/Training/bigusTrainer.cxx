@@ -198,7 +198,8 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
       : Format("ReflectivitySolve = on (CGLS, at most %d iterations, ridge %.3g, after seeding, after every "
                "densification", s.Solve.MaximumIterations, s.Solve.Ridge) +
         (s.SolveInterval > 0 ? Format(" and every %d steps)", s.SolveInterval) : std::string(")")));
-  this->Report.Settings.push_back(Format("Seed = %u, FramesPerStep = %d, Cutoff = %.3g", s.Seed, s.FramesPerStep, s.Cutoff));
+  this->Report.Settings.push_back(Format("Seed = %u, FramesPerStep = %d, Cutoff = %.3g, SparseAdam = %s", s.Seed,
+    s.FramesPerStep, s.Cutoff, s.SparseAdam ? "on" : "off"));
   this->Engine->SetData(this->Data.get(), nullptr);
 }
 
@@ -736,6 +737,7 @@ StepStatus Trainer::Step(double* loss, std::string* error)
   request.MaximumLogScale = std::log(MaximumScaleMm);
   request.Options = this->Options();
   request.Loss = this->Settings.Loss;
+  request.SparseAdam = this->Settings.SparseAdam;
   this->HostCurrent = false;
   const StepStatus status = this->Engine->Step(request, loss, error);
   if (status == StepStatus::Failed)

@@ -79,6 +79,8 @@ struct TrainerSettings
   /// checkpoint counts the seconds trained before it (TrainingState::TrainingSeconds).
   double TimeBudget = 0;
   int FramesPerStep = 1;             ///< training frames rendered per step (the batch); losses are averaged
+  /// Adam over the Gaussians a step touched only (StepRequest::SparseAdam): off (docs/FINDINGS.md).
+  bool SparseAdam = false;
   double MeanLearningRate = 0.02;    ///< mm per step at the start ...
   double MeanLearningRateFinal = 0.002; ///< ... decaying exponentially to this at the end of the schedule
   double LogScaleLearningRate = 0.01;

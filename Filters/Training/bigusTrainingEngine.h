@@ -121,6 +121,10 @@ struct StepRequest
   int Iteration = 0;           ///< Adam's bias correction uses t = Iteration + 1
   double MeanRate = 0, LogScaleRate = 0, QuaternionRate = 0, ReflectivityRate = 0; ///< Adam learning rates
   double MinimumLogScale = 0, MaximumLogScale = 0; ///< log-scales are clamped to this range after the update
+  /// Adam over the Gaussians the step touched only: one whose gradients are all zero keeps its parameters
+  /// and moments (Mallick et al. 2024, Taming 3DGS; gsplat's sparse gradients). False: every Gaussian's
+  /// moments decay and its parameters move on their momentum (Kingma and Ba 2015, algorithm 1).
+  bool SparseAdam = false;
   RenderOptions Options;                           ///< rendering while training (cutoff, gamma, beam)
   ImageLossWeights Loss;
 };

@@ -623,6 +623,65 @@ TEST(Trainer, APoseTheRendererRejectsFailsTheRunWithItsMessage)
   EXPECT_NE(error.find("shear"), std::string::npos) << error;
 }
 
+TEST(Trainer, SparseAdamLeavesTheGaussiansAStepDidNotTouchAsTheyWere)
+{
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(50, 4), 0.5, heldOut);
+  OptimizerState state;
+  state.Field = KnownField(2, 11);
+  // Gaussian 0 on frame 0's plane (z = -6 mm, the middle of the frame), Gaussian 1 100 mm off every frame.
+  state.Field.Means = { 9.6f, 9.6f, -6.0f, 9.6f, 9.6f, 100.0f };
+  state.ResizeToField();
+  for (GaussianField* moment : { &state.FirstMoment, &state.SecondMoment })
+  {
+    const float value = moment == &state.FirstMoment ? 0.1f : 0.01f;
+    for (std::vector<float>* v : { &moment->Means, &moment->LogScales, &moment->Quaternions, &moment->Reflectivities })
+    {
+      std::fill(v->begin(), v->end(), value);
+    }
+  }
+  for (bool sparse : { true, false })
+  {
+    std::string error;
+    auto engine = CreateTrainingEngine("cpu", &error);
+    ASSERT_NE(engine, nullptr) << error;
+    ASSERT_TRUE(engine->SetData(&data, &error) && engine->Push(state, &error)) << error;
+    const int frame = 0;
+    StepRequest request;
+    request.Frames = &frame;
+    request.Count = 1;
+    request.Iteration = 5;
+    request.MeanRate = request.LogScaleRate = request.QuaternionRate = request.ReflectivityRate = 0.01;
+    request.MinimumLogScale = std::log(0.01);
+    request.MaximumLogScale = std::log(100.0);
+    request.SparseAdam = sparse;
+    double loss = 0;
+    ASSERT_EQ(engine->Step(request, &loss, &error), StepStatus::Done) << error;
+    OptimizerState after;
+    ASSERT_TRUE(engine->Pull(after, &error)) << error;
+    EXPECT_NE(after.Field.Reflectivities[0], state.Field.Reflectivities[0]) << "the Gaussian on the frame moves";
+    if (sparse)
+    {
+      for (const auto& [a, b] : { std::make_pair(&after.Field, &state.Field),
+             std::make_pair(&after.FirstMoment, &state.FirstMoment), std::make_pair(&after.SecondMoment, &state.SecondMoment) })
+      {
+        EXPECT_TRUE(std::equal(a->Means.begin() + 3, a->Means.end(), b->Means.begin() + 3));
+        EXPECT_TRUE(std::equal(a->LogScales.begin() + 3, a->LogScales.end(), b->LogScales.begin() + 3));
+        EXPECT_TRUE(std::equal(a->Quaternions.begin() + 4, a->Quaternions.end(), b->Quaternions.begin() + 4));
+        EXPECT_EQ(a->Reflectivities[1], b->Reflectivities[1]);
+      }
+    }
+    else
+    {
+      // Dense Adam (Kingma and Ba, algorithm 1) with a zero gradient: m = beta1 m, and the parameter moves
+      // on that momentum.
+      EXPECT_FLOAT_EQ(after.FirstMoment.Reflectivities[1], 0.9f * 0.1f);
+      EXPECT_NE(after.Field.Reflectivities[1], state.Field.Reflectivities[1]);
+      EXPECT_NE(after.Field.Means[5], state.Field.Means[5]);
+    }
+  }
+}
+
 TEST(Trainer, AnUnavailableBackendIsAClearError)
 {
   std::string error;
