@@ -601,10 +601,9 @@ std::string Trainer::InitializeGrid(std::int64_t total, GaussianField& field)
   }
   const double planeSpacing = planes.size() > 1 ? gaps / (planes.size() - 1) : minimumGap;
   // Grid points at the centres of stride x stride blocks of pixels (pixel centres at integer indices:
-  // (stride - 1)/2 + a stride), kept inside the fan mask. The stride
-  // is real-valued, so that the grid's count falls short of the count wanted by less than a row and a
-  // column (an integer stride can land at a quarter of it): widened from the estimate in steps of 1 %
-  // until the count stays within it.
+  // (stride - 1)/2 + a stride), kept inside the fan mask. The stride is real-valued, so that the grid's
+  // count falls short of the count wanted by less than a row and a column (an integer stride can land at
+  // a quarter of it): widened from the estimate in steps of 1 % until the count stays within it.
   auto forEachPoint = [&](int f, double stride, const auto& visit) {
     const unsigned char* mask = data.MaskOf(f);
     for (double y = 0.5 * (stride - 1); y <= data.Height - 1; y += stride)
