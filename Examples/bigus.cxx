@@ -365,8 +365,8 @@ struct TrainOptions
   double TimeBudget = 0, ElevationSigma = 0, EvaluationInterval = 0;
   long long MaxGaussians = 0, InitialGaussians = 0;
   double GrowthMargin = 0;
-  int GrowthPatience = 0;
-  bool NoFillGaps = false, ReflectivitySolve = false, DenseStart = false, SparseAdam = false;
+  int GrowthPatience = 0, SolveIterations = 0;
+  bool NoFillGaps = false, ReflectivitySolve = false, DenseStart = false, DenseAdam = false;
   unsigned Seed = 0;
 
   /// The filter's own defaults, so that `bigus train` and vtkGaussianFieldTrainer agree.
@@ -379,6 +379,7 @@ struct TrainOptions
     this->InitialGaussians = defaults->GetInitialGaussians();
     this->GrowthMargin = defaults->GetGrowthMargin();
     this->GrowthPatience = defaults->GetGrowthPatience();
+    this->SolveIterations = defaults->GetSolveIterations();
     this->Seed = defaults->GetSeed();
   }
 };
@@ -424,8 +425,9 @@ int RunTrain(const TrainOptions& o)
   trainer->SetGrowthPatience(o.GrowthPatience);
   trainer->SetFillGaps(!o.NoFillGaps);
   trainer->SetReflectivitySolve(o.ReflectivitySolve);
+  trainer->SetSolveIterations(o.SolveIterations);
   trainer->SetDenseInitialisation(o.DenseStart);
-  trainer->SetSparseAdam(o.SparseAdam);
+  trainer->SetSparseAdam(!o.DenseAdam);
   trainer->SetElevationSigma(o.ElevationSigma);
   trainer->SetSeed(o.Seed);
   trainer->SetEvaluationInterval(o.EvaluationInterval);
@@ -1175,9 +1177,13 @@ int main(int argc, char** argv)
   trainCommand->add_flag("--reflectivity-solve", train.ReflectivitySolve,
     "Variable projection: solve the reflectivities by least squares after seeding and after every densification, "
     "Adam between the solves (default: Adam alone)");
-  trainCommand->add_flag("--sparse-adam", train.SparseAdam,
-    "Adam over the Gaussians a step touched only: the others keep their parameters and moments (default: every "
-    "Gaussian every step)");
+  trainCommand->add_option("--solve-iterations", train.SolveIterations,
+    "CGLS iterations of each reflectivity solve (each a forward and a backward pass over every training frame)")
+    ->capture_default_str()
+    ->check(CLI::PositiveNumber);
+  trainCommand->add_flag("--dense-adam", train.DenseAdam,
+    "Adam moves every Gaussian every step on its momentum (the ablation; default: only the Gaussians a step "
+    "touched, the others keep their parameters and moments)");
   trainCommand->add_flag("--dense-start", train.DenseStart,
     "Start from Gaussians on the training frames' pixel grid (--initial-gaussians of them, default half of "
     "--max-gaussians) instead of Harris seeds");

@@ -144,6 +144,7 @@ int vtkGaussianFieldTrainer::RequestData(
   s.HarrisInitialisation = this->HarrisInitialisation;
   s.Densify = this->Densify;
   s.ReflectivitySolve = this->ReflectivitySolve;
+  s.Solve.MaximumIterations = this->SolveIterations;
   s.DenseInitialisation = this->DenseInitialisation;
   s.SparseAdam = this->SparseAdam;
   s.InitialGaussians = this->InitialGaussians;
@@ -337,6 +338,7 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "HarrisInitialisation: " << this->HarrisInitialisation << "\n";
   os << indent << "Densify: " << this->Densify << "\n";
   os << indent << "ReflectivitySolve: " << this->ReflectivitySolve << "\n";
+  os << indent << "SolveIterations: " << this->SolveIterations << "\n";
   os << indent << "DenseInitialisation: " << this->DenseInitialisation << "\n";
   os << indent << "SparseAdam: " << this->SparseAdam << "\n";
   os << indent << "Iterations: " << this->Iterations << "\n";

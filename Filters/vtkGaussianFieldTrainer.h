@@ -116,13 +116,19 @@ public:
   vtkGetMacro(ReflectivitySolve, bool);
   vtkBooleanMacro(ReflectivitySolve, bool);
   ///@}
+  ///@{ CGLS iterations of each reflectivity solve (default 12; each one a forward and a backward pass over
+  /// every training frame). See bigus::ReflectivitySolveSettings::MaximumIterations.
+  vtkSetClampMacro(SolveIterations, int, 1, 100000);
+  vtkGetMacro(SolveIterations, int);
+  ///@}
   ///@{ A dense start: Gaussians on the training frames' pixel grid instead of Harris seeds (default
   /// off; bigus::TrainerSettings::DenseInitialisation).
   vtkSetMacro(DenseInitialisation, bool);
   vtkGetMacro(DenseInitialisation, bool);
   vtkBooleanMacro(DenseInitialisation, bool);
   ///@}
-  ///@{ Adam over the Gaussians a step touched only (default off; bigus::TrainerSettings::SparseAdam).
+  ///@{ Adam over the Gaussians a step touched only (default on; off moves every Gaussian every step on its
+  /// momentum, the ablation; bigus::TrainerSettings::SparseAdam).
   vtkSetMacro(SparseAdam, bool);
   vtkGetMacro(SparseAdam, bool);
   vtkBooleanMacro(SparseAdam, bool);
@@ -262,8 +268,9 @@ protected:
   bool HarrisInitialisation = true;
   bool Densify = true;
   bool ReflectivitySolve = false;
+  int SolveIterations = 12; // bigus::ReflectivitySolveSettings::MaximumIterations
   bool DenseInitialisation = false;
-  bool SparseAdam = false;
+  bool SparseAdam = true;
   int Iterations = 3000;
   double TimeBudget = 0;
   double ConvergenceTolerance = 0;
