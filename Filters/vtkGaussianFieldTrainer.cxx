@@ -33,6 +33,33 @@ vtkGaussianFieldTrainer::vtkGaussianFieldTrainer()
 {
   this->SetNumberOfInputPorts(2);
   this->SetBackend("auto");
+  // One place for the defaults: the trainer's own (RequestData hands these back to it).
+  const bigus::TrainerSettings d;
+  this->ElevationSigma = d.ElevationSigma;
+  this->BeamIntegration = d.BeamIntegration;
+  this->NonNegativeReflectivity = d.NonNegativeReflectivity;
+  this->HarrisInitialisation = d.HarrisInitialisation;
+  this->Densify = d.Densify;
+  this->ReflectivitySolve = d.ReflectivitySolve;
+  this->SolveIterations = d.Solve.MaximumIterations;
+  this->DenseInitialisation = d.DenseInitialisation;
+  this->SparseAdam = d.SparseAdam;
+  this->Iterations = d.Iterations;
+  this->TimeBudget = d.TimeBudget;
+  this->ConvergenceTolerance = d.ConvergenceTolerance;
+  this->InitialGaussians = d.InitialGaussians;
+  this->MaximumGaussians = d.MaximumGaussians;
+  this->LossWeights[0] = d.Loss.L1;
+  this->LossWeights[1] = d.Loss.DSSIM;
+  this->LossWeights[2] = d.Loss.FFL;
+  this->DensifyStart = d.DensifyStart;
+  this->DensifyEnd = d.DensifyEnd;
+  this->DensifyInterval = d.DensifyInterval;
+  this->DensifyPercentile = d.DensifyPercentile;
+  this->GrowthMargin = d.GrowthMargin;
+  this->GrowthPatience = d.GrowthPatience;
+  this->FillGaps = d.FillGaps;
+  this->Seed = d.Seed;
 }
 
 vtkGaussianFieldTrainer::~vtkGaussianFieldTrainer()
