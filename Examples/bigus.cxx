@@ -1273,7 +1273,8 @@ int main(int argc, char** argv)
     ->check(CLI::NonNegativeNumber);
   fillGapsCommand
     ->add_option("--max-gaussians", fillGaps.Settings.MaximumGaussians,
-      "The most Gaussians the filled field may hold (0: no limit); a gap whose copies would exceed it is left empty")
+      "The most Gaussians the filled field may hold (0: no limit); where a gap's copies would exceed it, only the "
+      "strongest Gaussians of its two frames whose copies fit are copied")
     ->capture_default_str()
     ->check(CLI::NonNegativeNumber);
 

@@ -150,7 +150,7 @@ public:
   vtkGetMacro(ConvergenceTolerance, double);
   ///@}
   ///@{ Field size: seeds (0 = automatic, see above) and hard maximum (gap filling's copies included: a gap
-  /// that would exceed it is left empty and field data `GapFilling` says so).
+  /// whose copies would exceed it is bridged by the strongest Gaussians only and field data `GapFilling` says so).
   vtkSetClampMacro(InitialGaussians, vtkIdType, 0, VTK_ID_MAX);
   vtkGetMacro(InitialGaussians, vtkIdType);
   vtkSetClampMacro(MaximumGaussians, vtkIdType, 1, VTK_ID_MAX);

@@ -110,98 +110,155 @@ GapFillingReport FillElevationGaps(
     const Plane &a = planes[k], &b = planes[k + 1];
     const Eigen::Quaterniond qa(a.R), qb(b.R);
     const Eigen::Vector3d middleNormal = qa.slerp(0.5, qb).toRotationMatrix().col(2);
-    const std::int64_t before = field.Count();
-    const std::vector<double> addedBefore = settings.MaximumGaussians > 0 ? added : std::vector<double>();
+    // The copies of Gaussian i across the gap from side 0 (frame a) or 1 (frame b): returns how many
+    // there are, appends them to the field when @p emit, and sets @p strength to |r_i| exp(-z_i^2 / 2v),
+    // what the Gaussian renders at its peak on that frame.
+    auto bridge = [&](std::int64_t i, int side, bool emit, double& strength) -> int {
+      const Plane& from = side == 0 ? a : b;
+      const Eigen::Vector3d mu(field.Means[3 * i], field.Means[3 * i + 1], field.Means[3 * i + 2]);
+      Eigen::Vector3d local = from.R.transpose() * (mu - from.Centre);
+      const Eigen::Quaterniond q0 = Eigen::Quaterniond(field.Quaternions[4 * i], field.Quaternions[4 * i + 1],
+        field.Quaternions[4 * i + 2], field.Quaternions[4 * i + 3])
+                                      .normalized();
+      // Its profile across the frame seen through the beam: exp(-(z - z_i)^2 / (2 v)), v = sigma_E^2 +
+      // its variance along the normal (bigusGaussianMath.h: P2[z,z]).
+      const Eigen::Matrix3d R0 = from.R.transpose() * q0.toRotationMatrix();
+      double v = sigma2;
+      for (int c = 0; c < 3; ++c)
+      {
+        const double l = field.LogScales[3 * i + c];
+        const double sc = std::exp(std::isfinite(l) ? std::clamp(l, MinimumLogScale, MaximumLogScale) : 0.0);
+        v += R0(2, c) * R0(2, c) * sc * sc;
+      }
+      const double width = std::sqrt(v), zi = local[2];
+      if (!std::isfinite(width) || !std::isfinite(zi) || std::abs(zi) > settings.ReachSigmas * width)
+      {
+        return 0; // out of the frame's reach (or a non-finite mean or rotation)
+      }
+      // Taken onto the frame's plane with what it renders there: the copies carry the frame as the
+      // field renders it, from every Gaussian that contributes to it.
+      local[2] = 0;
+      if (!InsideImage(from, from.R.transpose() * (from.Centre - from.Origin) + local, data.Width, data.Height))
+      {
+        return 0;
+      }
+      const double atPlane = std::exp(-zi * zi / (2 * v));
+      strength = std::abs(double(field.Reflectivities[i])) * atPlane;
+      // The gap's length where this Gaussian crosses it (the frames need not be parallel): from its
+      // place relative to the first frame to its place relative to the second, along the normal.
+      const double gap = std::abs(middleNormal.dot(b.Centre + b.R * local - a.Centre - a.R * local));
+      const double h = LatticeSpacing * width;
+      if (!std::isfinite(gap) || gap > 2 * settings.MaximumGapMm)
+      {
+        return 0;
+      }
+      // Copies every h = 1.5 sqrt(v) with weight h / sqrt(2 pi v) sum to the profile's peak wherever the
+      // lattice reaches (a partition of unity by Gaussian bumps).
+      const int count = static_cast<int>(std::floor(gap / h));
+      const double scale = h / std::sqrt(2 * M_PI * v);
+      const double margin = std::min(settings.BlendMarginSigmas * width, 0.25 * gap);
+      int copies = 0;
+      for (int j = 1; j <= count; ++j)
+      {
+        const double z = j * h; // from its own frame, towards the other
+        const double t = side == 0 ? z / gap : 1 - z / gap;
+        // The share of its own frame: 1 within the margin of it, 0 within the margin of the other.
+        const double own = 1 - std::clamp((z - margin) / (gap - 2 * margin), 0.0, 1.0);
+        if (own <= 0 || z < settings.ClearanceSigmas * width || gap - z < settings.ClearanceSigmas * width)
+        {
+          continue;
+        }
+        ++copies;
+        if (!emit)
+        {
+          continue;
+        }
+        const Eigen::Quaterniond qt = qa.slerp(t, qb);
+        const Eigen::Vector3d copy = (1 - t) * a.Centre + t * b.Centre + qt.toRotationMatrix() * local;
+        const Eigen::Quaterniond q = qt * (side == 0 ? qa : qb).conjugate() * q0;
+        const std::int64_t c = field.Count();
+        field.Resize(c + 1);
+        field.CopyGaussian(i, c);
+        for (int e = 0; e < 3; ++e)
+        {
+          field.Means[3 * c + e] = static_cast<float>(copy[e]);
+        }
+        field.Quaternions[4 * c] = static_cast<float>(q.w());
+        field.Quaternions[4 * c + 1] = static_cast<float>(q.x());
+        field.Quaternions[4 * c + 2] = static_cast<float>(q.y());
+        field.Quaternions[4 * c + 3] = static_cast<float>(q.z());
+        const double weight = own * scale;
+        field.Reflectivities[c] = static_cast<float>(weight * atPlane * field.Reflectivities[i]);
+        // At the plane the Gaussian renders r exp(-z_i^2 / 2v) and this copy r weight exp(-z_i^2 / 2v)
+        // exp(-z^2 / 2v): relative to the Gaussian, weight exp(-z^2 / 2v), whatever z_i.
+        added[i] += weight * std::exp(-z * z / (2 * v));
+      }
+      return copies;
+    };
+    // Which Gaussians are copied: all of them, or, when their copies would take the field past
+    // MaximumGaussians, the strongest on either frame (by what they render there) whose copies fit.
+    struct Candidate
+    {
+      std::int64_t Gaussian;
+      int Side, Copies;
+      double Strength;
+    };
+    std::vector<Candidate> candidates;
+    std::int64_t total = 0;
     for (int side = 0; side < 2; ++side)
     {
-      const Plane& from = side == 0 ? a : b;
       for (std::int64_t i = 0; i < n; ++i)
       {
-        const Eigen::Vector3d mu(field.Means[3 * i], field.Means[3 * i + 1], field.Means[3 * i + 2]);
-        Eigen::Vector3d local = from.R.transpose() * (mu - from.Centre);
-        const Eigen::Quaterniond q0 = Eigen::Quaterniond(field.Quaternions[4 * i], field.Quaternions[4 * i + 1],
-          field.Quaternions[4 * i + 2], field.Quaternions[4 * i + 3])
-                                        .normalized();
-        // Its profile across the frame seen through the beam: exp(-(z - z_i)^2 / (2 v)), v = sigma_E^2 +
-        // its variance along the normal (bigusGaussianMath.h: P2[z,z]).
-        const Eigen::Matrix3d R0 = from.R.transpose() * q0.toRotationMatrix();
-        double v = sigma2;
-        for (int c = 0; c < 3; ++c)
+        double strength = 0;
+        const int copies = bridge(i, side, false, strength);
+        if (copies > 0)
         {
-          const double l = field.LogScales[3 * i + c];
-          const double sc = std::exp(std::isfinite(l) ? std::clamp(l, MinimumLogScale, MaximumLogScale) : 0.0);
-          v += R0(2, c) * R0(2, c) * sc * sc;
-        }
-        const double width = std::sqrt(v), zi = local[2];
-        if (!std::isfinite(width) || !std::isfinite(zi) || std::abs(zi) > settings.ReachSigmas * width)
-        {
-          continue; // out of the frame's reach (or a non-finite mean or rotation)
-        }
-        // Taken onto the frame's plane with what it renders there: the copies carry the frame as the
-        // field renders it, from every Gaussian that contributes to it.
-        local[2] = 0;
-        if (!InsideImage(from, from.R.transpose() * (from.Centre - from.Origin) + local, data.Width, data.Height))
-        {
-          continue;
-        }
-        const double atPlane = std::exp(-zi * zi / (2 * v));
-        // The gap's length where this Gaussian crosses it (the frames need not be parallel): from its
-        // place relative to the first frame to its place relative to the second, along the normal.
-        const double gap = std::abs(middleNormal.dot(b.Centre + b.R * local - a.Centre - a.R * local));
-        const double h = LatticeSpacing * width;
-        if (!std::isfinite(gap) || gap > 2 * settings.MaximumGapMm)
-        {
-          continue;
-        }
-        // Copies every h = 1.5 sqrt(v) with weight h / sqrt(2 pi v) sum to the profile's peak wherever the
-        // lattice reaches (a partition of unity by Gaussian bumps).
-        const int count = static_cast<int>(std::floor(gap / h));
-        const double scale = h / std::sqrt(2 * M_PI * v);
-        const double margin = std::min(settings.BlendMarginSigmas * width, 0.25 * gap);
-        for (int j = 1; j <= count; ++j)
-        {
-          const double z = j * h; // from its own frame, towards the other
-          const double t = side == 0 ? z / gap : 1 - z / gap;
-          // The share of its own frame: 1 within the margin of it, 0 within the margin of the other.
-          const double own = 1 - std::clamp((z - margin) / (gap - 2 * margin), 0.0, 1.0);
-          if (own <= 0 || z < settings.ClearanceSigmas * width || gap - z < settings.ClearanceSigmas * width)
-          {
-            continue;
-          }
-          const Eigen::Quaterniond qt = qa.slerp(t, qb);
-          const Eigen::Vector3d copy = (1 - t) * a.Centre + t * b.Centre + qt.toRotationMatrix() * local;
-          const Eigen::Quaterniond q = qt * (side == 0 ? qa : qb).conjugate() * q0;
-          const std::int64_t c = field.Count();
-          field.Resize(c + 1);
-          field.CopyGaussian(i, c);
-          for (int e = 0; e < 3; ++e)
-          {
-            field.Means[3 * c + e] = static_cast<float>(copy[e]);
-          }
-          field.Quaternions[4 * c] = static_cast<float>(q.w());
-          field.Quaternions[4 * c + 1] = static_cast<float>(q.x());
-          field.Quaternions[4 * c + 2] = static_cast<float>(q.y());
-          field.Quaternions[4 * c + 3] = static_cast<float>(q.z());
-          const double weight = own * scale;
-          field.Reflectivities[c] = static_cast<float>(weight * atPlane * field.Reflectivities[i]);
-          // At the plane the Gaussian renders r exp(-z_i^2 / 2v) and this copy r weight exp(-z_i^2 / 2v)
-          // exp(-z^2 / 2v): relative to the Gaussian, weight exp(-z^2 / 2v), whatever z_i.
-          added[i] += weight * std::exp(-z * z / (2 * v));
+          candidates.push_back({ i, side, copies, strength });
+          total += copies;
         }
       }
     }
-    if (settings.MaximumGaussians > 0 && field.Count() > settings.MaximumGaussians)
+    if (candidates.empty())
     {
-      field.Resize(before); // this gap's copies would not fit: leave it empty
-      added = addedBefore;
-      report.Skipped += 1;
+      continue;
     }
-    else if (field.Count() > before)
+    const std::int64_t room = settings.MaximumGaussians > 0 ? settings.MaximumGaussians - field.Count() : total;
+    if (total > room)
     {
-      report.Gaps += 1;
-      report.WidestGap = std::max(report.WidestGap, spacing[k]);
-      report.Added += field.Count() - before;
+      std::stable_sort(candidates.begin(), candidates.end(),
+        [](const Candidate& x, const Candidate& y) { return x.Strength > y.Strength; });
+      std::int64_t kept = 0;
+      std::vector<Candidate> fitting;
+      for (const Candidate& c : candidates)
+      {
+        if (kept + c.Copies <= room)
+        {
+          kept += c.Copies;
+          fitting.push_back(c);
+        }
+      }
+      report.LeftOut += static_cast<std::int64_t>(candidates.size() - fitting.size());
+      candidates.swap(fitting);
+      // In the order of the unthinned field, so that a fill with room for everything is the same field.
+      std::sort(candidates.begin(), candidates.end(), [](const Candidate& x, const Candidate& y) {
+        return x.Side != y.Side ? x.Side < y.Side : x.Gaussian < y.Gaussian;
+      });
+      if (candidates.empty())
+      {
+        report.Skipped += 1;
+        continue;
+      }
+      report.Thinned += 1;
     }
+    const std::int64_t before = field.Count();
+    for (const Candidate& c : candidates)
+    {
+      double strength = 0;
+      bridge(c.Gaussian, c.Side, true, strength);
+    }
+    report.Gaps += 1;
+    report.WidestGap = std::max(report.WidestGap, spacing[k]);
+    report.Added += field.Count() - before;
   }
   for (std::int64_t i = 0; i < n; ++i)
   {
@@ -219,9 +276,17 @@ std::string DescribeGapFilling(const GapFillingReport& report, const GapFillingS
     report.Gaps, report.WidestGap, report.TypicalSpacing, static_cast<long long>(report.Added),
     settings.MinimumGapSpacings, settings.ClearanceSigmas, settings.BlendMarginSigmas);
   std::string line = text;
+  if (report.Thinned > 0)
+  {
+    std::snprintf(text, sizeof(text),
+      "; %d gaps thinned: the copies of the %lld weakest Gaussians left out to stay within the maximum of %lld "
+      "Gaussians",
+      report.Thinned, static_cast<long long>(report.LeftOut), static_cast<long long>(settings.MaximumGaussians));
+    line += text;
+  }
   if (report.Skipped > 0)
   {
-    std::snprintf(text, sizeof(text), "; %d gaps left empty: their copies would exceed the maximum of %lld Gaussians",
+    std::snprintf(text, sizeof(text), "; %d gaps left empty: the field already holds the maximum of %lld Gaussians",
       report.Skipped, static_cast<long long>(settings.MaximumGaussians));
     line += text;
   }

@@ -68,8 +68,10 @@ struct GapFillingSettings
   /// The Gaussians copied from a bracketing frame: those within this many of their beam widths sqrt(v)
   /// of its plane (their profile there is above exp(-ReachSigmas^2 / 2): 1 % at 3).
   double ReachSigmas = 3.0;
-  /// The most Gaussians the filled field may hold (0: no limit): a gap whose copies would take the field
-  /// past it is left empty (GapFillingReport::Skipped), the gaps before and after it are still bridged.
+  /// The most Gaussians the filled field may hold (0: no limit). When a gap's copies would take the field
+  /// past it, only the strongest Gaussians of its two frames (by |r| exp(-z_i^2 / 2v), what each renders
+  /// at its peak there) whose copies fit are copied (GapFillingReport::Thinned, LeftOut); a gap is left
+  /// empty (Skipped) only when the field already holds the maximum. Gaps are taken in sweep order.
   std::int64_t MaximumGaussians = 0;
 };
 
@@ -79,7 +81,9 @@ struct GapFillingReport
   int Gaps = 0;              ///< gaps bridged
   double WidestGap = 0;      ///< mm, the widest of them (0 when none)
   std::int64_t Added = 0;    ///< Gaussians added
-  int Skipped = 0;           ///< gaps left empty: their copies would exceed MaximumGaussians
+  int Thinned = 0;          ///< gaps bridged by only the strongest Gaussians: all copies exceed MaximumGaussians
+  std::int64_t LeftOut = 0; ///< Gaussians of the thinned gaps' frames whose copies were left out
+  int Skipped = 0;          ///< gaps left empty: no room at all under MaximumGaussians
 };
 
 /**
@@ -93,7 +97,7 @@ BIGUSTRAINING_EXPORT GapFillingReport FillElevationGaps(GaussianField& field, co
   double elevationSigma, const GapFillingSettings& settings = GapFillingSettings());
 
 /// One line: "2 gaps bridged (widest 4.51 mm; typical spacing 0.645 mm), 31210 Gaussians added (...)", and
-/// the gaps left empty by the maximum of Gaussians, if any.
+/// the gaps thinned or left empty by the maximum of Gaussians, if any.
 BIGUSTRAINING_EXPORT std::string DescribeGapFilling(const GapFillingReport& report, const GapFillingSettings& settings);
 
 } // namespace bigus

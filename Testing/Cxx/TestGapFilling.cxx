@@ -259,26 +259,55 @@ TEST(GapFilling, ASweepWithoutGapsOrTooFewFramesIsLeftAlone)
   EXPECT_EQ(s.Field.Count(), n);
 }
 
-TEST(GapFilling, AGapWhoseCopiesWouldExceedTheMaximumOfGaussiansIsLeftEmpty)
+TEST(GapFilling, UnderTheMaximumOfGaussiansAGapIsBridgedByItsStrongestGaussians)
 {
-  // The maximum a user trains with holds for the filled field too: one Gaussian short of what the gap
-  // needs, the field is left exactly as it was (the bracketing frames' Gaussians keep their
-  // reflectivity); with room for every copy it is filled as without a maximum.
+  // The maximum a user trains with holds for the filled field too. With room for half the copies the
+  // gap is bridged by the strongest Gaussians of its two frames: rendered in the middle of the gap it
+  // stays near the unlimited fill (|r| is uniform, so the stronger half of the Gaussians carries 7/8 of
+  // the sum of r^2: a relative error near sqrt(1/8) = 0.35, where an unordered half would leave about
+  // sqrt(1/2) = 0.71). With no room at all the gap is left empty and the field is as it was; with room for
+  // every copy it is filled as without a maximum.
   const Sweep s = MakeSweep(0);
   const std::int64_t n = s.Field.Count();
   GaussianField unlimited = s.Field;
   const std::int64_t needed = FillElevationGaps(unlimited, s.Data, Sigma).Added;
   ASSERT_GT(needed, 0);
+  std::array<double, 16> middle = s.Data.Poses[4];
+  middle[11] = 0.5 * (s.Data.Poses[4][11] + s.Data.Poses[5][11]);
+  const std::vector<float> full = RenderS(unlimited, middle);
+
   GapFillingSettings settings;
-  settings.MaximumGaussians = n + needed - 1;
-  GaussianField limited = s.Field;
-  const GapFillingReport report = FillElevationGaps(limited, s.Data, Sigma, settings);
-  EXPECT_EQ(report.Added, 0);
-  EXPECT_EQ(report.Gaps, 0);
-  EXPECT_EQ(report.Skipped, 1);
-  ExpectSameField(limited, s.Field);
-  EXPECT_NE(DescribeGapFilling(report, settings).find("1 gaps left empty"), std::string::npos)
+  settings.MaximumGaussians = n + needed / 2;
+  GaussianField half = s.Field;
+  const GapFillingReport report = FillElevationGaps(half, s.Data, Sigma, settings);
+  EXPECT_EQ(report.Gaps, 1);
+  EXPECT_EQ(report.Thinned, 1);
+  EXPECT_EQ(report.Skipped, 0);
+  EXPECT_GT(report.LeftOut, 0);
+  EXPECT_LE(half.Count(), settings.MaximumGaussians);
+  EXPECT_GT(report.Added, needed / 4);
+  const std::vector<float> thinned = RenderS(half, middle);
+  double error = 0, norm = 0;
+  for (std::size_t p = 0; p < full.size(); ++p)
+  {
+    error += (thinned[p] - full[p]) * (thinned[p] - full[p]);
+    norm += full[p] * full[p];
+  }
+  ASSERT_GT(norm, 0);
+  std::printf("half the copies, strongest first: relative error in the middle of the gap %.3f\n", std::sqrt(error / norm));
+  EXPECT_LT(std::sqrt(error / norm), 0.5) << "the strongest half of the copies carries most of the gap";
+  EXPECT_NE(DescribeGapFilling(report, settings).find("1 gaps thinned"), std::string::npos)
     << DescribeGapFilling(report, settings);
+
+  settings.MaximumGaussians = n;
+  GaussianField none = s.Field;
+  const GapFillingReport empty = FillElevationGaps(none, s.Data, Sigma, settings);
+  EXPECT_EQ(empty.Added, 0);
+  EXPECT_EQ(empty.Skipped, 1);
+  ExpectSameField(none, s.Field);
+  EXPECT_NE(DescribeGapFilling(empty, settings).find("1 gaps left empty"), std::string::npos)
+    << DescribeGapFilling(empty, settings);
+
   settings.MaximumGaussians = n + needed;
   GaussianField room = s.Field;
   EXPECT_EQ(FillElevationGaps(room, s.Data, Sigma, settings).Added, needed);
