@@ -24,7 +24,7 @@
  * the fan mask (or uniform random, for the ablation), gamma = -ln(1 - mean masked intensity), Adam on
  * means, log-scales, quaternions and reflectivities, loss = L1 + D-SSIM + focal frequency loss on the
  * masked pixels, error-attributed densification (the top DensifyPercentile of the attribution score
- * sum_p |dL/dS(p)| w_i(p) is split or cloned (bigus::DensifyGaussian); negligible and never-seen
+ * sum_p |dL/dS(p)| |r_i| w_i(p) is split or cloned (bigus::DensifyGaussian); negligible and never-seen
  * Gaussians pruned), growth that stops when a validation subset of the training frames stops
  * improving, and a final prune of every Gaussian whose removal changes no training pixel by more than
  * 1/512.

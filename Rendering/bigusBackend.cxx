@@ -1,5 +1,6 @@
 // The backend registry (see bigusBackend.h).
 #include "bigusBackend.h"
+#include "bigusBackendCheck.h"
 
 #include <algorithm>
 #include <map>
@@ -34,6 +35,16 @@ std::vector<Entry>& Registry(std::unique_lock<std::mutex>& lock)
   static std::vector<Entry> entries{ { "cpu", &MakeCpuRenderer, 0 } };
   lock = std::unique_lock<std::mutex>(mutex);
   return entries;
+}
+
+/// The self-checks run so far, by backend (CheckBackend), under their own lock: a check runs a
+/// backend's factory, which may register.
+std::map<std::string, BackendCheck>& Checks(std::unique_lock<std::mutex>& lock)
+{
+  static std::mutex mutex;
+  static std::map<std::string, BackendCheck> checks;
+  lock = std::unique_lock<std::mutex>(mutex);
+  return checks;
 }
 
 /// Backends built but not usable here, and why (guarded by the registry's lock).
@@ -101,6 +112,9 @@ void RegisterBackend(const std::string& name, RendererFactory factory, int prior
   entries.push_back({ name, factory, priority });
   std::stable_sort(
     entries.begin(), entries.end(), [](const Entry& a, const Entry& b) { return a.Priority > b.Priority; });
+  lock.unlock();
+  std::unique_lock<std::mutex> checksLock;
+  Checks(checksLock).erase(name); // a replaced backend proves itself again
 }
 
 void RegisterUnavailableBackend(const std::string& name, const std::string& why)
@@ -122,12 +136,27 @@ std::vector<std::string> AvailableBackends()
   return names;
 }
 
+std::vector<std::pair<std::string, std::string>> UnavailableBackends()
+{
+  LoadBackendModules();
+  std::unique_lock<std::mutex> lock;
+  Registry(lock);
+  return { Unavailable().begin(), Unavailable().end() };
+}
+
 std::string ResolveBackend(const std::string& name, std::string* error)
 {
   const std::vector<std::string> names = AvailableBackends();
   if (name.empty() || name == "auto")
   {
-    return names.front();
+    // The first backend in priority order that passes its self-check ("cpu" always does).
+    for (const std::string& n : names)
+    {
+      if (n == "cpu" || CheckBackend(n).Passed)
+      {
+        return n;
+      }
+    }
   }
   if (std::find(names.begin(), names.end(), name) != names.end())
   {
@@ -172,26 +201,88 @@ std::unique_ptr<Renderer> CreateRenderer(const std::string& name, std::string* e
       }
     }
   }
+  const bool automatic = name.empty() || name == "auto";
   std::string skipped;
   for (const Entry& e : candidates)
   {
     std::string why;
     std::unique_ptr<Renderer> renderer = e.Factory(&why);
-    if (renderer)
+    if (!renderer)
     {
-      if (notice && !skipped.empty())
-      {
-        *notice = skipped + "; using " + e.Name;
-      }
-      return renderer;
+      skipped += (skipped.empty() ? "" : "; ") + ("backend '" + e.Name + "' cannot be used: " + why);
+      continue;
     }
-    skipped += (skipped.empty() ? "" : "; ") + ("backend '" + e.Name + "' cannot be used: " + why);
+    // A backend other than the reference proves itself first: "auto" passes over one that fails, an
+    // explicit name runs it with the warning.
+    std::string warning;
+    if (e.Name != "cpu")
+    {
+      const BackendCheck check = CheckBackend(e.Name);
+      if (!check.Passed)
+      {
+        warning = "backend '" + e.Name + "' failed its self-check against the CPU renderer: " + check.Detail;
+        if (automatic)
+        {
+          skipped += (skipped.empty() ? "" : "; ") + warning;
+          continue;
+        }
+      }
+    }
+    if (notice && !(skipped.empty() && warning.empty()))
+    {
+      *notice = automatic ? skipped + "; using " + e.Name : warning;
+    }
+    return renderer;
   }
   if (error)
   {
     *error = skipped;
   }
   return nullptr;
+}
+
+BackendCheck CheckBackend(const std::string& name)
+{
+  LoadBackendModules(); // they register (taking the checks' lock) before that lock is held here
+  std::unique_lock<std::mutex> lock;
+  std::map<std::string, BackendCheck>& checks = Checks(lock);
+  const auto found = checks.find(name);
+  if (found != checks.end())
+  {
+    return found->second;
+  }
+  BackendCheck check;
+  check.Backend = name;
+  if (name == "cpu")
+  {
+    check.Passed = true;
+    check.Detail = "the reference renderer";
+  }
+  else
+  {
+    RendererFactory factory = nullptr;
+    std::string error;
+    if (!ResolveBackend(name, &error).empty())
+    {
+      std::unique_lock<std::mutex> registryLock;
+      for (const Entry& e : Registry(registryLock))
+      {
+        factory = e.Name == name ? e.Factory : factory;
+      }
+    }
+    std::unique_ptr<Renderer> renderer = factory ? factory(&error) : nullptr;
+    if (renderer)
+    {
+      check = CheckRenderer(*renderer);
+      check.Backend = name;
+    }
+    else
+    {
+      check.Detail = error;
+    }
+  }
+  checks[name] = check;
+  return check;
 }
 
 } // namespace bigus

@@ -18,6 +18,7 @@
 
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace bigus
@@ -40,6 +41,9 @@ BIGUSRENDERING_EXPORT void RegisterUnavailableBackend(const std::string& name, c
 
 /// The registered backend names, highest priority first ("cpu" is always among them).
 BIGUSRENDERING_EXPORT std::vector<std::string> AvailableBackends();
+
+/// The backends built but unable to run here, each with why (RegisterUnavailableBackend), by name.
+BIGUSRENDERING_EXPORT std::vector<std::pair<std::string, std::string>> UnavailableBackends();
 
 /**
  * The backend that @p name selects: @p name itself when it is registered, the highest-priority one

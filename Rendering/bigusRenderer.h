@@ -4,7 +4,7 @@
  *
  * A renderer turns a Gaussian field and a batch of slice poses into the signed scattering field S and
  * the image I = 1 - exp(-gamma max(S, 0)), and turns dL/dI (or dL/dS) back into gradients of the
- * field's parameters plus the error-attribution score E_i = sum_p |dL/dS(p)| w_i(p) that
+ * field's parameters plus the error-attribution score E_i = sum_p |dL/dS(p)| |r_i| w_i(p) that
  * densification uses. Buffers are host memory, structure of arrays, float; shapes in comments.
  *
  * Pixel (i, j) of a slice lies at ImageToReference * (i, j, 0, 1) (mm), i.e. columns along the first
@@ -40,7 +40,7 @@ struct FieldGradients
   float* LogScales = nullptr;      ///< [N, 3] dL/dlog-scale
   float* Quaternions = nullptr;    ///< [N, 4] dL/dq (through the normalisation)
   float* Reflectivities = nullptr; ///< [N] dL/dr
-  float* Attribution = nullptr;    ///< [N] E_i = sum_p |dL/dS(p)| w_i(p)
+  float* Attribution = nullptr;    ///< [N] E_i = sum_p |dL/dS(p)| |r_i| w_i(p)
   int* VisibleCount = nullptr;     ///< [N] number of slices whose pixels the Gaussian's footprint touched
 };
 

@@ -67,7 +67,7 @@ struct BIGUSTRAINING_EXPORT OptimizerState
 {
   GaussianField Field;
   GaussianField FirstMoment, SecondMoment; ///< Adam m and v, laid out as the field
-  std::vector<float> Attribution;          ///< [N] E_i = sum_p |dL/dS(p)| w_i(p) (DESIGN section 4)
+  std::vector<float> Attribution;          ///< [N] E_i = sum_p |dL/dS(p)| |r_i| w_i(p) (DESIGN section 4)
   std::vector<int> SeenCount;              ///< [N] training slices whose pixels the Gaussian touched
   std::int64_t Count() const { return this->Field.Count(); }
   /// Moments and accumulators sized to the field; new entries are zero.

@@ -3,6 +3,7 @@
 // a liver field, slice batches, bit-identical repeats, bad poses, a field too large for the device,
 // and the registry choosing it. Exits 125 (skipped) where no usable GPU exists.
 #include "bigusBackend.h"
+#include "bigusBackendCheck.h"
 #include "bigusCudaDevice.h"
 #include "bigusCudaRenderer.h"
 #include "bigusGaussianFieldData.h"
@@ -142,119 +143,15 @@ std::unique_ptr<Renderer> Cuda()
   return r;
 }
 
-/// Unit quaternion (w, x, y, z) of a rotation matrix (Shepperd's method).
-void MatrixToQuaternion(const double R[3][3], float q[4])
-{
-  const double trace = R[0][0] + R[1][1] + R[2][2];
-  double w, x, y, z;
-  if (trace > 0)
-  {
-    const double s = 2 * std::sqrt(1 + trace);
-    w = s / 4;
-    x = (R[2][1] - R[1][2]) / s;
-    y = (R[0][2] - R[2][0]) / s;
-    z = (R[1][0] - R[0][1]) / s;
-  }
-  else if (R[0][0] > R[1][1] && R[0][0] > R[2][2])
-  {
-    const double s = 2 * std::sqrt(1 + R[0][0] - R[1][1] - R[2][2]);
-    w = (R[2][1] - R[1][2]) / s;
-    x = s / 4;
-    y = (R[0][1] + R[1][0]) / s;
-    z = (R[0][2] + R[2][0]) / s;
-  }
-  else if (R[1][1] > R[2][2])
-  {
-    const double s = 2 * std::sqrt(1 + R[1][1] - R[0][0] - R[2][2]);
-    w = (R[0][2] - R[2][0]) / s;
-    x = (R[0][1] + R[1][0]) / s;
-    y = s / 4;
-    z = (R[1][2] + R[2][1]) / s;
-  }
-  else
-  {
-    const double s = 2 * std::sqrt(1 + R[2][2] - R[0][0] - R[1][1]);
-    w = (R[1][0] - R[0][1]) / s;
-    x = (R[0][2] + R[2][0]) / s;
-    y = (R[1][2] + R[2][1]) / s;
-    z = s / 4;
-  }
-  q[0] = float(w);
-  q[1] = float(x);
-  q[2] = float(y);
-  q[3] = float(z);
-}
-
-constexpr int GridColumns = 20, GridRows = 14; // cells of 4 mm on the 80 x 56 mm grid slice
-
-/// The slice of the hard-case grid: 160 x 112 pixels of 0.5 mm, generic orientation.
+/// The slice and field of the hard cases: those of the backend self-check (bigusBackendCheck.h).
 SliceGeometry GridSlice(double shift = 0)
 {
-  const double axis[3] = { 0.3, 0.2, 1.0 };
-  const double origin[3] = { 12.5, -31.25 + shift, 47.0 };
-  return MakeSlice(2 * 4 * GridColumns, 2 * 4 * GridRows, 0.5, 20, axis, origin);
+  return HardCaseSlice(shift);
 }
 
-/**
- * The hard cases of TestGaussianFootprint's grid as one field on GridSlice: needles and pancakes
- * (long axis or disc radius 2 mm) with the scale ratios @p ratios, tilted 0 to 90 degrees out of the
- * plane (azimuth 37 degrees), 0 to 4 elevation standard deviations sqrt(P2[z,z]) off it for beam
- * @p sigmaE, each in a 4 mm cell of its own; reflectivities 0.8 and -0.5 in turn.
- */
-FieldF HardCaseGrid(double sigmaE, const std::vector<double>& ratios)
+HostField HardCaseGrid(double sigmaE, const std::vector<double>& ratios)
 {
-  const SliceGeometry slice = GridSlice();
-  double F[3][3]; // columns u, v, n of the slice
-  for (int r = 0; r < 3; ++r)
-  {
-    F[r][0] = slice.ImageToReference[4 * r] / 0.5;
-    F[r][1] = slice.ImageToReference[4 * r + 1] / 0.5;
-  }
-  F[0][2] = F[1][0] * F[2][1] - F[2][0] * F[1][1];
-  F[1][2] = F[2][0] * F[0][1] - F[0][0] * F[2][1];
-  F[2][2] = F[0][0] * F[1][1] - F[1][0] * F[0][1];
-  FieldF f;
-  int cell = 0;
-  const double azimuth = 37 * M_PI / 180;
-  for (bool needle : { false, true })
-  {
-    for (double ratio : ratios)
-    {
-      for (double tiltDegrees : { 0.0, 1.0, 15.0, 45.0, 75.0, 89.0, 90.0 })
-      {
-        for (double offset : { 0.0, 0.5, 2.0, 4.0 })
-        {
-          const double s[3] = { needle ? 2.0 : 2.0 / ratio, needle ? 2.0 / ratio : 2.0, needle ? 2.0 / ratio : 2.0 };
-          const double t = tiltDegrees * M_PI / 180;
-          // Local rotation Rz(azimuth) Rx(tilt) in the slice frame, then into the reference frame.
-          const double ca = std::cos(azimuth), sa = std::sin(azimuth), ct = std::cos(t), st = std::sin(t);
-          const double L[3][3] = { { ca, -sa * ct, sa * st }, { sa, ca * ct, -ca * st }, { 0, st, ct } };
-          double R[3][3];
-          for (int i = 0; i < 3; ++i)
-          {
-            for (int j = 0; j < 3; ++j)
-            {
-              R[i][j] = F[i][0] * L[0][j] + F[i][1] * L[1][j] + F[i][2] * L[2][j];
-            }
-          }
-          float q[4];
-          MatrixToQuaternion(R, q);
-          const double elevation =
-            offset * std::sqrt(std::pow(st * s[1], 2) + std::pow(ct * s[2], 2) + sigmaE * sigmaE);
-          const double x = 2 + 4 * (cell % GridColumns), y = 2 + 4 * (cell / GridColumns);
-          for (int k = 0; k < 3; ++k)
-          {
-            f.Means.push_back(float(slice.ImageToReference[4 * k + 3] + x * F[k][0] + y * F[k][1] + elevation * F[k][2]));
-            f.LogScales.push_back(float(std::log(s[k])));
-          }
-          f.Quaternions.insert(f.Quaternions.end(), q, q + 4);
-          f.Reflectivities.push_back(cell % 2 ? -0.5f : 0.8f);
-          ++cell;
-        }
-      }
-    }
-  }
-  return f;
+  return HardCaseField(sigmaE, ratios);
 }
 
 /// The bundled liver sweep as training data, frames with k mod 4 == 2 held out.
@@ -304,7 +201,7 @@ TEST(CudaRenderer, MatchesTheCpuOnTheHardCaseGrid)
     {
       for (bool beam : { true, false })
       {
-        const FieldF field = HardCaseGrid(sigmaE, family.Ratios);
+        const HostField field = HardCaseGrid(sigmaE, family.Ratios);
         RenderOptions o;
         o.ElevationSigma = sigmaE;
         o.BeamIntegration = beam;
@@ -372,7 +269,7 @@ TEST(CudaRenderer, RepeatedRunsAreBitIdentical)
 
 TEST(CudaRenderer, BadPosesAreRejectedWithAReason)
 {
-  const FieldF field = HardCaseGrid(0.5, { 1.0, 10.0 });
+  const HostField field = HardCaseGrid(0.5, { 1.0, 10.0 });
   std::vector<SliceGeometry> slices = { GridSlice(), GridSlice() };
   for (int k = 0; k < 3; ++k)
   {
@@ -402,7 +299,7 @@ TEST(CudaRenderer, AFieldTooLargeForTheDeviceIsRefusedBeforeAllocating)
   {
     GTEST_SKIP() << "the device holds the largest field the backend indexes (2^31 - 1 Gaussians)";
   }
-  const FieldF small = HardCaseGrid(0.5, { 1.0, 10.0 });
+  const HostField small = HardCaseGrid(0.5, { 1.0, 10.0 });
   FieldView huge = small.View();
   huge.Count = n;
   const std::vector<SliceGeometry> slices = { GridSlice() };

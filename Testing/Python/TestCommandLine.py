@@ -195,6 +195,14 @@ def main():
     assert code == 1 and err.count("\n") == 1 and "frame 3" in err, (code, err)
     code, out_text, _ = run("info", sweep, "--calibration", xml)
     assert code == 0 and "frames         20 (20 valid)" in out_text, out_text
+    # The backends and their self-checks: the CPU renderer is the reference; "auto" names one that passed
+    # (where a built CUDA backend cannot run, it is listed with why).
+    code, out_text, err = run("info", "--backends")
+    assert code == 0 and "backend cpu    passed its self-check" in out_text, (out_text, err)
+    chosen = out_text.split("auto   -> ")[1].split()[0]
+    assert "backend %-6s passed" % chosen in out_text, out_text
+    code, _, err = run("info")
+    assert code == 2 and "give a SWEEP, or --backends" in err, err
 
     code, out_text, err = run("train", sweep, "--calibration", xml, "-o", field, "--holdout-every", "4",
                               "--holdout-offset", "2", "--iterations", "40", "--elevation-sigma", "1.0",

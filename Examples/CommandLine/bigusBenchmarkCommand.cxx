@@ -1,0 +1,37 @@
+// `bigus benchmark`: speed against error on the bundled sweeps (bigusBenchmark.h).
+#include "bigusBenchmark.h"
+#include "bigusCommandLine.h"
+
+#include <CLI/CLI.hpp>
+#include <memory>
+
+namespace bigus::cli
+{
+Command AddBenchmarkCommand(CLI::App& app, const std::string& sourceDirectory)
+{
+  auto options = std::make_shared<bigus::BenchmarkOptions>();
+  bigus::BenchmarkOptions& benchmark = *options;
+  benchmark.SourceDirectory = sourceDirectory;
+  CLI::App* benchmarkCommand = app.add_subcommand("benchmark",
+    "Speed against error on the bundled sweeps: baselines, volume protocol, capacity, render cutoffs, ablations, "
+    "defaults against hand-tuned, block hold-outs; "
+    "writes OUTPUT/BENCHMARKS.md and OUTPUT/benchmarks/ (about 3 hours on 2 cores)");
+  benchmarkCommand->add_option("--output", benchmark.Output, "Folder for BENCHMARKS.md (default: docs)");
+  benchmarkCommand->add_option("--data", benchmark.SourceDirectory, "Project folder holding Examples/Data and Testing/Data")
+    ->check(CLI::ExistingDirectory);
+  benchmarkCommand->add_flag("--quick", benchmark.Quick, "A few minutes: short training, small crops (smoke test)");
+  benchmarkCommand
+    ->add_option("--section", benchmark.Section,
+      "all, or one section alone, written to BENCHMARKS_<section>.md: defaults (defaults against hand-tuned), "
+      "volume (the volume protocol), blocks (block hold-outs on the liver) or ablations (every switch at equal "
+      "iterations and equal time, 3 seeds; about 2 hours) or pareto (held-out PSNR against Gaussians and time: "
+      "Adam alone, variable projection and the regular grid; about 30 minutes)")
+    ->capture_default_str()
+    ->check(CLI::IsMember({ "all", "defaults", "volume", "blocks", "ablations", "pareto" }));
+  return { benchmarkCommand, [options] {
+    bigus::BenchmarkOptions& benchmark = *options;
+    return bigus::RunBenchmark(benchmark);
+  } };
+}
+
+} // namespace bigus::cli

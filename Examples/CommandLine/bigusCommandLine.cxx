@@ -1,0 +1,208 @@
+// What the commands of `bigus` share: failing with a message, reading sweeps, fields and masks, writing images.
+#include "bigusCommandLine.h"
+#include "bigusPlot.h"
+#include "vtkCallbackCommand.h"
+#include "vtkCommand.h"
+#include "vtkDataArray.h"
+#include "vtkFieldData.h"
+#include "vtkImageData.h"
+#include "vtkMetaImageReader.h"
+#include "vtkMetaImageWriter.h"
+#include "vtkNew.h"
+#include "vtkPointData.h"
+#include "vtkPolyData.h"
+#include "vtkUltrasoundSequenceReader.h"
+#include "vtkXMLImageDataWriter.h"
+#include "vtkXMLPolyDataReader.h"
+
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <string>
+#include <vector>
+
+namespace bigus::cli
+{
+int Fail(const std::string& what)
+{
+  std::fprintf(stderr, "bigus: %s\n", what.c_str());
+  return 1;
+}
+
+FilterError::FilterError()
+{
+  this->Callback->SetClientData(&this->Text);
+  this->Callback->SetCallback([](vtkObject*, unsigned long, void* client, void* data) {
+    std::string text = static_cast<const char*>(data);
+    const std::size_t start = text.rfind("): ");
+    text = start == std::string::npos ? text : text.substr(start + 3);
+    text.erase(std::remove(text.begin(), text.end(), '\n'), text.end());
+    *static_cast<std::string*>(client) = text;
+  });
+}
+
+void FilterError::Watch(vtkObject* object)
+{
+  object->AddObserver(vtkCommand::ErrorEvent, this->Callback);
+}
+
+bool EndsWith(const std::string& s, const std::string& suffix)
+{
+  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+vtkSmartPointer<vtkUltrasoundSequenceReader> ReadSweep(const SweepOptions& o)
+{
+  auto reader = vtkSmartPointer<vtkUltrasoundSequenceReader>::New();
+  reader->SetFileName(o.Sweep.c_str());
+  if (!o.Calibration.empty())
+  {
+    reader->SetCalibrationFileName(o.Calibration.c_str());
+  }
+  if (!o.Chain.empty())
+  {
+    reader->SetTransformChain(o.Chain.c_str());
+  }
+  if (o.FrameRange.size() == 2)
+  {
+    reader->SetFrameRange(o.FrameRange[0], o.FrameRange[1]);
+  }
+  reader->Update();
+  if (*reader->GetLastErrorText())
+  {
+    Fail(reader->GetLastErrorText());
+    return nullptr;
+  }
+  return reader;
+}
+
+vtkSmartPointer<vtkPolyData> ReadField(const std::string& file)
+{
+  std::ifstream probe(file);
+  if (!probe)
+  {
+    Fail(file + ": cannot open the field file");
+    return nullptr;
+  }
+  vtkNew<vtkXMLPolyDataReader> reader;
+  reader->SetFileName(file.c_str());
+  reader->Update();
+  vtkPolyData* field = reader->GetOutput();
+  if (!field || field->GetNumberOfPoints() == 0 || !field->GetPointData()->GetArray("Scale"))
+  {
+    Fail(file + ": not a Gaussian field (.vtp with point data Scale, Rotation, Reflectivity)");
+    return nullptr;
+  }
+  auto copy = vtkSmartPointer<vtkPolyData>::New();
+  copy->DeepCopy(field);
+  return copy;
+}
+
+bool FrameIsValid(vtkImageData* sweep, int k)
+{
+  vtkDataArray* valid = sweep->GetFieldData()->GetArray("FrameValid");
+  return !valid || valid->GetNumberOfTuples() != sweep->GetDimensions()[2] || valid->GetTuple1(k) != 0;
+}
+
+std::vector<int> ChooseFrames(int count, int every, int offset, const std::vector<int>& list)
+{
+  std::vector<int> frames;
+  for (int k = 0; k < count; ++k)
+  {
+    if (!list.empty() ? std::find(list.begin(), list.end(), k) != list.end() : (every <= 0 || k % every == offset))
+    {
+      frames.push_back(k);
+    }
+  }
+  return frames;
+}
+
+vtkSmartPointer<vtkImageData> ReadMask(const std::string& file, const int dims[3])
+{
+  std::ifstream probe(file);
+  if (!probe)
+  {
+    Fail(file + ": cannot open the mask");
+    return nullptr;
+  }
+  vtkNew<vtkMetaImageReader> reader;
+  reader->SetFileName(file.c_str());
+  reader->Update();
+  vtkImageData* mask = reader->GetOutput();
+  int size[3] = { 0, 0, 0 };
+  mask->GetDimensions(size);
+  if (!mask->GetPointData()->GetScalars() || mask->GetNumberOfScalarComponents() != 1 || size[0] != dims[0] ||
+    size[1] != dims[1] || (size[2] != 1 && size[2] != dims[2]))
+  {
+    Fail(file + ": the mask must be one-component " + std::to_string(dims[0]) + " x " + std::to_string(dims[1]) +
+      " x 1 or x " + std::to_string(dims[2]) + " (one per frame), not " + std::to_string(size[0]) + " x " +
+      std::to_string(size[1]) + " x " + std::to_string(size[2]));
+    return nullptr;
+  }
+  auto copy = vtkSmartPointer<vtkImageData>::New();
+  copy->DeepCopy(mask);
+  return copy;
+}
+
+void AddSweepOptions(CLI::App* command, SweepOptions& o, const char* what)
+{
+  command->add_option("--calibration", o.Calibration, "PLUS device-set configuration XML (ImageToProbe)")
+    ->check(CLI::ExistingFile);
+  command->add_option("--transform", o.Chain,
+    std::string("Transform chain for ImageToReference of the ") + what +
+      ", e.g. \"inverse(ReferenceToTracker) * ProbeToTracker * ImageToProbe\"");
+}
+
+int WriteImage(vtkImageData* image, const std::string& path)
+{
+  const std::string temporary = TemporaryName(path);
+  bool ok = false;
+  if (EndsWith(path, ".png"))
+  {
+    int dims[3];
+    image->GetDimensions(dims);
+    vtkDataArray* values = image->GetPointData()->GetScalars();
+    cv::Mat png(dims[1], dims[0], CV_8U);
+    for (int j = 0; j < dims[1]; ++j)
+    {
+      for (int i = 0; i < dims[0]; ++i)
+      {
+        const double v = values->GetTuple1(vtkIdType(j) * dims[0] + i);
+        png.at<unsigned char>(j, i) =
+          static_cast<unsigned char>(std::lround(std::min(255.0, std::max(0.0, values->GetDataType() == VTK_FLOAT ? 255 * v : v))));
+      }
+    }
+    ok = cv::imwrite(temporary, png);
+  }
+  else if (EndsWith(path, ".mha") || EndsWith(path, ".mhd"))
+  {
+    vtkNew<vtkMetaImageWriter> writer;
+    writer->SetInputData(image);
+    writer->SetFileName(temporary.c_str());
+    writer->SetCompression(true);
+    writer->Write();
+    ok = writer->GetErrorCode() == 0;
+  }
+  else if (EndsWith(path, ".vti"))
+  {
+    vtkNew<vtkXMLImageDataWriter> writer;
+    writer->SetInputData(image);
+    writer->SetFileName(temporary.c_str());
+    ok = writer->Write() != 0;
+  }
+  else
+  {
+    return Fail(path + ": unknown image format (use .png, .mha or .vti)");
+  }
+  if (!ok || !Publish(temporary, path))
+  {
+    std::remove(temporary.c_str());
+    return Fail(path + ": cannot write the image");
+  }
+  return 0;
+}
+} // namespace bigus::cli

@@ -1,0 +1,109 @@
+/**
+ * @file bigusCommandLine.h
+ * @brief What the commands of the `bigus` program share (one file per command beside this one, each with
+ *        an Add...Command that declares its options on a CLI11 app and a Run... that does the work).
+ *
+ * Exit codes of every command: 0 success, 1 a bad file or a failed step (one line on stderr), 2 bad
+ * arguments. Outputs are written under a temporary name and renamed (bigus::Publish): an existing file is
+ * never left half-written.
+ */
+#ifndef bigusCommandLine_h
+#define bigusCommandLine_h
+
+#include "vtkCallbackCommand.h"
+#include "vtkImageData.h"
+#include "vtkNew.h"
+#include "vtkPolyData.h"
+#include "vtkSmartPointer.h"
+#include "vtkUltrasoundSequenceReader.h"
+
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace CLI
+{
+class App;
+}
+class vtkObject;
+
+namespace bigus::cli
+{
+/// A subcommand of `bigus` and what runs when it was the one parsed (returns the exit code).
+struct Command
+{
+  CLI::App* App = nullptr;
+  std::function<int()> Run;
+};
+
+Command AddInfoCommand(CLI::App& app);
+Command AddTrainCommand(CLI::App& app);
+Command AddRenderCommand(CLI::App& app);
+Command AddEvaluateCommand(CLI::App& app);
+Command AddSweepCommand(CLI::App& app);
+Command AddFillGapsCommand(CLI::App& app);
+/// @p sourceDirectory: where `bigus benchmark` finds Examples/Data and Testing/Data unless --data says.
+Command AddBenchmarkCommand(CLI::App& app, const std::string& sourceDirectory);
+
+/// Prints "bigus: @p what" on stderr; returns 1 (the exit code of a bad file or a failed step).
+int Fail(const std::string& what);
+
+/**
+ * The last error a watched VTK object reported, on one line. VTK's output window is silenced (main),
+ * so the command line reports a filter's own message ("ERROR: In <file>, line <n>\n<class>
+ * (<address>): <message>\n\n" keeps <message>) instead of its own guess.
+ */
+class FilterError
+{
+public:
+  FilterError();
+  FilterError(const FilterError&) = delete;
+  FilterError& operator=(const FilterError&) = delete;
+  void Watch(vtkObject* object);
+  /// The message, or @p fallback when none was reported.
+  std::string Or(const std::string& fallback) const { return this->Text.empty() ? fallback : this->Text; }
+  std::string Text;
+
+private:
+  vtkNew<vtkCallbackCommand> Callback;
+};
+
+bool EndsWith(const std::string& s, const std::string& suffix);
+
+/// A sweep on the command line: the sequence metafile, its calibration and transform chain, a frame range.
+struct SweepOptions
+{
+  std::string Sweep, Calibration, Chain;
+  std::vector<int> FrameRange; ///< empty, or first and last frame
+};
+
+/// --calibration and --transform for the sweep @p what names ("sweep", "pose sweep").
+void AddSweepOptions(CLI::App* command, SweepOptions& o, const char* what);
+
+/// Reads a sweep; on failure prints the reader's message and returns null.
+vtkSmartPointer<vtkUltrasoundSequenceReader> ReadSweep(const SweepOptions& o);
+
+/// Reads a Gaussian field (.vtp with point data Scale, Rotation, Reflectivity); null after a message.
+vtkSmartPointer<vtkPolyData> ReadField(const std::string& file);
+
+/**
+ * Whether frame @p k of a sweep may be used: its FrameValid value is non-zero, or the sweep has no
+ * FrameValid of one value per frame (every frame valid), as vtkGaussianFieldTrainer and
+ * vtkUltrasoundVolumeCompounder read it.
+ */
+bool FrameIsValid(vtkImageData* sweep, int k);
+
+/// Frames with index k mod every == offset (every > 0), or the explicit list, or all.
+std::vector<int> ChooseFrames(int count, int every, int offset, const std::vector<int>& list);
+
+/// Reads a fan mask (.mha/.mhd, W x H x 1, or W x H x N: one per frame) for a W x H x N sweep;
+/// on failure prints what is wrong and returns null.
+vtkSmartPointer<vtkImageData> ReadMask(const std::string& file, const int dims[3]);
+
+/// Writes an image: .png (8-bit, rows flipped so that row 0 is the top), .mha (MetaImage), .vti.
+/// Returns the exit code (1 after a message).
+int WriteImage(vtkImageData* image, const std::string& path);
+
+} // namespace bigus::cli
+
+#endif

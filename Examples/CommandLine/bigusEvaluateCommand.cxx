@@ -1,0 +1,290 @@
+// `bigus evaluate`: render sweep frames and compare them with the recording.
+#include "bigusCommandLine.h"
+#include "bigusGaussianFieldData.h"
+#include "bigusImageMetrics.h"
+#include "bigusPlot.h"
+#include "bigusSliceFrame.h"
+#include "vtkDataArray.h"
+#include "vtkFieldData.h"
+#include "vtkGaussianFieldReslice.h"
+#include "vtkGaussianFieldSequenceRenderer.h"
+#include "vtkIdList.h"
+#include "vtkImageData.h"
+#include "vtkNew.h"
+#include "vtkPolyData.h"
+#include "vtkUltrasoundFanMask.h"
+
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <array>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <optional>
+#include <string>
+#include <sys/stat.h>
+#include <vector>
+
+namespace bigus::cli
+{
+namespace
+{
+struct EvaluateOptions
+{
+  std::string Field, Report, Mask, Backend = "auto";
+  SweepOptions Sweep;
+  int HoldOutEvery = 0, HoldOutOffset = 0;
+  std::vector<int> Frames;
+};
+
+/// PNG plot of held-out PSNR (dB) against training time (s), from the field's HeldOutPSNR array.
+bool PlotHistory(vtkDataArray* history, const std::string& path)
+{
+  bigus::PlotSpec spec;
+  spec.Title = "held-out PSNR against training time";
+  spec.XLabel = "training time (s)";
+  spec.YLabel = "PSNR (dB)";
+  spec.Series.push_back({ "BIGUS", {} });
+  for (vtkIdType k = 0; k < history->GetNumberOfTuples(); ++k)
+  {
+    spec.Series[0].Points.emplace_back(history->GetComponent(k, 0), history->GetComponent(k, 1));
+  }
+  return bigus::WritePlot(spec, path);
+}
+
+/// Renders a slice through the centre of frame @p pose (W x H pixels at the frame's spacing) whose
+/// in-plane axes are @p x and @p y (unit vectors), and writes it as PNG.
+int WriteSliceThrough(vtkPolyData* field, const double pose[16], int width, int height, const double x[3],
+  const double y[3], const std::string& backend, const std::string& path)
+{
+  bigus::SliceFrame frame;
+  bigus::ComputeSliceFrame(pose, 90, frame);
+  const double spacing = 0.5 * (frame.spacing[0] + frame.spacing[1]);
+  double centre[3];
+  for (int c = 0; c < 3; ++c)
+  {
+    centre[c] = pose[4 * c] * 0.5 * (width - 1) + pose[4 * c + 1] * 0.5 * (height - 1) + pose[4 * c + 3];
+  }
+  const double n[3] = { x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2], x[0] * y[1] - x[1] * y[0] };
+  vtkNew<vtkGaussianFieldReslice> reslice;
+  reslice->SetInputData(field);
+  reslice->SetBackend(backend.c_str());
+  reslice->SetResliceAxesDirectionCosines(x[0], x[1], x[2], y[0], y[1], y[2], n[0], n[1], n[2]);
+  reslice->SetResliceAxesOrigin(centre[0], centre[1], centre[2]);
+  reslice->SetOutputSpacing(spacing, spacing, 1);
+  reslice->SetOutputOrigin(-0.5 * spacing * (width - 1), -0.5 * spacing * (height - 1), 0);
+  reslice->SetOutputExtent(0, width - 1, 0, height - 1, 0, 0);
+  reslice->SetOutputScalarTypeToUnsignedChar();
+  FilterError error;
+  error.Watch(reslice);
+  reslice->Update();
+  if (reslice->GetOutput()->GetNumberOfPoints() == 0)
+  {
+    return Fail(path + ": rendering failed: " + error.Or("empty slice"));
+  }
+  return WriteImage(reslice->GetOutput(), path);
+}
+
+int RunEvaluate(const EvaluateOptions& o)
+{
+  auto field = ReadField(o.Field);
+  auto reader = field ? ReadSweep(o.Sweep) : nullptr;
+  if (!reader)
+  {
+    return 1;
+  }
+  vtkImageData* truth = reader->GetOutput();
+  int dims[3];
+  truth->GetDimensions(dims);
+  for (int k : o.Frames)
+  {
+    if (k < 0 || k >= dims[2])
+    {
+      return Fail("--frames: frame " + std::to_string(k) + " is outside the " + std::to_string(dims[2]) +
+        " frames of " + o.Sweep.Sweep);
+    }
+  }
+  std::vector<int> frames = ChooseFrames(dims[2], o.HoldOutEvery, o.HoldOutOffset, o.Frames);
+  frames.erase(std::remove_if(frames.begin(), frames.end(), [&](int k) { return !FrameIsValid(truth, k); }),
+    frames.end());
+  if (frames.empty())
+  {
+    return Fail("evaluate: no valid frame chosen");
+  }
+  vtkSmartPointer<vtkImageData> maskImage;
+  if (!o.Mask.empty())
+  {
+    if (!(maskImage = ReadMask(o.Mask, dims)))
+    {
+      return 1;
+    }
+  }
+  else
+  {
+    vtkNew<vtkUltrasoundFanMask> fan;
+    fan->SetInputConnection(reader->GetOutputPort());
+    fan->Update();
+    maskImage = fan->GetOutput();
+  }
+  // The recorded frames and masks as the trainer sees them, so that the metrics are the trainer's own.
+  bigus::TrainingData data;
+  std::string message;
+  if (!bigus::TrainingDataFromSequence(truth, maskImage, data, &message))
+  {
+    return Fail(o.Sweep.Sweep + ": " + message);
+  }
+  vtkNew<vtkGaussianFieldSequenceRenderer> renderer;
+  renderer->SetInputData(field);
+  renderer->SetPoseConnection(reader->GetOutputPort());
+  renderer->SetBackend(o.Backend.c_str());
+  vtkNew<vtkIdList> list;
+  for (int k : frames)
+  {
+    list->InsertNextId(k);
+  }
+  renderer->SetFrameList(list);
+  FilterError error;
+  error.Watch(renderer);
+  renderer->Update();
+  vtkImageData* rendered = renderer->GetOutput();
+  if (rendered->GetNumberOfPoints() == 0)
+  {
+    return Fail("rendering failed: " + error.Or("no frames"));
+  }
+  if (::mkdir(o.Report.c_str(), 0755) != 0 && errno != EEXIST)
+  {
+    return Fail(o.Report + ": cannot create the report folder");
+  }
+  const std::size_t pixels = std::size_t(dims[0]) * dims[1];
+  const auto* renderedPixels = static_cast<float*>(rendered->GetScalarPointer());
+  std::vector<std::optional<bigus::ImageMetrics>> perFrame;
+  const bigus::ImageMetrics mean = bigus::MeanFrameMetrics(
+    data, frames, [&](std::size_t m, int) { return renderedPixels + pixels * m; }, &perFrame);
+  nlohmann::json report;
+  report["field"] = o.Field;
+  report["sweep"] = o.Sweep.Sweep;
+  report["render_seconds_per_frame"] = renderer->GetSecondsPerFrame();
+  std::size_t used = 0;
+  std::printf("%6s %8s %8s %8s %8s\n", "frame", "PSNR", "SSIM", "NCC", "speckle");
+  for (std::size_t n = 0; n < frames.size(); ++n)
+  {
+    const int k = frames[n];
+    if (!perFrame[n])
+    {
+      report["frames"].push_back({ { "frame", k }, { "left_out", "empty mask" } });
+      std::printf("%6d  left out of the mean: empty mask\n", k);
+      continue;
+    }
+    const bigus::ImageMetrics& m = *perFrame[n];
+    ++used;
+    report["frames"].push_back(
+      { { "frame", k }, { "psnr", m.PSNR }, { "ssim", m.SSIM }, { "ncc", m.NCC }, { "speckle", m.Speckle } });
+    std::printf("%6d %8.2f %8.4f %8.4f %8.4f\n", k, m.PSNR, m.SSIM, m.NCC, m.Speckle);
+    // Side by side for a few frames: truth | rendering | absolute error (x 4, so that it shows).
+    if (n % std::max<std::size_t>(1, frames.size() / 4) == 0)
+    {
+      const float* image = renderedPixels + pixels * n;
+      const float* recorded = &data.Frames[pixels * k];
+      cv::Mat side(dims[1], 3 * dims[0], CV_8U);
+      for (int j = 0; j < dims[1]; ++j)
+      {
+        for (int i = 0; i < dims[0]; ++i)
+        {
+          const std::size_t p = std::size_t(j) * dims[0] + i;
+          side.at<unsigned char>(j, i) = cv::saturate_cast<unsigned char>(255 * recorded[p]);
+          side.at<unsigned char>(j, dims[0] + i) = cv::saturate_cast<unsigned char>(255 * image[p]);
+          side.at<unsigned char>(j, 2 * dims[0] + i) =
+            cv::saturate_cast<unsigned char>(4 * 255 * std::abs(image[p] - recorded[p]));
+        }
+      }
+      const std::string path = o.Report + "/frame_" + std::to_string(k) + "_truth_rendering_error.png";
+      const std::string temporary = TemporaryName(path);
+      if (!cv::imwrite(temporary, side) || !Publish(temporary, path))
+      {
+        return Fail(path + ": cannot write");
+      }
+    }
+  }
+  if (used == 0)
+  {
+    return Fail("evaluate: every chosen frame has an empty mask, so there is nothing to compare");
+  }
+  // Views that no frame saw, through the centre of the middle evaluated frame: the plane spanned by
+  // depth and elevation (orthogonal to the frames), and one tilted 45 degrees between the two.
+  const std::array<double, 16>& pose = data.Poses[frames[frames.size() / 2]];
+  bigus::SliceFrame middle;
+  bigus::ComputeSliceFrame(pose.data(), 90, middle);
+  double tilted[3];
+  for (int c = 0; c < 3; ++c)
+  {
+    tilted[c] = (middle.u[c] + middle.n[c]) / std::sqrt(2.0);
+  }
+  const double* matrix = pose.data();
+  if (WriteSliceThrough(field, matrix, dims[0], dims[1], middle.n, middle.v, o.Backend,
+        o.Report + "/slice_orthogonal.png") != 0 ||
+    WriteSliceThrough(field, matrix, dims[0], dims[1], tilted, middle.v, o.Backend, o.Report + "/slice_oblique.png") != 0)
+  {
+    return 1;
+  }
+  if (vtkDataArray* history = field->GetFieldData()->GetArray("HeldOutPSNR"))
+  {
+    if (!PlotHistory(history, o.Report + "/psnr_against_time.png"))
+    {
+      return Fail(o.Report + "/psnr_against_time.png: cannot write");
+    }
+    for (vtkIdType k = 0; k < history->GetNumberOfTuples(); ++k)
+    {
+      report["held_out_psnr_against_time"].push_back(
+        { { "seconds", history->GetComponent(k, 0) }, { "psnr", history->GetComponent(k, 1) } });
+    }
+  }
+  report["mean"] = { { "psnr", mean.PSNR }, { "ssim", mean.SSIM }, { "ncc", mean.NCC }, { "speckle", mean.Speckle },
+    { "frames", used } };
+  std::printf("%6s %8.2f %8.4f %8.4f %8.4f  (%zu frames, %zu left out: empty mask; %.1f ms per rendered frame)\n",
+    "mean", mean.PSNR, mean.SSIM, mean.NCC, mean.Speckle, used, frames.size() - used,
+    1e3 * renderer->GetSecondsPerFrame());
+  const std::string path = o.Report + "/metrics.json";
+  const std::string temporary = TemporaryName(path);
+  std::ofstream out(temporary);
+  out << report.dump(2) << "\n";
+  out.close();
+  // A failed write (disk full) must not be published: the temporary goes, an existing file stays.
+  if (!out)
+  {
+    std::remove(temporary.c_str());
+    return Fail(path + ": cannot write");
+  }
+  if (!Publish(temporary, path))
+  {
+    return Fail(path + ": cannot write");
+  }
+  return 0;
+}
+}
+
+Command AddEvaluateCommand(CLI::App& app)
+{
+  auto options = std::make_shared<EvaluateOptions>();
+  EvaluateOptions& evaluate = *options;
+  CLI::App* evaluateCommand = app.add_subcommand("evaluate", "Render sweep frames and compare them with the recording");
+  evaluateCommand->add_option("FIELD", evaluate.Field, "Gaussian field (.vtp)")->required()->check(CLI::ExistingFile);
+  evaluateCommand->add_option("SWEEP", evaluate.Sweep.Sweep, "Sequence metafile")->required()->check(CLI::ExistingFile);
+  AddSweepOptions(evaluateCommand, evaluate.Sweep, "sweep");
+  evaluateCommand->add_option("--holdout-every", evaluate.HoldOutEvery, "Evaluate frames with index % K == J");
+  evaluateCommand->add_option("--holdout-offset", evaluate.HoldOutOffset, "J of --holdout-every");
+  evaluateCommand->add_option("--frames", evaluate.Frames, "Evaluate these frames");
+  evaluateCommand->add_option("--mask", evaluate.Mask, "Fan mask .mha (W x H x 1, or W x H x N per frame; default: estimated)");
+  evaluateCommand->add_option("--backend", evaluate.Backend, "Rendering backend: auto, cpu or cuda (as registered)");
+  evaluateCommand->add_option("--report", evaluate.Report, "Folder for metrics.json and side-by-side PNGs")->required();
+  return { evaluateCommand, [options] {
+    EvaluateOptions& evaluate = *options;
+    return RunEvaluate(evaluate);
+  } };
+}
+
+} // namespace bigus::cli

@@ -1,0 +1,276 @@
+// `bigus train`: train a Gaussian scattering field from a tracked sweep.
+#include "bigusCommandLine.h"
+#include "bigusGapFilling.h"
+#include "bigusGaussianFieldData.h"
+#include "bigusPlot.h"
+#include "vtkCallbackCommand.h"
+#include "vtkCommand.h"
+#include "vtkDataArray.h"
+#include "vtkFieldData.h"
+#include "vtkGaussianFieldTrainer.h"
+#include "vtkIdList.h"
+#include "vtkNew.h"
+#include "vtkSMPTools.h"
+#include "vtkXMLPolyDataWriter.h"
+
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <unistd.h>
+#include <vector>
+
+namespace bigus::cli
+{
+namespace
+{
+struct TrainOptions
+{
+  SweepOptions Sweep;
+  std::string Output, Checkpoint, Resume, Mask, Backend = "auto";
+  int HoldOutEvery = 0, HoldOutOffset = 0, Iterations = 0, Threads = 0;
+  std::vector<int> Frames; ///< explicit training frames (empty: the hold-out rule)
+  double TimeBudget = 0, ElevationSigma = 0, EvaluationInterval = 0;
+  long long MaxGaussians = 0, InitialGaussians = 0;
+  double GrowthMargin = 0;
+  int GrowthPatience = 0, SolveIterations = 0;
+  bool NoFillGaps = false, ReflectivitySolve = false, DenseStart = false, DenseAdam = false;
+  unsigned Seed = 0;
+
+  /// The filter's own defaults, so that `bigus train` and vtkGaussianFieldTrainer agree.
+  TrainOptions()
+  {
+    vtkNew<vtkGaussianFieldTrainer> defaults;
+    this->Iterations = defaults->GetIterations();
+    this->ElevationSigma = defaults->GetElevationSigma();
+    this->MaxGaussians = defaults->GetMaximumGaussians();
+    this->InitialGaussians = defaults->GetInitialGaussians();
+    this->GrowthMargin = defaults->GetGrowthMargin();
+    this->GrowthPatience = defaults->GetGrowthPatience();
+    this->SolveIterations = defaults->GetSolveIterations();
+    this->Seed = defaults->GetSeed();
+  }
+};
+
+int RunTrain(const TrainOptions& o)
+{
+  if (o.Threads > 0)
+  {
+    vtkSMPTools::Initialize(o.Threads);
+  }
+  auto reader = ReadSweep(o.Sweep);
+  if (!reader)
+  {
+    return 1;
+  }
+  vtkNew<vtkGaussianFieldTrainer> trainer;
+  trainer->SetInputConnection(reader->GetOutputPort());
+  if (!o.Mask.empty())
+  {
+    auto mask = ReadMask(o.Mask, reader->GetOutput()->GetDimensions());
+    if (!mask)
+    {
+      return 1;
+    }
+    trainer->SetInputData(1, mask);
+  }
+  trainer->SetHoldOutEvery(o.HoldOutEvery);
+  trainer->SetHoldOutOffset(o.HoldOutOffset);
+  if (!o.Frames.empty())
+  {
+    vtkNew<vtkIdList> frames;
+    for (int k : o.Frames)
+    {
+      frames->InsertUniqueId(k);
+    }
+    trainer->SetTrainingFrameList(frames);
+  }
+  trainer->SetIterations(o.Iterations);
+  trainer->SetTimeBudget(o.TimeBudget);
+  trainer->SetMaximumGaussians(o.MaxGaussians);
+  trainer->SetInitialGaussians(o.InitialGaussians);
+  trainer->SetGrowthMargin(o.GrowthMargin);
+  trainer->SetGrowthPatience(o.GrowthPatience);
+  trainer->SetFillGaps(!o.NoFillGaps);
+  trainer->SetReflectivitySolve(o.ReflectivitySolve);
+  trainer->SetSolveIterations(o.SolveIterations);
+  trainer->SetDenseInitialisation(o.DenseStart);
+  trainer->SetSparseAdam(!o.DenseAdam);
+  trainer->SetElevationSigma(o.ElevationSigma);
+  trainer->SetSeed(o.Seed);
+  trainer->SetEvaluationInterval(o.EvaluationInterval);
+  trainer->SetBackend(o.Backend.c_str());
+  if (!o.Checkpoint.empty())
+  {
+    trainer->SetCheckpointFile(o.Checkpoint.c_str());
+    trainer->SetCheckpointInterval(200);
+  }
+  if (!o.Resume.empty())
+  {
+    trainer->SetResumeFile(o.Resume.c_str());
+  }
+  // Progress: a bar on a terminal, a line every 10 % otherwise.
+  const bool terminal = ::isatty(STDOUT_FILENO);
+  const auto start = std::chrono::steady_clock::now();
+  int lastDecile = -1;
+  vtkNew<vtkCallbackCommand> progress;
+  struct Context
+  {
+    bool Terminal;
+    std::chrono::steady_clock::time_point Start;
+    int* LastDecile;
+  } context{ terminal, start, &lastDecile };
+  progress->SetClientData(&context);
+  progress->SetCallback([](vtkObject* caller, unsigned long, void* client, void* data) {
+    const Context& c = *static_cast<Context*>(client);
+    const double fraction = *static_cast<double*>(data);
+    const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - c.Start).count();
+    const double eta = fraction > 0 ? elapsed * (1 - fraction) / fraction : 0;
+    auto* t = static_cast<vtkGaussianFieldTrainer*>(caller);
+    if (t->GetCurrentIteration() == 0)
+    {
+      return; // the pipeline's own 0 % and 100 % events, also sent when training fails before a step
+    }
+    char state[160];
+    std::snprintf(state, sizeof(state), "%3.0f%%  iteration %d  loss %.4f  Gaussians %lld  elapsed %.0f s  ETA %.0f s",
+      100 * fraction, t->GetCurrentIteration(), t->GetCurrentLoss(),
+      static_cast<long long>(t->GetCurrentNumberOfGaussians()), elapsed, eta);
+    if (c.Terminal)
+    {
+      const int width = 24, filled = static_cast<int>(fraction * width);
+      std::printf("\r[%s%s] %s   ", std::string(filled, '#').c_str(), std::string(width - filled, ' ').c_str(), state);
+      std::fflush(stdout);
+    }
+    else if (static_cast<int>(fraction * 10) > *c.LastDecile)
+    {
+      *c.LastDecile = static_cast<int>(fraction * 10);
+      std::printf("training %s\n", state);
+      std::fflush(stdout);
+    }
+  });
+  trainer->AddObserver(vtkCommand::ProgressEvent, progress);
+  vtkNew<vtkCallbackCommand> chosen;
+  chosen->SetCallback([](vtkObject* caller, unsigned long, void*, void*) {
+    std::istringstream lines(static_cast<vtkGaussianFieldTrainer*>(caller)->GetSettingsText());
+    for (std::string line; std::getline(lines, line);)
+    {
+      std::printf("setting        %s\n", line.c_str());
+    }
+    std::fflush(stdout);
+  });
+  trainer->AddObserver(vtkGaussianFieldTrainer::SettingsChosenEvent, chosen);
+  FilterError error;
+  error.Watch(trainer);
+  trainer->Update();
+  if (terminal)
+  {
+    std::printf("\n");
+  }
+  if (trainer->GetNumberOfGaussians() == 0)
+  {
+    return Fail("training failed: " + error.Or("no field"));
+  }
+  const std::string temporary = TemporaryName(o.Output);
+  vtkNew<vtkXMLPolyDataWriter> writer;
+  writer->SetInputConnection(trainer->GetOutputPort());
+  writer->SetFileName(temporary.c_str());
+  writer->SetDataModeToAppended();
+  if (!writer->Write() || !Publish(temporary, o.Output))
+  {
+    std::remove(temporary.c_str());
+    return Fail(o.Output + ": cannot write the field");
+  }
+  vtkDataArray* seeds = trainer->GetOutput()->GetFieldData()->GetArray("InitialGaussians");
+  std::printf("field          %s: %lld Gaussians (from %lld seeds) after %d iterations in %.1f s (stop: %s; growth: %s)\n",
+    o.Output.c_str(), static_cast<long long>(trainer->GetNumberOfGaussians()),
+    seeds ? static_cast<long long>(seeds->GetTuple1(0)) : 0LL, trainer->GetCompletedIterations(),
+    trainer->GetTrainingSeconds(), trainer->GetStopReason(), trainer->GetGrowthStopReason());
+  vtkFieldData* fd = trainer->GetOutput()->GetFieldData();
+  vtkDataArray* best = fd->GetArray("BestValidationLoss");
+  vtkDataArray* last = fd->GetArray("LastValidationLoss");
+  if (best && last)
+  {
+    std::printf("early stopping %s (validation loss %.5f at iteration %.0f, %.5f at the end)\n",
+      best->GetTuple1(0) < last->GetTuple1(0) ? "kept an earlier field" : "kept the last field", best->GetTuple1(0),
+      fd->GetArray("BestIteration")->GetTuple1(0), last->GetTuple1(0));
+  }
+  if (vtkAbstractArray* gaps = fd->GetAbstractArray("GapFilling"))
+  {
+    std::printf("gap filling    %s\n", gaps->GetVariantValue(0).ToString().c_str());
+  }
+  std::printf("backend        %s\n", trainer->GetBackendInUse());
+  return 0;
+}
+}
+
+Command AddTrainCommand(CLI::App& app)
+{
+  auto options = std::make_shared<TrainOptions>();
+  TrainOptions& train = *options;
+  CLI::App* trainCommand = app.add_subcommand("train", "Train a Gaussian scattering field from a tracked sweep");
+  trainCommand->add_option("SWEEP", train.Sweep.Sweep, "Sequence metafile")->required()->check(CLI::ExistingFile);
+  trainCommand->add_option("-o,--output", train.Output, "Field to write (.vtp)")->required();
+  AddSweepOptions(trainCommand, train.Sweep, "sweep");
+  trainCommand->add_option("--mask", train.Mask, "Fan mask .mha (W x H x 1, or W x H x N per frame; default: estimated)");
+  trainCommand->add_option("--holdout-every", train.HoldOutEvery, "Hold out frames with index % K == J (0: none)");
+  trainCommand->add_option("--holdout-offset", train.HoldOutOffset, "J of --holdout-every");
+  trainCommand->add_option("--frames", train.Frames, "Train on these frames only (indices); the others are held out")
+    ->excludes("--holdout-every");
+  trainCommand->add_option("--time-budget", train.TimeBudget,
+    "Wall-clock budget for training, seconds (0: none); alone, it is the whole schedule (learning-rate decay, "
+    "densification window) and training runs until it");
+  auto* iterations = trainCommand->add_option("--iterations", train.Iterations,
+    "Optimisation steps (with --time-budget: whichever ends first)")->capture_default_str();
+  trainCommand->add_option("--max-gaussians", train.MaxGaussians, "Hard maximum of Gaussians (gap filling's copies included)")->capture_default_str();
+  trainCommand->add_option("--initial-gaussians", train.InitialGaussians,
+    "Seeds (0: one per 200 fan pixels of the training frames, 20,000 to half the maximum)")
+    ->capture_default_str()
+    ->check(CLI::NonNegativeNumber);
+  trainCommand->add_option("--growth-margin", train.GrowthMargin,
+    "Growth stops when the validation loss improves by less than this (relative) on the best so far ...")
+    ->capture_default_str()
+    ->check(CLI::Range(0.0, 1.0));
+  trainCommand->add_option("--growth-patience", train.GrowthPatience,
+    "... over this many densification intervals in a row")
+    ->capture_default_str()
+    ->check(CLI::PositiveNumber);
+  trainCommand->add_flag("--reflectivity-solve", train.ReflectivitySolve,
+    "Variable projection: solve the reflectivities by least squares after seeding and after every densification, "
+    "Adam between the solves (default: Adam alone)");
+  trainCommand->add_option("--solve-iterations", train.SolveIterations,
+    "CGLS iterations of each reflectivity solve (each a forward and a backward pass over every training frame)")
+    ->capture_default_str()
+    ->check(CLI::PositiveNumber);
+  trainCommand->add_flag("--dense-adam", train.DenseAdam,
+    "Adam moves every Gaussian every step on its momentum (the ablation; default: only the Gaussians a step "
+    "touched, the others keep their parameters and moments)");
+  trainCommand->add_flag("--dense-start", train.DenseStart,
+    "Start from Gaussians on the training frames' pixel grid (--initial-gaussians of them, default half of "
+    "--max-gaussians) instead of Harris seeds");
+  trainCommand->add_flag("--no-fill-gaps", train.NoFillGaps,
+    "Leave gaps between training frames wider than the beam empty (default: bridged, as bigus fill-gaps does)");
+  trainCommand->add_option("--elevation-sigma", train.ElevationSigma, "Elevation beam sigma, mm (FWHM / 2.355); 0: chosen from the sweep (frame spacing, speckle decorrelation)")
+    ->capture_default_str();
+  trainCommand->add_option("--backend", train.Backend, "Training backend: auto, cpu or cuda (as registered)")
+    ->capture_default_str();
+  trainCommand->add_option("--threads", train.Threads, "Threads (0: all cores)");
+  trainCommand->add_option("--seed", train.Seed, "Random seed")->capture_default_str();
+  trainCommand->add_option("--checkpoint", train.Checkpoint, "Checkpoint file, written every 200 steps");
+  trainCommand->add_option("--resume", train.Resume, "Continue from this checkpoint (same settings; the seconds trained before it count towards --time-budget)")
+    ->check(CLI::ExistingFile);
+  trainCommand->add_option("--evaluate-every", train.EvaluationInterval,
+    "Record the held-out PSNR every S seconds (field data HeldOutPSNR)");
+  return { trainCommand, [options, iterations] {
+    TrainOptions& train = *options;
+    if (iterations->count() == 0 && train.TimeBudget > 0)
+    {
+      train.Iterations = 0; // the budget alone is the schedule
+    }
+    return RunTrain(train);
+  } };
+}
+
+} // namespace bigus::cli

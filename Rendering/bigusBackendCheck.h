@@ -1,0 +1,74 @@
+/**
+ * @file bigusBackendCheck.h
+ * @brief A backend proves itself before "auto" picks it (bigusBackend.h): it renders and
+ *        back-propagates a small fixed field of hard cases and must match the CPU renderer.
+ *
+ * The field (HardCaseField) holds the footprint's hard cases on one slice of 160 x 112 pixels of 0.5 mm
+ * in a generic orientation: needles and pancakes (long axis or disc radius 2 mm, scale ratios 1, 10 and
+ * 100) tilted 0 to 90 degrees out of the plane, 0 to 4 elevation standard deviations off it, signed
+ * reflectivities, each in a 4 mm cell of its own (168 Gaussians). The check renders it at that slice and
+ * at a second one of another size (77 x 45 pixels: neither a multiple of the 16-pixel tile) moved 1.3 mm
+ * off the plane, in one call, and back-propagates a fixed dL/dI. It passes when
+ *   - max |I - I_cpu| <= ImageTolerance (1e-5: the CUDA parity test's bound at these ratios), and
+ *   - for every Gaussian and every parameter group (mean, log-scale, rotation, reflectivity, attribution)
+ *     max |g - g_cpu| <= GradientTolerance (1e-4) x max(|g_cpu| of that Gaussian's group, 1e-3 x the
+ *     largest |g_cpu| of the group over all Gaussians): relative to the Gaussian's own gradient, so a
+ *     small Gaussian's wrong gradient is not hidden by a large one's;
+ *   - the visible counts agree in total (a Gaussian at the cull's edge may tie differently), and
+ *     nothing is NaN or infinite.
+ * On a GPU this costs milliseconds; it runs once per backend and process (CheckBackend caches it).
+ */
+#ifndef bigusBackendCheck_h
+#define bigusBackendCheck_h
+
+#include "bigusRenderer.h"
+#include "bigusRenderingModule.h" // For export macro
+
+#include <string>
+#include <vector>
+
+namespace bigus
+{
+
+/// What a backend's self-check found.
+struct BackendCheck
+{
+  std::string Backend;
+  bool Passed = false;
+  double ImageDifference = 0;    ///< max |I - I_cpu| over the check's pixels
+  double GradientDifference = 0; ///< max |g - g_cpu| / the per-Gaussian scale above (pass: <= 1e-4)
+  std::string Detail;            ///< one line: what was compared, or why the check could not run
+};
+
+/// A field of host arrays (structure of arrays, as FieldView).
+struct BIGUSRENDERING_EXPORT HostField
+{
+  std::vector<float> Means, LogScales, Quaternions, Reflectivities; ///< [N,3] mm, [N,3], [N,4] w x y z, [N]
+  FieldView View() const;
+};
+
+/// The slice of the hard-case field: 160 x 112 pixels of 0.5 mm, moved @p shift mm along reference y.
+BIGUSRENDERING_EXPORT SliceGeometry HardCaseSlice(double shift = 0);
+
+/**
+ * The hard cases above for beam @p sigmaE (mm; it sets the elevation offsets) and the scale ratios
+ * @p ratios, on HardCaseSlice(); reflectivities 0.8 and -0.5 in turn.
+ */
+BIGUSRENDERING_EXPORT HostField HardCaseField(double sigmaE, const std::vector<double>& ratios);
+
+/**
+ * Compares @p renderer with the CPU renderer on the hard-case field (sigma_E 0.5 mm, ratios 1 to 100)
+ * as above. Never throws; a renderer that fails a call fails the check with its error in Detail.
+ */
+BIGUSRENDERING_EXPORT BackendCheck CheckRenderer(Renderer& renderer);
+
+/**
+ * The self-check of registered backend @p name, run once per process (later calls return the first
+ * result). "cpu" is the reference: it passes without running. An unknown or unusable backend fails
+ * with the registry's reason.
+ */
+BIGUSRENDERING_EXPORT BackendCheck CheckBackend(const std::string& name);
+
+} // namespace bigus
+
+#endif
