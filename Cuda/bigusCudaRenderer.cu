@@ -773,7 +773,9 @@ std::unique_ptr<Renderer> CreateCudaRenderer(std::string* error)
 /**
  * Called once by the backend registry when it loads this library (bigusBackend.cxx): registers "cuda"
  * above "cpu" where a usable device exists, and otherwise records why not, so that asking for "cuda"
- * says so and "auto" quietly stays on the CPU.
+ * says so and "auto" quietly stays on the CPU. A device-resident training engine would register here too
+ * (bigus::RegisterTrainingEngine("cuda", ...), bigusTrainingEngine.h); until one exists the CPU engine
+ * trains over this renderer.
  */
 extern "C" BIGUSCUDA_EXPORT void bigusCudaRegisterBackend()
 {

@@ -8,6 +8,8 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <map>
+#include <mutex>
 #include <sstream>
 
 #include <unistd.h>
@@ -283,15 +285,63 @@ bool TrainingState::Load(const std::string& file, double& gamma, std::string* er
 
 // ------------------------------------------------------------------------------------------------
 
+namespace
+{
+/// The engines that backends registered, by backend name.
+std::map<std::string, TrainingEngineFactory>& EngineFactories(std::unique_lock<std::mutex>& lock)
+{
+  static std::mutex mutex;
+  static std::map<std::string, TrainingEngineFactory> factories;
+  lock = std::unique_lock<std::mutex>(mutex);
+  return factories;
+}
+}
+
+void RegisterTrainingEngine(const std::string& name, TrainingEngineFactory factory)
+{
+  std::unique_lock<std::mutex> lock;
+  EngineFactories(lock)[name] = factory;
+}
+
 std::unique_ptr<TrainingEngine> CreateTrainingEngine(const std::string& name, std::string* error, std::string* notice)
 {
-  // Every backend's renderer comes from the one registry. A backend without an engine of its own
-  // (none has one yet) trains through the CPU engine's host-side step over its renderer.
+  // Every backend comes from the one registry; its renderer says which one "auto" chose.
   std::unique_ptr<Renderer> renderer = CreateRenderer(name, error, notice);
   if (!renderer)
   {
     return nullptr;
   }
+  const std::string backend = renderer->GetName();
+  TrainingEngineFactory factory = nullptr;
+  {
+    std::unique_lock<std::mutex> lock;
+    const auto& factories = EngineFactories(lock);
+    const auto found = factories.find(backend);
+    factory = found == factories.end() ? nullptr : found->second;
+  }
+  if (factory)
+  {
+    std::string why;
+    std::unique_ptr<TrainingEngine> engine = factory(&why);
+    if (engine)
+    {
+      return engine;
+    }
+    const std::string what = "the training engine of backend '" + backend + "' cannot be used: " + why;
+    if (!(name.empty() || name == "auto"))
+    {
+      if (error)
+      {
+        *error = what;
+      }
+      return nullptr;
+    }
+    if (notice)
+    {
+      *notice = (notice->empty() ? "" : *notice + "; ") + what + "; its renderer trains through the CPU engine";
+    }
+  }
+  // A backend without an engine of its own trains through the CPU engine's host-side step over its renderer.
   return CreateCpuTrainingEngine(std::move(renderer));
 }
 

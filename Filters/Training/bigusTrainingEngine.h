@@ -201,10 +201,24 @@ public:
 /// The CPU engine over @p renderer (normally bigus::CreateRenderer("cpu", ...)).
 BIGUSTRAINING_EXPORT std::unique_ptr<TrainingEngine> CreateCpuTrainingEngine(std::unique_ptr<Renderer> renderer);
 
+/// Makes a backend's own training engine; null with @p error when it cannot run here.
+using TrainingEngineFactory = std::unique_ptr<TrainingEngine> (*)(std::string* error);
+
+/**
+ * Registers (or replaces) the training engine of backend @p name (a renderer backend registered with
+ * bigus::RegisterBackend): a backend that keeps the training state on its device, or across ranks,
+ * brings its engine here, and CreateTrainingEngine takes it instead of the CPU engine over that
+ * backend's renderer. Called once by the backend module when it is loaded.
+ */
+BIGUSTRAINING_EXPORT void RegisterTrainingEngine(const std::string& name, TrainingEngineFactory factory);
+
 /**
  * The training engine of backend @p name ("auto", "cpu", "cuda"), chosen through the one backend
- * registry (bigus::CreateRenderer). Returns null with @p error when the backend is unknown, not
- * built, or has no training engine; @p notice as for CreateRenderer.
+ * registry (bigus::CreateRenderer, so "auto" takes only a backend that passed its self-check): that
+ * backend's registered engine (RegisterTrainingEngine), or else the CPU engine's host-side step over
+ * the backend's renderer. Returns null with @p error when the backend is unknown, not built, cannot
+ * run here, or its registered engine cannot be made (for an explicit name; "auto" then falls back to
+ * the CPU engine over its renderer and says so in @p notice); @p notice as for CreateRenderer.
  */
 BIGUSTRAINING_EXPORT std::unique_ptr<TrainingEngine> CreateTrainingEngine(
   const std::string& name, std::string* error, std::string* notice = nullptr);

@@ -1,6 +1,7 @@
 // The trainer: self-consistency on a synthetic sweep rendered from a known field, determinism,
 // checkpoint/resume, ablation switches, and a short run on the real spine-phantom sweep.
 #include "bigusTestUtilities.h"
+#include "bigusBackend.h"
 #include "bigusElevationSigma.h"
 #include "bigusTrainer.h"
 #include "bigusTrainingTestUtilities.h"
@@ -680,6 +681,82 @@ TEST(Trainer, SparseAdamLeavesTheGaussiansAStepDidNotTouchAsTheyWere)
       EXPECT_NE(after.Field.Means[5], state.Field.Means[5]);
     }
   }
+}
+
+namespace
+{
+/// The CPU renderer under the name of a test backend that brings its own training engine.
+class EngineBackendRenderer : public Renderer
+{
+public:
+  explicit EngineBackendRenderer(const char* name)
+    : Name(name)
+  {
+  }
+  const char* GetName() const override { return this->Name; }
+  bool Forward(const FieldView& field, const SliceGeometry* slices, int count, const RenderOptions& options, float* S,
+    float* I, RenderStats* stats, std::string* error) override
+  {
+    return this->Cpu->Forward(field, slices, count, options, S, I, stats, error);
+  }
+  bool Backward(const FieldView& field, const SliceGeometry* slices, int count, const RenderOptions& options,
+    const float* S, const float* dL, bool wrtS, FieldGradients& gradients, RenderStats* stats,
+    std::string* error) override
+  {
+    return this->Cpu->Backward(field, slices, count, options, S, dL, wrtS, gradients, stats, error);
+  }
+
+private:
+  const char* Name;
+  std::unique_ptr<Renderer> Cpu = CreateCpuRenderer();
+};
+
+int EnginesMade = 0;
+std::unique_ptr<Renderer> MakeOwnEngineRenderer(std::string*)
+{
+  return std::make_unique<EngineBackendRenderer>("own-engine");
+}
+std::unique_ptr<TrainingEngine> MakeOwnEngine(std::string*)
+{
+  ++EnginesMade;
+  return CreateCpuTrainingEngine(CreateCpuRenderer());
+}
+std::unique_ptr<Renderer> MakeBrokenEngineRenderer(std::string*)
+{
+  return std::make_unique<EngineBackendRenderer>("broken-engine");
+}
+std::unique_ptr<TrainingEngine> MakeBrokenEngine(std::string* error)
+{
+  *error = "the device has no room for the training state";
+  return nullptr;
+}
+}
+
+TEST(Trainer, ABackendBringsItsOwnTrainingEngine)
+{
+  // Registered engines are taken by name and by "auto"; "cpu" keeps the CPU engine. An engine that
+  // cannot be made is an error when its backend is named, and "auto" then trains through the CPU
+  // engine over that backend's renderer, saying so.
+  RegisterBackend("own-engine", &MakeOwnEngineRenderer, 20);
+  RegisterTrainingEngine("own-engine", &MakeOwnEngine);
+  std::string error, notice;
+  ASSERT_NE(CreateTrainingEngine("own-engine", &error), nullptr) << error;
+  EXPECT_EQ(EnginesMade, 1);
+  ASSERT_NE(CreateTrainingEngine("auto", &error), nullptr) << error;
+  EXPECT_EQ(EnginesMade, 2);
+  ASSERT_NE(CreateTrainingEngine("cpu", &error), nullptr) << error;
+  EXPECT_EQ(EnginesMade, 2);
+
+  RegisterBackend("broken-engine", &MakeBrokenEngineRenderer, 30);
+  RegisterTrainingEngine("broken-engine", &MakeBrokenEngine);
+  EXPECT_EQ(CreateTrainingEngine("broken-engine", &error), nullptr);
+  EXPECT_NE(error.find("training engine of backend 'broken-engine' cannot be used: the device has no room"),
+    std::string::npos)
+    << error;
+  std::unique_ptr<TrainingEngine> fallback = CreateTrainingEngine("auto", &error, &notice);
+  ASSERT_NE(fallback, nullptr) << error;
+  EXPECT_STREQ(fallback->GetName(), "broken-engine") << "the CPU engine over the backend's renderer";
+  EXPECT_NE(notice.find("trains through the CPU engine"), std::string::npos) << notice;
 }
 
 TEST(Trainer, AnUnavailableBackendIsAClearError)
