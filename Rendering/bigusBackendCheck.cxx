@@ -1,6 +1,8 @@
 // A backend's self-check against the CPU renderer (see bigusBackendCheck.h).
 #include "bigusBackendCheck.h"
 
+#include "bigusGaussianMath.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -13,62 +15,25 @@ namespace
 constexpr int GridColumns = 20, GridRows = 14; // cells of 4 mm on the 80 x 56 mm slice
 constexpr double ImageTolerance = 1e-5, GradientTolerance = 1e-4;
 
-/// Unit quaternion (w, x, y, z) of a rotation matrix (Shepperd's method).
-void MatrixToQuaternion(const double R[3][3], float q[4])
-{
-  const double trace = R[0][0] + R[1][1] + R[2][2];
-  double w, x, y, z;
-  if (trace > 0)
-  {
-    const double s = 2 * std::sqrt(1 + trace);
-    w = s / 4;
-    x = (R[2][1] - R[1][2]) / s;
-    y = (R[0][2] - R[2][0]) / s;
-    z = (R[1][0] - R[0][1]) / s;
-  }
-  else if (R[0][0] > R[1][1] && R[0][0] > R[2][2])
-  {
-    const double s = 2 * std::sqrt(1 + R[0][0] - R[1][1] - R[2][2]);
-    w = (R[2][1] - R[1][2]) / s;
-    x = s / 4;
-    y = (R[0][1] + R[1][0]) / s;
-    z = (R[0][2] + R[2][0]) / s;
-  }
-  else if (R[1][1] > R[2][2])
-  {
-    const double s = 2 * std::sqrt(1 + R[1][1] - R[0][0] - R[2][2]);
-    w = (R[0][2] - R[2][0]) / s;
-    x = (R[0][1] + R[1][0]) / s;
-    y = s / 4;
-    z = (R[1][2] + R[2][1]) / s;
-  }
-  else
-  {
-    const double s = 2 * std::sqrt(1 + R[2][2] - R[0][0] - R[1][1]);
-    w = (R[1][0] - R[0][1]) / s;
-    x = (R[0][2] + R[2][0]) / s;
-    y = (R[1][2] + R[2][1]) / s;
-    z = s / 4;
-  }
-  q[0] = float(w);
-  q[1] = float(x);
-  q[2] = float(y);
-  q[3] = float(z);
 }
 
-/// What a renderer gives for the check: S, I and every gradient.
-struct Rendered
+FieldView HostField::View() const
 {
-  std::vector<float> S, I, Means, LogScales, Quaternions, Reflectivities, Attribution;
-  std::vector<int> Visible;
-};
+  FieldView v;
+  v.Count = static_cast<std::int64_t>(this->Reflectivities.size());
+  v.Means = this->Means.data();
+  v.LogScales = this->LogScales.data();
+  v.Quaternions = this->Quaternions.data();
+  v.Reflectivities = this->Reflectivities.data();
+  return v;
+}
 
-bool Render(Renderer& renderer, const FieldView& field, const SliceGeometry* slices, int count,
-  const RenderOptions& o, const std::vector<float>& dL, Rendered& out, std::string* error)
+bool RenderWithGradients(Renderer& renderer, const FieldView& field, const SliceGeometry* slices, int count,
+  const RenderOptions& o, const std::vector<float>& dL, RenderedGradients& out, std::string* error)
 {
   out.S.assign(dL.size(), 0.f);
   out.I.assign(dL.size(), 0.f);
-  if (!renderer.Forward(field, slices, count, o, out.S.data(), out.I.data(), nullptr, error))
+  if (!renderer.Forward(field, slices, count, o, out.S.data(), out.I.data(), &out.Forward, error))
   {
     return false;
   }
@@ -86,26 +51,11 @@ bool Render(Renderer& renderer, const FieldView& field, const SliceGeometry* sli
   g.Reflectivities = out.Reflectivities.data();
   g.Attribution = out.Attribution.data();
   g.VisibleCount = out.Visible.data();
-  return renderer.Backward(field, slices, count, o, out.S.data(), dL.data(), false, g, nullptr, error);
-}
-}
-
-FieldView HostField::View() const
-{
-  FieldView v;
-  v.Count = static_cast<std::int64_t>(this->Reflectivities.size());
-  v.Means = this->Means.data();
-  v.LogScales = this->LogScales.data();
-  v.Quaternions = this->Quaternions.data();
-  v.Reflectivities = this->Reflectivities.data();
-  return v;
+  return renderer.Backward(field, slices, count, o, out.S.data(), dL.data(), false, g, &out.Backward, error);
 }
 
-SliceGeometry HardCaseSlice(double shift)
+SliceGeometry RotatedSlice(int w, int h, double spacing, double degrees, const double axis[3], const double origin[3])
 {
-  // 20 degrees about the axis (0.3, 0.2, 1): a generic orientation.
-  const double axis[3] = { 0.3, 0.2, 1.0 }, degrees = 20, spacing = 0.5;
-  const double origin[3] = { 12.5, -31.25 + shift, 47.0 };
   const double n = std::sqrt(axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]);
   const double x = axis[0] / n, y = axis[1] / n, z = axis[2] / n;
   const double t = degrees * M_PI / 180, c = std::cos(t), s = std::sin(t), C = 1 - c;
@@ -121,9 +71,17 @@ SliceGeometry HardCaseSlice(double shift)
   }
   g.ImageToReference[12] = g.ImageToReference[13] = g.ImageToReference[14] = 0;
   g.ImageToReference[15] = 1;
-  g.Width = 2 * 4 * GridColumns;
-  g.Height = 2 * 4 * GridRows;
+  g.Width = w;
+  g.Height = h;
   return g;
+}
+
+SliceGeometry HardCaseSlice(double shift)
+{
+  // 20 degrees about the axis (0.3, 0.2, 1): a generic orientation.
+  const double axis[3] = { 0.3, 0.2, 1.0 };
+  const double origin[3] = { 12.5, -31.25 + shift, 47.0 };
+  return RotatedSlice(2 * 4 * GridColumns, 2 * 4 * GridRows, 0.5, 20, axis, origin);
 }
 
 HostField HardCaseField(double sigmaE, const std::vector<double>& ratios)
@@ -162,8 +120,10 @@ HostField HardCaseField(double sigmaE, const std::vector<double>& ratios)
               R[i][j] = F[i][0] * L[0][j] + F[i][1] * L[1][j] + F[i][2] * L[2][j];
             }
           }
-          float q[4];
-          MatrixToQuaternion(R, q);
+          const double u[3] = { R[0][0], R[1][0], R[2][0] }, v[3] = { R[0][1], R[1][1], R[2][1] },
+                       n[3] = { R[0][2], R[1][2], R[2][2] };
+          double q[4];
+          QuaternionFromAxes(u, v, n, q);
           // Its elevation standard deviation seen through the beam: sqrt(P2[z,z]) (bigusGaussianMath.h).
           const double elevation =
             offset * std::sqrt(std::pow(st * s[1], 2) + std::pow(ct * s[2], 2) + sigmaE * sigmaE);
@@ -173,7 +133,10 @@ HostField HardCaseField(double sigmaE, const std::vector<double>& ratios)
             f.Means.push_back(float(slice.ImageToReference[4 * k + 3] + x * F[k][0] + y * F[k][1] + elevation * F[k][2]));
             f.LogScales.push_back(float(std::log(s[k])));
           }
-          f.Quaternions.insert(f.Quaternions.end(), q, q + 4);
+          for (double c : q)
+          {
+            f.Quaternions.push_back(float(c));
+          }
           f.Reflectivities.push_back(cell % 2 ? -0.5f : 0.8f);
           ++cell;
         }
@@ -200,15 +163,15 @@ BackendCheck CheckRenderer(Renderer& renderer)
   }
   RenderOptions o;
   o.ElevationSigma = 0.5;
-  Rendered mine, cpu;
+  RenderedGradients mine, cpu;
   std::string error;
-  if (!Render(renderer, field.View(), slices, 2, o, dL, mine, &error))
+  if (!RenderWithGradients(renderer, field.View(), slices, 2, o, dL, mine, &error))
   {
     check.Detail = "the hard-case field failed to render: " + error;
     return check;
   }
   const std::unique_ptr<Renderer> reference = CreateCpuRenderer();
-  if (!Render(*reference, field.View(), slices, 2, o, dL, cpu, &error))
+  if (!RenderWithGradients(*reference, field.View(), slices, 2, o, dL, cpu, &error))
   {
     check.Detail = "the CPU renderer failed on the hard-case field: " + error; // never expected
     return check;

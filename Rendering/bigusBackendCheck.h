@@ -47,6 +47,27 @@ struct BIGUSRENDERING_EXPORT HostField
   FieldView View() const;
 };
 
+/// A slice of @p w x @p h pixels of @p spacing mm turned by @p degrees about @p axis (Rodrigues' formula),
+/// its pixel (0, 0) at @p origin (mm).
+BIGUSRENDERING_EXPORT SliceGeometry RotatedSlice(
+  int w, int h, double spacing, double degrees, const double axis[3], const double origin[3]);
+
+/// What a renderer gives for a field, a batch of slices and dL/dI: S, I, every gradient, the visible
+/// counts and the calls' statistics.
+struct RenderedGradients
+{
+  std::vector<float> S, I, Means, LogScales, Quaternions, Reflectivities, Attribution; ///< [pixels] and [N, ...]
+  std::vector<int> Visible;                                                            ///< [N]
+  RenderStats Forward, Backward;
+};
+
+/**
+ * Forward then Backward of @p renderer for @p count @p slices with dL/dI = @p dL ([pixels of every
+ * slice]); every gradient output is zeroed first. False with @p error when either call fails.
+ */
+BIGUSRENDERING_EXPORT bool RenderWithGradients(Renderer& renderer, const FieldView& field, const SliceGeometry* slices,
+  int count, const RenderOptions& options, const std::vector<float>& dL, RenderedGradients& out, std::string* error);
+
 /// The slice of the hard-case field: 160 x 112 pixels of 0.5 mm, moved @p shift mm along reference y.
 BIGUSRENDERING_EXPORT SliceGeometry HardCaseSlice(double shift = 0);
 

@@ -151,6 +151,37 @@ BIGUS_HD void QuaternionToMatrix(const double q[4], double R[3][3])
   R[2][2] = 1 - 2 * (x * x + y * y);
 }
 
+/**
+ * The unit quaternion (w, x, y, z) of the rotation whose columns are the orthonormal vectors u, v, n: the
+ * inverse of QuaternionToMatrix. Shepperd's method: the largest of the four pivots keeps it stable
+ * (S. W. Shepperd, "Quaternion from rotation matrix", J. Guidance and Control 1(3), 1978). Host only.
+ */
+inline void QuaternionFromAxes(const double u[3], const double v[3], const double n[3], double q[4])
+{
+  const double m00 = u[0], m11 = v[1], m22 = n[2];
+  const double trace = m00 + m11 + m22;
+  if (trace > 0)
+  {
+    const double s = 2 * std::sqrt(1 + trace);
+    q[0] = 0.25 * s, q[1] = (v[2] - n[1]) / s, q[2] = (n[0] - u[2]) / s, q[3] = (u[1] - v[0]) / s;
+  }
+  else if (m00 > m11 && m00 > m22)
+  {
+    const double s = 2 * std::sqrt(1 + m00 - m11 - m22);
+    q[0] = (v[2] - n[1]) / s, q[1] = 0.25 * s, q[2] = (v[0] + u[1]) / s, q[3] = (n[0] + u[2]) / s;
+  }
+  else if (m11 > m22)
+  {
+    const double s = 2 * std::sqrt(1 + m11 - m00 - m22);
+    q[0] = (n[0] - u[2]) / s, q[1] = (v[0] + u[1]) / s, q[2] = 0.25 * s, q[3] = (n[1] + v[2]) / s;
+  }
+  else
+  {
+    const double s = 2 * std::sqrt(1 + m22 - m00 - m11);
+    q[0] = (u[1] - v[0]) / s, q[1] = (n[0] + u[2]) / s, q[2] = (n[1] + v[2]) / s, q[3] = 0.25 * s;
+  }
+}
+
 /// dL/dq of R(q) given dL/dR, for the unit quaternion q (entry-wise derivative of the formula above).
 BIGUS_HD void QuaternionToMatrixBackward(const double q[4], const double G[3][3], double dq[4])
 {

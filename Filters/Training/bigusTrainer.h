@@ -1,8 +1,10 @@
 /**
  * @file bigusTrainer.h
- * @brief The BIGUS training loop (DESIGN section 4), independent of the VTK pipeline: initialisation
- *        (Harris or uniform random), Adam, losses, error-attributed densification (EA-D), adaptive
- *        growth stop, final pruning, NaN roll-back, checkpoints. vtkGaussianFieldTrainer wraps it.
+ * @brief The BIGUS training loop and its schedule (DESIGN section 4), independent of the VTK pipeline:
+ *        settings chosen from the data, the steps, when to densify (bigusDensification.h) and to solve
+ *        the reflectivities (bigusReflectivitySolve.h), adaptive growth stop, validation and early
+ *        stopping, the final prune, NaN roll-back, checkpoints. The first field comes from
+ *        bigusSeeding.h, frame metrics from bigusFrameMetrics.h. vtkGaussianFieldTrainer wraps it.
  *
  * Part of BIGUS::Training (public, not wrapped for Python). Deterministic for a given seed and thread
  * count on the CPU backend when scheduled by Iterations (TimeBudget alone follows the clock).
@@ -11,11 +13,14 @@
 #define bigusTrainer_h
 
 #include "bigusTrainingModule.h" // For export macro
+#include "bigusDensification.h"
 #include "bigusElevationSigma.h"
+#include "bigusFrameMetrics.h"
 #include "bigusGapFilling.h"
 #include "bigusImageLoss.h"
 #include "bigusImageMetrics.h"
 #include "bigusReflectivitySolve.h"
+#include "bigusSeeding.h"
 #include "bigusRenderer.h"
 #include "bigusTrainingEngine.h"
 
@@ -257,11 +262,8 @@ public:
   RenderOptions Options() const;
 
 private:
-  /// @p total seeds, drawn from the Harris response / uniformly (the ablation), into @p field.
-  void InitializeHarris(std::int64_t total, std::mt19937_64& rng, GaussianField& field);
-  void InitializeRandom(std::int64_t total, std::mt19937_64& rng, GaussianField& field);
-  /// The dense start (DenseInitialisation) of about @p total Gaussians; returns a description.
-  std::string InitializeGrid(std::int64_t total, GaussianField& field);
+  /// The seeds' shape for this run's data, settings and gamma (bigusSeeding.h).
+  SeedShape SeedShapeOf() const;
   bool FitReflectivityScale(std::string* error);
   /// The engine takes the seeded field; its reflectivities are then solved (ReflectivitySolve) or scaled.
   bool FitInitialReflectivities(std::string* error);
@@ -301,33 +303,6 @@ private:
   bool DensificationEnded = false; // the last Train call ended past the densification window
   std::vector<float> S; // scratch for RenderFrame
 };
-
-/**
- * Mean metrics (bigus::CompareImages) of one [H, W] image per frame against @p frames of @p data, each
- * inside that frame's mask; frames whose mask is empty are left out of the means (and @p image is not
- * called for them). @p image(m, f) gives the image for the m-th entry f of @p frames. @p perFrame, if
- * non-null, receives one entry per entry of @p frames: that frame's metrics, or empty for a frame left out.
- */
-BIGUSTRAINING_EXPORT ImageMetrics MeanFrameMetrics(const TrainingData& data, const std::vector<int>& frames,
-  const std::function<const float*(std::size_t, int)>& image,
-  std::vector<std::optional<ImageMetrics>>* perFrame = nullptr);
-
-/**
- * EA-D densification of Gaussian @p i (DESIGN section 4): appends one child and returns its index.
- * Split when its largest scale s exceeds @p splitScale (mm), cloned otherwise. The pair sits at +-s/2
- * (split) or +-s/10 (clone) along the major axis,
- * with r / 2 each. A clone keeps the scales, so the pair renders as the parent did and the offset only
- * keeps the copies from getting identical gradients. A split divides every scale by 1.6, as 3D
- * Gaussian splatting does (Kerbl et al. 2023): smaller children resolve finer detail and render
- * faster; the render loses part of the parent's integral, which the next steps restore. (A
- * moment-matched split, r / sqrt(3) each and only the major scale times sqrt(3/4), keeps the render
- * but gave 37.3 against 37.6 dB held-out PSNR after 10 minutes on the liver sweep, one run each: its
- * larger children made steps 10 % slower.)
- */
-BIGUSTRAINING_EXPORT std::int64_t DensifyGaussian(GaussianField& field, std::int64_t i, double splitScale);
-
-/// Quaternion (w, x, y, z) of the rotation whose columns are the unit vectors u, v, n.
-std::array<double, 4> QuaternionFromAxes(const double u[3], const double v[3], const double n[3]);
 
 /// Mean in-plane pixel spacing (mm) of a pose.
 double PixelSpacingOf(const std::array<double, 16>& pose);

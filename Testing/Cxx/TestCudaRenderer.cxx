@@ -30,45 +30,14 @@ using namespace bigus::test;
 
 namespace
 {
-/// What a renderer gives for a field, a batch of slices and dL/dI: S, I and every gradient.
-struct Rendered
-{
-  std::vector<float> S, I, Means, LogScales, Quaternions, Reflectivities, Attribution;
-  std::vector<int> Visible;
-  RenderStats Forward, Backward;
-};
+using Rendered = RenderedGradients;
 
 Rendered Render(Renderer& renderer, const FieldView& field, const std::vector<SliceGeometry>& slices,
   const RenderOptions& o, const std::vector<float>& dL)
 {
   Rendered out;
-  std::size_t pixels = 0;
-  for (const SliceGeometry& g : slices)
-  {
-    pixels += std::size_t(g.Width) * g.Height;
-  }
-  out.S.resize(pixels);
-  out.I.resize(pixels);
   std::string error;
-  const int count = static_cast<int>(slices.size());
-  EXPECT_TRUE(renderer.Forward(field, slices.data(), count, o, out.S.data(), out.I.data(), &out.Forward, &error))
-    << error;
-  const std::size_t n = static_cast<std::size_t>(field.Count);
-  out.Means.assign(3 * n, 0.f);
-  out.LogScales.assign(3 * n, 0.f);
-  out.Quaternions.assign(4 * n, 0.f);
-  out.Reflectivities.assign(n, 0.f);
-  out.Attribution.assign(n, 0.f);
-  out.Visible.assign(n, 0);
-  FieldGradients grads;
-  grads.Means = out.Means.data();
-  grads.LogScales = out.LogScales.data();
-  grads.Quaternions = out.Quaternions.data();
-  grads.Reflectivities = out.Reflectivities.data();
-  grads.Attribution = out.Attribution.data();
-  grads.VisibleCount = out.Visible.data();
-  EXPECT_TRUE(renderer.Backward(field, slices.data(), count, o, out.S.data(), dL.data(), false, grads, &out.Backward,
-    &error))
+  EXPECT_TRUE(RenderWithGradients(renderer, field, slices.data(), static_cast<int>(slices.size()), o, dL, out, &error))
     << error;
   return out;
 }

@@ -3,6 +3,7 @@
 #ifndef bigusRendererTestUtilities_h
 #define bigusRendererTestUtilities_h
 
+#include "bigusBackendCheck.h"
 #include "bigusReferenceRenderer.h"
 #include "bigusRenderer.h"
 
@@ -17,24 +18,7 @@ namespace test
 /// A slice pose: rotation about the axis (ax, ay, az) by `degrees`, then translation; spacing in mm.
 inline SliceGeometry MakeSlice(int w, int h, double spacing, double degrees, const double axis[3], const double origin[3])
 {
-  const double n = std::sqrt(axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]);
-  const double x = axis[0] / n, y = axis[1] / n, z = axis[2] / n;
-  const double t = degrees * M_PI / 180, c = std::cos(t), s = std::sin(t), C = 1 - c;
-  const double R[3][3] = { { c + x * x * C, x * y * C - z * s, x * z * C + y * s },
-    { y * x * C + z * s, c + y * y * C, y * z * C - x * s }, { z * x * C - y * s, z * y * C + x * s, c + z * z * C } };
-  SliceGeometry g;
-  for (int r = 0; r < 3; ++r)
-  {
-    g.ImageToReference[4 * r + 0] = R[r][0] * spacing;
-    g.ImageToReference[4 * r + 1] = R[r][1] * spacing;
-    g.ImageToReference[4 * r + 2] = R[r][2] * spacing;
-    g.ImageToReference[4 * r + 3] = origin[r];
-  }
-  g.ImageToReference[12] = g.ImageToReference[13] = g.ImageToReference[14] = 0;
-  g.ImageToReference[15] = 1;
-  g.Width = w;
-  g.Height = h;
-  return g;
+  return RotatedSlice(w, h, spacing, degrees, axis, origin);
 }
 
 /// Random field around the slice centre: means in a cube of side `extent` mm, scales 0.3..2 mm,
@@ -61,20 +45,8 @@ inline reference::FieldD RandomField(int n, const double centre[3], double exten
   return f;
 }
 
-struct FieldF
-{
-  std::vector<float> Means, LogScales, Quaternions, Reflectivities;
-  FieldView View() const
-  {
-    FieldView v;
-    v.Count = static_cast<std::int64_t>(this->Reflectivities.size());
-    v.Means = this->Means.data();
-    v.LogScales = this->LogScales.data();
-    v.Quaternions = this->Quaternions.data();
-    v.Reflectivities = this->Reflectivities.data();
-    return v;
-  }
-};
+/// A float field on the host (the backend check's HostField).
+using FieldF = HostField;
 
 inline FieldF ToFloat(const reference::FieldD& d)
 {

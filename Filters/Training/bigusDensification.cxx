@@ -1,0 +1,169 @@
+// Error-attributed densification and pruning (see bigusDensification.h and DESIGN section 4.5).
+#include "bigusDensification.h"
+
+#include "bigusGaussianMath.h"
+#include "bigusSliceFrame.h"
+
+#include "vtkSMPTools.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <vector>
+
+namespace bigus
+{
+namespace
+{
+constexpr double SplitShrink = 1.6; // every scale of a split Gaussian is divided by this
+}
+
+std::int64_t DensifyGaussian(GaussianField& field, std::int64_t i, double splitScale)
+{
+  const float* l = &field.LogScales[3 * i];
+  const int major = static_cast<int>(std::max_element(l, l + 3) - l);
+  const double s = std::exp(double(l[major]));
+  const bool large = s > splitScale;
+  double q[4] = { field.Quaternions[4 * i], field.Quaternions[4 * i + 1], field.Quaternions[4 * i + 2],
+    field.Quaternions[4 * i + 3] };
+  const double qn = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+  for (double& v : q)
+  {
+    v /= qn > 0 ? qn : 1;
+  }
+  double R[3][3];
+  QuaternionToMatrix(q, R);
+  // Split: children at +-s/2, every scale divided by 1.6 (as in 3D Gaussian splatting, Kerbl et al.
+  // 2023): smaller Gaussians resolve finer detail and render faster. r / 2 each.
+  const double offset = large ? 0.5 * s : 0.1 * s;
+  const float reflectivity = 0.5f * field.Reflectivities[i];
+  const std::int64_t child = field.Count();
+  field.Resize(child + 1);
+  for (int k = 0; large && k < 3; ++k)
+  {
+    field.LogScales[3 * i + k] -= static_cast<float>(std::log(SplitShrink));
+  }
+  field.CopyGaussian(i, child);
+  for (int k = 0; k < 3; ++k)
+  {
+    const double axis = R[k][major];
+    field.Means[3 * child + k] = static_cast<float>(field.Means[3 * i + k] - offset * axis);
+    field.Means[3 * i + k] = static_cast<float>(field.Means[3 * i + k] + offset * axis);
+  }
+  field.Reflectivities[i] = reflectivity;
+  field.Reflectivities[child] = reflectivity;
+  return child;
+}
+
+DensificationResult DensifyAndPrune(OptimizerState& G, bool grow, double percentile, std::int64_t maximumGaussians,
+  double splitScale, double pruneReflectivity)
+{
+  GaussianField& F = G.Field;
+  const std::int64_t n = F.Count();
+  std::vector<unsigned char> split(n, 0);
+  std::int64_t added = 0;
+  DensificationResult result;
+  if (grow)
+  {
+    std::vector<std::int64_t> order(n);
+    std::iota(order.begin(), order.end(), 0);
+    std::stable_sort(
+      order.begin(), order.end(), [&](std::int64_t a, std::int64_t b) { return G.Attribution[a] > G.Attribution[b]; });
+    const std::int64_t room = maximumGaussians - n;
+    const std::int64_t wanted = static_cast<std::int64_t>(n * percentile / 100.0);
+    added = std::max<std::int64_t>(0, std::min(room, wanted));
+    for (std::int64_t k = 0; k < added; ++k)
+    {
+      if (G.Attribution[order[k]] <= 0)
+      {
+        added = k;
+        break;
+      }
+      split[order[k]] = 1;
+    }
+    result.MaximumReached = room <= wanted;
+  }
+  for (std::int64_t i = 0; i < n; ++i)
+  {
+    if (split[i])
+    {
+      DensifyGaussian(F, i, splitScale);
+    }
+  }
+  // Children and split parents start with fresh optimiser moments; the others keep theirs. Their
+  // first steps are large (Adam with the global step's bias correction: 0.1 g / sqrt(0.001 g^2) = 3.2
+  // learning rates, carried on by the first moment), which costs a dip in PSNR right after a
+  // densification but lets the children move apart: inheriting the parent's second moment removed the
+  // dip but ended lower (liver, 10 minutes: 37.1 against 37.5 dB held out, 37.4 against 39.0 trained).
+  G.ResizeToField();
+  for (std::int64_t i = 0; i < n; ++i)
+  {
+    if (split[i])
+    {
+      G.FirstMoment.ZeroGaussian(i);
+      G.SecondMoment.ZeroGaussian(i);
+    }
+  }
+  // Prune negligible and never-seen Gaussians (not the ones just made).
+  std::vector<unsigned char> keep(F.Count(), 1);
+  for (std::int64_t i = 0; i < n; ++i)
+  {
+    if (!split[i] && (std::abs(F.Reflectivities[i]) < pruneReflectivity || G.SeenCount[i] == 0))
+    {
+      keep[i] = 0;
+    }
+  }
+  result.Added = added;
+  if (std::count(keep.begin(), keep.end(), 1) > 0)
+  {
+    result.Pruned = F.Count() - std::count(keep.begin(), keep.end(), 1);
+    G.Compact(keep);
+  }
+  G.Attribution.assign(F.Count(), 0.f);
+  G.SeenCount.assign(F.Count(), 0);
+  return result;
+}
+
+std::int64_t FinalPrune(OptimizerState& G, const TrainingData& data, const RenderOptions& o, double gamma,
+  double tolerance)
+{
+  // A Gaussian changes a pixel's scattering field by at most |r| amp, hence its intensity by at most
+  // gamma |r| amp (dI/dS <= gamma): remove it when that stays below the tolerance on every training frame.
+  const GaussianField& field = G.Field;
+  const std::int64_t n = field.Count();
+  const double sigmaE = EffectiveElevationSigma(o);
+  std::vector<unsigned char> keep(n, 0);
+  std::vector<SliceFrameD> frames;
+  for (int f : data.TrainFrames)
+  {
+    SliceFrameD frame;
+    double pixel[3];
+    ComputeRenderingFrame(data.Poses[f].data(), 90, frame.F, frame.Origin, pixel);
+    frames.push_back(frame);
+  }
+  vtkSMPTools::For(0, n, 256, [&](std::int64_t b, std::int64_t e) {
+    for (std::int64_t i = b; i < e; ++i)
+    {
+      const GaussianParams g = LoadGaussian(
+        field.Means.data(), field.LogScales.data(), field.Quaternions.data(), field.Reflectivities.data(), i);
+      const double r = o.NonNegativeReflectivity ? std::max(g.Reflectivity, 0.0) : std::abs(g.Reflectivity);
+      for (const SliceFrameD& frame : frames)
+      {
+        const Footprint f = SetupFootprint(g, frame, sigmaE, o.Cutoff, nullptr);
+        if (f.Visible && gamma * r * f.Amplitude > tolerance)
+        {
+          keep[i] = 1;
+          break;
+        }
+      }
+    }
+  });
+  const std::int64_t removed = n - std::count(keep.begin(), keep.end(), 1);
+  if (removed > 0)
+  {
+    G.Compact(keep);
+  }
+  return removed;
+}
+
+} // namespace bigus

@@ -1,0 +1,246 @@
+// The first field of a run: Harris, uniform and dense seeding (see bigusSeeding.h and DESIGN section 4).
+#include "bigusSeeding.h"
+
+#include "bigusGaussianMath.h"
+#include "bigusSliceFrame.h"
+
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <vector>
+
+namespace bigus
+{
+namespace
+{
+/// Uniform double in [0, 1) from the generator's raw output (identical on every platform).
+double Uniform(std::mt19937_64& rng)
+{
+  return (rng() >> 11) * (1.0 / 9007199254740992.0);
+}
+
+/// The point (mm) of pixel (i, j) of a frame with ImageToReference @p m.
+void Apply(const std::array<double, 16>& m, double i, double j, double out[3])
+{
+  for (int r = 0; r < 3; ++r)
+  {
+    out[r] = m[4 * r] * i + m[4 * r + 1] * j + m[4 * r + 3];
+  }
+}
+/// Appends one seed Gaussian lying in frame @p pose at pixel (i, j).
+void AddSeed(GaussianField& field, const std::array<double, 16>& pose, double i, double j, double inPlaneScale,
+  double elevationScale, double reflectivity)
+{
+  double p[3];
+  Apply(pose, i, j, p);
+  SliceFrame frame;
+  ComputeSliceFrame(pose.data(), 90, frame);
+  double q[4];
+  QuaternionFromAxes(frame.u, frame.v, frame.n, q);
+  for (int k = 0; k < 3; ++k)
+  {
+    field.Means.push_back(static_cast<float>(p[k]));
+  }
+  field.LogScales.push_back(static_cast<float>(std::log(inPlaneScale)));
+  field.LogScales.push_back(static_cast<float>(std::log(inPlaneScale)));
+  field.LogScales.push_back(static_cast<float>(std::log(elevationScale)));
+  for (double v : q)
+  {
+    field.Quaternions.push_back(static_cast<float>(v));
+  }
+  field.Reflectivities.push_back(static_cast<float>(reflectivity));
+}
+
+}
+
+double ScatteringOfIntensity(double intensity, double gamma)
+{
+  return -std::log(1.0 - std::min(intensity, 0.95)) / gamma;
+}
+
+void SeedHarris(const TrainingData& data, std::int64_t total, std::mt19937_64& rng, const SeedShape& shape,
+  GaussianField& field)
+{
+  // Seeds in proportion to the positive Harris response inside the mask, plus a uniform share
+  // (DESIGN section 4): structure (edges, corners, bright speckle) gets Gaussians first.
+  const int W = data.Width, H = data.Height;
+  const std::size_t pixels = std::size_t(W) * H;
+  const int frames = static_cast<int>(data.TrainFrames.size());
+  field = GaussianField();
+  std::vector<double> cumulative(pixels);
+  for (int n = 0; n < frames; ++n)
+  {
+    const int f = data.TrainFrames[n];
+    const float* frame = &data.Frames[pixels * f];
+    const unsigned char* mask = data.MaskOf(f);
+    cv::Mat image(H, W, CV_32F, const_cast<float*>(frame));
+    cv::Mat response;
+    cv::cornerHarris(image, response, 3, 3, 0.04);
+    double positive = 0, masked = 0;
+    for (std::size_t p = 0; p < pixels; ++p)
+    {
+      if (mask[p])
+      {
+        positive += std::max(0.0f, response.at<float>(static_cast<int>(p)));
+        masked += 1;
+      }
+    }
+    if (masked == 0)
+    {
+      continue; // a frame that sees nothing of the scene (volume protocol: a slice outside the data)
+    }
+    const double share = shape.UniformShare;
+    double running = 0;
+    for (std::size_t p = 0; p < pixels; ++p)
+    {
+      if (mask[p])
+      {
+        const double harris = positive > 0 ? std::max(0.0f, response.at<float>(static_cast<int>(p))) / positive : 0;
+        running += (1 - share) * harris + (positive > 0 ? share : 1.0) / masked;
+      }
+      cumulative[p] = running;
+    }
+    const std::int64_t seeds = total / frames + (n < total % frames ? 1 : 0);
+    for (std::int64_t s = 0; s < seeds; ++s)
+    {
+      const double target = Uniform(rng) * running;
+      const std::size_t p = std::upper_bound(cumulative.begin(), cumulative.end(), target) - cumulative.begin();
+      const std::size_t pixel = std::min(p, pixels - 1);
+      const double i = double(pixel % W) + Uniform(rng) - 0.5;
+      const double j = double(pixel / W) + Uniform(rng) - 0.5;
+      AddSeed(field, data.Poses[f], i, j, shape.InPlaneScale, shape.ElevationScale,
+        ScatteringOfIntensity(frame[pixel], shape.Gamma));
+    }
+  }
+}
+
+void SeedUniform(const TrainingData& data, std::int64_t total, std::mt19937_64& rng, const SeedShape& shape,
+  GaussianField& field)
+{
+  // Ablation: seeds uniform in the bounding box of every training frame's corners.
+  double lo[3] = { 1e300, 1e300, 1e300 }, hi[3] = { -1e300, -1e300, -1e300 };
+  for (int f : data.TrainFrames)
+  {
+    for (double i : { 0.0, data.Width - 1.0 })
+    {
+      for (double j : { 0.0, data.Height - 1.0 })
+      {
+        double p[3];
+        Apply(data.Poses[f], i, j, p);
+        for (int k = 0; k < 3; ++k)
+        {
+          lo[k] = std::min(lo[k], p[k]);
+          hi[k] = std::max(hi[k], p[k]);
+        }
+      }
+    }
+  }
+  const double scale = shape.InPlaneScale;
+  field = GaussianField();
+  for (std::int64_t s = 0; s < total; ++s)
+  {
+    for (int k = 0; k < 3; ++k)
+    {
+      field.Means.push_back(static_cast<float>(lo[k] + (hi[k] - lo[k]) * Uniform(rng)));
+      field.LogScales.push_back(static_cast<float>(std::log(scale)));
+    }
+    double q[4], n2 = 0;
+    for (double& v : q)
+    {
+      v = Uniform(rng) - 0.5;
+      n2 += v * v;
+    }
+    for (double v : q)
+    {
+      field.Quaternions.push_back(static_cast<float>(v / std::sqrt(n2)));
+    }
+    field.Reflectivities.push_back(static_cast<float>(ScatteringOfIntensity(0.5, shape.Gamma)));
+  }
+}
+
+std::string SeedGrid(const TrainingData& data, std::int64_t total, const SeedShape& shape, GaussianField& field)
+{
+  // Planes: the training frames in order, each kept when its centre lies at least sigma_E (or 1 pixel
+  // without a beam) from the plane of the last one kept, so that the planes' Gaussians do not repeat
+  // each other within a beam width.
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
+  const double minimumGap = std::max(shape.ElevationSigma, shape.PixelSpacing);
+  std::vector<int> planes;
+  std::vector<SliceFrame> frames;
+  double masked = 0, gaps = 0;
+  for (int f : data.TrainFrames)
+  {
+    SliceFrame frame;
+    ComputeSliceFrame(data.Poses[f].data(), 90, frame);
+    double centre[3];
+    Apply(data.Poses[f], 0.5 * (data.Width - 1), 0.5 * (data.Height - 1), centre);
+    if (!frames.empty())
+    {
+      const SliceFrame& last = frames.back();
+      double d = 0;
+      for (int k = 0; k < 3; ++k)
+      {
+        d += last.n[k] * (centre[k] - last.origin[k]);
+      }
+      if (std::abs(d) < minimumGap)
+      {
+        continue;
+      }
+      gaps += std::abs(d);
+    }
+    planes.push_back(f);
+    frames.push_back(frame);
+    const unsigned char* mask = data.MaskOf(f);
+    masked += static_cast<double>(std::count_if(mask, mask + pixels, [](unsigned char v) { return v != 0; }));
+  }
+  const double planeSpacing = planes.size() > 1 ? gaps / (planes.size() - 1) : minimumGap;
+  // Grid points at the centres of stride x stride blocks of pixels (pixel centres at integer indices:
+  // (stride - 1)/2 + a stride), kept inside the fan mask. The stride is real-valued, so that the grid's
+  // count falls short of the count wanted by less than a row and a column (an integer stride can land at
+  // a quarter of it): widened from the estimate in steps of 1 % until the count stays within it.
+  auto forEachPoint = [&](int f, double stride, const auto& visit) {
+    const unsigned char* mask = data.MaskOf(f);
+    for (double y = 0.5 * (stride - 1); y <= data.Height - 1; y += stride)
+    {
+      for (double x = 0.5 * (stride - 1); x <= data.Width - 1; x += stride)
+      {
+        const std::size_t p = std::size_t(std::lround(y)) * data.Width + std::size_t(std::lround(x));
+        if (mask[p])
+        {
+          visit(x, y, p);
+        }
+      }
+    }
+  };
+  auto gridCount = [&](double stride) {
+    std::int64_t c = 0;
+    for (int f : planes)
+    {
+      forEachPoint(f, stride, [&](double, double, std::size_t) { ++c; });
+    }
+    return c;
+  };
+  double stride = std::max(1.0, std::sqrt(masked / std::max<std::int64_t>(1, total)));
+  while (gridCount(stride) > total)
+  {
+    stride *= 1.01;
+  }
+  const double inPlane = 0.6 * stride * shape.PixelSpacing;
+  const double elevation = std::max(0.5 * planeSpacing, shape.PixelSpacing);
+  field = GaussianField();
+  for (int f : planes)
+  {
+    const float* frame = &data.Frames[pixels * f];
+    forEachPoint(f, stride, [&](double x, double y, std::size_t p) {
+      AddSeed(field, data.Poses[f], x, y, inPlane, elevation, ScatteringOfIntensity(frame[p], shape.Gamma));
+    });
+  }
+  char text[200];
+  std::snprintf(text, sizeof(text),
+    "%zu planes %.3g mm apart, every %.2f pixels, in-plane scale %.3g mm, elevation scale %.3g mm", planes.size(),
+    planeSpacing, stride, inPlane, elevation);
+  return text;
+}
+} // namespace bigus

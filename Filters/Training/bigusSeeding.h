@@ -1,0 +1,58 @@
+/**
+ * @file bigusSeeding.h
+ * @brief The first field of a run (DESIGN section 4): seeds drawn from the training frames' Harris
+ *        response, uniform seeds (the ablation), or the dense start on the frames' pixel grid.
+ *
+ * Every seed is a Gaussian lying in a training frame (its axes the frame's u, v, n), placed at a
+ * pixel, with in-plane scale SeedShape::InPlaneScale and the reflectivity that renders that pixel's
+ * intensity alone, S = -ln(1 - I) / gamma (ScatteringOfIntensity); the trainer then scales or solves
+ * the reflectivities of the whole field (bigus::Trainer::Initialize).
+ */
+#ifndef bigusSeeding_h
+#define bigusSeeding_h
+
+#include "bigusTrainingEngine.h"
+
+#include <cstdint>
+#include <random>
+#include <string>
+
+namespace bigus
+{
+
+/// How seeds are shaped.
+struct SeedShape
+{
+  double PixelSpacing = 1;   ///< mm, the training frames' mean in-plane pixel spacing
+  double InPlaneScale = 1;   ///< mm, Harris and uniform seeds' scale (InitialScalePixels x PixelSpacing)
+  double ElevationScale = 1; ///< mm, Harris seeds' scale across their frame (sigma_E, or a pixel without the beam)
+  double ElevationSigma = 0; ///< mm, the beam the field renders with (0: the thin plane); the dense start's planes
+  double UniformShare = 0.2; ///< Harris seeding: share of the seeds spread uniformly over the fan
+  double Gamma = 1;          ///< of I = 1 - exp(-gamma max(S, 0))
+};
+
+/// The scattering field that gives intensity @p intensity alone: S = -ln(1 - min(I, 0.95)) / gamma.
+double ScatteringOfIntensity(double intensity, double gamma);
+
+/**
+ * @p total seeds into @p field (replaced), in proportion to the positive Harris response (OpenCV
+ * cornerHarris, block 3, aperture 3, k 0.04) of each training frame inside its mask, plus the uniform
+ * share; an even share of @p total per frame, pixel positions jittered within the pixel by @p rng.
+ */
+void SeedHarris(const TrainingData& data, std::int64_t total, std::mt19937_64& rng, const SeedShape& shape,
+  GaussianField& field);
+
+/// The ablation: @p total seeds uniform in the bounding box of the training frames' corners, random rotations.
+void SeedUniform(const TrainingData& data, std::int64_t total, std::mt19937_64& rng, const SeedShape& shape,
+  GaussianField& field);
+
+/**
+ * The dense start: Gaussians on the training frames' pixel grid, about @p total of them (never more),
+ * on the planes at least a beam width (or a pixel) apart, in-plane scale 0.6 stride, elevation scale half
+ * the planes' spacing. Returns one line that says what was made.
+ */
+std::string SeedGrid(const TrainingData& data, std::int64_t total, const SeedShape& shape, GaussianField& field);
+
+} // namespace bigus
+
+#endif
