@@ -1,10 +1,11 @@
-// CUDA backend of the beam-integrated Gaussian renderer (see bigusCudaRenderer.h): phase 1 one thread
-// per Gaussian, binning by CUB radix sort on the tile id, phase 2 one block per tile, backward one
-// warp per Gaussian. The maths is bigusGaussianMath.h and bigusRasterGeometry.h, as on the CPU.
+// CUDA backend of the beam-integrated Gaussian renderer (see bigusCudaRenderer.h), host side: device
+// buffers, uploads and downloads, the CUB scan and sort, and the order of the kernels, which live one
+// file per family behind launchers on device pointers (bigusCudaKernels.h: binning, forward, backward).
 #include "bigusCudaRenderer.h"
 
 #include "bigusBackend.h"
 #include "bigusCudaDevice.h"
+#include "bigusCudaKernels.h"
 #include "bigusGaussianMath.h"
 #include "bigusRasterGeometry.h"
 
@@ -25,271 +26,16 @@ namespace cuda
 
 namespace
 {
-constexpr int SetupBlock = 256;
-constexpr int BackwardBlock = 256; // 8 warps: 8 Gaussians per block
-constexpr int WarpSize = 32;
-constexpr int RasterThreads = TileSize * TileSize;
-
 double Now()
 {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
-
-/// The field on the device, structure of arrays as in FieldView.
-struct DeviceField
-{
-  const float* Means;          // [N, 3] mm
-  const float* LogScales;      // [N, 3] ln mm
-  const float* Quaternions;    // [N, 4] w, x, y, z
-  const float* Reflectivities; // [N]
-  std::int64_t Count;
-};
-
-/// Running counters of a call: visible Gaussians, pixel evaluations.
-struct Counters
-{
-  unsigned long long Visible;
-  unsigned long long Evaluations;
-};
 
 constexpr std::int64_t FieldBytes = 11 * sizeof(float);
 constexpr std::int64_t GradientBytes = 12 * sizeof(float) + sizeof(int);
 constexpr std::int64_t BinningBytes = sizeof(Splat) + 2 * sizeof(unsigned long long);
 constexpr std::int64_t EntryBytes = 4 * sizeof(std::uint32_t); // keys and values, unsorted and sorted
 constexpr std::int64_t PixelBytes = 3 * sizeof(float);          // forward S, I; backward S, dL, dL/dS
-
-// ------------------------------------------------------------------------------------------------
-// Kernels.
-
-/// Phase 1: footprint and number of tiles touched of Gaussian i (0 when culled).
-__global__ void SetupKernel(DeviceField field, PreparedSlice s, double sigmaE, double cutoff, bool nonNegative,
-  Splat* splats, unsigned long long* touched, Counters* counters)
-{
-  const std::int64_t i = std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (i >= field.Count)
-  {
-    return;
-  }
-  unsigned long long tiles = 0;
-  const GaussianParams g = LoadGaussian(field.Means, field.LogScales, field.Quaternions, field.Reflectivities, i);
-  const double r = EffectiveReflectivity(g.Reflectivity, nonNegative);
-  if (r != 0)
-  {
-    const Footprint f = SetupFootprint(g, s.Frame, sigmaE, cutoff, nullptr);
-    int box[4];
-    if (f.Visible && FootprintBox(f, s, box))
-    {
-      splats[i] = MakeSplat(f, r, box);
-      tiles = static_cast<unsigned long long>(box[1] / TileSize - box[0] / TileSize + 1) *
-        static_cast<unsigned long long>(box[3] / TileSize - box[2] / TileSize + 1);
-      atomicAdd(&counters->Visible, 1ull);
-    }
-  }
-  touched[i] = tiles;
-}
-
-/// Binning: Gaussian i writes (tile, i) for every tile it touches, at its offset of the inclusive scan.
-__global__ void EmitKernel(const Splat* splats, const unsigned long long* touched,
-  const unsigned long long* inclusive, std::int64_t count, int tilesX, std::uint32_t* keys, std::uint32_t* values)
-{
-  const std::int64_t i = std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (i >= count || touched[i] == 0)
-  {
-    return;
-  }
-  const Splat sp = splats[i];
-  unsigned long long next = inclusive[i] - touched[i];
-  for (int ty = sp.Y0 / TileSize; ty <= sp.Y1 / TileSize; ++ty)
-  {
-    for (int tx = sp.X0 / TileSize; tx <= sp.X1 / TileSize; ++tx)
-    {
-      keys[next] = static_cast<std::uint32_t>(ty * tilesX + tx);
-      values[next] = static_cast<std::uint32_t>(i);
-      ++next;
-    }
-  }
-}
-
-/// Tile t's entries are [start[t], end[t]) of the sorted lists (both zero for an empty tile).
-__global__ void TileRangeKernel(const std::uint32_t* keys, std::int64_t entries, int* start, int* end)
-{
-  const std::int64_t e = std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (e >= entries)
-  {
-    return;
-  }
-  const std::uint32_t t = keys[e];
-  if (e == 0 || keys[e - 1] != t)
-  {
-    start[t] = static_cast<int>(e);
-  }
-  if (e == entries - 1 || keys[e + 1] != t)
-  {
-    end[t] = static_cast<int>(e + 1);
-  }
-}
-
-/// Sum of @p v over the warp (integer: exact in any order).
-__device__ unsigned long long WarpSum(unsigned long long v)
-{
-  for (int offset = WarpSize / 2; offset > 0; offset /= 2)
-  {
-    v += __shfl_down_sync(0xffffffffu, v, offset);
-  }
-  return v;
-}
-
-/**
- * Phase 2: one block per tile, one thread per pixel. The tile's footprints are staged in shared memory
- * RasterThreads at a time and every pixel adds them in Gaussian index order, as the CPU backend does,
- * with offsets relative to the tile's first pixel.
- */
-__global__ void RasterKernel(const Splat* splats, const std::uint32_t* values, const int* start,
-  const int* end, PreparedSlice s, float gamma, float* S, float* I, Counters* counters)
-{
-  __shared__ Splat staged[RasterThreads];
-  const int tile = blockIdx.x;
-  const int q = threadIdx.x, r = threadIdx.y;
-  const int I0 = (tile % s.TilesX) * TileSize, J0 = (tile / s.TilesX) * TileSize;
-  const int i = I0 + q, j = J0 + r;
-  const bool inside = i < s.Width && j < s.Height;
-  const double X0 = I0 * s.PixelToPlane[0] + J0 * s.PixelToPlane[1];
-  const double Y0 = J0 * s.PixelToPlane[2];
-  const float P0 = static_cast<float>(s.PixelToPlane[0]);
-  const float P1 = static_cast<float>(s.PixelToPlane[1]);
-  const float P2 = static_cast<float>(s.PixelToPlane[2]);
-  const float column = q * P0;
-  float acc = 0;
-  unsigned long long evaluations = 0;
-  const int first = start[tile], last = end[tile];
-  for (int base = first; base < last; base += RasterThreads)
-  {
-    const int n = min(RasterThreads, last - base);
-    const int t = r * TileSize + q;
-    if (t < n)
-    {
-      staged[t] = splats[values[base + t]];
-    }
-    __syncthreads();
-    if (inside)
-    {
-      for (int k = 0; k < n; ++k)
-      {
-        const Splat& sp = staged[k];
-        if (i < sp.X0 || i > sp.X1 || j < sp.Y0 || j > sp.Y1)
-        {
-          continue;
-        }
-        const float dcx = static_cast<float>(sp.Cx - X0);
-        const float dcy = static_cast<float>(sp.Cy - Y0);
-        const float dy = r * P2 - dcy;
-        const float dx = column + (r * P1 - dcx);
-        const float form = AxesForm(sp.Cos, sp.Sin, sp.InvMajor, sp.InvMinor, dx, dy);
-        const float value = sp.Weight * FastExp(-0.5f * form);
-        acc += form <= sp.CutoffSquared ? value : 0.0f;
-        ++evaluations;
-      }
-    }
-    __syncthreads();
-  }
-  if (inside)
-  {
-    const std::int64_t p = std::int64_t(j) * s.Width + i;
-    S[p] = acc;
-    if (I)
-    {
-      I[p] = ImageFromScattering(acc, gamma);
-    }
-  }
-  evaluations = WarpSum(evaluations);
-  if (((r * TileSize + q) & (WarpSize - 1)) == 0 && evaluations)
-  {
-    atomicAdd(&counters->Evaluations, evaluations);
-  }
-}
-
-/// dL/dS of every pixel: @p dL itself, or dL/dI times dI/dS (in double, as on the CPU).
-__global__ void ScatteringGradientKernel(const float* S, const float* dL, std::int64_t pixels, bool withRespectToS,
-  double gamma, float* gS)
-{
-  const std::int64_t p = std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (p < pixels)
-  {
-    gS[p] = withRespectToS ? dL[p] : static_cast<float>(dL[p] * ImageFromScatteringDerivative<double>(S[p], gamma));
-  }
-}
-
-/**
- * Backward, one warp per Gaussian: every lane sets the footprint up (the same double arithmetic), the
- * lanes share the pixels of its bounding box, each keeps float partial sums of PixelWeightBackward's
- * terms that it flushes into double every few pixels, and a fixed butterfly of shuffles reduces them;
- * lane 0 runs the setup's backward and adds to the Gaussian's gradients, which no other warp touches.
- */
-__global__ void BackwardKernel(DeviceField field, PreparedSlice s, double sigmaE, double cutoff, bool nonNegative,
-  const float* gS, FieldGradients out, Counters* counters)
-{
-  const std::int64_t i = (std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x) / WarpSize;
-  const int lane = threadIdx.x & (WarpSize - 1);
-  if (i >= field.Count)
-  {
-    return; // the whole warp: i is the same for its 32 lanes
-  }
-  const GaussianParams g = LoadGaussian(field.Means, field.LogScales, field.Quaternions, field.Reflectivities, i);
-  const double r = EffectiveReflectivity(g.Reflectivity, nonNegative);
-  SetupCache cache;
-  const Footprint f = SetupFootprint(g, s.Frame, sigmaE, cutoff, &cache);
-  int box[4];
-  if (!f.Visible || !FootprintBox(f, s, box))
-  {
-    return;
-  }
-  const BoxFootprint fp = MakeBoxFootprint(f, s, box, r);
-  const int boxWidth = box[1] - box[0] + 1;
-  const std::int64_t boxPixels = std::int64_t(boxWidth) * (box[3] - box[2] + 1);
-  double sum[7] = { 0, 0, 0, 0, 0, 0, 0 };
-  float part[7] = { 0, 0, 0, 0, 0, 0, 0 };
-  int pending = 0;
-  for (std::int64_t k = lane; k < boxPixels; k += WarpSize)
-  {
-    const int row = static_cast<int>(k / boxWidth), col = static_cast<int>(k % boxWidth);
-    const float dy = row * fp.P2 - fp.Dcy;
-    const float dx = col * fp.P0 + (row * fp.P1 - fp.Dcx);
-    const float form = AxesForm(fp.Axes[0], fp.Axes[1], fp.Axes[2], fp.Axes[3], dx, dy);
-    if (form <= fp.CutoffSquared)
-    {
-      const float gv = gS[std::int64_t(box[2] + row) * s.Width + box[0] + col];
-      PixelWeightBackward(gv, fp.Weight, FastExp(-0.5f * form), fp.A, fp.B, fp.C, dx, dy, part, 1);
-      if (++pending == 8)
-      {
-        for (int t = 0; t < 7; ++t)
-        {
-          sum[t] += part[t];
-          part[t] = 0;
-        }
-        pending = 0;
-      }
-    }
-  }
-  for (int t = 0; t < 7; ++t)
-  {
-    sum[t] += part[t];
-    for (int offset = WarpSize / 2; offset > 0; offset /= 2)
-    {
-      sum[t] += __shfl_xor_sync(0xffffffffu, sum[t], offset);
-    }
-  }
-  if (lane != 0)
-  {
-    return;
-  }
-  AddGaussianGradients(f, cache, s.Frame, sigmaE, sum, r, g.Reflectivity, nonNegative, out, i);
-  if (out.VisibleCount)
-  {
-    out.VisibleCount[i] += 1;
-  }
-  atomicAdd(&counters->Visible, 1ull);
-  atomicAdd(&counters->Evaluations, static_cast<unsigned long long>(boxPixels));
-}
 
 // ------------------------------------------------------------------------------------------------
 // Host side.
@@ -339,11 +85,6 @@ struct Buffer
   }
 };
 
-std::int64_t Blocks(std::int64_t threads, int block)
-{
-  return (threads + block - 1) / block;
-}
-
 class CudaRenderer : public Renderer
 {
 public:
@@ -382,10 +123,9 @@ public:
       }
       const double t1 = Now();
       const int tiles = s.TilesX * s.TilesY;
-      RasterKernel<<<tiles, dim3(TileSize, TileSize), 0, this->Stream>>>(this->Splats.As<Splat>(),
-        this->SortedValues.As<std::uint32_t>(), this->TileStart.As<int>(), this->TileEnd.As<int>(), s,
-        static_cast<float>(options.Gamma), this->Image.As<float>(), I ? this->Image.As<float>() + pixels : nullptr,
-        this->Count.As<Counters>());
+      LaunchRaster(tiles, this->Splats.As<Splat>(), this->SortedValues.As<std::uint32_t>(), this->TileStart.As<int>(),
+        this->TileEnd.As<int>(), s, static_cast<float>(options.Gamma), this->Image.As<float>(),
+        I ? this->Image.As<float>() + pixels : nullptr, this->Count.As<Counters>(), this->Stream);
       Counters counters;
       if (!Check(cudaGetLastError(), "raster kernel", error) ||
         !Check(cudaMemcpyAsync(S + offset, this->Image.Data, sizeof(float) * pixels, cudaMemcpyDeviceToHost,
@@ -468,12 +208,11 @@ public:
       {
         return false;
       }
-      ScatteringGradientKernel<<<Blocks(pixels, SetupBlock), SetupBlock, 0, this->Stream>>>(
-        dS, dG, pixels, gradientIsWithRespectToS, options.Gamma, dGS);
+      LaunchScatteringGradient(dS, dG, pixels, gradientIsWithRespectToS, options.Gamma, dGS, this->Stream);
       if (n > 0)
       {
-        BackwardKernel<<<Blocks(n * WarpSize, BackwardBlock), BackwardBlock, 0, this->Stream>>>(this->Field(n), s,
-          sigmaE, options.Cutoff, options.NonNegativeReflectivity, dGS, out, this->Count.As<Counters>());
+        LaunchBackward(this->Field(n), s, sigmaE, options.Cutoff, options.NonNegativeReflectivity, dGS, out,
+          this->Count.As<Counters>(), this->Stream);
       }
       if (!Check(cudaGetLastError(), "backward kernel", error))
       {
@@ -639,8 +378,8 @@ private:
     {
       return true;
     }
-    SetupKernel<<<Blocks(n, SetupBlock), SetupBlock, 0, this->Stream>>>(this->Field(n), s, sigmaE, options.Cutoff,
-      options.NonNegativeReflectivity, this->Splats.As<Splat>(), touched, this->Count.As<Counters>());
+    LaunchSetup(this->Field(n), s, sigmaE, options.Cutoff, options.NonNegativeReflectivity, this->Splats.As<Splat>(),
+      touched, this->Count.As<Counters>(), this->Stream);
     std::size_t scanBytes = 0;
     if (!Check(cudaGetLastError(), "setup kernel", error) ||
       !Check(cub::DeviceScan::InclusiveSum(nullptr, scanBytes, touched, inclusive, n, this->Stream), "scan size", error) ||
@@ -695,8 +434,8 @@ private:
     {
       return false;
     }
-    EmitKernel<<<Blocks(n, SetupBlock), SetupBlock, 0, this->Stream>>>(this->Splats.As<Splat>(), touched,
-      inclusive, n, s.TilesX, this->Keys.As<std::uint32_t>(), this->Values.As<std::uint32_t>());
+    LaunchEmit(this->Splats.As<Splat>(), touched, inclusive, n, s.TilesX, this->Keys.As<std::uint32_t>(),
+      this->Values.As<std::uint32_t>(), this->Stream);
     if (!Check(cudaGetLastError(), "binning kernel", error) ||
       !Check(cub::DeviceRadixSort::SortPairs(this->Temporary.Data, sortBytes, this->Keys.As<std::uint32_t>(),
                this->SortedKeys.As<std::uint32_t>(), this->Values.As<std::uint32_t>(),
@@ -705,8 +444,8 @@ private:
     {
       return false;
     }
-    TileRangeKernel<<<Blocks(entries, SetupBlock), SetupBlock, 0, this->Stream>>>(
-      this->SortedKeys.As<std::uint32_t>(), entries, this->TileStart.As<int>(), this->TileEnd.As<int>());
+    LaunchTileRange(this->SortedKeys.As<std::uint32_t>(), entries, this->TileStart.As<int>(), this->TileEnd.As<int>(),
+      this->Stream);
     return Check(cudaGetLastError(), "tile range kernel", error);
   }
 

@@ -176,6 +176,15 @@ BackendCheck CheckRenderer(Renderer& renderer)
     check.Detail = "the CPU renderer failed on the hard-case field: " + error; // never expected
     return check;
   }
+  check = CompareRenders(mine, cpu, ImageTolerance, GradientTolerance);
+  check.Backend = renderer.GetName();
+  return check;
+}
+
+BackendCheck CompareRenders(
+  const RenderedGradients& mine, const RenderedGradients& cpu, double imageTolerance, double gradientTolerance)
+{
+  BackendCheck check;
   bool finite = true;
   for (std::size_t p = 0; p < cpu.I.size(); ++p)
   {
@@ -226,13 +235,13 @@ BackendCheck CheckRenderer(Renderer& renderer)
     visible += mine.Visible[i];
     visibleCpu += cpu.Visible[i];
   }
-  check.Passed = finite && check.ImageDifference <= ImageTolerance && check.GradientDifference <= GradientTolerance &&
+  check.Passed = finite && check.ImageDifference <= imageTolerance && check.GradientDifference <= gradientTolerance &&
     visible == visibleCpu;
   char text[300];
   std::snprintf(text, sizeof(text),
     "max |delta I| %.3g (bound %.0e), max gradient difference %.3g of the Gaussian's own (bound %.0e; worst: %s of "
     "Gaussian %zu), visible %lld (CPU %lld)%s",
-    check.ImageDifference, ImageTolerance, check.GradientDifference, GradientTolerance, worstGroup, worstGaussian,
+    check.ImageDifference, imageTolerance, check.GradientDifference, gradientTolerance, worstGroup, worstGaussian,
     visible, visibleCpu, finite ? "" : ", non-finite values");
   check.Detail = text;
   return check;

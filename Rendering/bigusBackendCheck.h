@@ -84,6 +84,15 @@ BIGUSRENDERING_EXPORT HostField HardCaseField(double sigmaE, const std::vector<d
 BIGUSRENDERING_EXPORT BackendCheck CheckRenderer(Renderer& renderer);
 
 /**
+ * @p mine against @p cpu (the same field, slices, options and dL/dI) as the check compares them, with
+ * the bounds @p imageTolerance on max |delta I| and @p gradientTolerance on each Gaussian's gradients
+ * relative to its own (floor: 1e-3 of the group's largest), visible entries equal in total, nothing
+ * NaN or infinite. Sizes must match (the same field and slices).
+ */
+BIGUSRENDERING_EXPORT BackendCheck CompareRenders(
+  const RenderedGradients& mine, const RenderedGradients& cpu, double imageTolerance, double gradientTolerance);
+
+/**
  * The self-check of registered backend @p name, run once per process (later calls return the first
  * result). "cpu" is the reference: it passes without running. An unknown or unusable backend fails
  * with the registry's reason.

@@ -1,0 +1,88 @@
+/**
+ * @file bigusCudaKernels.h
+ * @brief The CUDA renderer's kernels, one file per family, behind host launchers that take device
+ *        pointers and a stream (private to BIGUS::Cuda): binning (bigusCudaBinning.cu: phase 1's
+ *        footprints, the (tile, Gaussian) entries, the tile ranges of the sorted entries), forward
+ *        (bigusCudaForward.cu: phase 2, one block per tile) and backward (bigusCudaBackward.cu: dL/dS and
+ *        one warp per Gaussian). bigusCudaRenderer.cu owns the buffers, the CUB scan and sort, and the
+ *        order of the launches; a device-resident training engine can call the same launchers.
+ *
+ * A launcher only enqueues its kernel on @p stream (the caller checks cudaGetLastError). Every pointer is
+ * device memory; shapes as in bigusRenderer.h.
+ */
+#ifndef bigusCudaKernels_h
+#define bigusCudaKernels_h
+
+#include "bigusRasterGeometry.h"
+#include "bigusRenderer.h"
+
+#include <cuda_runtime.h>
+
+#include <cstdint>
+
+namespace bigus
+{
+namespace cuda
+{
+
+constexpr int SetupBlock = 256;
+constexpr int BackwardBlock = 256; // 8 warps: 8 Gaussians per block
+constexpr int WarpSize = 32;
+constexpr int RasterThreads = TileSize * TileSize;
+
+/// The field on the device, structure of arrays as in FieldView.
+struct DeviceField
+{
+  const float* Means;          // [N, 3] mm
+  const float* LogScales;      // [N, 3] ln mm
+  const float* Quaternions;    // [N, 4] w, x, y, z
+  const float* Reflectivities; // [N]
+  std::int64_t Count;
+};
+
+/// Running counters of a call: visible Gaussians, pixel evaluations.
+struct Counters
+{
+  unsigned long long Visible;
+  unsigned long long Evaluations;
+};
+
+/// Blocks of @p block threads that cover @p threads.
+inline std::int64_t Blocks(std::int64_t threads, int block)
+{
+  return (threads + block - 1) / block;
+}
+
+// Binning (bigusCudaBinning.cu).
+
+/// Phase 1 on slice @p s: Gaussian i's splat, and in @p touched [N] the number of tiles it touches (0 culled).
+void LaunchSetup(const DeviceField& field, const PreparedSlice& s, double sigmaE, double cutoff, bool nonNegative,
+  Splat* splats, unsigned long long* touched, Counters* counters, cudaStream_t stream);
+/// Gaussian i writes (tile, i) for every tile it touches into @p keys / @p values at its offset of the
+/// inclusive scan @p inclusive [N] of @p touched.
+void LaunchEmit(const Splat* splats, const unsigned long long* touched, const unsigned long long* inclusive,
+  std::int64_t count, int tilesX, std::uint32_t* keys, std::uint32_t* values, cudaStream_t stream);
+/// Tile t's entries are [start[t], end[t]) of the @p entries sorted @p keys (@p start, @p end zeroed before).
+void LaunchTileRange(
+  const std::uint32_t* keys, std::int64_t entries, int* start, int* end, cudaStream_t stream);
+
+// Forward (bigusCudaForward.cu).
+
+/// Phase 2: S (and I = 1 - exp(-gamma max(S, 0)) when @p I is not null) of slice @p s, [H, W], from the
+/// splats listed per tile by @p values, @p start and @p end; @p tiles = s.TilesX s.TilesY.
+void LaunchRaster(int tiles, const Splat* splats, const std::uint32_t* values, const int* start, const int* end,
+  const PreparedSlice& s, float gamma, float* S, float* I, Counters* counters, cudaStream_t stream);
+
+// Backward (bigusCudaBackward.cu).
+
+/// dL/dS of @p pixels pixels into @p gS: @p dL itself (@p withRespectToS) or dL/dI dI/dS.
+void LaunchScatteringGradient(const float* S, const float* dL, std::int64_t pixels, bool withRespectToS,
+  double gamma, float* gS, cudaStream_t stream);
+/// Accumulates every Gaussian's gradients (and attribution, visible count) from @p gS of slice @p s.
+void LaunchBackward(const DeviceField& field, const PreparedSlice& s, double sigmaE, double cutoff,
+  bool nonNegative, const float* gS, FieldGradients out, Counters* counters, cudaStream_t stream);
+
+} // namespace cuda
+} // namespace bigus
+
+#endif
