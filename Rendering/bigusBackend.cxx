@@ -37,6 +37,8 @@ std::vector<Entry>& Registry(std::unique_lock<std::mutex>& lock)
   return entries;
 }
 
+BackendCheck CheckBackendOnce(const std::string& name, Renderer* renderer); // below, with CheckBackend
+
 /// The self-checks run so far, by backend (CheckBackend), under their own lock: a check runs a
 /// backend's factory, which may register.
 std::map<std::string, BackendCheck>& Checks(std::unique_lock<std::mutex>& lock)
@@ -217,7 +219,7 @@ std::unique_ptr<Renderer> CreateRenderer(const std::string& name, std::string* e
     std::string warning;
     if (e.Name != "cpu")
     {
-      const BackendCheck check = CheckBackend(e.Name);
+      const BackendCheck check = CheckBackendOnce(e.Name, renderer.get());
       if (!check.Passed)
       {
         warning = "backend '" + e.Name + "' failed its self-check against the CPU renderer: " + check.Detail;
@@ -241,7 +243,13 @@ std::unique_ptr<Renderer> CreateRenderer(const std::string& name, std::string* e
   return nullptr;
 }
 
-BackendCheck CheckBackend(const std::string& name)
+namespace
+{
+/**
+ * The self-check of backend @p name, run once (then cached) on @p renderer when given (an instance the
+ * caller just made, so that checking makes no second one) or on one its factory makes.
+ */
+BackendCheck CheckBackendOnce(const std::string& name, Renderer* renderer)
 {
   LoadBackendModules(); // they register (taking the checks' lock) before that lock is held here
   std::unique_lock<std::mutex> lock;
@@ -257,6 +265,11 @@ BackendCheck CheckBackend(const std::string& name)
   {
     check.Passed = true;
     check.Detail = "the reference renderer";
+  }
+  else if (renderer)
+  {
+    check = CheckRenderer(*renderer);
+    check.Backend = name;
   }
   else
   {
@@ -283,6 +296,12 @@ BackendCheck CheckBackend(const std::string& name)
   }
   checks[name] = check;
   return check;
+}
+}
+
+BackendCheck CheckBackend(const std::string& name)
+{
+  return CheckBackendOnce(name, nullptr);
 }
 
 } // namespace bigus

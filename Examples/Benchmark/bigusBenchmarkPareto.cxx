@@ -1,0 +1,200 @@
+// `bigus benchmark`: held-out PSNR against Gaussians and time, the adaptive field against the regular grid
+// (bigusBenchmarkSections.h).
+#include "bigusBenchmarkSections.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace bigus::benchmark
+{
+namespace
+{
+/// One run of the Pareto section: a trainer to a time budget, or the regular grid (no training).
+struct ParetoRun
+{
+  std::string Method;
+  double Budget = NaN;         ///< s: the trainer's time budget (NaN for the grid)
+  std::int64_t Requested = 0;  ///< the grid: the count asked for (the count an adaptive run ended with)
+  AblationRun Run;
+  bool CountFront = false;     ///< no other run has at most its Gaussians and a higher held-out PSNR
+  bool TimeFront = false;      ///< no other run took at most its time and has a higher held-out PSNR
+};
+
+/// Marks the runs on the front of held-out PSNR against @p cost (lower cost, higher PSNR).
+void MarkFront(std::vector<ParetoRun>& runs, double AblationRun::*cost, bool ParetoRun::*front)
+{
+  for (ParetoRun& a : runs)
+  {
+    a.*front = std::none_of(runs.begin(), runs.end(), [&](const ParetoRun& b) {
+      return &a != &b && b.Run.*cost <= a.Run.*cost && b.Run.HeldOut.PSNR > a.Run.HeldOut.PSNR;
+    });
+  }
+}
+}
+
+bool ParetoSection(BenchmarkContext& context, std::string* error)
+{
+  const std::vector<Sweep>& sweeps = context.Sweeps;
+  const bool quick = context.Quick;
+  VolumeProtocol vp;
+  if (!MakeVolumeProtocol(context.Root, quick, vp, error))
+  {
+    return false;
+  }
+  Report& report = context.Report;
+  // A solve passes over every training frame twice per iteration: --quick takes the 20 liver frames.
+  const std::vector<AblationExperiment> experiments = { HoldOutExperiment(sweeps[quick ? 3 : 0], 0),
+    HoldOutExperiment(sweeps[1], 0), VolumeExperiment(vp, 0) };
+  const std::vector<double> budgets = quick ? std::vector<double>{ 3 } : std::vector<double>{ 30, 120 };
+  const std::pair<std::string, bool> adaptive[] = { { "Adam alone (defaults)", false },
+    { "variable projection", true } };
+  const std::string grid = "regular grid + solve";
+
+  std::ostringstream& md = report.Markdown;
+  md << "\n## Held-out PSNR against Gaussians and time: the adaptive field and the regular grid\n\n"
+     << "Trainer defaults (Adam alone) and variable projection (`--reflectivity-solve`: the reflectivities solved "
+     << "by least squares after seeding and after every densification, Adam between) to time budgets of ";
+  for (std::size_t b = 0; b < budgets.size(); ++b)
+  {
+    md << (b ? " and " : "") << Format("%.0f", budgets[b]);
+  }
+  md << " s, and a regular grid (`--dense-start`: Gaussians on the training frames' pixel grid, reflectivities "
+     << "by the same solve, no training) at the count each adaptive run ended with (one grid for counts within "
+     << "10 %). Time includes seeding, the solves, the final prune and gap filling. Held-out as in the ablations; "
+     << "fit: every 4th training frame. *count front* / *time front*: no other run of the sweep has at most "
+     << "its Gaussians / its time and a higher held-out PSNR.\n";
+  nlohmann::json& json = report.Json["pareto"];
+  for (const AblationExperiment& e : experiments)
+  {
+    std::vector<ParetoRun> runs;
+    auto measure = [&](ParetoRun& p, const TrainerSettings& s, bool train) {
+      if (!RunAblation(e, s, p.Run, error, train))
+      {
+        return Failed("Pareto " + e.Name + ", " + p.Method + ": " + *error, error);
+      }
+      std::printf("  pareto   %-16s %-24s %6.1f s  %6.0f steps  held-out %6.2f dB  fit %6.2f dB  %8.0f Gaussians\n",
+        e.Name.substr(0, 16).c_str(), p.Method.c_str(), p.Run.Seconds, p.Run.Steps, p.Run.HeldOut.PSNR, p.Run.Fit,
+        p.Run.Gaussians);
+      std::fflush(stdout);
+      runs.push_back(p);
+      return true;
+    };
+    for (const auto& [name, solve] : adaptive)
+    {
+      for (double budget : budgets)
+      {
+        TrainerSettings s;
+        s.Iterations = 0;
+        s.TimeBudget = budget;
+        s.ReflectivitySolve = solve;
+        ParetoRun p;
+        p.Method = name;
+        p.Budget = budget;
+        if (!measure(p, s, true))
+        {
+          return false;
+        }
+      }
+    }
+    const std::size_t adaptiveRuns = runs.size();
+    for (std::size_t a = 0; a < adaptiveRuns; ++a)
+    {
+      const auto count = static_cast<std::int64_t>(runs[a].Run.Gaussians);
+      if (std::any_of(runs.begin() + adaptiveRuns, runs.end(),
+            [&](const ParetoRun& g) { return std::abs(double(g.Requested - count)) <= 0.1 * count; }))
+      {
+        continue;
+      }
+      TrainerSettings s;
+      s.DenseInitialisation = true;
+      s.ReflectivitySolve = true;
+      s.InitialGaussians = count;
+      ParetoRun p;
+      p.Method = grid;
+      p.Requested = count;
+      if (!measure(p, s, false))
+      {
+        return false;
+      }
+    }
+    MarkFront(runs, &AblationRun::Gaussians, &ParetoRun::CountFront);
+    MarkFront(runs, &AblationRun::Seconds, &ParetoRun::TimeFront);
+
+    md << "\n### " << e.Name << "\n\n| method | budget (s) | time (s) | Gaussians | held-out PSNR (dB) | SSIM | "
+       << "fit PSNR (dB) | steps | count front | time front |\n|---|---|---|---|---|---|---|---|---|---|\n";
+    nlohmann::json je;
+    PlotSpec byCount, byTime;
+    byCount.Title = e.Name + ": held-out PSNR against Gaussians";
+    byCount.XLabel = "Gaussians";
+    byCount.LogX = true;
+    byTime.Title = e.Name + ": held-out PSNR against time";
+    byTime.XLabel = "time (s)";
+    byCount.YLabel = byTime.YLabel = "held-out PSNR (dB)";
+    for (const ParetoRun& p : runs)
+    {
+      const AblationRun& r = p.Run;
+      md << "| " << p.Method << " | " << Format("%.0f", p.Budget) << " | " << Format("%.1f", r.Seconds) << " | "
+         << Format("%.0f", r.Gaussians) << " | " << Format("%.2f", r.HeldOut.PSNR) << " | "
+         << Format("%.4f", r.HeldOut.SSIM) << " | " << Format("%.2f", r.Fit) << " | " << Format("%.0f", r.Steps)
+         << " | " << (p.CountFront ? "yes" : "") << " | " << (p.TimeFront ? "yes" : "") << " |\n";
+      je["runs"].push_back({ { "method", p.Method }, { "budget", std::isfinite(p.Budget) ? nlohmann::json(p.Budget) : nlohmann::json(nullptr) },
+        { "requested", p.Requested }, { "seconds", r.Seconds }, { "gaussians", r.Gaussians }, { "seeds", r.Seeds },
+        { "steps", r.Steps }, { "psnr", r.HeldOut.PSNR }, { "ssim", r.HeldOut.SSIM }, { "fit_psnr", r.Fit },
+        { "count_front", p.CountFront }, { "time_front", p.TimeFront } });
+      for (PlotSpec* spec : { &byCount, &byTime })
+      {
+        auto series = std::find_if(spec->Series.begin(), spec->Series.end(),
+          [&](const PlotSeries& s) { return s.Name == p.Method; });
+        if (series == spec->Series.end())
+        {
+          series = spec->Series.insert(spec->Series.end(), PlotSeries{ p.Method, {} });
+        }
+        series->Points.emplace_back(spec == &byCount ? r.Gaussians : r.Seconds, r.HeldOut.PSNR);
+      }
+    }
+    for (PlotSpec* spec : { &byCount, &byTime })
+    {
+      for (PlotSeries& s : spec->Series)
+      {
+        std::sort(s.Points.begin(), s.Points.end());
+      }
+    }
+    // Each adaptive run against the grid made at (or within 10 % of) its count.
+    md << "\n";
+    for (std::size_t a = 0; a < adaptiveRuns; ++a)
+    {
+      const ParetoRun& p = runs[a];
+      const auto g = std::min_element(runs.begin() + adaptiveRuns, runs.end(), [&](const ParetoRun& x, const ParetoRun& y) {
+        return std::abs(x.Requested - p.Run.Gaussians) < std::abs(y.Requested - p.Run.Gaussians);
+      });
+      const double delta = p.Run.HeldOut.PSNR - g->Run.HeldOut.PSNR;
+      const bool above = delta > 0;
+      md << "- " << p.Method << ", " << Format("%.0f", p.Budget) << " s (" << Format("%.0f", p.Run.Gaussians)
+         << " Gaussians): " << (above ? "above" : "below") << " the grid of " << Format("%.0f", g->Run.Gaussians)
+         << " by " << Format("%.2f", std::abs(delta)) << " dB";
+      if (!above)
+      {
+        md << "; fit of the training frames " << Format("%.2f", p.Run.Fit) << " dB against the grid's "
+           << Format("%.2f", g->Run.Fit) << " (" << (p.Run.Fit < g->Run.Fit ? "the adaptive field fits less: "
+              "its geometry is not yet where the budget's steps would take it" : "the adaptive field fits more "
+              "and generalises less between frames") << ")";
+      }
+      md << ".\n";
+      je["verdicts"].push_back({ { "method", p.Method }, { "budget", p.Budget }, { "grid_gaussians", g->Run.Gaussians },
+        { "delta_psnr", delta }, { "above_grid", above } });
+    }
+    const std::string tag = std::to_string(&e - experiments.data());
+    if (!report.Plot(byCount, "pareto_gaussians_" + tag + ".png") || !report.Plot(byTime, "pareto_time_" + tag + ".png"))
+    {
+      return Failed("cannot write the Pareto plots to " + report.PlotFolder, error);
+    }
+    json[e.Name] = je;
+  }
+  return true;
+}
+}

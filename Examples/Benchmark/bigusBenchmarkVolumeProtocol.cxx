@@ -1,0 +1,199 @@
+// `bigus benchmark`: the volume protocol on the PLUS reconstruction of the spine phantom: train on parallel
+// slices, test on in-between, oblique and orthogonal slices, against the compounded volume resliced
+// (bigusBenchmarkSections.h).
+#include "bigusBenchmarkSections.h"
+
+#include <cstdio>
+
+namespace bigus::benchmark
+{
+namespace
+{
+/**
+ * The volume protocol's account of the in-between error (as MeasureErrorSources for a hold-out sweep): the
+ * field's fit of the training slices, its renders at the in-between slices, and the blend of its own renders
+ * at the training slices on each side. In-between slice k lies midway between training slices k and k + 1
+ * (vtkUltrasoundVolumeSweep, Offset 0.5), so the blends use the in-between slices 0 to N - 2 and weights 1/2;
+ * @p recordedBlend receives the same blend of the recorded training slices.
+ */
+bool MeasureVolumeErrorSources(const VolumeProtocol& vp, Trainer& trainer, const Row& row, ErrorSources& e,
+  Row& recordedBlend, std::string* error)
+{
+  const TrainingData& train = vp.TrainData;
+  const std::size_t pixels = std::size_t(train.Width) * train.Height;
+  std::vector<float> renders(pixels * train.Count());
+  for (int f : train.TrainFrames)
+  {
+    if (!trainer.RenderFrame(train, f, renders.data() + pixels * f, error))
+    {
+      return false;
+    }
+  }
+  const std::vector<int> between(vp.TestList[0].begin(), vp.TestList[0].end() - 1);
+  std::vector<float> blend(pixels);
+  auto blendOf = [&](const float* frames) {
+    return [&, frames](std::size_t, int k) {
+      for (std::size_t p = 0; p < pixels; ++p)
+      {
+        blend[p] = 0.5f * (frames[pixels * k + p] + frames[pixels * (k + 1) + p]);
+      }
+      return static_cast<const float*>(blend.data());
+    };
+  };
+  e.Seconds = row.Seconds;
+  e.Training = MeanFrameMetrics(train, train.TrainFrames, [&](std::size_t, int f) { return &renders[pixels * f]; });
+  if (!trainer.EvaluateOn(vp.TestData[0], between, e.HeldOut, error))
+  {
+    return false;
+  }
+  e.BlendedRenders = MeanFrameMetrics(vp.TestData[0], between, blendOf(renders.data()));
+  recordedBlend.Method = "blend of the training slices on each side (recorded)";
+  recordedBlend.Quality = MeanFrameMetrics(vp.TestData[0], between, blendOf(train.Frames.data()));
+  return true;
+}
+
+/// @p row (a run's time, Gaussians, note) scored with @p trainer's field on each of the volume protocol's
+/// three test sweeps, into @p rows.
+bool ScoreVolume(Trainer& trainer, const VolumeProtocol& vp, const Row& row, Row rows[3], std::string* error)
+{
+  for (int t = 0; t < 3; ++t)
+  {
+    rows[t] = row;
+    double secondsPerFrame = 0;
+    if (!trainer.EvaluateOn(vp.TestData[t], vp.TestList[t], rows[t].Quality, error, &secondsPerFrame))
+    {
+      return false;
+    }
+    rows[t].MsPerFrame = 1e3 * secondsPerFrame;
+    Print("volume", rows[t]);
+  }
+  return true;
+}
+}
+
+bool VolumeProtocolSection(BenchmarkContext& context, std::string* error)
+{
+  const std::string& root = context.Root;
+  const bool quick = context.Quick;
+  Report& report = context.Report;
+  VolumeBudgetResults& budgetRuns = context.Volume;
+  std::ostringstream& md = report.Markdown;
+  const std::vector<double> marks = quick ? std::vector<double>{ 5 } : std::vector<double>{ 30, 60, 180 };
+  VolumeProtocol vp;
+  if (!MakeVolumeProtocol(root, quick, vp, error))
+  {
+    return false;
+  }
+  const char* testNames[] = { "in-between parallel slices", "oblique slices (tilt up to 30 degrees)",
+    "orthogonal slices" };
+  std::printf("volume protocol: %s\n", vp.Description.c_str());
+  TrainerSettings s;
+  s.ElevationSigma = vp.ElevationSigma;
+  s.Iterations = quick ? 300 : 15000;
+  std::vector<Row> bigusRows[3];
+  const bool ok = TrainWithMarks(vp.TrainData, s, marks, {}, "BIGUS",
+    [&](double, const Row& mark, Trainer& trainer) {
+      Row rows[3];
+      if (!ScoreVolume(trainer, vp, mark, rows, error))
+      {
+        return false;
+      }
+      for (int t = 0; t < 3; ++t)
+      {
+        bigusRows[t].push_back(rows[t]);
+      }
+      return true;
+    },
+    error);
+  if (!ok)
+  {
+    return Failed("volume protocol: " + *error, error);
+  }
+  if (!VolumeBudgetRuns(vp, quick, budgetRuns, error))
+  {
+    return false;
+  }
+  std::vector<Row> baselineRows[3];
+  for (int t = 0; t < 3; ++t)
+  {
+    baselineRows[t].push_back(budgetRuns.Compounded[t]);
+    Print("volume", budgetRuns.Compounded[t]);
+  }
+  md << "\n## Volume protocol (spine-phantom reconstruction)\n\n" << vp.Description << " The last two rows "
+     << "train with only a time budget of " << Format("%.0f", budgetRuns.Budget) << " s as the schedule (the "
+     << "trainer's defaults, then the hand-tuned sigma) and include the final prune and gap filling.\n";
+  for (int t = 0; t < 3; ++t)
+  {
+    md << "\n### " << testNames[t] << "\n\n" << TableHeader();
+    nlohmann::json j;
+    for (const Row& r : baselineRows[t])
+    {
+      md << TableRow(r);
+      j["baselines"].push_back(ToJson(r));
+    }
+    for (const Row& r : bigusRows[t])
+    {
+      md << TableRow(r);
+      j["bigus"].push_back(ToJson(r));
+    }
+    for (const Row* r : { &budgetRuns.Defaults[t], &budgetRuns.Tuned[t] })
+    {
+      md << TableRow(*r);
+      j["budget_runs"].push_back(ToJson(*r));
+    }
+    if (t == 0)
+    {
+      // ErrorSourcesSection's "held-out pose" is here the in-between slice, its bracketing training frames
+      // the training slices on each side.
+      j["recorded_blend"] = ToJson(budgetRuns.RecordedBlend);
+      md << ErrorSourcesSection(budgetRuns.RecordedBlend, { budgetRuns.DefaultsSources }, j)
+         << "(The defaults run at the budget, in-between slices 0 to " << vp.TestList[0].size() - 2
+         << ", each midway between two training slices: the held-out poses of the table above; the recorded "
+         << "blend is that of the training slices on each side, which the compounded volume approximates.)\n";
+    }
+    report.Json["volume_protocol"][testNames[t]] = j;
+  }
+  PlotSpec spec = TimePlot("volume protocol: PSNR of the in-between slices against time", baselineRows[0], bigusRows[0]);
+  spec.Series.push_back({ "BIGUS, oblique slices", {} });
+  spec.Series.push_back({ "BIGUS, orthogonal slices", {} });
+  for (int t = 1; t < 3; ++t)
+  {
+    for (const Row& r : bigusRows[t])
+    {
+      spec.Series[spec.Series.size() - 3 + t].Points.emplace_back(r.Seconds, r.Quality.PSNR);
+    }
+  }
+  if (!report.Plot(spec, "psnr_time_volume.png"))
+  {
+    return Failed(report.PlotFolder + ": cannot write a plot", error);
+  }
+  return true;
+}
+
+bool VolumeBudgetRuns(const VolumeProtocol& vp, bool quick, VolumeBudgetResults& out, std::string* error)
+{
+  CompoundVolume(vp, out.Compounded);
+  const double budget = quick ? 4 : 600;
+  TrainerSettings defaults;
+  defaults.Iterations = 0;
+  defaults.TimeBudget = budget;
+  TrainerSettings tuned = defaults;
+  tuned.ElevationSigma = vp.ElevationSigma;
+  auto run = [&](const TrainerSettings& settings, const std::string& method, Row rows[3], ErrorSources* sources) {
+    Row row;
+    return TrainToBudget(vp.TrainData, settings, method, row,
+      [&](Trainer& trainer, Row& r) {
+        return ScoreVolume(trainer, vp, r, rows, error) &&
+          (!sources || MeasureVolumeErrorSources(vp, trainer, r, *sources, out.RecordedBlend, error));
+      },
+      error);
+  };
+  if (!run(defaults, "BIGUS defaults, time budget only", out.Defaults, &out.DefaultsSources) ||
+    !run(tuned, "BIGUS, same budget, hand-tuned sigma", out.Tuned, nullptr))
+  {
+    return Failed("volume protocol at " + Format("%.0f", budget) + " s: " + *error, error);
+  }
+  out.Budget = budget;
+  return true;
+}
+}
