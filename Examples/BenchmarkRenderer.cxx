@@ -18,6 +18,7 @@
 //
 // Usage: BenchmarkRenderer [--benchmark_filter=...] [other Google Benchmark flags]
 #include "bigusBackend.h"
+#include "bigusBackendCheck.h"
 #include "bigusGaussianMath.h"
 #include "bigusReferenceRenderer.h"
 #include "bigusRenderer.h"
@@ -168,20 +169,7 @@ bigus::SliceGeometry MakeEmptySlice(int width, int height)
 // ---------------------------------------------------------------------------------------------
 // Random fields (fixed seed), cached per size.
 
-struct Field
-{
-  std::vector<float> Means, LogScales, Quaternions, Reflectivities;
-  bigus::FieldView View() const
-  {
-    bigus::FieldView v;
-    v.Count = static_cast<std::int64_t>(this->Reflectivities.size());
-    v.Means = this->Means.data();
-    v.LogScales = this->LogScales.data();
-    v.Quaternions = this->Quaternions.data();
-    v.Reflectivities = this->Reflectivities.data();
-    return v;
-  }
-};
+using Field = bigus::HostField;
 
 const Field& GetField(std::int64_t n)
 {
