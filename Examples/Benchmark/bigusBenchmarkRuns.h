@@ -15,8 +15,7 @@ namespace bigus::benchmark
 /// Trains with @p settings, evaluating @p heldOut at each of @p marks (cumulative training seconds);
 /// @p onMark is called with the mark, its row (measured time) and the trainer, and returns false (with
 /// @p error) when its own measurement fails. The field is not pruned at the marks (Trainer::Train).
-/// Returns false on a
-/// training error.
+/// Returns false on a training error.
 bool TrainWithMarks(const TrainingData& data, const TrainerSettings& settings, const std::vector<double>& marks,
   const std::vector<int>& heldOut, const std::string& method,
   const std::function<bool(double, const Row&, Trainer&)>& onMark, std::string* error);

@@ -124,9 +124,9 @@ bool ParetoSection(BenchmarkContext& context, std::string* error);
 bool DefaultsSection(BenchmarkContext& context, std::string* error);
 
 /**
- * Block hold-outs on the liver, context.Sweeps[0] (issue 19's gaps): @p blocks consecutive frames in the
- * middle of the sweep held out and every other valid frame trained on, so the held-out poses lie in a gap
- * wider than the beam. The baselines and BIGUS with its defaults at the sweep's DefaultsBudget. The sweep's
+ * Block hold-outs on the liver, context.Sweeps[0] (issue 19's gaps): 8 and 20 consecutive frames (--quick: 8)
+ * in the middle of the sweep held out and every other valid frame trained on, so the held-out poses lie in a
+ * gap wider than the beam. The baselines and BIGUS with its defaults at the sweep's DefaultsBudget. The sweep's
  * own frame lists are restored before returning.
  */
 bool BlockHoldOutSection(BenchmarkContext& context, std::string* error);
