@@ -186,24 +186,25 @@ std::string ResolveBackend(const std::string& name, std::string* error)
 
 std::unique_ptr<Renderer> CreateRenderer(const std::string& name, std::string* error, std::string* notice)
 {
-  const std::string resolved = ResolveBackend(name, error);
-  if (resolved.empty())
+  // "auto" tries every backend in priority order, each made once and checked on that instance (not
+  // through ResolveBackend, whose check would make a second one); an explicit name only itself.
+  const bool automatic = name.empty() || name == "auto";
+  if (!automatic && ResolveBackend(name, error).empty())
   {
     return nullptr;
   }
+  LoadBackendModules();
   std::vector<Entry> candidates;
   {
     std::unique_lock<std::mutex> lock;
     for (const Entry& e : Registry(lock))
     {
-      // "auto" tries every backend in priority order; an explicit name only itself.
-      if (e.Name == resolved || (name.empty() || name == "auto"))
+      if (automatic || e.Name == name)
       {
         candidates.push_back(e);
       }
     }
   }
-  const bool automatic = name.empty() || name == "auto";
   std::string skipped;
   for (const Entry& e : candidates)
   {

@@ -82,17 +82,6 @@ std::unique_ptr<Renderer> Cuda()
   return r;
 }
 
-/// The slice and field of the hard cases: those of the backend self-check (bigusBackendCheck.h).
-SliceGeometry GridSlice(double shift = 0)
-{
-  return HardCaseSlice(shift);
-}
-
-HostField HardCaseGrid(double sigmaE, const std::vector<double>& ratios)
-{
-  return HardCaseField(sigmaE, ratios);
-}
-
 /// The bundled liver sweep as training data, frames with k mod 4 == 2 held out.
 TrainingData LiverData()
 {
@@ -122,7 +111,7 @@ TEST(CudaRenderer, MatchesTheCpuOnTheHardCaseGrid)
   auto cpu = CreateCpuRenderer();
   // Two slices in one call: the grid's own and one moved 1.3 mm along the reference y axis (partly out
   // of its plane), to check the batch.
-  const std::vector<SliceGeometry> slices = { GridSlice(), GridSlice(1.3) };
+  const std::vector<SliceGeometry> slices = { HardCaseSlice(), HardCaseSlice(1.3) };
   const std::vector<float> dL = RandomGradient(2 * 160 * 112, 5);
   // Scale ratios up to 100 at the bounds. At 1e3 and 1e4 the footprint's minor-axis term
   // (cos dy - sin dx) / sigma_minor subtracts two products of a few mm, so one float rounding moves it
@@ -140,7 +129,7 @@ TEST(CudaRenderer, MatchesTheCpuOnTheHardCaseGrid)
     {
       for (bool beam : { true, false })
       {
-        const HostField field = HardCaseGrid(sigmaE, family.Ratios);
+        const HostField field = HardCaseField(sigmaE, family.Ratios);
         RenderOptions o;
         o.ElevationSigma = sigmaE;
         o.BeamIntegration = beam;
@@ -208,8 +197,8 @@ TEST(CudaRenderer, RepeatedRunsAreBitIdentical)
 
 TEST(CudaRenderer, BadPosesAreRejectedWithAReason)
 {
-  const HostField field = HardCaseGrid(0.5, { 1.0, 10.0 });
-  std::vector<SliceGeometry> slices = { GridSlice(), GridSlice() };
+  const HostField field = HardCaseField(0.5, { 1.0, 10.0 });
+  std::vector<SliceGeometry> slices = { HardCaseSlice(), HardCaseSlice() };
   for (int k = 0; k < 3; ++k)
   {
     slices[1].ImageToReference[4 * k] = 0; // first image axis of length 0
@@ -238,10 +227,10 @@ TEST(CudaRenderer, AFieldTooLargeForTheDeviceIsRefusedBeforeAllocating)
   {
     GTEST_SKIP() << "the device holds the largest field the backend indexes (2^31 - 1 Gaussians)";
   }
-  const HostField small = HardCaseGrid(0.5, { 1.0, 10.0 });
+  const HostField small = HardCaseField(0.5, { 1.0, 10.0 });
   FieldView huge = small.View();
   huge.Count = n;
-  const std::vector<SliceGeometry> slices = { GridSlice() };
+  const std::vector<SliceGeometry> slices = { HardCaseSlice() };
   std::vector<float> S(160 * 112, -7.f), dL(160 * 112, 1.f), gr(16, 0.f);
   auto gpu = Cuda();
   ASSERT_TRUE(gpu);
@@ -279,8 +268,8 @@ TEST(CudaRenderer, EdgeTilesAndSlicesOfDifferentSizesInOneBatch)
   auto gpu = Cuda();
   ASSERT_TRUE(gpu);
   auto cpu = CreateCpuRenderer();
-  const HostField field = HardCaseGrid(0.5, { 1.0, 10.0 });
-  std::vector<SliceGeometry> slices = { GridSlice(), GridSlice(0.7), GridSlice(-0.4) };
+  const HostField field = HardCaseField(0.5, { 1.0, 10.0 });
+  std::vector<SliceGeometry> slices = { HardCaseSlice(), HardCaseSlice(0.7), HardCaseSlice(-0.4) };
   slices[0].Width = 161;
   slices[0].Height = 113;
   slices[1].Width = 77;
@@ -332,8 +321,8 @@ TEST(CudaRenderer, NoImageOutputGradientsWithRespectToSAndNullGradientOutputs)
   auto gpu = Cuda();
   ASSERT_TRUE(gpu);
   auto cpu = CreateCpuRenderer();
-  const HostField field = HardCaseGrid(0.5, { 1.0, 10.0 });
-  const SliceGeometry slice = GridSlice();
+  const HostField field = HardCaseField(0.5, { 1.0, 10.0 });
+  const SliceGeometry slice = HardCaseSlice();
   const std::size_t pixels = std::size_t(slice.Width) * slice.Height;
   RenderOptions o;
   o.ElevationSigma = 0.5;
@@ -372,7 +361,7 @@ TEST(CudaRenderer, AnEmptyFieldAndASliceThatCullsEverything)
 {
   auto gpu = Cuda();
   ASSERT_TRUE(gpu);
-  const SliceGeometry slice = GridSlice();
+  const SliceGeometry slice = HardCaseSlice();
   const std::size_t pixels = std::size_t(slice.Width) * slice.Height;
   RenderOptions o;
   std::string error;
@@ -384,8 +373,8 @@ TEST(CudaRenderer, AnEmptyFieldAndASliceThatCullsEverything)
   FieldGradients none;
   EXPECT_TRUE(gpu->Backward(empty.View(), &slice, 1, o, S.data(), dL.data(), false, none, nullptr, &error)) << error;
   // The hard-case field 50 mm off its slice: every Gaussian is culled.
-  const HostField field = HardCaseGrid(0.5, { 1.0 });
-  const SliceGeometry far = GridSlice(50.0);
+  const HostField field = HardCaseField(0.5, { 1.0 });
+  const SliceGeometry far = HardCaseSlice(50.0);
   std::fill(S.begin(), S.end(), -1.f);
   RenderStats stats;
   ASSERT_TRUE(gpu->Forward(field.View(), &far, 1, o, S.data(), I.data(), &stats, &error)) << error;
