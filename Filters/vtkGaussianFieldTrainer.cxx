@@ -43,6 +43,7 @@ vtkGaussianFieldTrainer::vtkGaussianFieldTrainer()
   this->ReflectivitySolve = d.ReflectivitySolve;
   this->SolveIterations = d.Solve.MaximumIterations;
   this->DenseInitialisation = d.DenseInitialisation;
+  this->PixelGridFit = d.PixelGridFit;
   this->SparseAdam = d.SparseAdam;
   this->Iterations = d.Iterations;
   this->TimeBudget = d.TimeBudget;
@@ -173,6 +174,7 @@ int vtkGaussianFieldTrainer::RequestData(
   s.ReflectivitySolve = this->ReflectivitySolve;
   s.Solve.MaximumIterations = this->SolveIterations;
   s.DenseInitialisation = this->DenseInitialisation;
+  s.PixelGridFit = this->PixelGridFit;
   s.SparseAdam = this->SparseAdam;
   s.InitialGaussians = this->InitialGaussians;
   s.MaximumGaussians = this->MaximumGaussians;
@@ -367,6 +369,7 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "ReflectivitySolve: " << this->ReflectivitySolve << "\n";
   os << indent << "SolveIterations: " << this->SolveIterations << "\n";
   os << indent << "DenseInitialisation: " << this->DenseInitialisation << "\n";
+  os << indent << "PixelGridFit: " << this->PixelGridFit << "\n";
   os << indent << "SparseAdam: " << this->SparseAdam << "\n";
   os << indent << "Iterations: " << this->Iterations << "\n";
   os << indent << "TimeBudget: " << this->TimeBudget << "\n";

@@ -127,6 +127,13 @@ public:
   vtkGetMacro(DenseInitialisation, bool);
   vtkBooleanMacro(DenseInitialisation, bool);
   ///@}
+  ///@{ The fit when the data are few (default on): when one Gaussian per fan pixel of the training planes
+  /// fits under MaximumGaussians, the field is that pixel grid with solved reflectivities and no geometry
+  /// step is taken (bigus::TrainerSettings::PixelGridFit). Applies with the default start only.
+  vtkSetMacro(PixelGridFit, bool);
+  vtkGetMacro(PixelGridFit, bool);
+  vtkBooleanMacro(PixelGridFit, bool);
+  ///@}
   ///@{ Adam over the Gaussians a step touched only (default on; off moves every Gaussian every step on its
   /// momentum, the ablation; bigus::TrainerSettings::SparseAdam).
   vtkSetMacro(SparseAdam, bool);
@@ -271,6 +278,7 @@ protected:
   bool ReflectivitySolve;
   int SolveIterations;
   bool DenseInitialisation;
+  bool PixelGridFit;
   bool SparseAdam;
   int Iterations;
   double TimeBudget;

@@ -198,7 +198,10 @@ bool AblationSection(BenchmarkContext& context, std::string* error)
   for (const AblationExperiment& e : experiments)
   {
     const double started = Now();
+    // The switches are those of training from Harris seeds: the pixel-grid fit, which the defaults take on
+    // the volume protocol, takes no step (the volume section reports it).
     TrainerSettings timed;
+    timed.PixelGridFit = false;
     timed.Iterations = 0;
     timed.TimeBudget = e.Seconds;
     // The full method at equal time first: its steps set the equal-iteration schedule, its seeds the cap.
@@ -230,6 +233,7 @@ bool AblationSection(BenchmarkContext& context, std::string* error)
       return false;
     }
     TrainerSettings counted;
+    counted.PixelGridFit = false;
     counted.Iterations = std::max(1, static_cast<int>(std::lround(fullTimed.Steps().Mean)));
     if (!runCell(counted, nullptr, 0, fullIterations))
     {

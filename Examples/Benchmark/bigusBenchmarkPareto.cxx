@@ -89,6 +89,7 @@ bool ParetoSection(BenchmarkContext& context, std::string* error)
       for (double budget : budgets)
       {
         TrainerSettings s;
+        s.PixelGridFit = false; // the trainers themselves: the grid has its own rows
         s.Iterations = 0;
         s.TimeBudget = budget;
         s.ReflectivitySolve = solve;

@@ -37,7 +37,8 @@ struct TrainOptions
   long long MaxGaussians = 0, InitialGaussians = 0;
   double GrowthMargin = 0;
   int GrowthPatience = 0, SolveIterations = 0;
-  bool NoFillGaps = false, ReflectivitySolve = false, DenseStart = false, DenseAdam = false;
+  bool NoFillGaps = false, ReflectivitySolve = false, DenseStart = false, DenseAdam = false,
+       NoPixelGridFit = false;
   unsigned Seed = 0;
 
   /// The filter's own defaults, so that `bigus train` and vtkGaussianFieldTrainer agree.
@@ -98,6 +99,7 @@ int RunTrain(const TrainOptions& o)
   trainer->SetReflectivitySolve(o.ReflectivitySolve);
   trainer->SetSolveIterations(o.SolveIterations);
   trainer->SetDenseInitialisation(o.DenseStart);
+  trainer->SetPixelGridFit(!o.NoPixelGridFit);
   trainer->SetSparseAdam(!o.DenseAdam);
   trainer->SetElevationSigma(o.ElevationSigma);
   trainer->SetSeed(o.Seed);
@@ -250,6 +252,9 @@ Command AddTrainCommand(CLI::App& app)
   trainCommand->add_flag("--dense-start", train.DenseStart,
     "Start from Gaussians on the training frames' pixel grid (--initial-gaussians of them, default half of "
     "--max-gaussians) instead of Harris seeds");
+  trainCommand->add_flag("--no-pixel-grid-fit", train.NoPixelGridFit,
+    "Train from Harris seeds even when one Gaussian per fan pixel of the training frames would fit under "
+    "--max-gaussians (default: that pixel grid, its reflectivities solved, and no geometry steps)");
   trainCommand->add_flag("--no-fill-gaps", train.NoFillGaps,
     "Leave gaps between training frames wider than the beam empty (default: bridged, as bigus fill-gaps does)");
   trainCommand->add_option("--elevation-sigma", train.ElevationSigma, "Elevation beam sigma, mm (FWHM / 2.355); 0: chosen from the sweep (frame spacing, speckle decorrelation)")

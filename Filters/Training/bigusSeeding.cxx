@@ -160,25 +160,24 @@ void SeedUniform(const TrainingData& data, std::int64_t total, std::mt19937_64& 
   }
 }
 
-std::string SeedGrid(const TrainingData& data, std::int64_t total, const SeedShape& shape, GaussianField& field)
+GridPlanes SelectGridPlanes(const TrainingData& data, const SeedShape& shape)
 {
-  // Planes: the training frames in order, each kept when its centre lies at least sigma_E (or 1 pixel
-  // without a beam) from the plane of the last one kept, so that the planes' Gaussians do not repeat
-  // each other within a beam width.
+  // The training frames in order, each kept when its centre lies at least sigma_E (or 1 pixel without a
+  // beam) from the plane of the last one kept, so that the planes' Gaussians do not repeat each other
+  // within a beam width.
+  GridPlanes result;
   const std::size_t pixels = std::size_t(data.Width) * data.Height;
   const double minimumGap = std::max(shape.ElevationSigma, shape.PixelSpacing);
-  std::vector<int> planes;
-  std::vector<SliceFrame> frames;
-  double masked = 0, gaps = 0;
+  SliceFrame last;
+  double gaps = 0;
   for (int f : data.TrainFrames)
   {
     SliceFrame frame;
     ComputeSliceFrame(data.Poses[f].data(), 90, frame);
     double centre[3];
     Apply(data.Poses[f], 0.5 * (data.Width - 1), 0.5 * (data.Height - 1), centre);
-    if (!frames.empty())
+    if (!result.Frames.empty())
     {
-      const SliceFrame& last = frames.back();
       double d = 0;
       for (int k = 0; k < 3; ++k)
       {
@@ -190,12 +189,22 @@ std::string SeedGrid(const TrainingData& data, std::int64_t total, const SeedSha
       }
       gaps += std::abs(d);
     }
-    planes.push_back(f);
-    frames.push_back(frame);
+    result.Frames.push_back(f);
+    last = frame;
     const unsigned char* mask = data.MaskOf(f);
-    masked += static_cast<double>(std::count_if(mask, mask + pixels, [](unsigned char v) { return v != 0; }));
+    result.FanPixels += std::count_if(mask, mask + pixels, [](unsigned char v) { return v != 0; });
   }
-  const double planeSpacing = planes.size() > 1 ? gaps / (planes.size() - 1) : minimumGap;
+  result.Spacing = result.Frames.size() > 1 ? gaps / (result.Frames.size() - 1) : minimumGap;
+  return result;
+}
+
+std::string SeedGrid(const TrainingData& data, std::int64_t total, const SeedShape& shape, GaussianField& field)
+{
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
+  const GridPlanes selected = SelectGridPlanes(data, shape);
+  const std::vector<int>& planes = selected.Frames;
+  const double planeSpacing = selected.Spacing;
+  const double masked = static_cast<double>(selected.FanPixels);
   // Grid points at the centres of stride x stride blocks of pixels (pixel centres at integer indices:
   // (stride - 1)/2 + a stride), kept inside the fan mask. The stride is real-valued, so that the grid's
   // count falls short of the count wanted by less than a row and a column (an integer stride can land at
@@ -228,7 +237,13 @@ std::string SeedGrid(const TrainingData& data, std::int64_t total, const SeedSha
     stride *= 1.01;
   }
   const double inPlane = 0.6 * stride * shape.PixelSpacing;
-  const double elevation = std::max(0.5 * planeSpacing, shape.PixelSpacing);
+  // Elevation: a slice sees a Gaussian of elevation scale s through the beam as one of sqrt(s^2 + sigma_E^2)
+  // (DESIGN section 2); between the planes the field interpolates best when that is 0.6 of their spacing
+  // (the volume protocol, docs/FINDINGS.md "The dense start's elevation scale"), and s stays at least a
+  // quarter of the spacing.
+  const double seen = 0.6 * planeSpacing;
+  const double elevation = std::sqrt(std::max(seen * seen - shape.ElevationSigma * shape.ElevationSigma,
+    0.0625 * planeSpacing * planeSpacing));
   field = GaussianField();
   for (int f : planes)
   {

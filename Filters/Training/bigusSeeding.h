@@ -16,6 +16,7 @@
 #include <cstdint>
 #include <random>
 #include <string>
+#include <vector>
 
 namespace bigus
 {
@@ -46,10 +47,20 @@ void SeedHarris(const TrainingData& data, std::int64_t total, std::mt19937_64& r
 void SeedUniform(const TrainingData& data, std::int64_t total, std::mt19937_64& rng, const SeedShape& shape,
   GaussianField& field);
 
+/// The planes of the dense start.
+struct GridPlanes
+{
+  std::vector<int> Frames;     ///< training frames kept: each at least sigma_E (or a pixel) from the last one kept
+  double Spacing = 0;          ///< mm, their mean spacing along each one's normal
+  std::int64_t FanPixels = 0;  ///< pixels inside the fan masks of the frames kept (the grid's count at stride 1)
+};
+GridPlanes SelectGridPlanes(const TrainingData& data, const SeedShape& shape);
+
 /**
- * The dense start: Gaussians on the training frames' pixel grid, about @p total of them (never more),
- * on the planes at least a beam width (or a pixel) apart, in-plane scale 0.6 stride, elevation scale half
- * the planes' spacing. Returns one line that says what was made.
+ * The dense start: Gaussians on the pixel grid of the planes SelectGridPlanes keeps, about @p total of
+ * them (never more), in-plane scale 0.6 stride; elevation scale s such that sqrt(s^2 + sigma_E^2), what
+ * a slice sees through the beam, is 0.6 of the planes' spacing, and s at least a quarter of it (measured
+ * on the volume protocol: docs/FINDINGS.md). Returns one line that says what was made.
  */
 std::string SeedGrid(const TrainingData& data, std::int64_t total, const SeedShape& shape, GaussianField& field);
 

@@ -254,6 +254,11 @@ bool Trainer::Initialize(std::string* error)
     }
     return false;
   }
+  const SeedShape shape = this->SeedShapeOf();
+  const GridPlanes planes = SelectGridPlanes(data, shape);
+  this->PixelGrid = this->Settings.PixelGridFit && !this->Settings.DenseInitialisation &&
+    this->Settings.InitialGaussians <= 0 && this->Settings.HarrisInitialisation &&
+    !this->Settings.NonNegativeReflectivity && planes.FanPixels <= this->Settings.MaximumGaussians;
   // A field that could not grow to MaximumGaussians in this machine's memory is refused before any seed is
   // made (the training frames are already held).
   const std::int64_t trainingPixels =
@@ -273,11 +278,21 @@ bool Trainer::Initialize(std::string* error)
     return false;
   }
   GaussianField& field = this->State.Gaussians.Field;
+  if (this->PixelGrid)
+  {
+    const std::string grid = SeedGrid(data, planes.FanPixels, shape, field);
+    this->Report.InitialGaussians = field.Count();
+    this->Report.Settings.push_back(Format("InitialGaussians = %lld (the pixel-grid fit: the %lld fan pixels of the "
+                                           "dense start's planes fit under MaximumGaussians; ",
+                                      static_cast<long long>(field.Count()), static_cast<long long>(planes.FanPixels)) +
+      grid + "; reflectivities solved, no geometry steps)");
+    return this->FitInitialReflectivities(error);
+  }
   if (this->Settings.DenseInitialisation)
   {
     const std::int64_t wanted = this->Settings.InitialGaussians > 0 ? this->Settings.InitialGaussians
                                                                     : this->Settings.MaximumGaussians / 2;
-    const std::string grid = SeedGrid(data, wanted, this->SeedShapeOf(), field);
+    const std::string grid = SeedGrid(data, wanted, shape, field);
     this->Report.InitialGaussians = field.Count();
     this->Report.Settings.push_back(Format("InitialGaussians = %lld (dense start: ", static_cast<long long>(field.Count())) +
       grid + ")");
@@ -292,11 +307,11 @@ bool Trainer::Initialize(std::string* error)
   std::mt19937_64 rng(this->Settings.Seed * 7919ULL + 17);
   if (this->Settings.HarrisInitialisation)
   {
-    SeedHarris(data, seeds, rng, this->SeedShapeOf(), field);
+    SeedHarris(data, seeds, rng, shape, field);
   }
   else
   {
-    SeedUniform(data, seeds, rng, this->SeedShapeOf(), field);
+    SeedUniform(data, seeds, rng, shape, field);
   }
   return this->FitInitialReflectivities(error);
 }
@@ -353,6 +368,7 @@ bool Trainer::SetField(const GaussianField& field, std::string* error)
   this->State.Gaussians.ResizeToField();
   this->State.BestField = GaussianField();
   this->State.BestFieldLoss = -1;
+  this->PixelGrid = false;
   return this->PushState(error);
 }
 
@@ -642,11 +658,17 @@ bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>
   const TrainerSettings& s = this->Settings;
   const TrainingState& state = this->State;
   this->Report.StopReason = "iterations";
+  if (this->PixelGrid)
+  {
+    // The solve was the fit (PixelGridFit): geometry steps would overfit data this few.
+    this->Report.StopReason = "the pixel-grid fit (no geometry steps: as many Gaussians as fan pixels)";
+    this->Report.GrowthStopReason = "none (the pixel-grid fit)";
+  }
   double recent = 0;
   int recentCount = 0;
   double previousWindow = -1;
   bool ok = true;
-  while (s.Iterations <= 0 || state.Iteration < s.Iterations)
+  while (!this->PixelGrid && (s.Iterations <= 0 || state.Iteration < s.Iterations))
   {
     if (abort && abort())
     {
