@@ -196,6 +196,89 @@ BIGUS_HD void QuaternionToMatrixBackward(const double q[4], const double G[3][3]
 }
 
 // ---------------------------------------------------------------------------------------------
+// A rigid correction of a slice's pose (pose refinement), and its gradient twin (SlicePoseBackward).
+
+/**
+ * The slice frame moved by the rigid correction @p xi = (omega, t), both in the slice's own axes u, v, n:
+ * the rotation vector omega (rad) about the pivot @p pivot (slice coordinates, mm, e.g. the image centre),
+ * then the translation t (mm). Every point p of the slice (slice coordinates) moves to
+ * E (p - pivot) + pivot + t, E = exp([omega]_x) (Rodrigues' formula), so
+ *
+ *     F' = E^T F,    o' = o + F^T (pivot + t - E pivot),    and a Gaussian's m' = E^T (m - pivot - t) + pivot.
+ *
+ * The pixel grid in the plane is unchanged: the correction moves the whole slice.
+ */
+BIGUS_HD void CorrectSliceFrame(const SliceFrameD& frame, const double pivot[3], const double xi[6], SliceFrameD& out)
+{
+  const double angle = std::sqrt(xi[0] * xi[0] + xi[1] * xi[1] + xi[2] * xi[2]);
+  // sin(a)/a and (1 - cos a)/a^2, by their series below 1e-4 rad (no division by a small angle).
+  const double a2 = angle * angle;
+  const double sa = angle < 1e-4 ? 1 - a2 / 6 : std::sin(angle) / angle;
+  const double ca = angle < 1e-4 ? 0.5 - a2 / 24 : (1 - std::cos(angle)) / a2;
+  const double K[3][3] = { { 0, -xi[2], xi[1] }, { xi[2], 0, -xi[0] }, { -xi[1], xi[0], 0 } };
+  double E[3][3];
+  for (int i = 0; i < 3; ++i)
+  {
+    for (int j = 0; j < 3; ++j)
+    {
+      const double KK = K[i][0] * K[0][j] + K[i][1] * K[1][j] + K[i][2] * K[2][j];
+      E[i][j] = (i == j ? 1.0 : 0.0) + sa * K[i][j] + ca * KK;
+    }
+  }
+  double shift[3]; // pivot + t - E pivot, slice coordinates
+  for (int i = 0; i < 3; ++i)
+  {
+    shift[i] = pivot[i] + xi[3 + i] - (E[i][0] * pivot[0] + E[i][1] * pivot[1] + E[i][2] * pivot[2]);
+  }
+  for (int i = 0; i < 3; ++i)
+  {
+    for (int j = 0; j < 3; ++j)
+    {
+      out.F[i][j] = E[0][i] * frame.F[0][j] + E[1][i] * frame.F[1][j] + E[2][i] * frame.F[2][j];
+    }
+    out.Origin[i] = frame.Origin[i] + frame.F[0][i] * shift[0] + frame.F[1][i] * shift[1] + frame.F[2][i] * shift[2];
+  }
+}
+
+/// Gradients of the loss with respect to a Gaussian's mean and rotation in the slice frame, m and R' = F R
+/// (SetupFootprintBackward's intermediate values): what a slice's pose changes.
+struct SliceFrameGrad
+{
+  double Mean[3];
+  double Rotation[3][3];
+};
+
+/**
+ * dL/d(xi) of CorrectSliceFrame at xi = 0, accumulated into @p dxi (omega 0..2, per rad; t 3..5, per mm),
+ * from one Gaussian's SliceFrameGrad @p g and its SetupCache @p c (m and R'). With E^T = I - [omega]_x to
+ * first order, m' = m - t - omega x (m - pivot) and R'' = R' - [omega]_x R', so
+ *
+ *     dL/dt = -G_m,    dL/domega = G_m x (m - pivot) - (A_12 - A_21, A_20 - A_02, A_01 - A_10),  A = R' G_R'^T.
+ *
+ * A refinement that keeps a correction xi per frame composes it into the pose and takes this gradient at
+ * the corrected pose (the left-trivialised gradient on SE(3)); it equals d/dxi to first order in |omega|.
+ */
+BIGUS_HD void SlicePoseBackward(const SetupCache& c, const double pivot[3], const SliceFrameGrad& g, double dxi[6])
+{
+  const double d[3] = { c.m[0] - pivot[0], c.m[1] - pivot[1], c.m[2] - pivot[2] };
+  double A[3][3];
+  for (int i = 0; i < 3; ++i)
+  {
+    for (int j = 0; j < 3; ++j)
+    {
+      A[i][j] = c.Rp[i][0] * g.Rotation[j][0] + c.Rp[i][1] * g.Rotation[j][1] + c.Rp[i][2] * g.Rotation[j][2];
+    }
+  }
+  dxi[0] += g.Mean[1] * d[2] - g.Mean[2] * d[1] - (A[1][2] - A[2][1]);
+  dxi[1] += g.Mean[2] * d[0] - g.Mean[0] * d[2] - (A[2][0] - A[0][2]);
+  dxi[2] += g.Mean[0] * d[1] - g.Mean[1] * d[0] - (A[0][1] - A[1][0]);
+  for (int k = 0; k < 3; ++k)
+  {
+    dxi[3 + k] -= g.Mean[k];
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
 // Phase 1: transform, cull and set up one Gaussian for one slice.
 
 /**
@@ -377,10 +460,20 @@ struct GaussianGrad
  *   P = M M^T:  G_M = (G_P + G_P^T) M;   Lzz = sum_k R'_zk^2 / s_k^2;   M = R' diag(s)
  *   R' = F R:   G_R = F^T G_R';   q_n = q / |q|:  G_q = (G_qn - q_n (q_n . G_qn)) / |q|
  *   m = F (mu - o):  G_mu = F^T G_m
+ * @p slice, if not null, receives G_m and G_R' (overwritten; zero when the footprint is not visible) for
+ * the gradient with respect to the slice's pose (SlicePoseBackward).
  */
 BIGUS_HD void SetupFootprintBackward(const Footprint& f, const SetupCache& c, const SliceFrameD& frame,
-  double sigmaE, const FootprintGrad& gf, GaussianGrad& out)
+  double sigmaE, const FootprintGrad& gf, GaussianGrad& out, SliceFrameGrad* slice = nullptr)
 {
+  if (slice)
+  {
+    for (int i = 0; i < 3; ++i)
+    {
+      slice->Mean[i] = 0;
+      slice->Rotation[i][0] = slice->Rotation[i][1] = slice->Rotation[i][2] = 0;
+    }
+  }
   if (!f.Visible)
   {
     return;
@@ -433,6 +526,17 @@ BIGUS_HD void SetupFootprintBackward(const Footprint& f, const SetupCache& c, co
     GRp[2][k] += GLzz * 2 * c.Rp[2][k] * inv * inv;
     Gs[k] += GLzz * (-2 * c.Rp[2][k] * c.Rp[2][k] * inv * inv * inv);
     out.LogScale[k] += c.ScaleClamped[k] ? 0.0 : Gs[k] * c.Scale[k];
+  }
+  if (slice)
+  {
+    for (int i = 0; i < 3; ++i)
+    {
+      slice->Mean[i] = Gm[i];
+      for (int j = 0; j < 3; ++j)
+      {
+        slice->Rotation[i][j] = GRp[i][j];
+      }
+    }
   }
   double GR[3][3];
   for (int i = 0; i < 3; ++i)

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstring>
 #include <cstdio>
 #include <limits>
 #include <map>
@@ -1067,4 +1068,121 @@ TEST(GaussianFootprint, FastExpBoundHoldsAtTheWorstFloat)
   const double e = std::abs(static_cast<double>(bigus::FastExp(x)) - exact) / exact;
   std::printf("FastExp relative error at x = %.9g: %.4e\n", x, e);
   EXPECT_LT(e, 2.6e-7);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Pose refinement: the corrected slice frame against a known motion, and the gradient with respect to
+// the correction against central differences of the footprint.
+
+namespace
+{
+/// Reference position (mm) of slice point p (slice coordinates, mm) of @p frame: o + F^T p.
+void SlicePoint(const SliceFrameD& frame, const double p[3], double x[3])
+{
+  for (int k = 0; k < 3; ++k)
+  {
+    x[k] = frame.Origin[k] + frame.F[0][k] * p[0] + frame.F[1][k] * p[1] + frame.F[2][k] * p[2];
+  }
+}
+}
+
+// A quarter turn about the slice normal through the pivot, then a shift: every point of the slice goes
+// where the rigid motion p -> E (p - pivot) + pivot + t, written out by hand, takes it; F stays orthonormal.
+TEST(SlicePose, ACorrectionMovesTheSliceRigidlyAboutItsPivot)
+{
+  const Case c = MakeGridCase(true, 1, 0, 0, 0.5);
+  const double pivot[3] = { 20, 15, 0 };
+  const double xi[6] = { 0, 0, Pi / 2, 1.0, -2.0, 0.5 };
+  SliceFrameD moved;
+  bigus::CorrectSliceFrame(c.Frame, pivot, xi, moved);
+  const double points[3][3] = { { 0, 0, 0 }, { 20, 15, 0 }, { 33, 4, 0 } };
+  for (const auto& p : points)
+  {
+    // A quarter turn about n: (x, y) -> (-y, x) about the pivot.
+    const double expected[3] = { pivot[0] - (p[1] - pivot[1]) + xi[3], pivot[1] + (p[0] - pivot[0]) + xi[4],
+      p[2] + xi[5] };
+    double a[3], b[3];
+    SlicePoint(moved, p, a);
+    SlicePoint(c.Frame, expected, b);
+    for (int k = 0; k < 3; ++k)
+    {
+      EXPECT_NEAR(a[k], b[k], 1e-12) << "point (" << p[0] << ", " << p[1] << "), axis " << k;
+    }
+  }
+  for (int i = 0; i < 3; ++i)
+  {
+    for (int j = 0; j < 3; ++j)
+    {
+      const double dot = moved.F[i][0] * moved.F[j][0] + moved.F[i][1] * moved.F[j][1] + moved.F[i][2] * moved.F[j][2];
+      EXPECT_NEAR(dot, i == j ? 1.0 : 0.0, 1e-14);
+    }
+  }
+  // No correction: the same frame, bit for bit.
+  const double zero[6] = { 0, 0, 0, 0, 0, 0 };
+  bigus::CorrectSliceFrame(c.Frame, pivot, zero, moved);
+  EXPECT_EQ(std::memcmp(&moved, &c.Frame, sizeof(SliceFrameD)), 0);
+}
+
+// L = sum of random weights times the footprint's centre, conic and amplitude: dL/d(xi) from
+// SetupFootprintBackward and SlicePoseBackward against a central difference of L over CorrectSliceFrame,
+// on needles and pancakes, tilted, on and off the plane, with a pivot away from the Gaussian.
+TEST(SlicePose, TheGradientWithRespectToTheCorrectionMatchesCentralDifferences)
+{
+  const double weights[6] = { 0.7, -1.3, 0.45, -0.8, 0.3, 1.9 }; // centre x, y, conic a, b, c, amplitude
+  auto loss = [&](const Case& c, const SliceFrameD& frame) {
+    const Footprint f = bigus::SetupFootprint(c.G, frame, c.SigmaE, 1e3, nullptr);
+    return weights[0] * f.Center[0] + weights[1] * f.Center[1] + weights[2] * f.Conic[0] +
+      weights[3] * f.Conic[1] + weights[4] * f.Conic[2] + weights[5] * f.Amplitude;
+  };
+  const double pivot[3] = { 7.5, -3.0, 0 };
+  int cases = 0;
+  for (bool needle : { true, false })
+  {
+    for (double ratio : { 1.0, 3.0 })
+    {
+      for (double tilt : { 0.0, 30.0, 75.0 })
+      {
+        for (double offset : { 0.0, 0.8 })
+        {
+          const Case c = MakeGridCase(needle, ratio, tilt, offset, 0.5);
+          bigus::SetupCache cache;
+          const Footprint f = bigus::SetupFootprint(c.G, c.Frame, c.SigmaE, 1e3, &cache);
+          ASSERT_TRUE(f.Visible);
+          bigus::FootprintGrad gf;
+          gf.Center[0] = weights[0];
+          gf.Center[1] = weights[1];
+          // FootprintGrad's conic entries are dL/da, dL/db, dL/dc of q = a dx^2 + 2 b dx dy + c dy^2.
+          gf.Conic[0] = weights[2];
+          gf.Conic[1] = weights[3];
+          gf.Conic[2] = weights[4];
+          gf.Amplitude = weights[5];
+          bigus::GaussianGrad gg{};
+          bigus::SliceFrameGrad sg;
+          bigus::SetupFootprintBackward(f, cache, c.Frame, c.SigmaE, gf, gg, &sg);
+          double dxi[6] = { 0, 0, 0, 0, 0, 0 };
+          bigus::SlicePoseBackward(cache, pivot, sg, dxi);
+          double scale = 0;
+          for (double v : dxi)
+          {
+            scale = std::max(scale, std::abs(v));
+          }
+          for (int k = 0; k < 6; ++k)
+          {
+            const double h = k < 3 ? 1e-6 : 1e-5; // rad, mm
+            double xi[6] = { 0, 0, 0, 0, 0, 0 };
+            SliceFrameD plus, minus;
+            xi[k] = h;
+            bigus::CorrectSliceFrame(c.Frame, pivot, xi, plus);
+            xi[k] = -h;
+            bigus::CorrectSliceFrame(c.Frame, pivot, xi, minus);
+            const double numeric = (loss(c, plus) - loss(c, minus)) / (2 * h);
+            EXPECT_NEAR(dxi[k], numeric, 1e-6 * std::max(1.0, scale))
+              << Describe(needle, ratio, tilt, offset, c.SigmaE) << ", component " << k;
+          }
+          ++cases;
+        }
+      }
+    }
+  }
+  EXPECT_EQ(cases, 24);
 }

@@ -32,7 +32,7 @@ struct Case
   double GS, S, Gamma, MeanIntensity;
 };
 
-constexpr int MaximumOutputs = 160;
+constexpr int MaximumOutputs = 192;
 // The kernel is compiled without fused multiply-adds (Testing/CMakeLists.txt), so host and device
 // differ only by their math libraries (exp, log, sqrt, atan2, cos, sin: a few ulps on the device).
 // Float: the per-pixel functions get the same inputs on both sides, so only std::exp(float) differs.
@@ -162,7 +162,8 @@ BIGUS_HD void Evaluate(const Case& k, Outputs& out)
     const FootprintGrad gfp = FootprintGradFromSums(sums, g.Reflectivity);
     out.Put("FootprintGradFromSums Amplitude", gfp.Amplitude);
     GaussianGrad gg = {};
-    SetupFootprintBackward(f, cache, k.Frame, k.SigmaE, gfp, gg);
+    SliceFrameGrad sg;
+    SetupFootprintBackward(f, cache, k.Frame, k.SigmaE, gfp, gg, &sg);
     double smallest = cache.Scale[0], largest = cache.Scale[0];
     for (int q = 1; q < 3; ++q)
     {
@@ -180,6 +181,27 @@ BIGUS_HD void Evaluate(const Case& k, Outputs& out)
     {
       out.Put("SetupFootprintBackward Quaternion", gg.Quaternion[q], tolerance);
     }
+    // Pose refinement: the gradient with respect to a correction of the slice's pose, and the corrected
+    // frame (a correction of a few degrees and millimetres about the slice's point (10, 5) mm).
+    const double pivot[3] = { 10, 5, 0 };
+    double dxi[6] = { 0, 0, 0, 0, 0, 0 };
+    SlicePoseBackward(cache, pivot, sg, dxi);
+    for (int q = 0; q < 6; ++q)
+    {
+      out.Put("SlicePoseBackward", dxi[q], tolerance);
+    }
+  }
+  const double pivot[3] = { 10, 5, 0 };
+  const double xi[6] = { 0.02, -0.035, 0.05, 0.4, -0.7, 1.1 };
+  SliceFrameD corrected;
+  CorrectSliceFrame(k.Frame, pivot, xi, corrected);
+  for (int i = 0; i < 3; ++i)
+  {
+    for (int j = 0; j < 3; ++j)
+    {
+      out.Put("CorrectSliceFrame F", corrected.F[i][j]);
+    }
+    out.Put("CorrectSliceFrame Origin", corrected.Origin[i]);
   }
   PixelFunctions<double>(k, out);
   PixelFunctions<float>(k, out);
