@@ -237,13 +237,10 @@ std::string SeedGrid(const TrainingData& data, std::int64_t total, const SeedSha
     stride *= 1.01;
   }
   const double inPlane = 0.6 * stride * shape.PixelSpacing;
-  // Elevation: a slice sees a Gaussian of elevation scale s through the beam as one of sqrt(s^2 + sigma_E^2)
-  // (DESIGN section 2); between the planes the field interpolates best when that is 0.6 of their spacing
-  // (the volume protocol, docs/FINDINGS.md "The dense start's elevation scale"), and s stays at least a
-  // quarter of the spacing.
-  const double seen = 0.6 * planeSpacing;
-  const double elevation = std::sqrt(std::max(seen * seen - shape.ElevationSigma * shape.ElevationSigma,
-    0.0625 * planeSpacing * planeSpacing));
+  // Elevation scale 0.45 plane spacings, whatever the beam: measured on the volume protocol's in-between,
+  // oblique and orthogonal slices (docs/FINDINGS.md, "The dense start's elevation scale"); a slice across
+  // the planes sees this scale itself, not blurred by the beam.
+  const double elevation = 0.45 * planeSpacing;
   field = GaussianField();
   for (int f : planes)
   {

@@ -58,9 +58,8 @@ GridPlanes SelectGridPlanes(const TrainingData& data, const SeedShape& shape);
 
 /**
  * The dense start: Gaussians on the pixel grid of the planes SelectGridPlanes keeps, about @p total of
- * them (never more), in-plane scale 0.6 stride; elevation scale s such that sqrt(s^2 + sigma_E^2), what
- * a slice sees through the beam, is 0.6 of the planes' spacing, and s at least a quarter of it (measured
- * on the volume protocol: docs/FINDINGS.md). Returns one line that says what was made.
+ * them (never more), in-plane scale 0.6 stride, elevation scale 0.45 of the planes' spacing (measured on
+ * the volume protocol: docs/FINDINGS.md). Returns one line that says what was made.
  */
 std::string SeedGrid(const TrainingData& data, std::int64_t total, const SeedShape& shape, GaussianField& field);
 

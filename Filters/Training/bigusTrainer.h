@@ -66,8 +66,8 @@ struct TrainerSettings
   /// (SelectGridPlanes) fits under MaximumGaussians, the field is that pixel grid (SeedGrid at stride 1)
   /// with its reflectivities solved, and no geometry step follows, whatever Iterations and TimeBudget:
   /// 11 parameters per Gaussian would outnumber the pixels, and Adam overfits them. On the volume protocol
-  /// (352k fan pixels) 40.45 dB in between in 19 s, against 37.85 for Harris seeds and Adam in 120 s; on the
-  /// cropped N-wire phantom (22k) 19.71 dB held out in 0.8 s against 20.00 in 60 s (docs/FINDINGS.md,
+  /// (352k fan pixels) 40.52 dB in between in 14 s, against 37.85 for Harris seeds and Adam in 120 s; on the
+  /// cropped N-wire phantom (22k) 19.81 dB held out in 0.7 s against 20.00 in 60 s (docs/FINDINGS.md,
   /// "The fit when the data are few"). Applies with the default start only (Harris seeding,
   /// InitialGaussians 0, no DenseInitialisation, signed reflectivities); every bundled real sweep has more
   /// fan pixels than this and trains as before.

@@ -1206,7 +1206,7 @@ TEST(Trainer, VariableProjectionEndsWithALowerTrainingLossThanAdamAloneOnTheSpin
 // Data this few (the synthetic sweep's 45 training frames of 64 x 64 pixels): one Gaussian per fan pixel of
 // the planes a beam width apart fits under MaximumGaussians, so the defaults fit that pixel grid, solve its
 // reflectivities and take no geometry step; the held-out frames between the planes match the known
-// field's renders to 42.55 dB (measured; Harris seeds and 200 Adam steps 38.19). Below the pixel count, or with a
+// field's renders to 44.53 dB (measured; Harris seeds and 200 Adam steps 38.19). Below the pixel count, or with a
 // count given, the run trains from Harris seeds as before.
 TEST(Trainer, WhenOneGaussianPerFanPixelFitsTheDefaultsFitThePixelGridAndTakeNoStep)
 {
@@ -1253,7 +1253,7 @@ TEST(Trainer, WhenOneGaussianPerFanPixelFitsTheDefaultsFitThePixelGridAndTakeNoS
   EXPECT_EQ(trainer.GetIteration(), 0);
   EXPECT_NE(trainer.GetReport().StopReason.find("pixel-grid fit"), std::string::npos) << trainer.GetReport().StopReason;
   const double grid = HeldOutPsnr(trainer, heldOut);
-  EXPECT_GT(grid, 41.0) << "held-out frames between the planes";
+  EXPECT_GT(grid, 43.0) << "held-out frames between the planes";
 
   // One Gaussian fewer allowed than the grid needs: Harris seeds and Adam.
   s.MaximumGaussians = planes.FanPixels - 1;
