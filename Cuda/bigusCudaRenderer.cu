@@ -156,6 +156,15 @@ public:
     const float* S, const float* dL, bool gradientIsWithRespectToS, FieldGradients& gradients, RenderStats* stats,
     std::string* error) override
   {
+    if (gradients.SlicePoses)
+    {
+      if (error)
+      {
+        *error = "the CUDA backend does not compute pose gradients (FieldGradients::SlicePoses) yet; pose refinement "
+                 "runs on the CPU backend";
+      }
+      return false;
+    }
     std::vector<PreparedSlice> prepared;
     if (!PrepareSlices(slices, count, options, prepared, error) || !this->UploadField(field, true, prepared, error))
     {

@@ -390,8 +390,15 @@ public:
         }
       });
       vtkSMPThreadLocal<std::array<std::int64_t, 2>> counters(std::array<std::int64_t, 2>{ { 0, 0 } });
+      // The slice's pose gradient: each Gaussian's share in its own slot, summed in index order below, so
+      // that the sum does not depend on how the threads shared the Gaussians.
+      std::vector<double>& shares = this->PoseShares;
+      shares.assign(gradients.SlicePoses ? 6 * std::size_t(field.Count) : 0, 0.0);
+      double pivot[3];
+      SliceCentre(s.PixelToPlane, s.Width, s.Height, pivot);
       vtkSMPTools::For(0, field.Count, 256, [&](std::int64_t begin, std::int64_t end) {
         std::array<std::int64_t, 2>& counter = counters.Local(); // visible, pixel evaluations
+
         for (std::int64_t i = begin; i < end; ++i)
         {
           if (!MayBeVisible(field, this->Bounds, i, s, sigmaE, options.Cutoff))
@@ -417,9 +424,24 @@ public:
             gradients.VisibleCount[i] += 1;
           }
           AddGaussianGradients(f, cache, s.Frame, sigmaE, sum, r, g.Reflectivity, options.NonNegativeReflectivity,
-            gradients, i);
+            gradients, i, pivot, gradients.SlicePoses ? &shares[6 * i] : nullptr);
         }
       });
+      if (gradients.SlicePoses)
+      {
+        double total[6] = { 0, 0, 0, 0, 0, 0 };
+        for (std::size_t i = 0; i < shares.size(); i += 6)
+        {
+          for (int c = 0; c < 6; ++c)
+          {
+            total[c] += shares[i + c];
+          }
+        }
+        for (int c = 0; c < 6; ++c)
+        {
+          gradients.SlicePoses[6 * k + c] += total[c];
+        }
+      }
       for (const auto& counter : counters)
       {
         if (stats)
@@ -444,6 +466,7 @@ private:
   std::vector<std::vector<Splat>> ChunkSplats;
   std::vector<Splat> Splats;
   std::vector<float> ScatteringGradient;
+  std::vector<double> PoseShares; // [N, 6] each Gaussian's share of a slice's pose gradient (Backward)
   std::vector<std::int64_t> TileStart;
   std::vector<std::int32_t> Entries;
 };

@@ -212,13 +212,21 @@ BIGUS_HD void RowSpan(float a, float b, float det, float k2, float dy, float x0,
  * The backward pass of Gaussian @p i on one slice from its pixel sums @p sums (PixelWeightBackward's
  * terms over its footprint): its mean, log-scale, quaternion and reflectivity gradients and its share
  * of the attribution, added to the non-null outputs of @p out (host or device pointers). @p r is the
- * effective reflectivity, @p reflectivity the stored one (no gradient reaches a clamped one).
+ * effective reflectivity, @p reflectivity the stored one (no gradient reaches a clamped one). With @p dxi
+ * (6 doubles), the Gaussian's share of the gradient with respect to the slice's pose correction about
+ * @p pivot is added there too (SlicePoseBackward).
  */
 BIGUS_HD void AddGaussianGradients(const Footprint& f, const SetupCache& cache, const SliceFrameD& frame, double sigmaE,
-  const double sums[7], double r, double reflectivity, bool nonNegative, const FieldGradients& out, std::int64_t i)
+  const double sums[7], double r, double reflectivity, bool nonNegative, const FieldGradients& out, std::int64_t i,
+  const double* pivot = nullptr, double* dxi = nullptr)
 {
   GaussianGrad gg = {};
-  SetupFootprintBackward(f, cache, frame, sigmaE, FootprintGradFromSums(sums, r), gg);
+  SliceFrameGrad sg;
+  SetupFootprintBackward(f, cache, frame, sigmaE, FootprintGradFromSums(sums, r), gg, dxi ? &sg : nullptr);
+  if (dxi)
+  {
+    SlicePoseBackward(cache, pivot, sg, dxi);
+  }
   gg.Reflectivity = (nonNegative && reflectivity <= 0) ? 0.0 : f.Amplitude * sums[5];
   for (int k = 0; k < 3; ++k)
   {

@@ -42,6 +42,11 @@ struct FieldGradients
   float* Reflectivities = nullptr; ///< [N] dL/dr
   float* Attribution = nullptr;    ///< [N] E_i = sum_p |dL/dS(p)| |r_i| w_i(p)
   int* VisibleCount = nullptr;     ///< [N] number of slices whose pixels the Gaussian's footprint touched
+  /// [count, 6] (per slice of the call, not per Gaussian) dL/dxi of a rigid correction xi of each slice's
+  /// pose at xi = 0: rotation vector (0..2, per rad) about the slice's centre pixel ((W - 1) / 2, (H - 1) / 2)
+  /// and translation (3..5, per mm), both in the slice's own axes u, v, n (bigus::CorrectSliceFrame,
+  /// SlicePoseBackward; SliceCorrectionMatrix gives the corrected ImageToReference). Pose refinement.
+  double* SlicePoses = nullptr;
 };
 
 /// One slice: its pose and its pixel grid.

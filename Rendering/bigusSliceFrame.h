@@ -13,7 +13,10 @@
 #ifndef bigusSliceFrame_h
 #define bigusSliceFrame_h
 
+#include "bigusGaussianMath.h"
+
 #include <cmath>
+#include <cstring>
 
 namespace bigus
 {
@@ -114,6 +117,16 @@ inline PoseStatus ComputeSliceFrame(const double m[16], double maxShearDegrees, 
   return frame.shearDegrees > maxShearDegrees ? PoseStatus::Sheared : PoseStatus::Ok;
 }
 
+/// The centre pixel ((width - 1) / 2, (height - 1) / 2) of a slice in its plane coordinates (mm, elevation
+/// 0): the pivot of a pose correction (CorrectPose, FieldGradients::SlicePoses).
+inline void SliceCentre(const double pixelToPlane[3], int width, int height, double centre[3])
+{
+  const double i = 0.5 * (width - 1), j = 0.5 * (height - 1);
+  centre[0] = i * pixelToPlane[0] + j * pixelToPlane[1];
+  centre[1] = j * pixelToPlane[2];
+  centre[2] = 0;
+}
+
 /**
  * Orthonormal rendering frame of a slice and the affine map from pixel index to in-plane position.
  * Rows of @p F: u, v_perp (v made orthogonal to u), n = u x v. Pixel (i, j) lies at in-plane position
@@ -142,6 +155,55 @@ inline PoseStatus ComputeRenderingFrame(
   pixelToPlane[0] = frame.spacing[0];
   pixelToPlane[1] = frame.spacing[1] * c;
   pixelToPlane[2] = frame.spacing[1] * nv;
+  return PoseStatus::Ok;
+}
+
+/**
+ * The pose @p m (row-major ImageToReference of a @p width x @p height slice) moved by the rigid correction
+ * @p xi: rotation vector xi[0..2] (rad) about the slice's centre pixel ((width - 1) / 2, (height - 1) / 2)
+ * and translation xi[3..5] (mm), both in the slice's rendering axes (ComputeRenderingFrame's u, v_perp, n),
+ * as bigus::CorrectSliceFrame moves its frame; the gradient FieldGradients::SlicePoses is taken with
+ * respect to this xi. @p corrected = C m with C the rigid motion of the reference frame that moves the slice
+ * (pixel spacing and shear are kept). Returns the status of @p m (@p corrected untouched unless Ok).
+ */
+inline PoseStatus CorrectPose(const double m[16], int width, int height, const double xi[6], double corrected[16])
+{
+  SliceFrameD frame, moved;
+  double pixelToPlane[3];
+  const PoseStatus status = ComputeRenderingFrame(m, 90, frame.F, frame.Origin, pixelToPlane);
+  if (status != PoseStatus::Ok)
+  {
+    return status;
+  }
+  double pivot[3];
+  SliceCentre(pixelToPlane, width, height, pivot);
+  CorrectSliceFrame(frame, pivot, xi, moved);
+  // C x = Q x + d with Q = F'^T F and d = o' - Q o.
+  double Q[3][3], d[3];
+  for (int i = 0; i < 3; ++i)
+  {
+    for (int j = 0; j < 3; ++j)
+    {
+      Q[i][j] = moved.F[0][i] * frame.F[0][j] + moved.F[1][i] * frame.F[1][j] + moved.F[2][i] * frame.F[2][j];
+    }
+  }
+  for (int i = 0; i < 3; ++i)
+  {
+    d[i] = moved.Origin[i] - (Q[i][0] * frame.Origin[0] + Q[i][1] * frame.Origin[1] + Q[i][2] * frame.Origin[2]);
+  }
+  double out[16];
+  for (int i = 0; i < 3; ++i)
+  {
+    for (int j = 0; j < 4; ++j)
+    {
+      out[4 * i + j] = Q[i][0] * m[j] + Q[i][1] * m[4 + j] + Q[i][2] * m[8 + j] + (j == 3 ? d[i] : 0.0);
+    }
+  }
+  for (int j = 0; j < 4; ++j)
+  {
+    out[12 + j] = m[12 + j];
+  }
+  std::memcpy(corrected, out, sizeof(out));
   return PoseStatus::Ok;
 }
 
