@@ -216,6 +216,11 @@ StepStatus CpuTrainingEngine::Step(const StepRequest& request, double* loss, std
         g /= static_cast<float>(request.Count);
       }
     }
+    if (request.PoseGradients)
+    {
+      std::fill(request.PoseGradients + 6 * b, request.PoseGradients + 6 * b + 6, 0.0);
+      grads.SlicePoses = request.PoseGradients + 6 * b;
+    }
     if (!this->Backend->Backward(this->State.Field.View(), &slice, 1, request.Options, this->S.data(),
           this->LossGradient.data(), false, grads, nullptr, error))
     {

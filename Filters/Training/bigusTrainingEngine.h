@@ -127,6 +127,11 @@ struct StepRequest
   bool SparseAdam = false;
   RenderOptions Options;                           ///< rendering while training (cutoff, gamma, beam)
   ImageLossWeights Loss;
+  /// Pose refinement: when not null, receives ([Count, 6], overwritten) the gradient of the batch's loss
+  /// with respect to a rigid correction of each frame's pose at its current pose (FieldGradients::SlicePoses:
+  /// rotation vector per rad, translation per mm, about the frame's centre pixel in its own axes). The
+  /// trainer moves the poses (TrainingData::Poses) between steps; an engine reads them at every step.
+  double* PoseGradients = nullptr;
 };
 
 /// This machine's physical memory, bytes (sysconf); 0 when unknown. Sizes are checked against it

@@ -3,6 +3,7 @@
 #include "bigusTestUtilities.h"
 #include "bigusBackend.h"
 #include "bigusElevationSigma.h"
+#include "bigusSliceFrame.h"
 #include "bigusTrainer.h"
 #include "bigusTrainingTestUtilities.h"
 
@@ -1328,4 +1329,94 @@ TEST(Trainer, ADenseStartKeepsToItsCountAndSolvesTheReflectivities)
     std::string::npos) << error;
   EXPECT_NE(error.find("and this machine has"), std::string::npos) << error;
   EXPECT_EQ(tooLarge.GetField().Count(), 0);
+}
+
+// Pose refinement on synthetic truth: the known field rendered at the true poses, the training frames'
+// poses then moved by a random rigid motion of 0.5 degrees and 0.5 mm each (about the frame's centre, in
+// its own axes). Training with RefinePoses brings the poses back towards the truth: the mean distance of
+// the frames' corners from where they truly lie falls by more than half (the error a tracker would leave
+// in a volume), and the held-out frames (at their true poses, never refined) come out better.
+TEST(Trainer, RefiningPosesBringsPerturbedTrainingPosesTowardsTheTruth)
+{
+  std::vector<int> heldOut;
+  TrainingData truth = SyntheticSweep(KnownField(200, 7), 0.5, heldOut);
+  TrainingData perturbed = truth;
+  std::mt19937_64 rng(21);
+  std::normal_distribution<double> normal(0, 1);
+  auto unit = [&](double* v) {
+    double n = 0;
+    for (int k = 0; k < 3; ++k)
+    {
+      v[k] = normal(rng);
+      n += v[k] * v[k];
+    }
+    for (int k = 0; k < 3; ++k)
+    {
+      v[k] /= std::sqrt(n);
+    }
+  };
+  for (int f : truth.TrainFrames)
+  {
+    double xi[6];
+    unit(xi);
+    unit(xi + 3);
+    for (int k = 0; k < 3; ++k)
+    {
+      xi[k] *= 0.5 * M_PI / 180;
+      xi[3 + k] *= 0.5;
+    }
+    ASSERT_EQ(CorrectPose(truth.Poses[f].data(), W, H, xi, perturbed.Poses[f].data()), PoseStatus::Ok);
+  }
+  // Mean distance (mm) of the four corner pixels of every training frame from their true places.
+  auto cornerError = [&](const TrainingData& d) {
+    double total = 0;
+    int count = 0;
+    for (int f : truth.TrainFrames)
+    {
+      for (double i : { 0.0, W - 1.0 })
+      {
+        for (double j : { 0.0, H - 1.0 })
+        {
+          double d2 = 0;
+          for (int k = 0; k < 3; ++k)
+          {
+            const double* a = d.Poses[f].data();
+            const double* b = truth.Poses[f].data();
+            const double e = (a[4 * k] - b[4 * k]) * i + (a[4 * k + 1] - b[4 * k + 1]) * j + a[4 * k + 3] - b[4 * k + 3];
+            d2 += e * e;
+          }
+          total += std::sqrt(d2);
+          ++count;
+        }
+      }
+    }
+    return total / count;
+  };
+  const double before = cornerError(perturbed);
+  TrainerSettings s;
+  s.ElevationSigma = 0.5;
+  s.PixelGridFit = false;
+  s.InitialGaussians = 3000;
+  s.Iterations = 1500;
+  s.RefinePoses = true;
+  Trainer trainer(perturbed, s);
+  std::string error;
+  ASSERT_TRUE(trainer.Initialize(&error)) << error;
+  ASSERT_TRUE(trainer.Run(nullptr, nullptr, &error)) << error;
+  const double after = cornerError(trainer.GetData());
+  s.RefinePoses = false;
+  Trainer trusting(perturbed, s);
+  ASSERT_TRUE(trusting.Initialize(&error)) << error;
+  ASSERT_TRUE(trusting.Run(nullptr, nullptr, &error)) << error;
+  Trainer onTruth(truth, s);
+  ASSERT_TRUE(onTruth.Initialize(&error)) << error;
+  ASSERT_TRUE(onTruth.Run(nullptr, nullptr, &error)) << error;
+  std::printf("corner error: %.3f mm tracked, %.3f mm refined; held-out PSNR %.2f dB refined, %.2f dB trusting the "
+              "tracked poses, %.2f dB on the true poses\n", before, after, HeldOutPsnr(trainer, heldOut),
+    HeldOutPsnr(trusting, heldOut), HeldOutPsnr(onTruth, heldOut));
+  ASSERT_EQ(trainer.GetReport().PoseCorrections.size(), truth.TrainFrames.size());
+  // Measured: 0.505 -> 0.192 mm; held-out 38.42 dB refined, 33.63 trusting the tracked poses, 55.61 on the
+  // true poses (the aim of 0.5 dB from the true poses is not reached here).
+  EXPECT_LT(after, 0.5 * before) << "the pose error falls by at least half";
+  EXPECT_GT(HeldOutPsnr(trainer, heldOut), HeldOutPsnr(trusting, heldOut) + 2.0);
 }
