@@ -8,6 +8,7 @@
 #include "vtkDataArray.h"
 #include "vtkDoubleArray.h"
 #include "vtkFieldData.h"
+#include "vtkMath.h"
 #include "vtkIdList.h"
 #include "vtkImageData.h"
 #include "vtkInformation.h"
@@ -44,6 +45,7 @@ vtkGaussianFieldTrainer::vtkGaussianFieldTrainer()
   this->SolveIterations = d.Solve.MaximumIterations;
   this->DenseInitialisation = d.DenseInitialisation;
   this->PixelGridFit = d.PixelGridFit;
+  this->RefinePoses = d.RefinePoses;
   this->SparseAdam = d.SparseAdam;
   this->Iterations = d.Iterations;
   this->TimeBudget = d.TimeBudget;
@@ -175,6 +177,7 @@ int vtkGaussianFieldTrainer::RequestData(
   s.Solve.MaximumIterations = this->SolveIterations;
   s.DenseInitialisation = this->DenseInitialisation;
   s.PixelGridFit = this->PixelGridFit;
+  s.RefinePoses = this->RefinePoses;
   s.SparseAdam = this->SparseAdam;
   s.InitialGaussians = this->InitialGaussians;
   s.MaximumGaussians = this->MaximumGaussians;
@@ -343,6 +346,26 @@ int vtkGaussianFieldTrainer::RequestData(
     frames->InsertNextValue(f);
   }
   output->GetFieldData()->AddArray(frames);
+  if (!report.PoseCorrections.empty())
+  {
+    vtkNew<vtkDoubleArray> corrections;
+    corrections->SetName("PoseCorrections");
+    corrections->SetNumberOfComponents(7);
+    const char* names[7] = { "Frame", "RotationU (degrees)", "RotationV (degrees)", "RotationN (degrees)",
+      "TranslationU (mm)", "TranslationV (mm)", "TranslationN (mm)" };
+    for (int k = 0; k < 7; ++k)
+    {
+      corrections->SetComponentName(k, names[k]);
+    }
+    for (const bigus::TrainerReport::PoseCorrection& p : report.PoseCorrections)
+    {
+      const double degrees = 180.0 / vtkMath::Pi();
+      const double tuple[7] = { double(p.Frame), p.Xi[0] * degrees, p.Xi[1] * degrees, p.Xi[2] * degrees, p.Xi[3],
+        p.Xi[4], p.Xi[5] };
+      corrections->InsertNextTuple(tuple);
+    }
+    output->GetFieldData()->AddArray(corrections);
+  }
   if (history->GetNumberOfTuples() > 0)
   {
     output->GetFieldData()->AddArray(history);
@@ -370,6 +393,7 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "SolveIterations: " << this->SolveIterations << "\n";
   os << indent << "DenseInitialisation: " << this->DenseInitialisation << "\n";
   os << indent << "PixelGridFit: " << this->PixelGridFit << "\n";
+  os << indent << "RefinePoses: " << this->RefinePoses << "\n";
   os << indent << "SparseAdam: " << this->SparseAdam << "\n";
   os << indent << "Iterations: " << this->Iterations << "\n";
   os << indent << "TimeBudget: " << this->TimeBudget << "\n";

@@ -134,6 +134,14 @@ public:
   vtkGetMacro(PixelGridFit, bool);
   vtkBooleanMacro(PixelGridFit, bool);
   ///@}
+  ///@{ Pose refinement (default off): a rigid correction of each training frame's pose, optimised with the
+  /// field (bigus::TrainerSettings::RefinePoses). The output's field data then holds PoseCorrections, one
+  /// tuple per training frame: Frame, rotation about the frame's u, v, n axes through its centre pixel
+  /// (degrees), translation along u, v, n (mm) (bigus::CorrectPose), and TrainingPoses are the refined poses.
+  vtkSetMacro(RefinePoses, bool);
+  vtkGetMacro(RefinePoses, bool);
+  vtkBooleanMacro(RefinePoses, bool);
+  ///@}
   ///@{ Adam over the Gaussians a step touched only (default on; off moves every Gaussian every step on its
   /// momentum, the ablation; bigus::TrainerSettings::SparseAdam).
   vtkSetMacro(SparseAdam, bool);
@@ -279,6 +287,7 @@ protected:
   int SolveIterations;
   bool DenseInitialisation;
   bool PixelGridFit;
+  bool RefinePoses;
   bool SparseAdam;
   int Iterations;
   double TimeBudget;

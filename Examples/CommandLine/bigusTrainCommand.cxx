@@ -3,19 +3,24 @@
 #include "bigusGapFilling.h"
 #include "bigusGaussianFieldData.h"
 #include "bigusPlot.h"
+#include "bigusSliceFrame.h"
 #include "vtkCallbackCommand.h"
 #include "vtkCommand.h"
 #include "vtkDataArray.h"
 #include "vtkFieldData.h"
 #include "vtkGaussianFieldTrainer.h"
 #include "vtkIdList.h"
+#include "vtkImageData.h"
+#include "vtkMath.h"
 #include "vtkNew.h"
 #include "vtkSMPTools.h"
+#include "vtkUltrasoundSequenceWriter.h"
 #include "vtkXMLPolyDataWriter.h"
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <memory>
 #include <sstream>
@@ -38,7 +43,8 @@ struct TrainOptions
   double GrowthMargin = 0;
   int GrowthPatience = 0, SolveIterations = 0;
   bool NoFillGaps = false, ReflectivitySolve = false, DenseStart = false, DenseAdam = false,
-       NoPixelGridFit = false;
+       NoPixelGridFit = false, RefinePoses = false;
+  std::string RefinedPoses;
   unsigned Seed = 0;
 
   /// The filter's own defaults, so that `bigus train` and vtkGaussianFieldTrainer agree.
@@ -100,6 +106,7 @@ int RunTrain(const TrainOptions& o)
   trainer->SetSolveIterations(o.SolveIterations);
   trainer->SetDenseInitialisation(o.DenseStart);
   trainer->SetPixelGridFit(!o.NoPixelGridFit);
+  trainer->SetRefinePoses(o.RefinePoses);
   trainer->SetSparseAdam(!o.DenseAdam);
   trainer->SetElevationSigma(o.ElevationSigma);
   trainer->SetSeed(o.Seed);
@@ -204,6 +211,63 @@ int RunTrain(const TrainOptions& o)
     std::printf("gap filling    %s\n", gaps->GetVariantValue(0).ToString().c_str());
   }
   std::printf("backend        %s\n", trainer->GetBackendInUse());
+  if (vtkDataArray* corrections = fd->GetArray("PoseCorrections"))
+  {
+    // Per training frame: the rotation's angle (degrees) and the translation's length (mm).
+    double sum[2] = { 0, 0 }, largest[2] = { 0, 0 };
+    const vtkIdType n = corrections->GetNumberOfTuples();
+    for (vtkIdType i = 0; i < n; ++i)
+    {
+      const double* c = corrections->GetTuple(i);
+      const double size[2] = { std::sqrt(c[1] * c[1] + c[2] * c[2] + c[3] * c[3]),
+        std::sqrt(c[4] * c[4] + c[5] * c[5] + c[6] * c[6]) };
+      for (int k = 0; k < 2; ++k)
+      {
+        sum[k] += size[k];
+        largest[k] = std::max(largest[k], size[k]);
+      }
+    }
+    std::printf("poses          %lld training frames refined: rotation mean %.3f, largest %.3f degrees; translation "
+                "mean %.3f, largest %.3f mm\n",
+      static_cast<long long>(n), sum[0] / std::max<vtkIdType>(1, n), largest[0], sum[1] / std::max<vtkIdType>(1, n),
+      largest[1]);
+    if (!o.RefinedPoses.empty())
+    {
+      // The input sweep with its training frames' ImageToReference corrected (the held-out frames as tracked).
+      vtkImageData* input = reader->GetOutput();
+      vtkNew<vtkImageData> refined;
+      refined->ShallowCopy(input);
+      vtkNew<vtkFieldData> fields;
+      fields->DeepCopy(input->GetFieldData());
+      refined->SetFieldData(fields);
+      vtkDataArray* poses = fields->GetArray("ImageToReference");
+      int dims[3];
+      input->GetDimensions(dims);
+      for (vtkIdType i = 0; i < n; ++i)
+      {
+        const double* c = corrections->GetTuple(i);
+        const int frame = static_cast<int>(c[0]);
+        const double radians = vtkMath::Pi() / 180.0;
+        const double xi[6] = { c[1] * radians, c[2] * radians, c[3] * radians, c[4], c[5], c[6] };
+        double pose[16];
+        if (bigus::CorrectPose(poses->GetTuple(frame), dims[0], dims[1], xi, pose) == bigus::PoseStatus::Ok)
+        {
+          poses->SetTuple(frame, pose);
+        }
+      }
+      const std::string temporaryPoses = TemporaryName(o.RefinedPoses);
+      vtkNew<vtkUltrasoundSequenceWriter> sequenceWriter;
+      sequenceWriter->SetInputData(refined);
+      sequenceWriter->SetFileName(temporaryPoses.c_str());
+      if (!sequenceWriter->Write() || !Publish(temporaryPoses, o.RefinedPoses))
+      {
+        std::remove(temporaryPoses.c_str());
+        return Fail(o.RefinedPoses + ": cannot write the refined sequence");
+      }
+      std::printf("refined poses  %s: the sweep with its training frames' ImageToReference corrected\n",
+        o.RefinedPoses.c_str());
+    }
+  }
   return 0;
 }
 }
@@ -255,6 +319,12 @@ Command AddTrainCommand(CLI::App& app)
   trainCommand->add_flag("--no-pixel-grid-fit", train.NoPixelGridFit,
     "Train from Harris seeds even when one Gaussian per fan pixel of the training frames would fit under "
     "--max-gaussians (default: that pixel grid, its reflectivities solved, and no geometry steps)");
+  trainCommand->add_flag("--refine-poses", train.RefinePoses,
+    "Refine each training frame's tracked pose with the field (a rigid correction about its centre pixel, a prior "
+    "towards the tracked pose; default: the tracked poses are trusted)");
+  trainCommand->add_option("--refined-poses", train.RefinedPoses,
+    "With --refine-poses: write the sweep with its training frames' ImageToReference corrected (.igs.mha)")
+    ->needs("--refine-poses");
   trainCommand->add_flag("--no-fill-gaps", train.NoFillGaps,
     "Leave gaps between training frames wider than the beam empty (default: bridged, as bigus fill-gaps does)");
   trainCommand->add_option("--elevation-sigma", train.ElevationSigma, "Elevation beam sigma, mm (FWHM / 2.355); 0: chosen from the sweep (frame spacing, speckle decorrelation)")

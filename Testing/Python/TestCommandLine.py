@@ -181,6 +181,45 @@ def check_fill_gaps(sweep, xml, out):
     assert not os.path.exists(os.path.join(out, "bare_filled.vtp"))
 
 
+def check_refine_poses(sweep, xml, out):
+    """--refine-poses: the summary line, PoseCorrections in the field data, and --refined-poses writes the sweep
+    with the training frames' ImageToReference corrected and the held-out frames' as tracked."""
+    field = os.path.join(out, "nwire_refined.vtp")
+    refined = os.path.join(out, "nwire_refined.igs.mha")
+    code, _, err = run("train", sweep, "--calibration", xml, "-o", field, "--refined-poses", refined)
+    assert code == 2 and "requires --refine-poses" in err, (code, err)
+    code, out_text, err = run("train", sweep, "--calibration", xml, "-o", field, "--holdout-every", "4",
+                              "--holdout-offset", "2", "--iterations", "60", "--initial-gaussians", "2000",
+                              "--no-pixel-grid-fit", "--elevation-sigma", "1.0", "--refine-poses",
+                              "--refined-poses", refined)
+    assert code == 0, (out_text, err)
+    assert "RefinePoses = on" in out_text and "poses          15 training frames refined" in out_text, out_text
+    reader = vtk.vtkXMLPolyDataReader()
+    reader.SetFileName(field)
+    reader.Update()
+    corrections = reader.GetOutput().GetFieldData().GetArray("PoseCorrections")
+    assert corrections.GetNumberOfTuples() == 15 and corrections.GetNumberOfComponents() == 7
+    assert [int(corrections.GetComponent(k, 0)) for k in range(15)] == [k for k in range(20) if k % 4 != 2]
+    tracked = bigus.vtkUltrasoundSequenceReader()
+    tracked.SetFileName(sweep)
+    tracked.SetCalibrationFileName(xml)
+    tracked.Update()
+    back = bigus.vtkUltrasoundSequenceReader()
+    back.SetFileName(refined)
+    back.Update()
+    a = tracked.GetOutput().GetFieldData().GetArray("ImageToReference")
+    b = back.GetOutput().GetFieldData().GetArray("ImageToReference")
+    assert b.GetNumberOfTuples() == 20
+    moved = 0
+    for k in range(20):
+        difference = max(abs(a.GetComponent(k, c) - b.GetComponent(k, c)) for c in range(16))
+        if k % 4 == 2:
+            assert difference < 1e-9, (k, difference)  # held out: as tracked
+        else:
+            moved += difference > 1e-6
+    assert moved > 0, "no training frame's pose moved"
+
+
 def main():
     global BIGUS
     data, _, BIGUS, out = sys.argv[1:5]
@@ -208,6 +247,8 @@ def main():
                               "--holdout-offset", "2", "--iterations", "40", "--elevation-sigma", "1.0",
                               "--evaluate-every", "1")
     assert code == 0, (out_text, err)
+    # The cropped sweep's fan holds fewer pixels than --max-gaussians: the defaults fit the pixel grid.
+    assert "stop: the pixel-grid fit" in out_text and "after 0 iterations" in out_text, out_text
     reader = vtk.vtkXMLPolyDataReader()
     reader.SetFileName(field)
     reader.Update()
@@ -245,6 +286,7 @@ def main():
     assert sorted(int(frames.GetTuple1(k)) for k in range(frames.GetNumberOfTuples())) == [0, 1, 3]
 
     check_fill_gaps(sweep, xml, out)
+    check_refine_poses(sweep, xml, out)
 
     rendered = os.path.join(out, "nwire_rendered.igs.mha")
     code, out_text, err = run("render", field, "--poses", sweep, "--calibration", xml, "--frames", "2", "6", "10",
