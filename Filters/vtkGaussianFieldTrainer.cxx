@@ -46,6 +46,7 @@ vtkGaussianFieldTrainer::vtkGaussianFieldTrainer()
   this->DenseInitialisation = d.DenseInitialisation;
   this->PixelGridFit = d.PixelGridFit;
   this->RefinePoses = d.RefinePoses;
+  this->PoseSmoothness = d.PoseSmoothness;
   this->SparseAdam = d.SparseAdam;
   this->Iterations = d.Iterations;
   this->TimeBudget = d.TimeBudget;
@@ -178,6 +179,7 @@ int vtkGaussianFieldTrainer::RequestData(
   s.DenseInitialisation = this->DenseInitialisation;
   s.PixelGridFit = this->PixelGridFit;
   s.RefinePoses = this->RefinePoses;
+  s.PoseSmoothness = this->PoseSmoothness;
   s.SparseAdam = this->SparseAdam;
   s.InitialGaussians = this->InitialGaussians;
   s.MaximumGaussians = this->MaximumGaussians;
@@ -394,6 +396,7 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "DenseInitialisation: " << this->DenseInitialisation << "\n";
   os << indent << "PixelGridFit: " << this->PixelGridFit << "\n";
   os << indent << "RefinePoses: " << this->RefinePoses << "\n";
+  os << indent << "PoseSmoothness: " << this->PoseSmoothness << "\n";
   os << indent << "SparseAdam: " << this->SparseAdam << "\n";
   os << indent << "Iterations: " << this->Iterations << "\n";
   os << indent << "TimeBudget: " << this->TimeBudget << "\n";

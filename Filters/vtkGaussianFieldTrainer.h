@@ -142,6 +142,11 @@ public:
   vtkGetMacro(RefinePoses, bool);
   vtkBooleanMacro(RefinePoses, bool);
   ///@}
+  ///@{ Weight of the smoothness prior on the pose corrections along the sweep (default 0;
+  /// bigus::TrainerSettings::PoseSmoothness).
+  vtkSetClampMacro(PoseSmoothness, double, 0, 1e12);
+  vtkGetMacro(PoseSmoothness, double);
+  ///@}
   ///@{ Adam over the Gaussians a step touched only (default on; off moves every Gaussian every step on its
   /// momentum, the ablation; bigus::TrainerSettings::SparseAdam).
   vtkSetMacro(SparseAdam, bool);
@@ -288,6 +293,7 @@ protected:
   bool DenseInitialisation;
   bool PixelGridFit;
   bool RefinePoses;
+  double PoseSmoothness;
   bool SparseAdam;
   int Iterations;
   double TimeBudget;

@@ -45,6 +45,7 @@ struct TrainOptions
   bool NoFillGaps = false, ReflectivitySolve = false, DenseStart = false, DenseAdam = false,
        NoPixelGridFit = false, RefinePoses = false;
   std::string RefinedPoses;
+  double PoseSmoothness = 0;
   unsigned Seed = 0;
 
   /// The filter's own defaults, so that `bigus train` and vtkGaussianFieldTrainer agree.
@@ -107,6 +108,7 @@ int RunTrain(const TrainOptions& o)
   trainer->SetDenseInitialisation(o.DenseStart);
   trainer->SetPixelGridFit(!o.NoPixelGridFit);
   trainer->SetRefinePoses(o.RefinePoses);
+  trainer->SetPoseSmoothness(o.PoseSmoothness);
   trainer->SetSparseAdam(!o.DenseAdam);
   trainer->SetElevationSigma(o.ElevationSigma);
   trainer->SetSeed(o.Seed);
@@ -325,6 +327,10 @@ Command AddTrainCommand(CLI::App& app)
   trainCommand->add_option("--refined-poses", train.RefinedPoses,
     "With --refine-poses: write the sweep with its training frames' ImageToReference corrected (.igs.mha)")
     ->needs("--refine-poses");
+  trainCommand->add_option("--pose-smoothness", train.PoseSmoothness,
+    "With --refine-poses: weight of the prior that keeps the corrections smooth along the sweep (0: none)")
+    ->needs("--refine-poses")
+    ->check(CLI::NonNegativeNumber);
   trainCommand->add_flag("--no-fill-gaps", train.NoFillGaps,
     "Leave gaps between training frames wider than the beam empty (default: bridged, as bigus fill-gaps does)");
   trainCommand->add_option("--elevation-sigma", train.ElevationSigma, "Elevation beam sigma, mm (FWHM / 2.355); 0: chosen from the sweep (frame spacing, speckle decorrelation)")

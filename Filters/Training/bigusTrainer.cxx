@@ -130,9 +130,9 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
   if (s.RefinePoses)
   {
     this->Report.Settings.push_back(Format("RefinePoses = on (from %.0f %% of the schedule; Adam %.3g rad and %.3g mm per "
-                                           "step; prior %.3g at %.3g degrees and %.3g mm)",
+                                           "step; prior %.3g at %.3g degrees and %.3g mm, smoothness %.3g)",
       100 * s.PoseRefinementStart, s.PoseRotationLearningRate, s.PoseTranslationLearningRate, s.PosePrior,
-      s.PoseRotationSigma * 180 / M_PI, s.PoseTranslationSigma));
+      s.PoseRotationSigma * 180 / M_PI, s.PoseTranslationSigma, s.PoseSmoothness));
     this->TrackedPoses = this->Data->Poses;
     const std::size_t n = this->Data->Poses.size();
     this->PoseXi.assign(n, {});
@@ -533,9 +533,22 @@ void Trainer::UpdatePoses(const std::vector<int>& frames, const std::vector<doub
     std::array<double, 6>& xi = this->PoseXi[f];
     const int t = ++this->PoseSteps[f];
     const double c1 = 1 - std::pow(0.9, t), c2 = 1 - std::pow(0.999, t);
+    // The neighbours along the sweep: the training frames before and after this one (TrainFrames in
+    // order; none where they are not).
+    const std::vector<int>& train = this->Data->TrainFrames;
+    const auto at = std::lower_bound(train.begin(), train.end(), f);
+    const bool found = at != train.end() && *at == f;
+    const std::array<double, 6>* before = found && at != train.begin() ? &this->PoseXi[*(at - 1)] : nullptr;
+    const std::array<double, 6>* after = found && at + 1 != train.end() ? &this->PoseXi[*(at + 1)] : nullptr;
     for (int k = 0; k < 6; ++k)
     {
-      const double g = gradients[6 * b + k] + s.PosePrior * xi[k] / (sigma[k / 3] * sigma[k / 3]);
+      double smooth = 0;
+      for (const std::array<double, 6>* n : { before, after })
+      {
+        smooth += n ? xi[k] - (*n)[k] : 0.0;
+      }
+      const double g = gradients[6 * b + k] +
+        (s.PosePrior * xi[k] + s.PoseSmoothness * smooth) / (sigma[k / 3] * sigma[k / 3]);
       if (!std::isfinite(g))
       {
         return; // a non-finite pose gradient moves no pose

@@ -139,6 +139,10 @@ struct TrainerSettings
   double PoseRotationSigma = 0.0175;     ///< rad (1 degree): the prior's scale, a tracker's typical error
   double PoseTranslationSigma = 1.0;     ///< mm
   double PosePrior = 1e-3;               ///< weight of the prior against the image loss (0: none)
+  /// Weight of the smoothness prior PoseSmoothness / 2 sum |xi_f - xi_g|^2 (each component over its sigma
+  /// squared) over consecutive training frames f, g of the sweep: a tracker's error drifts along a sweep,
+  /// while a correction that jumps from frame to frame fits the image, not the pose (0: none).
+  double PoseSmoothness = 0;
   // Run
   unsigned Seed = 1;
   int CheckpointInterval = 0;        ///< steps between checkpoints (0 = none)

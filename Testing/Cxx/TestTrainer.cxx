@@ -1419,4 +1419,26 @@ TEST(Trainer, RefiningPosesBringsPerturbedTrainingPosesTowardsTheTruth)
   // true poses (the aim of 0.5 dB from the true poses is not reached here).
   EXPECT_LT(after, 0.5 * before) << "the pose error falls by at least half";
   EXPECT_GT(HeldOutPsnr(trainer, heldOut), HeldOutPsnr(trusting, heldOut) + 2.0);
+
+  // The smoothness prior: the corrections of consecutive training frames differ less.
+  auto roughness = [](const TrainerReport& report) {
+    double sum = 0;
+    for (std::size_t k = 1; k < report.PoseCorrections.size(); ++k)
+    {
+      for (int c = 0; c < 6; ++c)
+      {
+        const double d = report.PoseCorrections[k].Xi[c] - report.PoseCorrections[k - 1].Xi[c];
+        sum += d * d * (c < 3 ? 1.0 / (0.0175 * 0.0175) : 1.0); // per degree-sized and mm-sized unit
+      }
+    }
+    return std::sqrt(sum / (report.PoseCorrections.size() - 1));
+  };
+  s.RefinePoses = true;
+  s.PoseSmoothness = 10;
+  Trainer smooth(perturbed, s);
+  ASSERT_TRUE(smooth.Initialize(&error)) << error;
+  ASSERT_TRUE(smooth.Run(nullptr, nullptr, &error)) << error;
+  std::printf("roughness of the corrections along the sweep: %.4f without the smoothness prior, %.4f with\n",
+    roughness(trainer.GetReport()), roughness(smooth.GetReport()));
+  EXPECT_LT(roughness(smooth.GetReport()), 0.5 * roughness(trainer.GetReport()));
 }
