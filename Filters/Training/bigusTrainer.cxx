@@ -909,6 +909,7 @@ bool Trainer::LoadCheckpoint(const std::string& file, std::string* error)
   }
   this->State = std::move(loaded);
   this->Gamma = gamma;
+  this->PixelGrid = false; // a checkpoint comes from a run that takes steps: it goes on with them
   return this->PushState(error);
 }
 
