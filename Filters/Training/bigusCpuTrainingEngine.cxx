@@ -16,9 +16,6 @@ namespace bigus
 
 namespace
 {
-constexpr double AdamBeta1 = 0.9;
-constexpr double AdamBeta2 = 0.999;
-constexpr double AdamEpsilon = 1e-12;
 
 /// The options of the linear map S = A r: reflectivities used as given.
 RenderOptions Linear(RenderOptions options)

@@ -200,8 +200,13 @@ GridPlanes SelectGridPlanes(const TrainingData& data, const SeedShape& shape)
 
 std::string SeedGrid(const TrainingData& data, std::int64_t total, const SeedShape& shape, GaussianField& field)
 {
+  return SeedGrid(data, SelectGridPlanes(data, shape), total, shape, field);
+}
+
+std::string SeedGrid(const TrainingData& data, const GridPlanes& selected, std::int64_t total, const SeedShape& shape,
+  GaussianField& field)
+{
   const std::size_t pixels = std::size_t(data.Width) * data.Height;
-  const GridPlanes selected = SelectGridPlanes(data, shape);
   const std::vector<int>& planes = selected.Frames;
   const double planeSpacing = selected.Spacing;
   const double masked = static_cast<double>(selected.FanPixels);

@@ -62,6 +62,9 @@ GridPlanes SelectGridPlanes(const TrainingData& data, const SeedShape& shape);
  * the volume protocol: docs/FINDINGS.md). Returns one line that says what was made.
  */
 std::string SeedGrid(const TrainingData& data, std::int64_t total, const SeedShape& shape, GaussianField& field);
+/// The same on planes already selected (SelectGridPlanes of the same data and shape).
+std::string SeedGrid(const TrainingData& data, const GridPlanes& planes, std::int64_t total, const SeedShape& shape,
+  GaussianField& field);
 
 } // namespace bigus
 

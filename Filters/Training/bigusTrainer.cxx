@@ -268,10 +268,12 @@ bool Trainer::Initialize(std::string* error)
     return false;
   }
   const SeedShape shape = this->SeedShapeOf();
-  const GridPlanes planes = SelectGridPlanes(data, shape);
-  this->PixelGrid = this->Settings.PixelGridFit && !this->Settings.DenseInitialisation &&
+  // The planes are selected (a pass over the training frames' masks) only where the pixel-grid fit may apply.
+  const bool gridMayApply = this->Settings.PixelGridFit && !this->Settings.DenseInitialisation &&
     this->Settings.InitialGaussians <= 0 && this->Settings.HarrisInitialisation &&
-    !this->Settings.NonNegativeReflectivity && planes.FanPixels <= this->Settings.MaximumGaussians;
+    !this->Settings.NonNegativeReflectivity;
+  const GridPlanes planes = gridMayApply ? SelectGridPlanes(data, shape) : GridPlanes();
+  this->PixelGrid = gridMayApply && planes.FanPixels <= this->Settings.MaximumGaussians;
   // A field that could not grow to MaximumGaussians in this machine's memory is refused before any seed is
   // made (the training frames are already held).
   const std::int64_t trainingPixels =
@@ -293,7 +295,7 @@ bool Trainer::Initialize(std::string* error)
   GaussianField& field = this->State.Gaussians.Field;
   if (this->PixelGrid)
   {
-    const std::string grid = SeedGrid(data, planes.FanPixels, shape, field);
+    const std::string grid = SeedGrid(data, planes, planes.FanPixels, shape, field);
     this->Report.InitialGaussians = field.Count();
     this->Report.Settings.push_back(Format("InitialGaussians = %lld (the pixel-grid fit: the %lld fan pixels of the "
                                            "dense start's planes fit under MaximumGaussians; ",
@@ -531,8 +533,6 @@ void Trainer::UpdatePoses(const std::vector<int>& frames, const std::vector<doub
   {
     const int f = frames[b];
     std::array<double, 6>& xi = this->PoseXi[f];
-    const int t = ++this->PoseSteps[f];
-    const double c1 = 1 - std::pow(0.9, t), c2 = 1 - std::pow(0.999, t);
     // The neighbours along the sweep: the training frames before and after this one (TrainFrames in
     // order; none where they are not).
     const std::vector<int>& train = this->Data->TrainFrames;
@@ -540,6 +540,8 @@ void Trainer::UpdatePoses(const std::vector<int>& frames, const std::vector<doub
     const bool found = at != train.end() && *at == f;
     const std::array<double, 6>* before = found && at != train.begin() ? &this->PoseXi[*(at - 1)] : nullptr;
     const std::array<double, 6>* after = found && at + 1 != train.end() ? &this->PoseXi[*(at + 1)] : nullptr;
+    double g[6];
+    bool finite = true;
     for (int k = 0; k < 6; ++k)
     {
       double smooth = 0;
@@ -547,17 +549,22 @@ void Trainer::UpdatePoses(const std::vector<int>& frames, const std::vector<doub
       {
         smooth += n ? xi[k] - (*n)[k] : 0.0;
       }
-      const double g = gradients[6 * b + k] +
-        (s.PosePrior * xi[k] + s.PoseSmoothness * smooth) / (sigma[k / 3] * sigma[k / 3]);
-      if (!std::isfinite(g))
-      {
-        return; // a non-finite pose gradient moves no pose
-      }
+      g[k] = gradients[6 * b + k] + (s.PosePrior * xi[k] + s.PoseSmoothness * smooth) / (sigma[k / 3] * sigma[k / 3]);
+      finite = finite && std::isfinite(g[k]);
+    }
+    if (!finite)
+    {
+      continue; // a non-finite pose gradient moves none of the frame's correction
+    }
+    const int t = ++this->PoseSteps[f];
+    const double c1 = 1 - std::pow(AdamBeta1, t), c2 = 1 - std::pow(AdamBeta2, t);
+    for (int k = 0; k < 6; ++k)
+    {
       double& m = this->PoseFirst[f][k];
       double& v = this->PoseSecond[f][k];
-      m = 0.9 * m + 0.1 * g;
-      v = 0.999 * v + 0.001 * g * g;
-      xi[k] -= rate[k / 3] * (m / c1) / (std::sqrt(v / c2) + 1e-12);
+      m = AdamBeta1 * m + (1 - AdamBeta1) * g[k];
+      v = AdamBeta2 * v + (1 - AdamBeta2) * g[k] * g[k];
+      xi[k] -= rate[k / 3] * (m / c1) / (std::sqrt(v / c2) + AdamEpsilon);
     }
     CorrectPose(this->TrackedPoses[f].data(), this->Data->Width, this->Data->Height, xi.data(), this->Data->Poses[f].data());
   }
