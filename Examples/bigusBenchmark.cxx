@@ -79,6 +79,7 @@ std::vector<Section> Sections(const std::vector<benchmark::Sweep>& sweeps)
   sections.push_back({ "Pareto", "pareto", benchmark::ParetoSection });
   sections.push_back({ "defaults against hand-tuned", "defaults", benchmark::DefaultsSection });
   sections.push_back({ "block hold-outs", "blocks", benchmark::BlockHoldOutSection });
+  sections.push_back({ "several sweeps", "sweeps", benchmark::SeveralSweepsSection });
   return sections;
 }
 }
@@ -102,7 +103,7 @@ int RunBenchmark(const BenchmarkOptions& options)
   if (!all && std::none_of(sections.begin(), sections.end(),
                 [&](const Section& s) { return s.Alone && section == s.Alone; }))
   {
-    return Fail("--section " + section + ": expected all, defaults, volume, blocks, ablations or pareto");
+    return Fail("--section " + section + ": expected all, defaults, volume, blocks, ablations, pareto or sweeps");
   }
   benchmark::Introduction(root, quick, report);
   std::string error;

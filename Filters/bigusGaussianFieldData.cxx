@@ -24,6 +24,7 @@
 #include <algorithm>
 
 #include <cmath>
+#include <limits>
 
 namespace bigus
 {
@@ -605,6 +606,156 @@ bool TrainingDataFromSequence(vtkImageData* sequence, vtkImageData* mask, Traini
     data.Mask[p] = maskValues->GetComponent(p, 0) != 0 ? 1 : 0;
   }
   data.TrainFrames.clear();
+  return true;
+}
+
+bool TrainingDataFromSweeps(const std::vector<SweepInput>& sweeps, TrainingData& data, std::string* error)
+{
+  data = TrainingData();
+  if (sweeps.empty())
+  {
+    *error = "no sweep";
+    return false;
+  }
+  struct Loaded
+  {
+    TrainingData Data;
+    double Spacing = 0;                 // mm per pixel
+    double Bounds[6] = { 0, 0, 0, 0, 0, 0 }; // mm, the valid frames' corners
+  };
+  std::vector<Loaded> loaded(sweeps.size());
+  for (std::size_t s = 0; s < sweeps.size(); ++s)
+  {
+    Loaded& l = loaded[s];
+    if (!TrainingDataFromSequence(sweeps[s].Sequence, sweeps[s].Mask, l.Data, error))
+    {
+      *error = sweeps[s].Name + ": " + *error;
+      return false;
+    }
+    if (std::none_of(l.Data.Mask.begin(), l.Data.Mask.end(), [](unsigned char v) { return v != 0; }))
+    {
+      *error = sweeps[s].Name + ": the fan mask is empty (no imaged pixel), so the sweep has nothing to train on";
+      return false;
+    }
+    vtkDataArray* valid = sweeps[s].Sequence->GetFieldData()->GetArray("FrameValid");
+    if (valid && valid->GetNumberOfTuples() != l.Data.Count())
+    {
+      valid = nullptr;
+    }
+    std::vector<double> spacings;
+    for (int r = 0; r < 3; ++r)
+    {
+      l.Bounds[2 * r] = std::numeric_limits<double>::infinity();
+      l.Bounds[2 * r + 1] = -std::numeric_limits<double>::infinity();
+    }
+    for (int f = 0; f < l.Data.Count(); ++f)
+    {
+      const std::array<double, 16>& m = l.Data.Poses[f];
+      if ((valid && valid->GetTuple1(f) == 0) || !std::all_of(m.begin(), m.end(), [](double v) { return std::isfinite(v); }))
+      {
+        continue;
+      }
+      for (int c = 0; c < 2; ++c)
+      {
+        spacings.push_back(std::sqrt(m[c] * m[c] + m[4 + c] * m[4 + c] + m[8 + c] * m[8 + c]));
+      }
+      for (double i : { 0.0, l.Data.Width - 1.0 })
+      {
+        for (double j : { 0.0, l.Data.Height - 1.0 })
+        {
+          for (int r = 0; r < 3; ++r)
+          {
+            const double x = m[4 * r] * i + m[4 * r + 1] * j + m[4 * r + 3];
+            l.Bounds[2 * r] = std::min(l.Bounds[2 * r], x);
+            l.Bounds[2 * r + 1] = std::max(l.Bounds[2 * r + 1], x);
+          }
+        }
+      }
+    }
+    if (spacings.empty())
+    {
+      *error = sweeps[s].Name + ": no valid frame with a finite ImageToReference";
+      return false;
+    }
+    std::nth_element(spacings.begin(), spacings.begin() + spacings.size() / 2, spacings.end());
+    l.Spacing = spacings[spacings.size() / 2];
+    if (s > 0 && (l.Spacing > 10 * loaded[0].Spacing || loaded[0].Spacing > 10 * l.Spacing))
+    {
+      char text[300];
+      std::snprintf(text, sizeof(text),
+        ": pixel spacing %.4g mm against %.4g mm in %s: the sweeps are not in the same units (metres against "
+        "millimetres?), or a calibration does not belong to its sweep",
+        l.Spacing, loaded[0].Spacing, sweeps[0].Name.c_str());
+      *error = sweeps[s].Name + text;
+      return false;
+    }
+  }
+  // Every sweep's bounds joined to the first sweep's through overlapping bounds.
+  std::vector<bool> joined(sweeps.size(), false);
+  joined[0] = true;
+  for (bool grew = true; grew;)
+  {
+    grew = false;
+    for (std::size_t a = 0; a < sweeps.size(); ++a)
+    {
+      for (std::size_t b = 0; b < sweeps.size() && !joined[a]; ++b)
+      {
+        bool overlap = joined[b];
+        for (int r = 0; r < 3 && overlap; ++r)
+        {
+          overlap = loaded[a].Bounds[2 * r] <= loaded[b].Bounds[2 * r + 1] && loaded[b].Bounds[2 * r] <= loaded[a].Bounds[2 * r + 1];
+        }
+        if (overlap)
+        {
+          joined[a] = grew = true;
+        }
+      }
+    }
+  }
+  for (std::size_t s = 0; s < sweeps.size(); ++s)
+  {
+    if (!joined[s])
+    {
+      const double* b = loaded[s].Bounds;
+      char text[300];
+      std::snprintf(text, sizeof(text),
+        ": its frames (x %.1f to %.1f, y %.1f to %.1f, z %.1f to %.1f mm) share no region with the other sweeps'",
+        b[0], b[1], b[2], b[3], b[4], b[5]);
+      *error = sweeps[s].Name + text;
+      return false;
+    }
+  }
+  if (sweeps.size() == 1)
+  {
+    data = std::move(loaded[0].Data);
+    return true;
+  }
+  for (const Loaded& l : loaded)
+  {
+    data.Width = std::max(data.Width, l.Data.Width);
+    data.Height = std::max(data.Height, l.Data.Height);
+  }
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
+  for (std::size_t s = 0; s < loaded.size(); ++s)
+  {
+    const TrainingData& d = loaded[s].Data;
+    const std::size_t first = data.Poses.size();
+    data.Poses.insert(data.Poses.end(), d.Poses.begin(), d.Poses.end());
+    data.Sweeps.insert(data.Sweeps.end(), d.Poses.size(), static_cast<int>(s));
+    data.Frames.resize(pixels * data.Poses.size(), 0.0f);
+    data.Mask.resize(pixels * data.Poses.size(), 0);
+    for (int f = 0; f < d.Count(); ++f)
+    {
+      const unsigned char* mask = d.MaskOf(f);
+      for (int j = 0; j < d.Height; ++j)
+      {
+        const std::size_t from = std::size_t(f) * d.Width * d.Height + std::size_t(j) * d.Width;
+        const std::size_t to = (first + f) * pixels + std::size_t(j) * data.Width;
+        std::copy_n(&d.Frames[from], d.Width, &data.Frames[to]);
+        std::copy_n(mask + std::size_t(j) * d.Width, d.Width, &data.Mask[to]);
+      }
+    }
+  }
   return true;
 }
 

@@ -225,6 +225,33 @@ BIGUSFILTERS_EXPORT void FieldToPolyData(const GaussianField& field, const Field
 BIGUSFILTERS_EXPORT bool TrainingDataFromSequence(
   vtkImageData* sequence, vtkImageData* mask, TrainingData& data, std::string* error);
 
+/// One tracked sweep for TrainingDataFromSweeps.
+struct SweepInput
+{
+  vtkImageData* Sequence = nullptr; ///< W x H x N tracked frames (DESIGN section 2)
+  vtkImageData* Mask = nullptr;     ///< its fan mask, W x H x 1 or W x H x N
+  std::string Name;                 ///< how errors name it (e.g. "sweep 1 (B.igs.mha)")
+};
+
+/**
+ * Several tracked sweeps as one TrainingData, frames in the order of @p sweeps, each with its sweep's index
+ * in TrainingData::Sweeps (filled only when there are two sweeps or more). Frames of different sizes share
+ * the largest width and height, the rest masked (TrainingData); with several sweeps every frame has its
+ * own mask. One sweep gives what TrainingDataFromSequence gives.
+ *
+ * Refused, with @p error naming the sweep and the reason (and @p data left empty):
+ * - what TrainingDataFromSequence refuses;
+ * - an empty fan mask (no imaged pixel);
+ * - a pixel spacing (the median length of ImageToReference's first two columns over the valid frames)
+ *   more than 10 times larger or smaller than the first sweep's: the sweeps are not in the same units
+ *   (metres against millimetres), or a calibration does not belong to its sweep;
+ * - bounds (the box around the corners of its valid frames, mm) that share no region with those of the
+ *   other sweeps, directly or through a chain of sweeps: nothing ties that sweep's field to the others'.
+ * Frames with FrameValid 0 are loaded but take no part in the checks.
+ */
+BIGUSFILTERS_EXPORT bool TrainingDataFromSweeps(
+  const std::vector<SweepInput>& sweeps, TrainingData& data, std::string* error);
+
 /**
  * The frames a sequence filter works on: those of @p list (indices into a sequence of @p frameCount
  * frames, in the list's order), or every frame when @p list is null or empty. Returns false with

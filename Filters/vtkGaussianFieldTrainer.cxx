@@ -77,6 +77,7 @@ vtkGaussianFieldTrainer::~vtkGaussianFieldTrainer()
 int vtkGaussianFieldTrainer::FillInputPortInformation(int port, vtkInformation* info)
 {
   info->Set(vtkAlgorithm::INPUT_REQUIRED_DATA_TYPE(), "vtkImageData");
+  info->Set(vtkAlgorithm::INPUT_IS_REPEATABLE(), 1);
   if (port == 1)
   {
     info->Set(vtkAlgorithm::INPUT_IS_OPTIONAL(), 1);
@@ -100,11 +101,14 @@ int vtkGaussianFieldTrainer::RequestUpdateExtent(
   // filters here do); the default would copy the output's update request upstream.
   for (int port = 0; port < 2; ++port)
   {
-    vtkInformation* inInfo = inputVector[port]->GetInformationObject(0);
-    if (inInfo && inInfo->Has(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT()))
+    for (int c = 0; c < inputVector[port]->GetNumberOfInformationObjects(); ++c)
     {
-      inInfo->Set(vtkStreamingDemandDrivenPipeline::UPDATE_EXTENT(),
-        inInfo->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT()), 6);
+      vtkInformation* inInfo = inputVector[port]->GetInformationObject(c);
+      if (inInfo->Has(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT()))
+      {
+        inInfo->Set(vtkStreamingDemandDrivenPipeline::UPDATE_EXTENT(),
+          inInfo->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT()), 6);
+      }
     }
   }
   return 1;
@@ -113,8 +117,6 @@ int vtkGaussianFieldTrainer::RequestUpdateExtent(
 int vtkGaussianFieldTrainer::RequestData(
   vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector* outputVector)
 {
-  vtkImageData* sequence = vtkImageData::GetData(inputVector[0], 0);
-  vtkImageData* maskImage = vtkImageData::GetData(inputVector[1], 0);
   vtkPolyData* output = vtkPolyData::GetData(outputVector, 0);
   this->StopReason.clear();
   this->GrowthStopReason.clear();
@@ -122,20 +124,54 @@ int vtkGaussianFieldTrainer::RequestData(
   this->NumberOfGaussians = 0;
   this->BackendInUse.clear();
 
-  vtkSmartPointer<vtkImageData> mask = maskImage;
-  const bool maskGiven = mask != nullptr;
-  if (!mask && sequence)
+  // The sweeps (port 0) and their fan masks (port 1: none, every one estimated, or one per sweep).
+  const int sweepCount = inputVector[0]->GetNumberOfInformationObjects();
+  const int maskCount = inputVector[1]->GetNumberOfInformationObjects();
+  if (maskCount != 0 && maskCount != sweepCount)
   {
-    vtkNew<vtkUltrasoundFanMask> estimate;
-    estimate->SetInputData(sequence);
-    estimate->Update();
-    mask = estimate->GetOutput();
+    vtkErrorMacro("input port 1: " << maskCount << " fan masks for " << sweepCount
+                                   << " sweeps; connect one mask per sweep, in the sweeps' order, or none");
+    return 0;
+  }
+  std::vector<vtkSmartPointer<vtkImageData>> masks(sweepCount);
+  std::vector<bigus::SweepInput> sweeps(sweepCount);
+  std::vector<bool> valid;        // per frame of all sweeps
+  std::vector<int> indexInSweep;  // per frame of all sweeps
+  for (int k = 0; k < sweepCount; ++k)
+  {
+    vtkImageData* sequence = vtkImageData::GetData(inputVector[0], k);
+    masks[k] = maskCount ? vtkImageData::GetData(inputVector[1], k) : nullptr;
+    if (!masks[k] && sequence)
+    {
+      vtkNew<vtkUltrasoundFanMask> estimate;
+      estimate->SetInputData(sequence);
+      estimate->Update();
+      masks[k] = estimate->GetOutput();
+    }
+    sweeps[k] = { sequence, masks[k], sweepCount > 1 ? "sweep " + std::to_string(k) : std::string("input") };
+    int dims[3] = { 0, 0, 0 };
+    if (sequence)
+    {
+      sequence->GetDimensions(dims);
+    }
+    vtkDataArray* isValid = sequence ? sequence->GetFieldData()->GetArray("FrameValid") : nullptr;
+    for (int f = 0; f < dims[2]; ++f)
+    {
+      valid.push_back(!isValid || isValid->GetNumberOfTuples() != dims[2] || isValid->GetTuple1(f) != 0);
+      indexInSweep.push_back(f);
+    }
   }
   bigus::TrainingData data;
   std::string error;
-  if (!bigus::TrainingDataFromSequence(sequence, mask, data, &error))
+  if (!bigus::TrainingDataFromSweeps(sweeps, data, &error))
   {
-    vtkErrorMacro("input: " << error);
+    vtkErrorMacro(<< error);
+    return 0;
+  }
+  if (this->HoldOutSweep >= sweepCount)
+  {
+    vtkErrorMacro("HoldOutSweep " << this->HoldOutSweep << ": there are " << sweepCount << " sweeps (0 to "
+                                  << sweepCount - 1 << ")");
     return 0;
   }
   std::vector<vtkIdType> listed;
@@ -144,18 +180,16 @@ int vtkGaussianFieldTrainer::RequestData(
     vtkErrorMacro("TrainingFrameList: " << error);
     return 0;
   }
-  vtkDataArray* valid = sequence->GetFieldData()->GetArray("FrameValid");
   for (int k = 0; k < data.Count(); ++k)
   {
-    const bool isValid = !valid || valid->GetTuple1(k) != 0;
-    bool train = isValid;
+    bool train = valid[k] && data.SweepOf(k) != this->HoldOutSweep;
     if (this->TrainingFrameList && this->TrainingFrameList->GetNumberOfIds() > 0)
     {
-      train = isValid && this->TrainingFrameList->IsId(k) >= 0;
+      train = train && this->TrainingFrameList->IsId(k) >= 0;
     }
     else if (this->HoldOutEvery > 0)
     {
-      train = isValid && k % this->HoldOutEvery != this->HoldOutOffset;
+      train = train && indexInSweep[k] % this->HoldOutEvery != this->HoldOutOffset;
     }
     if (train)
     {
@@ -227,7 +261,7 @@ int vtkGaussianFieldTrainer::RequestData(
       static_cast<double>(std::count_if(d.Mask.begin(), d.Mask.end(), [](unsigned char v) { return v != 0; }));
     char text[200];
     std::snprintf(text, sizeof(text), "FanMask = %s, %.1f %% of the frame%s",
-      maskGiven ? "given (input port 1)" : "estimated from the frames (vtkUltrasoundFanMask)",
+      maskCount ? "given (input port 1)" : "estimated from the frames (vtkUltrasoundFanMask)",
       100 * imaged / std::max<std::size_t>(1, d.Mask.size()),
       d.Mask.size() == std::size_t(d.Width) * d.Height ? "" : " (one per frame, mean)");
     settings.insert(settings.begin(), text);
@@ -241,8 +275,7 @@ int vtkGaussianFieldTrainer::RequestData(
   std::vector<int> heldOut;
   for (int k = 0; k < trainer.GetData().Count(); ++k)
   {
-    const bool isValid = !valid || valid->GetTuple1(k) != 0;
-    if (isValid && !std::binary_search(trainer.GetData().TrainFrames.begin(), trainer.GetData().TrainFrames.end(), k))
+    if (valid[k] && !std::binary_search(trainer.GetData().TrainFrames.begin(), trainer.GetData().TrainFrames.end(), k))
     {
       heldOut.push_back(k);
     }
@@ -348,6 +381,21 @@ int vtkGaussianFieldTrainer::RequestData(
     frames->InsertNextValue(f);
   }
   output->GetFieldData()->AddArray(frames);
+  if (sweepCount > 1)
+  {
+    // The sweep of each training frame and its index there (TrainingFrames counts the sweeps' frames in turn).
+    vtkNew<vtkIntArray> trainingSweeps;
+    trainingSweeps->SetName("TrainingSweeps");
+    trainingSweeps->SetNumberOfComponents(2);
+    trainingSweeps->SetComponentName(0, "Sweep");
+    trainingSweeps->SetComponentName(1, "Frame");
+    for (int f : trainer.GetData().TrainFrames)
+    {
+      const int tuple[2] = { trainer.GetData().SweepOf(f), indexInSweep[f] };
+      trainingSweeps->InsertNextTypedTuple(tuple);
+    }
+    output->GetFieldData()->AddArray(trainingSweeps);
+  }
   if (!report.PoseCorrections.empty())
   {
     vtkNew<vtkDoubleArray> corrections;
@@ -409,7 +457,8 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
      << this->DensifyInterval << ", percentile " << this->DensifyPercentile << "\n";
   os << indent << "GrowthMargin: " << this->GrowthMargin << ", GrowthPatience: " << this->GrowthPatience << "\n";
   os << indent << "FillGaps: " << this->FillGaps << "\n";
-  os << indent << "HoldOutEvery: " << this->HoldOutEvery << ", HoldOutOffset: " << this->HoldOutOffset << "\n";
+  os << indent << "HoldOutEvery: " << this->HoldOutEvery << ", HoldOutOffset: " << this->HoldOutOffset
+     << ", HoldOutSweep: " << this->HoldOutSweep << "\n";
   os << indent << "TrainingFrameList: " << (this->TrainingFrameList ? this->TrainingFrameList->GetNumberOfIds() : 0)
      << " frames\n";
   os << indent << "Seed: " << this->Seed << "\n";

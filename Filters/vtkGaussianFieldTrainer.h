@@ -2,14 +2,22 @@
  * @class   vtkGaussianFieldTrainer
  * @brief   Trains a beam-integrated Gaussian scattering field from a tracked ultrasound sweep.
  *
- * Input port 0: a tracked frame sequence (DESIGN section 2; e.g. vtkUltrasoundSequenceReader).
- * Input port 1 (optional): its fan mask (vtkUltrasoundFanMask's output, W x H x 1), or one mask per frame
- * (W x H x N, e.g. vtkUltrasoundVolumeSweep's port 1); estimated when absent.
+ * Input port 0: a tracked frame sequence (DESIGN section 2; e.g. vtkUltrasoundSequenceReader), or several
+ * (AddInputConnection, as vtkAppendFilter takes them): sweeps of one region along different paths, each with
+ * its own frame size, pixel spacing and fan mask, trained into one field (bigus::TrainingDataFromSweeps).
+ * Frame indices (TrainingFrameList, the output's TrainingFrames) count the sweeps' frames one sweep after
+ * the other. Sweeps whose frames share no region, whose pixel spacings differ more than tenfold
+ * (different units, or a calibration that belongs to another sweep), or with an empty fan mask are
+ * refused with an error that names the sweep, and no field.
+ * Input port 1 (optional): the fan mask (vtkUltrasoundFanMask's output, W x H x 1), or one mask per frame
+ * (W x H x N, e.g. vtkUltrasoundVolumeSweep's port 1); estimated when absent. With several sweeps: none
+ * (each estimated) or one connection per sweep, in the sweeps' order.
  * Output: the Gaussian field as vtkPolyData: one point (mean, mm) and one vertex per Gaussian, point
  * data `Scale` (3 floats, standard deviations in mm along the local axes), `Rotation` (4 floats, unit
  * quaternion w, x, y, z) and `Reflectivity` (signed); field data `ElevationSigma` (mm), `Gamma`,
  * `TrainingFrames` (frame indices), `InitialGaussians` (seeds), `Iterations`, `TrainingSeconds`,
- * `StopReason`, `GrowthStopReason`, early stopping's `BestIteration`, `BestValidationLoss` and
+ * `StopReason`, `GrowthStopReason`, with several sweeps `TrainingSweeps` (2 components per training frame:
+ * Sweep, Frame within it), early stopping's `BestIteration`, `BestValidationLoss` and
  * `LastValidationLoss`, `ValidationHistory` (3 components per validation: Iteration, Loss, Gaussians),
  * `GapFilling` (string: what FillGaps added, or "off")
  * (bigus::TrainerReport), the training geometry `TrainingPoses`, `TrainingFrameSize`,
@@ -92,6 +100,8 @@ public:
 
   /// Connect the fan mask (W x H x 1 unsigned char, or W x H x N: one mask per frame) to port 1.
   void SetMaskConnection(vtkAlgorithmOutput* output) { this->SetInputConnection(1, output); }
+  /// With several sweeps: the fan mask of the next sweep (one per sweep, in the order of port 0's connections).
+  void AddMaskConnection(vtkAlgorithmOutput* output) { this->AddInputConnection(1, output); }
 
   ///@{ Elevation beam standard deviation (mm). Default 0: chosen from the sweep (bigusElevationSigma.h).
   vtkSetClampMacro(ElevationSigma, double, 0.0, 1000.0);
@@ -204,12 +214,16 @@ public:
   vtkBooleanMacro(FillGaps, bool);
   ///@}
   ///@{ Which frames to train on: all valid frames except those with index % HoldOutEvery ==
-  /// HoldOutOffset (HoldOutEvery 0 = none), or the explicit list when one is set (an index outside
-  /// the input fails the request).
+  /// HoldOutOffset (HoldOutEvery 0 = none; the index within the frame's own sweep), or the explicit list
+  /// when one is set (an index outside the input fails the request); with HoldOutSweep >= 0 (default -1,
+  /// none), no frame of that sweep (leave-one-sweep-out: its frames were taken along another path than
+  /// every training frame; a sweep that does not exist fails the request).
   vtkSetClampMacro(HoldOutEvery, int, 0, VTK_INT_MAX);
   vtkGetMacro(HoldOutEvery, int);
   vtkSetClampMacro(HoldOutOffset, int, 0, VTK_INT_MAX);
   vtkGetMacro(HoldOutOffset, int);
+  vtkSetClampMacro(HoldOutSweep, int, -1, VTK_INT_MAX);
+  vtkGetMacro(HoldOutSweep, int);
   void SetTrainingFrameList(vtkIdList* frames);
   ///@}
   ///@{ Every EvaluationInterval seconds of training (0 = never), render the held-out frames (valid
@@ -310,6 +324,7 @@ protected:
   bool FillGaps;
   int HoldOutEvery = 0;
   int HoldOutOffset = 0;
+  int HoldOutSweep = -1;
   vtkIdList* TrainingFrameList = nullptr;
   unsigned int Seed;
   double EvaluationInterval = 0;

@@ -36,6 +36,7 @@ constexpr int UnsetExtent = VTK_INT_MIN;
 /// (automatic grid) and RequestData need.
 struct FramePlan
 {
+  int Input = 0;                               // the sweep: connection of input ports 0 and 1
   int Width = 0;
   int Height = 0;
   int Frames = 0;                              // N of the sequence
@@ -186,8 +187,64 @@ bool MakePlan(vtkImageData* input, vtkIdList* list, const int clipOrigin[2], con
   return true;
 }
 
+/// The plans of every sweep on input port 0 (@p list counts the sweeps' frames one sweep after the other;
+/// a sweep none of whose frames is listed is left out). Errors name the sweep when there are several.
+bool MakePlans(vtkInformationVector* inputs, vtkIdList* list, const int clipOrigin[2], const int clipSize[2],
+  std::vector<FramePlan>& plans, std::string& error)
+{
+  plans.clear();
+  const int sweeps = inputs->GetNumberOfInformationObjects();
+  vtkIdType first = 0; // index of the sweep's first frame among all sweeps' frames
+  for (int k = 0; k < sweeps; ++k)
+  {
+    vtkImageData* input = vtkImageData::GetData(inputs, k);
+    int dims[3] = { 0, 0, 0 };
+    if (input)
+    {
+      input->GetDimensions(dims);
+    }
+    vtkNew<vtkIdList> local;
+    for (vtkIdType m = 0; list && m < list->GetNumberOfIds(); ++m)
+    {
+      const vtkIdType f = list->GetId(m);
+      if (f >= first && f < first + dims[2])
+      {
+        local->InsertNextId(f - first);
+      }
+    }
+    first += dims[2];
+    if (list && list->GetNumberOfIds() > 0 && local->GetNumberOfIds() == 0)
+    {
+      continue;
+    }
+    FramePlan plan;
+    plan.Input = k;
+    if (!MakePlan(input, local->GetNumberOfIds() ? local.Get() : nullptr, clipOrigin, clipSize, plan, error))
+    {
+      error = sweeps > 1 ? "sweep " + std::to_string(k) + ": " + error : error;
+      return false;
+    }
+    plans.push_back(std::move(plan));
+  }
+  for (vtkIdType m = 0; list && m < list->GetNumberOfIds(); ++m)
+  {
+    if (list->GetId(m) < 0 || list->GetId(m) >= first)
+    {
+      error = "frame " + std::to_string(list->GetId(m)) + " of the frame list is outside the " + std::to_string(first) +
+        " frames of the sequence" + (sweeps > 1 ? "s" : "");
+      return false;
+    }
+  }
+  if (plans.empty())
+  {
+    error = "input 0 must be a tracked frame sequence with pixels (W x H x N)";
+    return false;
+  }
+  return true;
+}
+
 /// Output grid: explicit settings where given, otherwise PLUS's automatic grid from the frame corners.
-bool ComputeGrid(const FramePlan* plan, const double spacing[3], const double originSetting[3],
+bool ComputeGrid(const std::vector<FramePlan>* plans, const double spacing[3], const double originSetting[3],
   const int extentSetting[6], vtkIdType maximumVoxels, double origin[3], int extent[6], std::string& error)
 {
   for (int c = 0; c < 3; ++c)
@@ -204,17 +261,20 @@ bool ComputeGrid(const FramePlan* plan, const double spacing[3], const double or
   double hi[3] = { -VTK_DOUBLE_MAX, -VTK_DOUBLE_MAX, -VTK_DOUBLE_MAX };
   if (!explicitOrigin || !explicitExtent)
   {
-    for (const auto& m : plan->Poses)
+    for (const FramePlan& plan : *plans)
     {
-      for (int x : { plan->Clip[0], plan->Clip[1] })
+      for (const auto& m : plan.Poses)
       {
-        for (int y : { plan->Clip[2], plan->Clip[3] })
+        for (int x : { plan.Clip[0], plan.Clip[1] })
         {
-          for (int c = 0; c < 3; ++c)
+          for (int y : { plan.Clip[2], plan.Clip[3] })
           {
-            const double p = m[4 * c] * x + m[4 * c + 1] * y + m[4 * c + 3];
-            lo[c] = std::min(lo[c], p);
-            hi[c] = std::max(hi[c], p);
+            for (int c = 0; c < 3; ++c)
+            {
+              const double p = m[4 * c] * x + m[4 * c + 1] * y + m[4 * c + 3];
+              lo[c] = std::min(lo[c], p);
+              hi[c] = std::max(hi[c], p);
+            }
           }
         }
       }
@@ -657,6 +717,7 @@ const char* vtkUltrasoundVolumeCompounder::GetCompoundingModeAsString()
 int vtkUltrasoundVolumeCompounder::FillInputPortInformation(int port, vtkInformation* info)
 {
   info->Set(vtkAlgorithm::INPUT_REQUIRED_DATA_TYPE(), "vtkImageData");
+  info->Set(vtkAlgorithm::INPUT_IS_REPEATABLE(), 1);
   if (port == 1)
   {
     info->Set(vtkAlgorithm::INPUT_IS_OPTIONAL(), 1);
@@ -669,17 +730,16 @@ int vtkUltrasoundVolumeCompounder::RequestInformation(
 {
   const bool explicitGrid = this->OutputOrigin[0] != Unset && this->OutputOrigin[1] != Unset &&
     this->OutputOrigin[2] != Unset && this->OutputExtent[0] != UnsetExtent;
-  FramePlan plan;
+  std::vector<FramePlan> plans;
   std::string error;
   if (!explicitGrid)
   {
-    // The automatic grid comes from the poses: bring the sequence up to date now.
-    if (vtkAlgorithmOutput* connection = this->GetInputConnection(0, 0))
+    // The automatic grid comes from the poses: bring the sequences up to date now.
+    for (int k = 0; k < this->GetNumberOfInputConnections(0); ++k)
     {
-      connection->GetProducer()->UpdatePiece(0, 1, 0);
+      this->GetInputConnection(0, k)->GetProducer()->UpdatePiece(0, 1, 0);
     }
-    if (!MakePlan(vtkImageData::GetData(inputVector[0], 0), this->FrameList, this->ClipRectangleOrigin,
-          this->ClipRectangleSize, plan, error))
+    if (!MakePlans(inputVector[0], this->FrameList, this->ClipRectangleOrigin, this->ClipRectangleSize, plans, error))
     {
       vtkErrorMacro(<< error);
       return 0;
@@ -687,7 +747,7 @@ int vtkUltrasoundVolumeCompounder::RequestInformation(
   }
   double origin[3];
   int extent[6];
-  if (!ComputeGrid(explicitGrid ? nullptr : &plan, this->OutputSpacing, this->OutputOrigin, this->OutputExtent,
+  if (!ComputeGrid(explicitGrid ? nullptr : &plans, this->OutputSpacing, this->OutputOrigin, this->OutputExtent,
         this->MaximumNumberOfVoxels, origin, extent, error))
   {
     vtkErrorMacro(<< error);
@@ -707,8 +767,9 @@ int vtkUltrasoundVolumeCompounder::RequestUpdateExtent(
   // Every frame and the whole mask are needed, whatever part of the volume is asked for.
   for (int port = 0; port < 2; ++port)
   {
-    if (vtkInformation* inInfo = inputVector[port]->GetInformationObject(0))
+    for (int k = 0; k < inputVector[port]->GetNumberOfInformationObjects(); ++k)
     {
+      vtkInformation* inInfo = inputVector[port]->GetInformationObject(k);
       inInfo->Set(vtkStreamingDemandDrivenPipeline::UPDATE_EXTENT(),
         inInfo->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT()), 6);
     }
@@ -719,8 +780,6 @@ int vtkUltrasoundVolumeCompounder::RequestUpdateExtent(
 int vtkUltrasoundVolumeCompounder::RequestData(
   vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector* outputVector)
 {
-  vtkImageData* input = vtkImageData::GetData(inputVector[0], 0);
-  vtkImageData* maskImage = vtkImageData::GetData(inputVector[1], 0);
   vtkImageData* output = vtkImageData::GetData(outputVector, 0);
   this->NumberOfInsertedFrames = 0;
   this->NumberOfInsertedPixels = 0;
@@ -729,50 +788,33 @@ int vtkUltrasoundVolumeCompounder::RequestData(
   this->InsertionSeconds = 0;
   this->HoleFillingSeconds = 0;
 
-  FramePlan plan;
+  std::vector<FramePlan> plans;
   std::string error;
   double origin[3];
   int extent[6];
-  if (!MakePlan(input, this->FrameList, this->ClipRectangleOrigin, this->ClipRectangleSize, plan, error) ||
-    !ComputeGrid(&plan, this->OutputSpacing, this->OutputOrigin, this->OutputExtent, this->MaximumNumberOfVoxels,
+  const int sweeps = inputVector[0]->GetNumberOfInformationObjects();
+  const int maskCount = inputVector[1]->GetNumberOfInformationObjects();
+  if (maskCount != 0 && maskCount != sweeps)
+  {
+    vtkErrorMacro("input port 1: " << maskCount << " fan masks for " << sweeps
+                                   << " sweeps; connect one mask per sweep, in the sweeps' order, or none");
+    return 0;
+  }
+  if (!MakePlans(inputVector[0], this->FrameList, this->ClipRectangleOrigin, this->ClipRectangleSize, plans, error) ||
+    !ComputeGrid(&plans, this->OutputSpacing, this->OutputOrigin, this->OutputExtent, this->MaximumNumberOfVoxels,
       origin, extent, error))
   {
     vtkErrorMacro(<< error);
     return 0;
   }
-  if (!plan.SkippedInvalid.empty())
+  for (const FramePlan& plan : plans)
   {
-    vtkWarningMacro(<< plan.SkippedInvalid.size() << " listed frame(s) have FrameValid = 0 and are not inserted "
-                    << "(first: frame " << plan.SkippedInvalid.front() << ")");
-  }
-
-  // The fan mask, as bytes: one W x H plane shared by every frame, or one per frame.
-  const std::size_t framePixels = std::size_t(plan.Width) * plan.Height;
-  std::vector<unsigned char> mask;
-  bool maskPerFrame = false;
-  if (maskImage)
-  {
-    int maskDims[3];
-    maskImage->GetDimensions(maskDims);
-    vtkDataArray* maskScalars = maskImage->GetPointData()->GetScalars();
-    const bool sizeOk = maskDims[0] == plan.Width && maskDims[1] == plan.Height &&
-      (maskDims[2] == 1 || maskDims[2] == plan.Frames);
-    if (!maskScalars || maskScalars->GetNumberOfComponents() != 1 || !sizeOk ||
-      maskScalars->GetNumberOfTuples() != vtkIdType(framePixels) * maskDims[2])
+    if (!plan.SkippedInvalid.empty())
     {
-      vtkErrorMacro("the fan mask must be a one-component W x H x 1 or W x H x N image for the "
-        << plan.Width << " x " << plan.Height << " x " << plan.Frames << " sequence, not " << maskDims[0] << " x "
-        << maskDims[1] << " x " << maskDims[2]);
-      return 0;
+      vtkWarningMacro(<< (sweeps > 1 ? "sweep " + std::to_string(plan.Input) + ": " : std::string())
+                      << plan.SkippedInvalid.size() << " listed frame(s) have FrameValid = 0 and are not inserted "
+                      << "(first: frame " << plan.SkippedInvalid.front() << ")");
     }
-    maskPerFrame = maskDims[2] > 1;
-    mask.resize(maskScalars->GetNumberOfTuples());
-    vtkSMPTools::For(0, maskScalars->GetNumberOfTuples(), 65536, [&](vtkIdType begin, vtkIdType end) {
-      for (vtkIdType p = begin; p < end; ++p)
-      {
-        mask[p] = maskScalars->GetComponent(p, 0) != 0 ? 1 : 0;
-      }
-    });
   }
 
   output->SetExtent(extent);
@@ -802,29 +844,69 @@ int vtkUltrasoundVolumeCompounder::RequestData(
 
   const auto start = std::chrono::steady_clock::now();
   const double insertionShare = this->FillHoles ? 0.5 : 1.0;
-  std::vector<vtkIdType> target;
-  void* pixels = input->GetScalarPointer();
-  const int scalarType = input->GetScalarType();
-  for (std::size_t k = 0; k < plan.Inserted.size(); ++k)
+  std::size_t total = 0, done = 0;
+  for (const FramePlan& plan : plans)
   {
-    const vtkIdType f = plan.Inserted[k];
-    const unsigned char* frameMask =
-      mask.empty() ? nullptr : mask.data() + (maskPerFrame ? std::size_t(f) * framePixels : 0);
-    acc.Locate(plan.Poses[k], plan.Clip, frameMask, plan.Width, target);
-    switch (scalarType)
+    total += plan.Inserted.size();
+  }
+  std::vector<vtkIdType> target;
+  for (const FramePlan& plan : plans)
+  {
+    vtkImageData* input = vtkImageData::GetData(inputVector[0], plan.Input);
+    vtkImageData* maskImage = maskCount ? vtkImageData::GetData(inputVector[1], plan.Input) : nullptr;
+    // The fan mask, as bytes: one W x H plane shared by every frame, or one per frame.
+    const std::size_t framePixels = std::size_t(plan.Width) * plan.Height;
+    std::vector<unsigned char> mask;
+    bool maskPerFrame = false;
+    if (maskImage)
     {
-      vtkTemplateMacro(acc.Insert(static_cast<const VTK_TT*>(pixels) + std::size_t(f) * framePixels, plan.Clip,
-        plan.Width, target));
-      default:
-        vtkErrorMacro("unsupported scalar type " << input->GetScalarTypeAsString());
+      int maskDims[3];
+      maskImage->GetDimensions(maskDims);
+      vtkDataArray* maskScalars = maskImage->GetPointData()->GetScalars();
+      const bool sizeOk = maskDims[0] == plan.Width && maskDims[1] == plan.Height &&
+        (maskDims[2] == 1 || maskDims[2] == plan.Frames);
+      if (!maskScalars || maskScalars->GetNumberOfComponents() != 1 || !sizeOk ||
+        maskScalars->GetNumberOfTuples() != vtkIdType(framePixels) * maskDims[2])
+      {
+        vtkErrorMacro(<< (sweeps > 1 ? "sweep " + std::to_string(plan.Input) + ": " : std::string())
+                      << "the fan mask must be a one-component W x H x 1 or W x H x N image for the " << plan.Width
+                      << " x " << plan.Height << " x " << plan.Frames << " sequence, not " << maskDims[0] << " x "
+                      << maskDims[1] << " x " << maskDims[2]);
         output->Initialize();
         return 0;
+      }
+      maskPerFrame = maskDims[2] > 1;
+      mask.resize(maskScalars->GetNumberOfTuples());
+      vtkSMPTools::For(0, maskScalars->GetNumberOfTuples(), 65536, [&](vtkIdType begin, vtkIdType end) {
+        for (vtkIdType p = begin; p < end; ++p)
+        {
+          mask[p] = maskScalars->GetComponent(p, 0) != 0 ? 1 : 0;
+        }
+      });
     }
-    this->UpdateProgress(insertionShare * (k + 1) / plan.Inserted.size());
-    if (this->AbortExecute)
+    void* pixels = input->GetScalarPointer();
+    const int scalarType = input->GetScalarType();
+    for (std::size_t k = 0; k < plan.Inserted.size(); ++k)
     {
-      output->Initialize();
-      return 0;
+      const vtkIdType f = plan.Inserted[k];
+      const unsigned char* frameMask =
+        mask.empty() ? nullptr : mask.data() + (maskPerFrame ? std::size_t(f) * framePixels : 0);
+      acc.Locate(plan.Poses[k], plan.Clip, frameMask, plan.Width, target);
+      switch (scalarType)
+      {
+        vtkTemplateMacro(acc.Insert(static_cast<const VTK_TT*>(pixels) + std::size_t(f) * framePixels, plan.Clip,
+          plan.Width, target));
+        default:
+          vtkErrorMacro("unsupported scalar type " << input->GetScalarTypeAsString());
+          output->Initialize();
+          return 0;
+      }
+      this->UpdateProgress(insertionShare * ++done / total);
+      if (this->AbortExecute)
+      {
+        output->Initialize();
+        return 0;
+      }
     }
   }
   float* value = acc.Value;
@@ -857,7 +939,7 @@ int vtkUltrasoundVolumeCompounder::RequestData(
   {
     this->NumberOfHitVoxels += hit;
   }
-  this->NumberOfInsertedFrames = static_cast<int>(plan.Inserted.size());
+  this->NumberOfInsertedFrames = static_cast<int>(total);
   this->NumberOfInsertedPixels = acc.Inserted;
   const auto inserted = std::chrono::steady_clock::now();
   this->InsertionSeconds = std::chrono::duration<double>(inserted - start).count();

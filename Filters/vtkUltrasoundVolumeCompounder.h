@@ -12,6 +12,12 @@
  *   `FanMask`) or W x H x N (mask k belongs to frame k); non-zero = imaged pixel
  *   (SetFanMaskConnection / SetFanMaskData). Without it every pixel is inserted, as PLUS does.
  *
+ * Several sweeps of one region (AddInputConnection on port 0, as vtkAppendFilter takes them; each with its own
+ * frame size) are compounded into one volume, the automatic grid covering all of them: frames are inserted
+ * sweep after sweep, and the frame list counts the sweeps' frames one sweep after the other (as
+ * vtkGaussianFieldTrainer's frame indices do). Port 1 then has no mask or one per sweep, in their order;
+ * errors name the sweep.
+ *
  * Output: a `vtkImageData` volume in the reference frame (axis-aligned, mm): voxel (i, j, k) is centred
  * at OutputOrigin + (i, j, k) * OutputSpacing. Point data:
  * - `Intensity` (active scalars, float): the compounded value in the input's intensity units, 0 where

@@ -130,6 +130,14 @@ bool DefaultsSection(BenchmarkContext& context, std::string* error);
  * own frame lists are restored before returning.
  */
 bool BlockHoldOutSection(BenchmarkContext& context, std::string* error);
+
+/**
+ * Issue 33, several sweeps: the volume protocol's parallel training sweep and an orthogonal sweep trained into
+ * one field (bigus::TrainingDataFromSweeps), scored on the oblique and in-between test slices against
+ * compounding both sweeps (and each alone) and each sweep's slices stacked and resliced: BIGUS's defaults with a
+ * 120 s budget, and Harris seeds with Adam at 60, 300 and 600 s (4 s with --quick).
+ */
+bool SeveralSweepsSection(BenchmarkContext& context, std::string* error);
 }
 
 #endif

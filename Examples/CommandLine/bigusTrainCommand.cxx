@@ -14,6 +14,7 @@
 #include "vtkMath.h"
 #include "vtkNew.h"
 #include "vtkSMPTools.h"
+#include "vtkUltrasoundSequenceReader.h"
 #include "vtkUltrasoundSequenceWriter.h"
 #include "vtkXMLPolyDataWriter.h"
 
@@ -34,9 +35,10 @@ namespace
 {
 struct TrainOptions
 {
-  SweepOptions Sweep;
-  std::string Output, Checkpoint, Resume, Mask, Backend = "auto";
-  int HoldOutEvery = 0, HoldOutOffset = 0, Iterations = 0, Threads = 0;
+  std::vector<std::string> Sweeps, Calibrations, Masks; ///< one calibration / mask for all, or one per sweep
+  std::string Chain;                                     ///< --transform, for every sweep
+  std::string Output, Checkpoint, Resume, Backend = "auto";
+  int HoldOutEvery = 0, HoldOutOffset = 0, HoldOutSweep = -1, Iterations = 0, Threads = 0;
   std::vector<int> Frames; ///< explicit training frames (empty: the hold-out rule)
   double TimeBudget = 0, ElevationSigma = 0, EvaluationInterval = 0;
   long long MaxGaussians = 0, InitialGaussians = 0;
@@ -69,24 +71,64 @@ int RunTrain(const TrainOptions& o)
   {
     vtkSMPTools::Initialize(o.Threads);
   }
-  auto reader = ReadSweep(o.Sweep);
-  if (!reader)
+  const std::size_t count = o.Sweeps.size();
+  for (const auto& [files, what] : { std::make_pair(&o.Calibrations, "--calibration"), std::make_pair(&o.Masks, "--mask") })
   {
-    return 1;
+    if (files->size() > 1 && files->size() != count)
+    {
+      std::fprintf(stderr, "bigus: %zu sweeps and %zu %s files: give one for every sweep, in the sweeps' order, or one for all\n",
+        count, files->size(), what);
+      return 2;
+    }
+  }
+  if (count > 1 && !o.RefinedPoses.empty())
+  {
+    std::fprintf(stderr, "bigus: --refined-poses writes one sweep; train a single sweep to write its refined poses\n");
+    return 2;
   }
   vtkNew<vtkGaussianFieldTrainer> trainer;
-  trainer->SetInputConnection(reader->GetOutputPort());
-  if (!o.Mask.empty())
+  std::vector<vtkSmartPointer<vtkUltrasoundSequenceReader>> readers;
+  for (std::size_t k = 0; k < count; ++k)
   {
-    auto mask = ReadMask(o.Mask, reader->GetOutput()->GetDimensions());
-    if (!mask)
+    auto pick = [k](const std::vector<std::string>& files) {
+      return files.empty() ? std::string() : files[files.size() == 1 ? 0 : k];
+    };
+    SweepOptions sweep;
+    sweep.Sweep = o.Sweeps[k];
+    sweep.Calibration = pick(o.Calibrations);
+    sweep.Chain = o.Chain;
+    auto reader = ReadSweep(sweep);
+    if (!reader)
     {
       return 1;
     }
-    trainer->SetInputData(1, mask);
+    trainer->AddInputConnection(0, reader->GetOutputPort());
+    if (!o.Masks.empty())
+    {
+      auto mask = ReadMask(pick(o.Masks), reader->GetOutput()->GetDimensions());
+      if (!mask)
+      {
+        return 1;
+      }
+      trainer->AddInputData(1, mask);
+    }
+    readers.push_back(reader);
+  }
+  if (count > 1)
+  {
+    std::printf("sweeps         %zu, trained into one field (frame indices count them in turn):", count);
+    int first = 0;
+    for (std::size_t k = 0; k < count; ++k)
+    {
+      const int frames = readers[k]->GetOutput()->GetDimensions()[2];
+      std::printf("%s %zu = %s (frames %d to %d)", k ? ";" : "", k, o.Sweeps[k].c_str(), first, first + frames - 1);
+      first += frames;
+    }
+    std::printf("\n");
   }
   trainer->SetHoldOutEvery(o.HoldOutEvery);
   trainer->SetHoldOutOffset(o.HoldOutOffset);
+  trainer->SetHoldOutSweep(o.HoldOutSweep);
   if (!o.Frames.empty())
   {
     vtkNew<vtkIdList> frames;
@@ -236,7 +278,7 @@ int RunTrain(const TrainOptions& o)
     if (!o.RefinedPoses.empty())
     {
       // The input sweep with its training frames' ImageToReference corrected (the held-out frames as tracked).
-      vtkImageData* input = reader->GetOutput();
+      vtkImageData* input = readers[0]->GetOutput();
       vtkNew<vtkImageData> refined;
       refined->ShallowCopy(input);
       vtkNew<vtkFieldData> fields;
@@ -279,13 +321,33 @@ Command AddTrainCommand(CLI::App& app)
   auto options = std::make_shared<TrainOptions>();
   TrainOptions& train = *options;
   CLI::App* trainCommand = app.add_subcommand("train", "Train a Gaussian scattering field from a tracked sweep");
-  trainCommand->add_option("SWEEP", train.Sweep.Sweep, "Sequence metafile")->required()->check(CLI::ExistingFile);
+  trainCommand
+    ->add_option("SWEEP", train.Sweeps,
+      "Sequence metafile; several: sweeps of one region along different paths, trained into one field")
+    ->required()
+    ->check(CLI::ExistingFile);
   trainCommand->add_option("-o,--output", train.Output, "Field to write (.vtp)")->required();
-  AddSweepOptions(trainCommand, train.Sweep, "sweep");
-  trainCommand->add_option("--mask", train.Mask, "Fan mask .mha (W x H x 1, or W x H x N per frame; default: estimated)");
-  trainCommand->add_option("--holdout-every", train.HoldOutEvery, "Hold out frames with index % K == J (0: none)");
+  trainCommand->add_option("--calibration", train.Calibrations,
+      "PLUS device-set configuration XML (ImageToProbe): one for every sweep, or one per sweep in their order "
+      "(repeat the option)")
+    ->allow_extra_args(false)
+    ->check(CLI::ExistingFile);
+  trainCommand->add_option("--transform", train.Chain,
+    "Transform chain for ImageToReference of every sweep, e.g. \"inverse(ReferenceToTracker) * ProbeToTracker * "
+    "ImageToProbe\"");
+  trainCommand
+    ->add_option("--mask", train.Masks,
+      "Fan mask .mha (W x H x 1, or W x H x N per frame; default: estimated): one for every sweep, or one per sweep "
+      "(repeat the option)")
+    ->allow_extra_args(false);
+  trainCommand->add_option("--holdout-every", train.HoldOutEvery,
+    "Hold out frames with index % K == J, the index within each sweep (0: none)");
   trainCommand->add_option("--holdout-offset", train.HoldOutOffset, "J of --holdout-every");
-  trainCommand->add_option("--frames", train.Frames, "Train on these frames only (indices); the others are held out")
+  trainCommand->add_option("--holdout-sweep", train.HoldOutSweep,
+    "Hold out every frame of sweep K (0 = the first SWEEP): leave-one-sweep-out")
+    ->check(CLI::NonNegativeNumber);
+  trainCommand->add_option("--frames", train.Frames,
+    "Train on these frames only (indices, counting the sweeps' frames in turn); the others are held out")
     ->excludes("--holdout-every");
   trainCommand->add_option("--time-budget", train.TimeBudget,
     "Wall-clock budget for training, seconds (0: none); alone, it is the whole schedule (learning-rate decay, "

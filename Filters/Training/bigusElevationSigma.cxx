@@ -116,7 +116,16 @@ bool MeasureElevationDecorrelation(const TrainingData& data, const ElevationDeco
   std::map<int, cv::Mat> highPassed; // by position in frames: the window [a, a + gaps]
   for (std::size_t a = 0; a + 1 < frames.size(); ++a)
   {
-    const std::size_t last = std::min(frames.size() - 1, a + gaps);
+    // Pairs within one sweep (the training frames are in order, a sweep's frames one after the other).
+    std::size_t last = std::min(frames.size() - 1, a + gaps);
+    while (last > a && data.SweepOf(frames[last]) != data.SweepOf(frames[a]))
+    {
+      --last;
+    }
+    if (last == a)
+    {
+      continue;
+    }
     highPassed.erase(highPassed.begin(), highPassed.lower_bound(static_cast<int>(a)));
     std::vector<std::size_t> missing;
     for (std::size_t b = a; b <= last; ++b)

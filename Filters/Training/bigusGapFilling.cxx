@@ -77,14 +77,24 @@ GapFillingReport FillElevationGaps(
   {
     return report;
   }
-  // Distance between consecutive planes: each centre's elevation in the other's plane, averaged.
-  std::vector<double> spacing(frames.size() - 1);
+  // Distance between consecutive planes of one sweep: each centre's elevation in the other's plane,
+  // averaged (-1 between the last frame of a sweep and the first of the next: no gap there).
+  std::vector<double> spacing(frames.size() - 1), sorted;
   for (std::size_t k = 0; k + 1 < frames.size(); ++k)
   {
     const Plane &a = planes[k], &b = planes[k + 1];
-    spacing[k] = 0.5 * (std::abs(a.R.col(2).dot(b.Centre - a.Origin)) + std::abs(b.R.col(2).dot(a.Centre - b.Origin)));
+    spacing[k] = data.SweepOf(frames[k]) != data.SweepOf(frames[k + 1])
+      ? -1
+      : 0.5 * (std::abs(a.R.col(2).dot(b.Centre - a.Origin)) + std::abs(b.R.col(2).dot(a.Centre - b.Origin)));
+    if (spacing[k] >= 0)
+    {
+      sorted.push_back(spacing[k]);
+    }
   }
-  std::vector<double> sorted = spacing;
+  if (sorted.empty())
+  {
+    return report;
+  }
   std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
   report.TypicalSpacing = sorted[sorted.size() / 2];
   std::vector<std::size_t> gaps;

@@ -170,13 +170,14 @@ GridPlanes SelectGridPlanes(const TrainingData& data, const SeedShape& shape)
   const double minimumGap = std::max(shape.ElevationSigma, shape.PixelSpacing);
   SliceFrame last;
   double gaps = 0;
+  int gapCount = 0, lastSweep = -1;
   for (int f : data.TrainFrames)
   {
     SliceFrame frame;
     ComputeSliceFrame(data.Poses[f].data(), 90, frame);
     double centre[3];
     Apply(data.Poses[f], 0.5 * (data.Width - 1), 0.5 * (data.Height - 1), centre);
-    if (!result.Frames.empty())
+    if (data.SweepOf(f) == lastSweep) // the first frame of a sweep is kept
     {
       double d = 0;
       for (int k = 0; k < 3; ++k)
@@ -188,13 +189,15 @@ GridPlanes SelectGridPlanes(const TrainingData& data, const SeedShape& shape)
         continue;
       }
       gaps += std::abs(d);
+      ++gapCount;
     }
     result.Frames.push_back(f);
     last = frame;
+    lastSweep = data.SweepOf(f);
     const unsigned char* mask = data.MaskOf(f);
     result.FanPixels += std::count_if(mask, mask + pixels, [](unsigned char v) { return v != 0; });
   }
-  result.Spacing = result.Frames.size() > 1 ? gaps / (result.Frames.size() - 1) : minimumGap;
+  result.Spacing = gapCount > 0 ? gaps / gapCount : minimumGap;
   return result;
 }
 

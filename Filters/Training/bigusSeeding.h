@@ -50,8 +50,9 @@ void SeedUniform(const TrainingData& data, std::int64_t total, std::mt19937_64& 
 /// The planes of the dense start.
 struct GridPlanes
 {
-  std::vector<int> Frames;     ///< training frames kept: each at least sigma_E (or a pixel) from the last one kept
-  double Spacing = 0;          ///< mm, their mean spacing along each one's normal
+  std::vector<int> Frames;     ///< training frames kept: the first of each sweep, and each other at least sigma_E
+                               ///< (or a pixel) from the last one kept in its sweep
+  double Spacing = 0;          ///< mm, their mean spacing along each one's normal, within each sweep
   std::int64_t FanPixels = 0;  ///< pixels inside the fan masks of the frames kept (the grid's count at stride 1)
 };
 GridPlanes SelectGridPlanes(const TrainingData& data, const SeedShape& shape);

@@ -533,13 +533,16 @@ void Trainer::UpdatePoses(const std::vector<int>& frames, const std::vector<doub
   {
     const int f = frames[b];
     std::array<double, 6>& xi = this->PoseXi[f];
-    // The neighbours along the sweep: the training frames before and after this one (TrainFrames in
-    // order; none where they are not).
+    // The neighbours along the sweep: the training frames before and after this one in its sweep
+    // (TrainFrames in order; none where they are not).
     const std::vector<int>& train = this->Data->TrainFrames;
     const auto at = std::lower_bound(train.begin(), train.end(), f);
     const bool found = at != train.end() && *at == f;
-    const std::array<double, 6>* before = found && at != train.begin() ? &this->PoseXi[*(at - 1)] : nullptr;
-    const std::array<double, 6>* after = found && at + 1 != train.end() ? &this->PoseXi[*(at + 1)] : nullptr;
+    const int sweep = this->Data->SweepOf(f);
+    const std::array<double, 6>* before =
+      found && at != train.begin() && this->Data->SweepOf(*(at - 1)) == sweep ? &this->PoseXi[*(at - 1)] : nullptr;
+    const std::array<double, 6>* after =
+      found && at + 1 != train.end() && this->Data->SweepOf(*(at + 1)) == sweep ? &this->PoseXi[*(at + 1)] : nullptr;
     double g[6];
     bool finite = true;
     for (int k = 0; k < 6; ++k)

@@ -27,7 +27,16 @@
 namespace bigus
 {
 
-/// The frames a trainer learns from. Intensities in [0, 1].
+/**
+ * The frames a trainer learns from. Intensities in [0, 1].
+ *
+ * Several sweeps (bigus::TrainingDataFromSweeps) are held one after the other, each frame with the index
+ * of its sweep in Sweeps. Frames of different sizes share one [H, W] grid, the largest width and height:
+ * a frame's own w x h pixels keep their indices (i, j), so its ImageToReference (pixel index -> mm,
+ * spacing inside) is unchanged, and the pixels beyond them are 0 and masked out (a per-frame mask). The
+ * padding costs render time on the smaller frames and nothing else: no loss, gradient or seed comes from a
+ * masked pixel.
+ */
 struct BIGUSTRAINING_EXPORT TrainingData
 {
   int Width = 0, Height = 0;
@@ -35,7 +44,11 @@ struct BIGUSTRAINING_EXPORT TrainingData
   std::vector<std::array<double, 16>> Poses; ///< [N] ImageToReference, row-major
   std::vector<unsigned char> Mask; ///< [H, W] fan mask shared by every frame, or [N, H, W] per frame (1 = imaged)
   std::vector<int> TrainFrames;    ///< indices into Frames used for training
+  std::vector<int> Sweeps;         ///< [N] the sweep (0, 1, ...) each frame was recorded in; empty: one sweep
   int Count() const { return static_cast<int>(this->Poses.size()); }
+  /// The sweep frame @p frame was recorded in (0 with a single sweep). Neighbours along a sweep (the
+  /// elevation sigma's frame pairs, gap filling, the pose smoothness prior) are taken within one sweep.
+  int SweepOf(int frame) const { return this->Sweeps.empty() ? 0 : this->Sweeps[frame]; }
   /// The [H, W] mask of frame @p frame (the shared one, or that frame's own).
   const unsigned char* MaskOf(int frame) const
   {

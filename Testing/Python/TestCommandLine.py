@@ -220,6 +220,49 @@ def check_refine_poses(sweep, xml, out):
     assert moved > 0, "no training frame's pose moved"
 
 
+def check_several_sweeps(data, sweep, xml, out):
+    """Two sweeps of the spine-phantom volume along different paths (frames of 147 x 106 and 106 x 104): trained
+    into one field with the other sweep held out (leave-one-sweep-out), scored on it by `bigus evaluate`; a
+    calibration or mask count that fits neither one for all nor one per sweep, and --refined-poses with two
+    sweeps, are refused before anything is read."""
+    volume = os.path.join(data, "spine-phantom", "SpinePhantomFreehandReconstructed.mha")
+    files = {}
+    for name, protocol in (("parallel", "parallel"), ("orthogonal", "orthogonal")):
+        files[name] = (os.path.join(out, "spine_%s.igs.mha" % name), os.path.join(out, "spine_%s_mask.mha" % name))
+        code, _, err = run("sweep", volume, "-o", files[name][0], "--mask-output", files[name][1], "--frames", "8",
+                           "--protocol", protocol)
+        assert code == 0, err
+    (a, a_mask), (b, b_mask) = files["parallel"], files["orthogonal"]
+    field = os.path.join(out, "spine_two_sweeps.vtp")
+    code, _, err = run("train", a, b, "-o", field, "--calibration", xml, "--calibration", xml, "--calibration", xml)
+    assert code == 2 and "2 sweeps and 3 --calibration files" in err, (code, err)
+    code, _, err = run("train", a, b, "-o", field, "--refine-poses", "--refined-poses", os.path.join(out, "r.igs.mha"))
+    assert code == 2 and "--refined-poses writes one sweep" in err, (code, err)
+    assert not os.path.exists(field)
+    code, out_text, err = run("train", a, b, "--mask", a_mask, "--mask", b_mask, "-o", field, "--holdout-sweep", "1",
+                              "--iterations", "20")
+    assert code == 0, (out_text, err)
+    assert "sweeps         2" in out_text and "1 = %s (frames 8 to 15)" % b in out_text, out_text
+    reader = vtk.vtkXMLPolyDataReader()
+    reader.SetFileName(field)
+    reader.Update()
+    fd = reader.GetOutput().GetFieldData()
+    frames = fd.GetArray("TrainingFrames")
+    assert [int(frames.GetTuple1(k)) for k in range(frames.GetNumberOfTuples())] == list(range(8))
+    size = fd.GetArray("TrainingFrameSize")
+    assert (size.GetComponent(0, 0), size.GetComponent(0, 1)) == (147, 106)  # the larger frames' grid
+    sweeps = fd.GetArray("TrainingSweeps")
+    assert [int(sweeps.GetComponent(k, 0)) for k in range(8)] == [0] * 8
+    report = os.path.join(out, "spine_held_out_sweep")
+    code, out_text, err = run("evaluate", field, b, "--mask", b_mask, "--report", report)
+    assert code == 0, (out_text, err)
+    metrics = json.load(open(os.path.join(report, "metrics.json")))
+    assert metrics["mean"]["frames"] == 8 and metrics["mean"]["psnr"] > 10, metrics["mean"]
+    # One mask for both sweeps: a 147 x 106 mask does not fit the orthogonal sweep's frames.
+    code, _, err = run("train", a, b, "--mask", a_mask, "-o", field)
+    assert code == 1 and "the mask must be" in err and err.count("\n") == 1, (code, err)
+
+
 def main():
     global BIGUS
     data, _, BIGUS, out = sys.argv[1:5]
@@ -287,6 +330,7 @@ def main():
 
     check_fill_gaps(sweep, xml, out)
     check_refine_poses(sweep, xml, out)
+    check_several_sweeps(data, sweep, xml, out)
 
     rendered = os.path.join(out, "nwire_rendered.igs.mha")
     code, out_text, err = run("render", field, "--poses", sweep, "--calibration", xml, "--frames", "2", "6", "10",
