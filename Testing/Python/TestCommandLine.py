@@ -234,6 +234,8 @@ def check_several_sweeps(data, sweep, xml, out):
         assert code == 0, err
     (a, a_mask), (b, b_mask) = files["parallel"], files["orthogonal"]
     field = os.path.join(out, "spine_two_sweeps.vtp")
+    if os.path.exists(field):
+        os.remove(field)
     code, _, err = run("train", a, b, "-o", field, "--calibration", xml, "--calibration", xml, "--calibration", xml)
     assert code == 2 and "2 sweeps and 3 --calibration files" in err, (code, err)
     code, _, err = run("train", a, b, "-o", field, "--refine-poses", "--refined-poses", os.path.join(out, "r.igs.mha"))
@@ -257,7 +259,7 @@ def check_several_sweeps(data, sweep, xml, out):
     code, out_text, err = run("evaluate", field, b, "--mask", b_mask, "--report", report)
     assert code == 0, (out_text, err)
     metrics = json.load(open(os.path.join(report, "metrics.json")))
-    assert metrics["mean"]["frames"] == 8 and metrics["mean"]["psnr"] > 10, metrics["mean"]
+    assert len(metrics["frames"]) == 8 and metrics["mean"]["frames"] >= 4 and metrics["mean"]["psnr"] > 10, metrics
     # One mask for both sweeps: a 147 x 106 mask does not fit the orthogonal sweep's frames.
     code, _, err = run("train", a, b, "--mask", a_mask, "-o", field)
     assert code == 1 and "the mask must be" in err and err.count("\n") == 1, (code, err)
