@@ -609,6 +609,20 @@ bool TrainingDataFromSequence(vtkImageData* sequence, vtkImageData* mask, Traini
   return true;
 }
 
+bool CheckMaskCount(int masks, int sweeps, std::string* error)
+{
+  if (masks == 0 || masks == sweeps)
+  {
+    return true;
+  }
+  if (error)
+  {
+    *error = "input port 1: " + std::to_string(masks) + " fan masks for " + std::to_string(sweeps) +
+      " sweeps; connect one mask per sweep, in the sweeps' order, or none";
+  }
+  return false;
+}
+
 bool TrainingDataFromSweeps(const std::vector<SweepInput>& sweeps, TrainingData& data, std::string* error)
 {
   data = TrainingData();

@@ -253,6 +253,12 @@ BIGUSFILTERS_EXPORT bool TrainingDataFromSweeps(
   const std::vector<SweepInput>& sweeps, TrainingData& data, std::string* error);
 
 /**
+ * The fan masks a filter with a repeatable sweep port takes on its mask port: none (every one estimated)
+ * or one per sweep. Returns false with @p error ("input port 1: M fan masks for N sweeps; ...") otherwise.
+ */
+BIGUSFILTERS_EXPORT bool CheckMaskCount(int masks, int sweeps, std::string* error);
+
+/**
  * The frames a sequence filter works on: those of @p list (indices into a sequence of @p frameCount
  * frames, in the list's order), or every frame when @p list is null or empty. Returns false with
  * @p error ("frame F is outside the N frames of the pose sequence") for an index out of range.

@@ -127,10 +127,10 @@ int vtkGaussianFieldTrainer::RequestData(
   // The sweeps (port 0) and their fan masks (port 1: none, every one estimated, or one per sweep).
   const int sweepCount = inputVector[0]->GetNumberOfInformationObjects();
   const int maskCount = inputVector[1]->GetNumberOfInformationObjects();
-  if (maskCount != 0 && maskCount != sweepCount)
+  std::string error;
+  if (!bigus::CheckMaskCount(maskCount, sweepCount, &error))
   {
-    vtkErrorMacro("input port 1: " << maskCount << " fan masks for " << sweepCount
-                                   << " sweeps; connect one mask per sweep, in the sweeps' order, or none");
+    vtkErrorMacro(<< error);
     return 0;
   }
   std::vector<vtkSmartPointer<vtkImageData>> masks(sweepCount);
@@ -162,7 +162,6 @@ int vtkGaussianFieldTrainer::RequestData(
     }
   }
   bigus::TrainingData data;
-  std::string error;
   if (!bigus::TrainingDataFromSweeps(sweeps, data, &error))
   {
     vtkErrorMacro(<< error);

@@ -102,6 +102,9 @@ public:
   void SetMaskConnection(vtkAlgorithmOutput* output) { this->SetInputConnection(1, output); }
   /// With several sweeps: the fan mask of the next sweep (one per sweep, in the order of port 0's connections).
   void AddMaskConnection(vtkAlgorithmOutput* output) { this->AddInputConnection(1, output); }
+  /// Disconnect every sweep (port 0), or every fan mask (port 1): the ParaView proxy's clean commands.
+  void RemoveAllSweepConnections() { this->RemoveAllInputConnections(0); }
+  void RemoveAllMaskConnections() { this->RemoveAllInputConnections(1); }
 
   ///@{ Elevation beam standard deviation (mm). Default 0: chosen from the sweep (bigusElevationSigma.h).
   vtkSetClampMacro(ElevationSigma, double, 0.0, 1000.0);
@@ -137,9 +140,9 @@ public:
   vtkGetMacro(DenseInitialisation, bool);
   vtkBooleanMacro(DenseInitialisation, bool);
   ///@}
-  ///@{ The fit when the data are few (default on): when one Gaussian per fan pixel of the training planes
-  /// fits under MaximumGaussians, the field is that pixel grid with solved reflectivities and no geometry
-  /// step is taken (bigus::TrainerSettings::PixelGridFit). Applies with the default start only.
+  ///@{ The fit when the data are few (default on): when the training planes hold at most twice
+  /// MaximumGaussians fan pixels, the field is a pixel grid (every fan pixel, or MaximumGaussians of them)
+  /// with solved reflectivities and no geometry step is taken (bigus::TrainerSettings::PixelGridFit). Applies with the default start only.
   vtkSetMacro(PixelGridFit, bool);
   vtkGetMacro(PixelGridFit, bool);
   vtkBooleanMacro(PixelGridFit, bool);

@@ -1,5 +1,7 @@
 #include "vtkUltrasoundVolumeCompounder.h"
 
+#include "bigusGaussianFieldData.h"
+
 #include "vtkAlgorithmOutput.h"
 #include "vtkDataArray.h"
 #include "vtkFieldData.h"
@@ -794,13 +796,8 @@ int vtkUltrasoundVolumeCompounder::RequestData(
   int extent[6];
   const int sweeps = inputVector[0]->GetNumberOfInformationObjects();
   const int maskCount = inputVector[1]->GetNumberOfInformationObjects();
-  if (maskCount != 0 && maskCount != sweeps)
-  {
-    vtkErrorMacro("input port 1: " << maskCount << " fan masks for " << sweeps
-                                   << " sweeps; connect one mask per sweep, in the sweeps' order, or none");
-    return 0;
-  }
-  if (!MakePlans(inputVector[0], this->FrameList, this->ClipRectangleOrigin, this->ClipRectangleSize, plans, error) ||
+  if (!bigus::CheckMaskCount(maskCount, sweeps, &error) ||
+    !MakePlans(inputVector[0], this->FrameList, this->ClipRectangleOrigin, this->ClipRectangleSize, plans, error) ||
     !ComputeGrid(&plans, this->OutputSpacing, this->OutputOrigin, this->OutputExtent, this->MaximumNumberOfVoxels,
       origin, extent, error))
   {

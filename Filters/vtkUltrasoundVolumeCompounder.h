@@ -88,6 +88,9 @@ public:
   /// Fan mask (W x H x 1 or W x H x N, non-zero = imaged) on the optional input port 1.
   void SetFanMaskConnection(vtkAlgorithmOutput* output) { this->SetInputConnection(1, output); }
   void SetFanMaskData(vtkDataObject* mask) { this->SetInputData(1, mask); }
+  /// Disconnect every sweep (port 0), or every fan mask (port 1): the ParaView proxy's clean commands.
+  void RemoveAllSweepConnections() { this->RemoveAllInputConnections(0); }
+  void RemoveAllFanMaskConnections() { this->RemoveAllInputConnections(1); }
 
   ///@{ Frames to insert (indices into the sequence); nullptr or empty = every frame.
   void SetFrameList(vtkIdList* frames);

@@ -381,8 +381,8 @@ Command AddTrainCommand(CLI::App& app)
     "Start from Gaussians on the training frames' pixel grid (--initial-gaussians of them, default half of "
     "--max-gaussians) instead of Harris seeds");
   trainCommand->add_flag("--no-pixel-grid-fit", train.NoPixelGridFit,
-    "Train from Harris seeds even when one Gaussian per fan pixel of the training frames would fit under "
-    "--max-gaussians (default: that pixel grid, its reflectivities solved, and no geometry steps)");
+    "Train from Harris seeds even when the training frames hold at most twice --max-gaussians fan pixels (default: "
+    "there, a pixel grid of at most --max-gaussians, its reflectivities solved, and no geometry steps)");
   trainCommand->add_flag("--refine-poses", train.RefinePoses,
     "Refine each training frame's tracked pose with the field (a rigid correction about its centre pixel, a prior "
     "towards the tracked pose; default: the tracked poses are trusted)");

@@ -72,13 +72,21 @@ bool MeasureElevationDecorrelation(const TrainingData& data, const ElevationDeco
   ElevationDecorrelation& result, std::string* error)
 {
   result = ElevationDecorrelation();
-  std::vector<int> frames = data.TrainFrames;
+  std::vector<int> frames;
+  for (int f : data.TrainFrames)
+  {
+    if (settings.Sweep < 0 || (f >= 0 && f < data.Count() && data.SweepOf(f) == settings.Sweep))
+    {
+      frames.push_back(f);
+    }
+  }
   std::sort(frames.begin(), frames.end());
   if (frames.size() < 2)
   {
     if (error)
     {
-      *error = "the elevation decorrelation needs at least two training frames";
+      *error = "the elevation decorrelation needs at least two training frames" +
+        (settings.Sweep >= 0 ? " in sweep " + std::to_string(settings.Sweep) : std::string());
     }
     return false;
   }
@@ -271,7 +279,35 @@ ElevationSigmaChoice ChooseElevationSigma(const TrainingData& data)
 {
   ElevationSigmaChoice choice;
   std::string error;
-  if (!MeasureElevationDecorrelation(data, ElevationDecorrelationSettings(), choice.Measurement, &error))
+  const int sweeps = data.Sweeps.empty() ? 1 : *std::max_element(data.Sweeps.begin(), data.Sweeps.end()) + 1;
+  std::string sweepText;
+  if (sweeps > 1)
+  {
+    // Each sweep alone; the one whose frames lie closest decides (see the header).
+    for (int s = 0; s < sweeps; ++s)
+    {
+      ElevationDecorrelationSettings settings;
+      settings.Sweep = s;
+      ElevationDecorrelation m;
+      std::string sweepError;
+      if (MeasureElevationDecorrelation(data, settings, m, &sweepError) && m.NeighbourSpacing > 0 &&
+        (sweepText.empty() || m.NeighbourSpacing < choice.Measurement.NeighbourSpacing))
+      {
+        choice.Measurement = m;
+        sweepText = "sweep " + std::to_string(s) + " of " + std::to_string(sweeps) + ", the one whose frames lie closest: ";
+      }
+      else if (sweepText.empty() && error.empty())
+      {
+        error = sweepError;
+      }
+    }
+    if (sweepText.empty())
+    {
+      choice.Reason = "0.5 mm, the fixed default: no sweep can be measured (" + error + ")";
+      return choice;
+    }
+  }
+  else if (!MeasureElevationDecorrelation(data, ElevationDecorrelationSettings(), choice.Measurement, &error))
   {
     choice.Reason = "0.5 mm, the fixed default: " + error;
     return choice;
@@ -299,7 +335,7 @@ ElevationSigmaChoice ChooseElevationSigma(const TrainingData& data)
       "across it",
       ElevationSigmaSpacingFactor, m.NeighbourSpacing);
   }
-  choice.Reason = text;
+  choice.Reason = sweepText + text;
   if (!(choice.Sigma > 0))
   {
     choice.Sigma = 0.5;

@@ -51,6 +51,7 @@ struct ElevationDecorrelationSettings
   long PixelsPerFrame = 20000;     ///< fan pixels sampled per frame (evenly strided)
   double BinWidthMm = 0.1;
   double MaximumDistanceMm = 4.0;
+  int Sweep = -1;                  ///< only the training frames of this sweep (TrainingData::Sweeps); -1: all
 };
 
 /**
@@ -88,6 +89,12 @@ struct BIGUSTRAINING_EXPORT ElevationSigmaChoice
  *   gave 17.15 dB held out at 0.5 mm, 20.41 at 1.0, 20.89 at 1.5; a sweep rendered with sigma 0.3 mm,
  *   frames 0.6 mm apart, is insensitive (26.76 dB with the true sigma, 26.70 at 0.36, 26.90 at 0.6,
  *   26.61 at 0.9).
+ * Several sweeps (TrainingData::Sweeps): each sweep is measured alone and the choice is that of the sweep
+ * whose neighbouring frames lie closest (the median NeighbourSpacing), among those that can be measured:
+ * a beam is one probe's, and a sweep whose frames lie farther apart than its speckle's correlation length
+ * cannot see it. Pooled, the pairs of a sparse sweep sit in the far bins of the dense one's curve and
+ * flatten it (the volume protocol's parallel sweep, 0.65 mm apart, alone: decorrelation sigma 0.70 mm; with
+ * an orthogonal sweep 1.84 mm apart pooled: 1.9 mm).
  * Falls back to 0.5 mm, saying so in Reason, when the frames cannot be measured (fewer than two
  * training frames, or none overlapping).
  */

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <map>
 #include <vector>
 
 namespace bigus
@@ -79,7 +80,8 @@ GapFillingReport FillElevationGaps(
   }
   // Distance between consecutive planes of one sweep: each centre's elevation in the other's plane,
   // averaged (-1 between the last frame of a sweep and the first of the next: no gap there).
-  std::vector<double> spacing(frames.size() - 1), sorted;
+  std::vector<double> spacing(frames.size() - 1);
+  std::map<int, std::vector<double>> sweepSpacings; // by sweep
   for (std::size_t k = 0; k + 1 < frames.size(); ++k)
   {
     const Plane &a = planes[k], &b = planes[k + 1];
@@ -88,25 +90,32 @@ GapFillingReport FillElevationGaps(
       : 0.5 * (std::abs(a.R.col(2).dot(b.Centre - a.Origin)) + std::abs(b.R.col(2).dot(a.Centre - b.Origin)));
     if (spacing[k] >= 0)
     {
-      sorted.push_back(spacing[k]);
+      sweepSpacings[data.SweepOf(frames[k])].push_back(spacing[k]);
     }
   }
-  if (sorted.empty())
+  if (sweepSpacings.empty())
   {
     return report;
   }
-  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-  report.TypicalSpacing = sorted[sorted.size() / 2];
+  // A gap is wide against its own sweep's median spacing: sweeps may be sampled at different densities.
+  std::map<int, double> typical;
+  for (auto& [sweep, sorted] : sweepSpacings)
+  {
+    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+    typical[sweep] = sorted[sorted.size() / 2];
+  }
+  report.TypicalSpacing = typical.begin()->second;
   std::vector<std::size_t> gaps;
   for (std::size_t k = 0; k + 1 < frames.size(); ++k)
   {
-    if (spacing[k] > settings.MinimumGapSpacings * report.TypicalSpacing &&
+    const double sweepTypical = spacing[k] >= 0 ? typical.at(data.SweepOf(frames[k])) : 0.0;
+    if (sweepTypical > 0 && spacing[k] > settings.MinimumGapSpacings * sweepTypical &&
       spacing[k] > 2 * std::max(LatticeSpacing, settings.ClearanceSigmas) * elevationSigma && spacing[k] <= settings.MaximumGapMm)
     {
       gaps.push_back(k);
     }
   }
-  if (gaps.empty() || report.TypicalSpacing <= 0)
+  if (gaps.empty())
   {
     return report;
   }

@@ -77,7 +77,8 @@ struct GapFillingSettings
 
 struct GapFillingReport
 {
-  double TypicalSpacing = 0; ///< mm, median distance between consecutive training frames
+  double TypicalSpacing = 0; ///< mm, median distance between consecutive training frames (of the first sweep
+                             ///< that has two; each sweep's gaps are judged against its own median)
   int Gaps = 0;              ///< gaps bridged
   double WidestGap = 0;      ///< mm, the widest of them (0 when none)
   std::int64_t Added = 0;    ///< Gaussians added

@@ -169,15 +169,22 @@ GridPlanes SelectGridPlanes(const TrainingData& data, const SeedShape& shape)
   const std::size_t pixels = std::size_t(data.Width) * data.Height;
   const double minimumGap = std::max(shape.ElevationSigma, shape.PixelSpacing);
   SliceFrame last;
-  double gaps = 0;
-  int gapCount = 0, lastSweep = -1;
+  std::vector<double> gaps;
+  std::vector<int> gapCount;
+  int lastSweep = -1;
   for (int f : data.TrainFrames)
   {
     SliceFrame frame;
     ComputeSliceFrame(data.Poses[f].data(), 90, frame);
     double centre[3];
     Apply(data.Poses[f], 0.5 * (data.Width - 1), 0.5 * (data.Height - 1), centre);
-    if (data.SweepOf(f) == lastSweep) // the first frame of a sweep is kept
+    const int sweep = data.SweepOf(f);
+    if (sweep >= static_cast<int>(gaps.size()))
+    {
+      gaps.resize(sweep + 1, 0.0);
+      gapCount.resize(sweep + 1, 0);
+    }
+    if (sweep == lastSweep) // the first frame of a sweep is kept
     {
       double d = 0;
       for (int k = 0; k < 3; ++k)
@@ -188,16 +195,19 @@ GridPlanes SelectGridPlanes(const TrainingData& data, const SeedShape& shape)
       {
         continue;
       }
-      gaps += std::abs(d);
-      ++gapCount;
+      gaps[sweep] += std::abs(d);
+      ++gapCount[sweep];
     }
     result.Frames.push_back(f);
     last = frame;
-    lastSweep = data.SweepOf(f);
+    lastSweep = sweep;
     const unsigned char* mask = data.MaskOf(f);
     result.FanPixels += std::count_if(mask, mask + pixels, [](unsigned char v) { return v != 0; });
   }
-  result.Spacing = gapCount > 0 ? gaps / gapCount : minimumGap;
+  for (std::size_t s = 0; s < gaps.size(); ++s)
+  {
+    result.Spacing.push_back(gapCount[s] > 0 ? gaps[s] / gapCount[s] : minimumGap);
+  }
   return result;
 }
 
@@ -211,7 +221,7 @@ std::string SeedGrid(const TrainingData& data, const GridPlanes& selected, std::
 {
   const std::size_t pixels = std::size_t(data.Width) * data.Height;
   const std::vector<int>& planes = selected.Frames;
-  const double planeSpacing = selected.Spacing;
+  const std::vector<double>& planeSpacing = selected.Spacing;
   const double masked = static_cast<double>(selected.FanPixels);
   // Grid points at the centres of stride x stride blocks of pixels (pixel centres at integer indices:
   // (stride - 1)/2 + a stride), kept inside the fan mask. The stride is real-valued, so that the grid's
@@ -248,19 +258,24 @@ std::string SeedGrid(const TrainingData& data, const GridPlanes& selected, std::
   // Elevation scale 0.45 plane spacings, whatever the beam: measured on the volume protocol's in-between,
   // oblique and orthogonal slices (docs/FINDINGS.md, "The dense start's elevation scale"); a slice across
   // the planes sees this scale itself, not blurred by the beam.
-  const double elevation = 0.45 * planeSpacing;
   field = GaussianField();
   for (int f : planes)
   {
     const float* frame = &data.Frames[pixels * f];
+    const double elevation = 0.45 * planeSpacing.at(data.SweepOf(f));
     forEachPoint(f, stride, [&](double x, double y, std::size_t p) {
       AddSeed(field, data.Poses[f], x, y, inPlane, elevation, ScatteringOfIntensity(frame[p], shape.Gamma));
     });
   }
   char text[200];
-  std::snprintf(text, sizeof(text),
-    "%zu planes %.3g mm apart, every %.2f pixels, in-plane scale %.3g mm, elevation scale %.3g mm", planes.size(),
-    planeSpacing, stride, inPlane, elevation);
-  return text;
+  std::string line = std::to_string(planes.size()) + " planes ";
+  for (std::size_t s = 0; s < planeSpacing.size(); ++s)
+  {
+    std::snprintf(text, sizeof(text), "%s%.3g mm apart", s > 0 ? ", " : "", planeSpacing[s]);
+    line += text + (planeSpacing.size() > 1 ? " in sweep " + std::to_string(s) : std::string());
+  }
+  std::snprintf(text, sizeof(text), ", every %.2f pixels, in-plane scale %.3g mm, elevation scale 0.45 x the spacing",
+    stride, inPlane);
+  return line + text;
 }
 } // namespace bigus

@@ -52,15 +52,16 @@ struct GridPlanes
 {
   std::vector<int> Frames;     ///< training frames kept: the first of each sweep, and each other at least sigma_E
                                ///< (or a pixel) from the last one kept in its sweep
-  double Spacing = 0;          ///< mm, their mean spacing along each one's normal, within each sweep
+  std::vector<double> Spacing; ///< [sweeps] mm, the mean spacing of each sweep's planes along their normals
+                               ///< (sigma_E or a pixel for a sweep of one plane)
   std::int64_t FanPixels = 0;  ///< pixels inside the fan masks of the frames kept (the grid's count at stride 1)
 };
 GridPlanes SelectGridPlanes(const TrainingData& data, const SeedShape& shape);
 
 /**
  * The dense start: Gaussians on the pixel grid of the planes SelectGridPlanes keeps, about @p total of
- * them (never more), in-plane scale 0.6 stride, elevation scale 0.45 of the planes' spacing (measured on
- * the volume protocol: docs/FINDINGS.md). Returns one line that says what was made.
+ * them (never more), in-plane scale 0.6 stride, elevation scale 0.45 of the spacing of the plane's sweep's
+ * planes (measured on the volume protocol: docs/FINDINGS.md). Returns one line that says what was made.
  */
 std::string SeedGrid(const TrainingData& data, std::int64_t total, const SeedShape& shape, GaussianField& field);
 /// The same on planes already selected (SelectGridPlanes of the same data and shape).

@@ -273,7 +273,8 @@ bool Trainer::Initialize(std::string* error)
     this->Settings.InitialGaussians <= 0 && this->Settings.HarrisInitialisation &&
     !this->Settings.NonNegativeReflectivity;
   const GridPlanes planes = gridMayApply ? SelectGridPlanes(data, shape) : GridPlanes();
-  this->PixelGrid = gridMayApply && planes.FanPixels <= this->Settings.MaximumGaussians;
+  this->PixelGrid = gridMayApply &&
+    planes.FanPixels <= PixelGridFanPixelsPerGaussian * this->Settings.MaximumGaussians;
   // A field that could not grow to MaximumGaussians in this machine's memory is refused before any seed is
   // made (the training frames are already held).
   const std::int64_t trainingPixels =
@@ -295,11 +296,14 @@ bool Trainer::Initialize(std::string* error)
   GaussianField& field = this->State.Gaussians.Field;
   if (this->PixelGrid)
   {
-    const std::string grid = SeedGrid(data, planes, planes.FanPixels, shape, field);
+    const std::int64_t count = std::min<std::int64_t>(planes.FanPixels, this->Settings.MaximumGaussians);
+    const std::string grid = SeedGrid(data, planes, count, shape, field);
     this->Report.InitialGaussians = field.Count();
     this->Report.Settings.push_back(Format("InitialGaussians = %lld (the pixel-grid fit: the %lld fan pixels of the "
-                                           "dense start's planes fit under MaximumGaussians; ",
-                                      static_cast<long long>(field.Count()), static_cast<long long>(planes.FanPixels)) +
+                                           "dense start's planes %s; ",
+                                      static_cast<long long>(field.Count()), static_cast<long long>(planes.FanPixels),
+                                      count < planes.FanPixels ? "are at most twice MaximumGaussians, a grid of that many"
+                                                               : "fit under MaximumGaussians") +
       grid + "; reflectivities solved, no geometry steps)");
     return this->FitInitialReflectivities(error);
   }
@@ -734,7 +738,8 @@ bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>
   if (this->PixelGrid)
   {
     // The solve was the fit (PixelGridFit): geometry steps would overfit data this few.
-    this->Report.StopReason = "the pixel-grid fit (no geometry steps: as many Gaussians as fan pixels)";
+    this->Report.StopReason =
+      "the pixel-grid fit (no geometry steps: a Gaussian per fan pixel, or a grid of MaximumGaussians)";
     this->Report.GrowthStopReason = "none (the pixel-grid fit)";
   }
   double recent = 0;

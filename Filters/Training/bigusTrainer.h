@@ -62,9 +62,9 @@ struct TrainerSettings
   /// InitialGaussians, short of it by less than a row and a column of the grid (0 = automatic: half of MaximumGaussians), in-plane scale 0.6 strides, elevation
   /// scale half the spacing of the planes kept; reflectivities from the solve (InitializeGrid).
   bool DenseInitialisation = false;
-  /// The fit when the data are few: when one Gaussian per fan pixel of the dense start's planes
-  /// (SelectGridPlanes) fits under MaximumGaussians, the field is that pixel grid (SeedGrid at stride 1)
-  /// with its reflectivities solved, and no geometry step follows, whatever Iterations and TimeBudget:
+  /// The fit when the data are few: when the dense start's planes (SelectGridPlanes) hold at most
+  /// PixelGridFanPixelsPerGaussian x MaximumGaussians fan pixels, the field is a pixel grid (SeedGrid: every
+  /// fan pixel, or MaximumGaussians of them at a stride of up to 1.41) with its reflectivities solved, and no geometry step follows, whatever Iterations and TimeBudget:
   /// 11 parameters per Gaussian would outnumber the pixels, and Adam overfits them. On the volume protocol
   /// (352k fan pixels) 40.52 dB in between in 14 s, against 37.85 for Harris seeds and Adam in 120 s; on the
   /// cropped N-wire phantom (22k) 19.81 dB held out in 0.7 s against 20.00 in 60 s (docs/FINDINGS.md,
@@ -159,6 +159,17 @@ struct TrainerSettings
  * come on top.
  */
 constexpr double TrainingBytesPerGaussian = 140 + 140 + 132 + 44 + 44;
+
+/**
+ * The pixel-grid fit (TrainerSettings::PixelGridFit) applies while the dense start's planes hold at most
+ * this many fan pixels per Gaussian of MaximumGaussians: every fan pixel when they fit, otherwise a grid
+ * of MaximumGaussians points (a stride of up to sqrt(2) pixels). Measured on the volume protocol's parallel
+ * sweep (352k fan pixels; oblique / in-between PSNR, dB): stride 1 40.78 / 40.52, stride 1.33 (200k
+ * Gaussians) 39.25 / 38.18, stride 1.89 (100k) 37.55 / 36.34, where Harris seeds and Adam for 120 s score
+ * 38.07 / 37.80 (docs/FINDINGS.md, "Several sweeps into one field"): the grid loses to Adam from a stride
+ * of about 1.45.
+ */
+constexpr double PixelGridFanPixelsPerGaussian = 2.0;
 
 /// What a run did.
 struct TrainerReport

@@ -2,7 +2,10 @@
 // frame sizes, trained into one field (vtkGaussianFieldTrainer with two input connections) and compounded into
 // one volume (vtkUltrasoundVolumeCompounder); leave-one-sweep-out; the frames of different sizes as the
 // trainer holds them; and each kind of sweep that cannot go with the others refused with an error that names it.
+#include "bigusElevationSigma.h"
+#include "bigusGapFilling.h"
 #include "bigusGaussianFieldData.h"
+#include "bigusSeeding.h"
 #include "bigusTestUtilities.h"
 #include "bigusTrainingEngine.h"
 
@@ -22,6 +25,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 #include <vector>
@@ -205,6 +209,57 @@ TEST(SeveralSweeps, FramesOfDifferentSizesKeepTheirPixelsAndPosesAndThePaddingIs
     }
   }
   EXPECT_GT(masked, 40 * 32 / 2);
+}
+
+TEST(SeveralSweeps, WhatDependsOnTheFrameSpacingIsMeasuredWithinEachSweep)
+{
+  // A parallel sweep 1 mm apart and an orthogonal one 4 mm apart (6 frames across 24 mm). Pooled, the dense
+  // sweep's spacing would rule both: the sparse sweep's every pair would be a gap (over 3 x 1 mm) and its
+  // Gaussians as thin as the dense sweep's planes.
+  Sweeps s;
+  auto sparse = Sweep(s.VolumeData, vtkUltrasoundVolumeSweep::ORTHOGONAL, 6, 0.5);
+  const double spacing[2] = { s.Parallel->GetSliceSpacing(), sparse->GetSliceSpacing() };
+  ASSERT_GT(spacing[1], 3.5 * spacing[0]);
+  TrainingData both, dense;
+  std::string error;
+  ASSERT_TRUE(TrainingDataFromSweeps({ { s.Parallel->GetOutput(), s.Parallel->GetMaskOutput(), "sweep 0" },
+                                       { sparse->GetOutput(), sparse->GetMaskOutput(), "sweep 1" } },
+    both, &error))
+    << error;
+  ASSERT_TRUE(TrainingDataFromSweeps({ { s.Parallel->GetOutput(), s.Parallel->GetMaskOutput(), "sweep 0" } }, dense, &error))
+    << error;
+  for (TrainingData* d : { &both, &dense })
+  {
+    for (int k = 0; k < d->Count(); ++k)
+    {
+      d->TrainFrames.push_back(k);
+    }
+  }
+  // The dense start's planes: each sweep's own spacing (the sweeps' slice spacing), and each plane's Gaussians
+  // 0.45 of it thick across the plane.
+  SeedShape shape;
+  shape.PixelSpacing = 0.5;
+  shape.ElevationSigma = 0.3;
+  const GridPlanes planes = SelectGridPlanes(both, shape);
+  ASSERT_EQ(planes.Frames.size(), std::size_t(NP + 6));
+  ASSERT_EQ(planes.Spacing.size(), 2u);
+  EXPECT_NEAR(planes.Spacing[0], spacing[0], 1e-6);
+  EXPECT_NEAR(planes.Spacing[1], spacing[1], 1e-6);
+  GaussianField field;
+  SeedGrid(both, planes, planes.FanPixels, shape, field);
+  ASSERT_EQ(field.Count(), planes.FanPixels);
+  auto thickness = [&](std::int64_t g) {
+    return std::exp(std::max({ field.LogScales[3 * g], field.LogScales[3 * g + 1], field.LogScales[3 * g + 2] }));
+  };
+  EXPECT_NEAR(thickness(0), 0.45 * spacing[0], 1e-5) << "the parallel sweep's first plane";
+  EXPECT_NEAR(thickness(field.Count() - 1), 0.45 * spacing[1], 1e-5) << "the sparse sweep's last plane";
+  // Gap filling: every pair of the sparse sweep is 1 of its own spacings apart, no gap.
+  const GapFillingReport gaps = FillElevationGaps(field, both, 0.3, GapFillingSettings());
+  EXPECT_EQ(gaps.Gaps, 0) << "typical spacing " << gaps.TypicalSpacing;
+  // The elevation sigma: the dense sweep's choice (its frames lie closest), not the pooled pairs'.
+  const ElevationSigmaChoice chosen = ChooseElevationSigma(both), alone = ChooseElevationSigma(dense);
+  EXPECT_DOUBLE_EQ(chosen.Sigma, alone.Sigma) << chosen.Reason << " | " << alone.Reason;
+  EXPECT_NE(chosen.Reason.find("sweep 0 of 2"), std::string::npos) << chosen.Reason;
 }
 
 TEST(SeveralSweeps, AFieldTrainedOnTwoSweepsRendersTheHeldOutFramesOfBoth)

@@ -1207,8 +1207,8 @@ TEST(Trainer, VariableProjectionEndsWithALowerTrainingLossThanAdamAloneOnTheSpin
 // Data this few (the synthetic sweep's 45 training frames of 64 x 64 pixels): one Gaussian per fan pixel of
 // the planes a beam width apart fits under MaximumGaussians, so the defaults fit that pixel grid, solve its
 // reflectivities and take no geometry step; the held-out frames between the planes match the known
-// field's renders to 44.53 dB (measured; Harris seeds and 200 Adam steps 38.19). Below the pixel count, or with a
-// count given, the run trains from Harris seeds as before.
+// field's renders to 44.53 dB (measured; Harris seeds and 200 Adam steps 38.19). Up to half the pixel count a
+// coarser grid of MaximumGaussians; below it, or with a count given, the run trains from Harris seeds as before.
 TEST(Trainer, WhenOneGaussianPerFanPixelFitsTheDefaultsFitThePixelGridAndTakeNoStep)
 {
   std::vector<int> heldOut;
@@ -1256,8 +1256,16 @@ TEST(Trainer, WhenOneGaussianPerFanPixelFitsTheDefaultsFitThePixelGridAndTakeNoS
   const double grid = HeldOutPsnr(trainer, heldOut);
   EXPECT_GT(grid, 43.0) << "held-out frames between the planes";
 
-  // One Gaussian fewer allowed than the grid needs: Harris seeds and Adam.
-  s.MaximumGaussians = planes.FanPixels - 1;
+  // Up to twice as many fan pixels as MaximumGaussians: a coarser grid of at most that many, no step either.
+  s.MaximumGaussians = planes.FanPixels / 2 + 1;
+  Trainer coarse(data, s);
+  ASSERT_TRUE(coarse.Initialize(&error)) << error;
+  EXPECT_LE(coarse.GetReport().InitialGaussians, s.MaximumGaussians);
+  EXPECT_GT(coarse.GetReport().InitialGaussians, s.MaximumGaussians * 9 / 10) << "short of it by less than a row and a column";
+  ASSERT_TRUE(coarse.Run(nullptr, nullptr, &error)) << error;
+  EXPECT_EQ(coarse.GetIteration(), 0);
+  // One Gaussian fewer allowed than half the fan pixels: Harris seeds and Adam.
+  s.MaximumGaussians = planes.FanPixels / 2 - 1;
   Trainer seeded(data, s);
   ASSERT_TRUE(seeded.Initialize(&error)) << error;
   EXPECT_LT(seeded.GetReport().InitialGaussians, planes.FanPixels);

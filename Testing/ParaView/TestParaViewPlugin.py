@@ -115,6 +115,31 @@ def main():
         fail("compounded volume resampled at the sweep's poses: %d points"
              % resampled.GetDataInformation().GetNumberOfPoints())
 
+    # Several sweeps on the repeatable inputs: the sweep read twice, trained into one field with the second
+    # held out (leave-one-sweep-out), then both; compounded together, every frame of both is inserted.
+    second = pvs.TrackedUltrasoundSequenceReader(FileName=sweep, CalibrationFileName=calibration)
+    for held_out, expected in ((1, [(0, k) for k in range(20)]),
+                               (-1, [(s, k) for s in (0, 1) for k in range(20)])):
+        joint = pvs.TrainGaussianField(Input=[reader, second], Iterations=10, TimeBudget=0, InitialGaussians=300,
+                                       ElevationSigma=0.5, HoldOutSweep=held_out)
+        joint.UpdatePipeline()
+        sweeps = joint.GetClientSideObject().GetOutputDataObject(0).GetFieldData().GetArray("TrainingSweeps")
+        pairs = [tuple(int(v) for v in sweeps.GetTuple(t)) for t in range(sweeps.GetNumberOfTuples())] \
+            if sweeps else None
+        if pairs != expected:
+            fail("two sweeps, HoldOutSweep %d: trained on (sweep, frame) %s, expected %s" % (held_out, pairs, expected))
+    both_volume = pvs.CompoundUltrasoundVolume(Input=[reader, second], OutputSpacing=[0.5, 0.5, 0.5])
+    both_volume.UpdatePipeline()
+    volume.UpdatePipeline()
+
+    def most_inserted(proxy):
+        counts = proxy.GetClientSideObject().GetOutputDataObject(0).GetPointData().GetArray("InsertedPixelCount")
+        return counts.GetRange()[1] if counts else -1
+    if most_inserted(volume) <= 0 or most_inserted(both_volume) != 2 * most_inserted(volume):
+        fail("the sweep compounded twice: at most %s pixels in a voxel, once: %s"
+             % (most_inserted(both_volume), most_inserted(volume)))
+    print("two sweeps: one field trained on both, or on one with the other held out; compounded together")
+
     # A chain built before anything ran, updated from its end (the slice asks for a small extent): the
     # trainer still gets every frame.
     fresh = pvs.TrackedUltrasoundSequenceReader(FileName=sweep, CalibrationFileName=calibration)
