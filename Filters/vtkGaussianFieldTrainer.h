@@ -142,7 +142,8 @@ public:
   ///@}
   ///@{ The fit when the data are few (default on): when the training planes hold at most twice
   /// MaximumGaussians fan pixels, the field is a pixel grid (every fan pixel, or MaximumGaussians of them)
-  /// with solved reflectivities and no geometry step is taken (bigus::TrainerSettings::PixelGridFit). Applies with the default start only.
+  /// with solved reflectivities and no geometry step is taken (bigus::TrainerSettings::PixelGridFit). Applies
+  /// with the default start only.
   vtkSetMacro(PixelGridFit, bool);
   vtkGetMacro(PixelGridFit, bool);
   vtkBooleanMacro(PixelGridFit, bool);

@@ -23,6 +23,8 @@ bool TrainWithMarks(const TrainingData& data, const TrainerSettings& settings, c
   Trainer trainer(data, settings);
   double trained = 0;
   double t0 = Now();
+  // Iterations 0: no step limit (TimeBudget is the schedule), the marks decide.
+  auto scheduleLeft = [&]() { return settings.Iterations <= 0 || trainer.GetIteration() < settings.Iterations; };
   if (!trainer.Initialize(error))
   {
     return false;
@@ -32,7 +34,7 @@ bool TrainWithMarks(const TrainingData& data, const TrainerSettings& settings, c
   {
     const double start = Now();
     const double slice = mark - trained;
-    if (slice > 0 && trainer.GetIteration() < settings.Iterations &&
+    if (slice > 0 && scheduleLeft() &&
       !trainer.Train(nullptr, [&]() { return Now() - start >= slice; }, error))
     {
       return false;
@@ -54,7 +56,7 @@ bool TrainWithMarks(const TrainingData& data, const TrainerSettings& settings, c
     {
       return false;
     }
-    if (trainer.GetIteration() >= settings.Iterations)
+    if (!scheduleLeft())
     {
       break; // the schedule ended before the later marks: they would repeat this row
     }

@@ -207,7 +207,8 @@ bool SeveralSweepsSection(BenchmarkContext& context, std::string* error)
      << orthogonal->GetOutput()->GetDimensions()[0] << " x " << orthogonal->GetOutput()->GetDimensions()[1]
      << "), trained into one field (`bigus train PARALLEL ORTHOGONAL`). Scored on test slices neither sweep "
      << "holds, against compounding both sweeps (and each alone) and against each sweep's own slices stacked "
-     << "into a volume and resliced trilinearly. " << vp.Description << "\n";
+     << "into a volume and resliced trilinearly. " << vp.Description
+     << " Here BIGUS chooses its elevation sigma from the sweeps, as `bigus train` does (the note column).\n";
   nlohmann::json j;
   for (int t = 0; t < 2; ++t)
   {

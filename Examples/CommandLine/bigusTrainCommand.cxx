@@ -46,7 +46,7 @@ struct TrainOptions
   int GrowthPatience = 0, SolveIterations = 0;
   bool NoFillGaps = false, ReflectivitySolve = false, DenseStart = false, DenseAdam = false,
        NoPixelGridFit = false, RefinePoses = false;
-  std::string RefinedPoses;
+  std::vector<std::string> RefinedPoses; ///< one per sweep
   double PoseSmoothness = 0;
   unsigned Seed = 0;
 
@@ -81,9 +81,10 @@ int RunTrain(const TrainOptions& o)
       return 2;
     }
   }
-  if (count > 1 && !o.RefinedPoses.empty())
+  if (!o.RefinedPoses.empty() && o.RefinedPoses.size() != count)
   {
-    std::fprintf(stderr, "bigus: --refined-poses writes one sweep; train a single sweep to write its refined poses\n");
+    std::fprintf(stderr, "bigus: %zu sweeps and %zu --refined-poses files: give one per sweep, in the sweeps' order\n",
+      count, o.RefinedPoses.size());
     return 2;
   }
   vtkNew<vtkGaussianFieldTrainer> trainer;
@@ -275,10 +276,13 @@ int RunTrain(const TrainOptions& o)
                 "mean %.3f, largest %.3f mm\n",
       static_cast<long long>(n), sum[0] / std::max<vtkIdType>(1, n), largest[0], sum[1] / std::max<vtkIdType>(1, n),
       largest[1]);
-    if (!o.RefinedPoses.empty())
+    // Each input sweep with its training frames' ImageToReference corrected (the held-out frames as tracked). A
+    // correction turns about the centre pixel of the trainer's frame grid (the largest sweep's frame size).
+    vtkDataArray* grid = fd->GetArray("TrainingFrameSize");
+    std::int64_t first = 0; // index of the sweep's first frame among all sweeps' frames
+    for (std::size_t k = 0; k < o.RefinedPoses.size(); ++k)
     {
-      // The input sweep with its training frames' ImageToReference corrected (the held-out frames as tracked).
-      vtkImageData* input = readers[0]->GetOutput();
+      vtkImageData* input = readers[k]->GetOutput();
       vtkNew<vtkImageData> refined;
       refined->ShallowCopy(input);
       vtkNew<vtkFieldData> fields;
@@ -287,29 +291,36 @@ int RunTrain(const TrainOptions& o)
       vtkDataArray* poses = fields->GetArray("ImageToReference");
       int dims[3];
       input->GetDimensions(dims);
+      const int width = grid ? static_cast<int>(grid->GetComponent(0, 0)) : dims[0];
+      const int height = grid ? static_cast<int>(grid->GetComponent(0, 1)) : dims[1];
       for (vtkIdType i = 0; i < n; ++i)
       {
         const double* c = corrections->GetTuple(i);
-        const int frame = static_cast<int>(c[0]);
+        const std::int64_t frame = static_cast<std::int64_t>(c[0]) - first;
+        if (frame < 0 || frame >= dims[2])
+        {
+          continue; // another sweep's frame
+        }
         const double radians = vtkMath::Pi() / 180.0;
         const double xi[6] = { c[1] * radians, c[2] * radians, c[3] * radians, c[4], c[5], c[6] };
         double pose[16];
-        if (bigus::CorrectPose(poses->GetTuple(frame), dims[0], dims[1], xi, pose) == bigus::PoseStatus::Ok)
+        if (bigus::CorrectPose(poses->GetTuple(frame), width, height, xi, pose) == bigus::PoseStatus::Ok)
         {
           poses->SetTuple(frame, pose);
         }
       }
-      const std::string temporaryPoses = TemporaryName(o.RefinedPoses);
+      first += dims[2];
+      const std::string temporaryPoses = TemporaryName(o.RefinedPoses[k]);
       vtkNew<vtkUltrasoundSequenceWriter> sequenceWriter;
       sequenceWriter->SetInputData(refined);
       sequenceWriter->SetFileName(temporaryPoses.c_str());
-      if (!sequenceWriter->Write() || !Publish(temporaryPoses, o.RefinedPoses))
+      if (!sequenceWriter->Write() || !Publish(temporaryPoses, o.RefinedPoses[k]))
       {
         std::remove(temporaryPoses.c_str());
-        return Fail(o.RefinedPoses + ": cannot write the refined sequence");
+        return Fail(o.RefinedPoses[k] + ": cannot write the refined sequence");
       }
-      std::printf("refined poses  %s: the sweep with its training frames' ImageToReference corrected\n",
-        o.RefinedPoses.c_str());
+      std::printf("refined poses  %s: %s with its training frames' ImageToReference corrected\n",
+        o.RefinedPoses[k].c_str(), o.Sweeps[k].c_str());
     }
   }
   return 0;
@@ -386,8 +397,11 @@ Command AddTrainCommand(CLI::App& app)
   trainCommand->add_flag("--refine-poses", train.RefinePoses,
     "Refine each training frame's tracked pose with the field (a rigid correction about its centre pixel, a prior "
     "towards the tracked pose; default: the tracked poses are trusted)");
-  trainCommand->add_option("--refined-poses", train.RefinedPoses,
-    "With --refine-poses: write the sweep with its training frames' ImageToReference corrected (.igs.mha)")
+  trainCommand
+    ->add_option("--refined-poses", train.RefinedPoses,
+      "With --refine-poses: write the sweep with its training frames' ImageToReference corrected (.igs.mha); one per "
+      "sweep, in their order (repeat the option)")
+    ->allow_extra_args(false)
     ->needs("--refine-poses");
   trainCommand->add_option("--pose-smoothness", train.PoseSmoothness,
     "With --refine-poses: weight of the prior that keeps the corrections smooth along the sweep (0: none)")

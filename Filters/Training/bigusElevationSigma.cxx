@@ -294,7 +294,8 @@ ElevationSigmaChoice ChooseElevationSigma(const TrainingData& data)
         (sweepText.empty() || m.NeighbourSpacing < choice.Measurement.NeighbourSpacing))
       {
         choice.Measurement = m;
-        sweepText = "sweep " + std::to_string(s) + " of " + std::to_string(sweeps) + ", the one whose frames lie closest: ";
+        sweepText =
+          "sweep " + std::to_string(s) + " of " + std::to_string(sweeps) + ", the one whose frames lie closest: ";
       }
       else if (sweepText.empty() && error.empty())
       {

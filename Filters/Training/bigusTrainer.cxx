@@ -39,6 +39,20 @@ std::string Format(const char* format, Args... args)
   return text;
 }
 
+/// One Adam step (t counts from 1) of a pose correction @p xi (rotation vector, rad; translation, mm) on its
+/// gradient @p g, with the rates @p rate of the rotation and the translation, and the correction's moments.
+void AdamPoseStep(const double g[6], const double rate[2], int t, std::array<double, 6>& xi,
+  std::array<double, 6>& first, std::array<double, 6>& second)
+{
+  const double c1 = 1 - std::pow(AdamBeta1, t), c2 = 1 - std::pow(AdamBeta2, t);
+  for (int k = 0; k < 6; ++k)
+  {
+    first[k] = AdamBeta1 * first[k] + (1 - AdamBeta1) * g[k];
+    second[k] = AdamBeta2 * second[k] + (1 - AdamBeta2) * g[k] * g[k];
+    xi[k] -= rate[k / 3] * (first[k] / c1) / (std::sqrt(second[k] / c2) + AdamEpsilon);
+  }
+}
+
 /// Uniform double in [0, 1) from the generator's raw output (identical on every platform).
 double Uniform(std::mt19937_64& rng)
 {
@@ -135,10 +149,10 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
       s.PoseRotationSigma * 180 / M_PI, s.PoseTranslationSigma, s.PoseSmoothness));
     this->TrackedPoses = this->Data->Poses;
     const std::size_t n = this->Data->Poses.size();
-    this->PoseXi.assign(n, {});
-    this->PoseFirst.assign(n, {});
-    this->PoseSecond.assign(n, {});
-    this->PoseSteps.assign(n, 0);
+    this->State.PoseCorrections.assign(n, {});
+    this->State.PoseFirstMoment.assign(n, {});
+    this->State.PoseSecondMoment.assign(n, {});
+    this->State.PoseSteps.assign(n, 0);
   }
   this->Engine->SetData(this->Data.get(), nullptr);
 }
@@ -302,8 +316,9 @@ bool Trainer::Initialize(std::string* error)
     this->Report.Settings.push_back(Format("InitialGaussians = %lld (the pixel-grid fit: the %lld fan pixels of the "
                                            "dense start's planes %s; ",
                                       static_cast<long long>(field.Count()), static_cast<long long>(planes.FanPixels),
-                                      count < planes.FanPixels ? "are at most twice MaximumGaussians, a grid of that many"
-                                                               : "fit under MaximumGaussians") +
+                                      count < planes.FanPixels
+                                        ? "are at most twice MaximumGaussians, a grid of that many"
+                                        : "fit under MaximumGaussians") +
       grid + "; reflectivities solved, no geometry steps)");
     return this->FitInitialReflectivities(error);
   }
@@ -536,17 +551,18 @@ void Trainer::UpdatePoses(const std::vector<int>& frames, const std::vector<doub
   for (std::size_t b = 0; b < frames.size(); ++b)
   {
     const int f = frames[b];
-    std::array<double, 6>& xi = this->PoseXi[f];
+    std::array<double, 6>& xi = this->State.PoseCorrections[f];
     // The neighbours along the sweep: the training frames before and after this one in its sweep
     // (TrainFrames in order; none where they are not).
     const std::vector<int>& train = this->Data->TrainFrames;
     const auto at = std::lower_bound(train.begin(), train.end(), f);
     const bool found = at != train.end() && *at == f;
     const int sweep = this->Data->SweepOf(f);
+    const auto& corrections = this->State.PoseCorrections;
     const std::array<double, 6>* before =
-      found && at != train.begin() && this->Data->SweepOf(*(at - 1)) == sweep ? &this->PoseXi[*(at - 1)] : nullptr;
+      found && at != train.begin() && this->Data->SweepOf(*(at - 1)) == sweep ? &corrections[*(at - 1)] : nullptr;
     const std::array<double, 6>* after =
-      found && at + 1 != train.end() && this->Data->SweepOf(*(at + 1)) == sweep ? &this->PoseXi[*(at + 1)] : nullptr;
+      found && at + 1 != train.end() && this->Data->SweepOf(*(at + 1)) == sweep ? &corrections[*(at + 1)] : nullptr;
     double g[6];
     bool finite = true;
     for (int k = 0; k < 6; ++k)
@@ -563,17 +579,10 @@ void Trainer::UpdatePoses(const std::vector<int>& frames, const std::vector<doub
     {
       continue; // a non-finite pose gradient moves none of the frame's correction
     }
-    const int t = ++this->PoseSteps[f];
-    const double c1 = 1 - std::pow(AdamBeta1, t), c2 = 1 - std::pow(AdamBeta2, t);
-    for (int k = 0; k < 6; ++k)
-    {
-      double& m = this->PoseFirst[f][k];
-      double& v = this->PoseSecond[f][k];
-      m = AdamBeta1 * m + (1 - AdamBeta1) * g[k];
-      v = AdamBeta2 * v + (1 - AdamBeta2) * g[k] * g[k];
-      xi[k] -= rate[k / 3] * (m / c1) / (std::sqrt(v / c2) + AdamEpsilon);
-    }
-    CorrectPose(this->TrackedPoses[f].data(), this->Data->Width, this->Data->Height, xi.data(), this->Data->Poses[f].data());
+    AdamPoseStep(
+      g, rate, ++this->State.PoseSteps[f], xi, this->State.PoseFirstMoment[f], this->State.PoseSecondMoment[f]);
+    CorrectPose(
+      this->TrackedPoses[f].data(), this->Data->Width, this->Data->Height, xi.data(), this->Data->Poses[f].data());
   }
 }
 
@@ -857,7 +866,7 @@ bool Trainer::Finish(std::string* error)
   {
     for (int f : this->Data->TrainFrames)
     {
-      this->Report.PoseCorrections.push_back({ f, this->PoseXi[f] });
+      this->Report.PoseCorrections.push_back({ f, this->State.PoseCorrections[f] });
     }
   }
   this->Report.BestValidationLoss = this->State.BestFieldLoss;
@@ -922,10 +931,92 @@ bool Trainer::LoadCheckpoint(const std::string& file, std::string* error)
   {
     return false;
   }
+  // The pose corrections go on from where the checkpoint left them (the same settings, the same sweep).
+  const std::size_t frames = this->Settings.RefinePoses ? this->Data->Poses.size() : 0;
+  if (loaded.PoseCorrections.size() != frames)
+  {
+    if (error)
+    {
+      *error = file + ": the checkpoint holds pose corrections of " + std::to_string(loaded.PoseCorrections.size()) +
+        " frames and this run " + (this->Settings.RefinePoses ? "refines the poses of " : "refines the poses of none of ") +
+        std::to_string(this->Data->Poses.size()) + " (resume with the settings and sweep the checkpoint was written with)";
+    }
+    return false;
+  }
+  for (std::size_t f = 0; f < frames; ++f)
+  {
+    if (loaded.PoseSteps[f] == 0)
+    {
+      continue; // never corrected (a held-out frame, or before the corrections moved): as tracked
+    }
+    CorrectPose(this->TrackedPoses[f].data(), this->Data->Width, this->Data->Height,
+      loaded.PoseCorrections[f].data(), this->Data->Poses[f].data());
+  }
   this->State = std::move(loaded);
   this->Gamma = gamma;
   this->PixelGrid = false; // a checkpoint comes from a run that takes steps: it goes on with them
   return this->PushState(error);
+}
+
+bool RefinePosesWithFieldFrozen(const GaussianField& field, TrainingData& data, const std::vector<int>& frames,
+  const RenderOptions& options, const TrainerSettings& settings, int steps, const std::string& backend,
+  std::vector<std::array<double, 6>>& corrections, std::string* error)
+{
+  std::unique_ptr<TrainingEngine> engine = CreateTrainingEngine(backend, error);
+  OptimizerState frozen;
+  frozen.Field = field;
+  frozen.ResizeToField();
+  if (!engine || !engine->SetData(&data, error) || !engine->Push(frozen, error))
+  {
+    return false;
+  }
+  // Every learning rate of the field 0: the engine's step gives the pose gradients and moves nothing.
+  StepRequest request;
+  request.Count = 1;
+  request.Options = options;
+  request.Loss = settings.Loss;
+  request.MinimumLogScale = -1e30;
+  request.MaximumLogScale = 1e30;
+  double gradient[6];
+  request.PoseGradients = gradient;
+  const double rate[2] = { settings.PoseRotationLearningRate, settings.PoseTranslationLearningRate };
+  const double sigma[2] = { settings.PoseRotationSigma, settings.PoseTranslationSigma };
+  corrections.assign(frames.size(), {});
+  std::vector<std::array<double, 6>> first(frames.size()), second(frames.size());
+  std::vector<std::array<double, 16>> tracked;
+  for (int f : frames)
+  {
+    tracked.push_back(data.Poses.at(f));
+  }
+  for (int t = 1; t <= steps; ++t)
+  {
+    for (std::size_t b = 0; b < frames.size(); ++b)
+    {
+      request.Frames = &frames[b];
+      request.Iteration = t - 1;
+      double loss = 0;
+      const StepStatus status = engine->Step(request, &loss, error);
+      if (status == StepStatus::Failed)
+      {
+        return false;
+      }
+      double g[6];
+      bool finite = status == StepStatus::Done;
+      for (int k = 0; k < 6 && finite; ++k)
+      {
+        g[k] = gradient[k] + settings.PosePrior * corrections[b][k] / (sigma[k / 3] * sigma[k / 3]);
+        finite = std::isfinite(g[k]);
+      }
+      if (!finite)
+      {
+        engine->Restore();
+        continue; // this frame's correction stays where it is for this step
+      }
+      AdamPoseStep(g, rate, t, corrections[b], first[b], second[b]);
+      CorrectPose(tracked[b].data(), data.Width, data.Height, corrections[b].data(), data.Poses[frames[b]].data());
+    }
+  }
+  return true;
 }
 
 } // namespace bigus

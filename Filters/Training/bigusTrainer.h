@@ -64,7 +64,8 @@ struct TrainerSettings
   bool DenseInitialisation = false;
   /// The fit when the data are few: when the dense start's planes (SelectGridPlanes) hold at most
   /// PixelGridFanPixelsPerGaussian x MaximumGaussians fan pixels, the field is a pixel grid (SeedGrid: every
-  /// fan pixel, or MaximumGaussians of them at a stride of up to 1.41) with its reflectivities solved, and no geometry step follows, whatever Iterations and TimeBudget:
+  /// fan pixel, or MaximumGaussians of them at a stride of up to 1.41) with its reflectivities solved, and no
+  /// geometry step follows, whatever Iterations and TimeBudget:
   /// 11 parameters per Gaussian would outnumber the pixels, and Adam overfits them. On the volume protocol
   /// (352k fan pixels) 40.52 dB in between in 14 s, against 37.85 for Harris seeds and Adam in 120 s; on the
   /// cropped N-wire phantom (22k) 19.81 dB held out in 0.7 s against 20.00 in 60 s (docs/FINDINGS.md,
@@ -353,10 +354,8 @@ private:
   double TrainedBefore = 0;        // the run's training seconds before that call
   bool DensificationEnded = false; // the last Train call ended past the densification window
   bool PixelGrid = false;          // the field is the pixel-grid fit (PixelGridFit): Train takes no step
-  // Pose refinement (RefinePoses): the tracked poses, each frame's correction and its Adam moments and steps.
+  // Pose refinement (RefinePoses): the tracked poses (each frame's correction is in State).
   std::vector<std::array<double, 16>> TrackedPoses;
-  std::vector<std::array<double, 6>> PoseXi, PoseFirst, PoseSecond;
-  std::vector<int> PoseSteps;
   /// Adam on the corrections of @p frames from their gradients @p gradients ([frames, 6]) and the prior;
   /// the frames' poses in the data become their tracked poses corrected.
   void UpdatePoses(const std::vector<int>& frames, const std::vector<double>& gradients);
@@ -365,6 +364,23 @@ private:
 
 /// Mean in-plane pixel spacing (mm) of a pose.
 double PixelSpacingOf(const std::array<double, 16>& pose);
+
+/**
+ * The fair score of frames that were not trained on, when poses are imperfect: each of @p frames (indices into
+ * @p data) has its pose refined with @p field frozen, as view-synthesis papers score held-out views under
+ * pose error (Lin et al. 2021, BARF, section 4; Wang et al. 2021, NeRF--): @p steps Adam steps per frame
+ * (TrainerSettings' pose learning rates) on the gradient of the image loss (TrainerSettings::Loss) with
+ * respect to a rigid correction of the frame's pose about its centre pixel (FieldGradients::SlicePoses,
+ * bigus::CorrectPose), plus the training prior PosePrior / 2 (|omega|^2 / PoseRotationSigma^2 +
+ * |t|^2 / PoseTranslationSigma^2). No smoothness term: the frames are scored one by one. The field never
+ * moves (every learning rate of its parameters is 0). @p data's Poses of @p frames become the refined poses;
+ * @p corrections ([frames.size()]: rotation vector, rad; translation, mm, in the frame's own axes) what was
+ * applied. Rendering with @p options on the training engine of @p backend. Returns false with @p error when
+ * the engine cannot be made or a pose is rejected.
+ */
+BIGUSTRAINING_EXPORT bool RefinePosesWithFieldFrozen(const GaussianField& field, TrainingData& data,
+  const std::vector<int>& frames, const RenderOptions& options, const TrainerSettings& settings, int steps,
+  const std::string& backend, std::vector<std::array<double, 6>>& corrections, std::string* error);
 
 } // namespace bigus
 

@@ -161,7 +161,7 @@ bool TrainingState::Save(const std::string& file, double gamma, std::string* err
   const std::string temporary = file + ".tmp";
   {
     std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
-    out.write("BIGUSCK3", 8);
+    out.write("BIGUSCK4", 8);
     Put(out, std::int32_t(this->Iteration));
     Put(out, this->LearningRateScale);
     Put(out, gamma);
@@ -188,6 +188,15 @@ bool TrainingState::Save(const std::string& file, double gamma, std::string* err
     Put(out, std::int64_t(this->BestField.Count()));
     WriteField(out, this->BestField);
     Put(out, this->TrainingSeconds);
+    Put(out, std::int64_t(this->PoseCorrections.size()));
+    for (std::size_t f = 0; f < this->PoseCorrections.size(); ++f)
+    {
+      for (const auto* v : { &this->PoseCorrections[f], &this->PoseFirstMoment[f], &this->PoseSecondMoment[f] })
+      {
+        out.write(reinterpret_cast<const char*>(v->data()), sizeof(double) * 6);
+      }
+      Put(out, std::int32_t(this->PoseSteps[f]));
+    }
     out.close();
     if (!out)
     {
@@ -226,11 +235,11 @@ bool TrainingState::Load(const std::string& file, double& gamma, std::string* er
     return fail("cannot open the checkpoint");
   }
   char magic[8];
-  if (!in.read(magic, 8) || std::memcmp(magic, "BIGUSCK", 7) != 0 || magic[7] < '1' || magic[7] > '3')
+  if (!in.read(magic, 8) || std::memcmp(magic, "BIGUSCK", 7) != 0 || magic[7] < '1' || magic[7] > '4')
   {
     return fail("not a BIGUS checkpoint (bad magic)");
   }
-  const bool withBest = magic[7] >= '2', withSeconds = magic[7] >= '3';
+  const bool withBest = magic[7] >= '2', withSeconds = magic[7] >= '3', withPoses = magic[7] >= '4';
   TrainingState s;
   std::int32_t iteration, growing, stalled, rolled;
   double storedGamma;
@@ -266,6 +275,31 @@ bool TrainingState::Load(const std::string& file, double& gamma, std::string* er
   if (withSeconds && (!Get(in, s.TrainingSeconds) || !(s.TrainingSeconds >= 0) || !std::isfinite(s.TrainingSeconds)))
   {
     return fail("truncated or invalid training seconds");
+  }
+  std::int64_t poses = 0;
+  if (withPoses && (!Get(in, poses) || poses < 0 || poses > (std::int64_t(1) << 31)))
+  {
+    return fail("truncated pose corrections");
+  }
+  s.PoseCorrections.resize(poses);
+  s.PoseFirstMoment.resize(poses);
+  s.PoseSecondMoment.resize(poses);
+  s.PoseSteps.resize(poses);
+  for (std::int64_t f = 0; f < poses; ++f)
+  {
+    std::int32_t steps = 0;
+    for (auto* v : { &s.PoseCorrections[f], &s.PoseFirstMoment[f], &s.PoseSecondMoment[f] })
+    {
+      if (!in.read(reinterpret_cast<char*>(v->data()), sizeof(double) * 6))
+      {
+        return fail("truncated pose corrections");
+      }
+    }
+    if (!Get(in, steps) || steps < 0)
+    {
+      return fail("truncated pose corrections");
+    }
+    s.PoseSteps[f] = steps;
   }
   s.BestFieldIteration = bestIteration;
   std::istringstream state(text);

@@ -107,16 +107,23 @@ struct BIGUSTRAINING_EXPORT TrainingState
   GaussianField BestField;         ///< the field with the lowest validation loss seen so far
   double BestFieldLoss = -1;       ///< its validation loss; -1: none measured yet
   int BestFieldIteration = 0;      ///< the iteration it was measured at
+  // Pose refinement (TrainerSettings::RefinePoses): per frame of the data, empty when off
+  std::vector<std::array<double, 6>> PoseCorrections;  ///< rotation vector (rad), translation (mm): CorrectPose
+  std::vector<std::array<double, 6>> PoseFirstMoment;  ///< Adam's moments of the corrections
+  std::vector<std::array<double, 6>> PoseSecondMoment;
+  std::vector<int> PoseSteps;                          ///< Adam steps each correction took
 
   /**
    * Writes the state to @p file (written to FILE.tmp, then renamed; the previous file survives a
-   * failure). Little-endian binary, "BIGUSCK3" | int32 iteration | float64 learning-rate scale |
+   * failure). Little-endian binary, "BIGUSCK4" | int32 iteration | float64 learning-rate scale |
    * float64 gamma | int32 growing | float64 best validation loss | int32 stalled growth steps |
    * int32 rolled-back steps | uint32 length + text of the random engine state | int64 N | field, Adam
    * m, Adam v: each [N,3] means, [N,3] log-scales, [N,4] quaternions, [N] reflectivities as float32 |
    * [N] float32 attribution | [N] int32 seen counts | int64 H + H float64 loss history | float64 best
    * field's validation loss | int32 its iteration | int64 M | best field as above | float64 training
-   * seconds. Load also reads "BIGUSCK2" files (no training seconds: a time budget starts afresh) and
+   * seconds | int64 P (frames with a pose correction; 0 without pose refinement) | P x (6 float64
+   * correction, 6 float64 Adam m, 6 float64 Adam v, int32 steps). Load also reads "BIGUSCK3" files (no
+   * pose corrections), "BIGUSCK2" files (no training seconds either: a time budget starts afresh) and
    * "BIGUSCK1" files (neither those nor a best field: early stopping starts afresh too).
    * Returns false with @p error naming the file.
    */

@@ -226,7 +226,8 @@ TEST(SeveralSweeps, WhatDependsOnTheFrameSpacingIsMeasuredWithinEachSweep)
                                        { sparse->GetOutput(), sparse->GetMaskOutput(), "sweep 1" } },
     both, &error))
     << error;
-  ASSERT_TRUE(TrainingDataFromSweeps({ { s.Parallel->GetOutput(), s.Parallel->GetMaskOutput(), "sweep 0" } }, dense, &error))
+  ASSERT_TRUE(
+    TrainingDataFromSweeps({ { s.Parallel->GetOutput(), s.Parallel->GetMaskOutput(), "sweep 0" } }, dense, &error))
     << error;
   for (TrainingData* d : { &both, &dense })
   {

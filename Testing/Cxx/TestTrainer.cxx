@@ -334,6 +334,62 @@ TEST(Trainer, ResumingFromACheckpointGivesTheSameField)
   EXPECT_NE(error.find("bad magic"), std::string::npos) << error;
 }
 
+TEST(Trainer, AResumedRunGoesOnWithThePoseCorrectionsOfItsCheckpoint)
+{
+  // With pose refinement, the corrections and their Adam moments are part of the state: a run stopped at step
+  // 110 and resumed ends with the field, the corrections and the corrected poses of the run that went straight
+  // through. A checkpoint without corrections is refused by a run that refines poses, and the other way round.
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(200, 6), 0.5, heldOut);
+  TrainerSettings s = ShortSettings();
+  s.RefinePoses = true;
+  s.PoseRefinementStart = 0.25; // the corrections move from step 50, well before the checkpoint
+  std::string error;
+  Trainer straight(data, s);
+  ASSERT_TRUE(straight.Initialize(&error));
+  ASSERT_TRUE(straight.Run(nullptr, nullptr, &error)) << error;
+
+  const std::string checkpoint = std::string(BIGUS_TEST_OUTPUT) + "/poses.ckpt";
+  Trainer first(data, s);
+  ASSERT_TRUE(first.Initialize(&error));
+  ASSERT_TRUE(first.Train(nullptr, [&]() { return first.GetIteration() >= 110; }, &error)) << error;
+  ASSERT_TRUE(first.SaveCheckpoint(checkpoint, &error)) << error;
+  double moved = 0;
+  for (const auto& xi : first.GetState().PoseCorrections)
+  {
+    for (double v : xi)
+    {
+      moved = std::max(moved, std::abs(v));
+    }
+  }
+  EXPECT_GT(moved, 0) << "the corrections moved before the checkpoint";
+
+  Trainer second(data, s);
+  ASSERT_TRUE(second.Initialize(&error));
+  ASSERT_TRUE(second.LoadCheckpoint(checkpoint, &error)) << error;
+  EXPECT_EQ(second.GetData().Poses, first.GetData().Poses) << "the corrected poses are restored";
+  ASSERT_TRUE(second.Run(nullptr, nullptr, &error)) << error;
+  ExpectSameField(straight.GetField(), second.GetField());
+  const auto& a = straight.GetReport().PoseCorrections;
+  const auto& b = second.GetReport().PoseCorrections;
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t k = 0; k < a.size(); ++k)
+  {
+    EXPECT_EQ(a[k].Frame, b[k].Frame);
+    for (int c = 0; c < 6; ++c)
+    {
+      EXPECT_DOUBLE_EQ(a[k].Xi[c], b[k].Xi[c]) << "frame " << a[k].Frame << " component " << c;
+    }
+  }
+  EXPECT_EQ(straight.GetData().Poses, second.GetData().Poses);
+
+  TrainerSettings trusted = ShortSettings();
+  Trainer other(data, trusted);
+  ASSERT_TRUE(other.Initialize(&error));
+  EXPECT_FALSE(other.LoadCheckpoint(checkpoint, &error));
+  EXPECT_NE(error.find("pose corrections of"), std::string::npos) << error;
+}
+
 TEST(Trainer, AResumedRunCountsTheSecondsBeforeItsCheckpointTowardsItsTimeBudget)
 {
   // The budget is the run's schedule: a run stopped at 70 % of it and resumed trains for the rest, with
@@ -372,14 +428,21 @@ TEST(Trainer, AResumedRunCountsTheSecondsBeforeItsCheckpointTowardsItsTimeBudget
   EXPECT_GT(second.GetIteration(), iteration);
   EXPECT_EQ(second.GetField().Count(), loaded) << "densified after the window had closed";
 
-  // A checkpoint of the previous format (no training seconds) still loads, with none counted.
+  // Checkpoints of the previous formats still load: version 3 (no pose corrections; this run has none, so its
+  // file ends with their count 0) with the training seconds, version 2 (no training seconds either) with none.
   std::ifstream in(checkpoint, std::ios::binary);
   std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  ASSERT_EQ(bytes.compare(0, 8, "BIGUSCK3"), 0);
-  bytes[7] = '2';
-  std::ofstream(checkpoint + ".v2", std::ios::binary) << bytes.substr(0, bytes.size() - sizeof(double));
+  ASSERT_EQ(bytes.compare(0, 8, "BIGUSCK4"), 0);
+  bytes = bytes.substr(0, bytes.size() - sizeof(std::int64_t));
+  bytes[7] = '3';
+  std::ofstream(checkpoint + ".v3", std::ios::binary) << bytes;
   TrainingState old;
   double gamma = 0;
+  ASSERT_TRUE(old.Load(checkpoint + ".v3", gamma, &error)) << error;
+  EXPECT_EQ(old.TrainingSeconds, saved);
+  EXPECT_TRUE(old.PoseCorrections.empty());
+  bytes[7] = '2';
+  std::ofstream(checkpoint + ".v2", std::ios::binary) << bytes.substr(0, bytes.size() - sizeof(double));
   ASSERT_TRUE(old.Load(checkpoint + ".v2", gamma, &error)) << error;
   EXPECT_EQ(old.TrainingSeconds, 0);
   EXPECT_EQ(old.Iteration, iteration);
@@ -1261,7 +1324,8 @@ TEST(Trainer, WhenOneGaussianPerFanPixelFitsTheDefaultsFitThePixelGridAndTakeNoS
   Trainer coarse(data, s);
   ASSERT_TRUE(coarse.Initialize(&error)) << error;
   EXPECT_LE(coarse.GetReport().InitialGaussians, s.MaximumGaussians);
-  EXPECT_GT(coarse.GetReport().InitialGaussians, s.MaximumGaussians * 9 / 10) << "short of it by less than a row and a column";
+  EXPECT_GT(coarse.GetReport().InitialGaussians, s.MaximumGaussians * 9 / 10)
+    << "short of it by less than a row and a column";
   ASSERT_TRUE(coarse.Run(nullptr, nullptr, &error)) << error;
   EXPECT_EQ(coarse.GetIteration(), 0);
   // One Gaussian fewer allowed than half the fan pixels: Harris seeds and Adam.
@@ -1344,6 +1408,89 @@ TEST(Trainer, ADenseStartKeepsToItsCountAndSolvesTheReflectivities)
 // its own axes). Training with RefinePoses brings the poses back towards the truth: the mean distance of
 // the frames' corners from where they truly lie falls by more than half (the error a tracker would leave
 // in a volume), and the held-out frames (at their true poses, never refined) come out better.
+TEST(Trainer, HeldOutPosesRefinedWithTheFieldFrozenComeBackToTheTruth)
+{
+  // The fair score of held-out frames: the known field that rendered the sweep, frozen; each held-out frame's
+  // pose moved by 0.5 degrees and 0.5 mm at random, then refined against its recorded frame. The poses come back
+  // towards the ones that rendered the frames (the truth), and the frames rendered at them match better.
+  const GaussianField field = KnownField(200, 7);
+  std::vector<int> heldOut;
+  const TrainingData truth = SyntheticSweep(field, 0.5, heldOut);
+  TrainingData data = truth;
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> normal(0, 1);
+  for (int f : heldOut)
+  {
+    double xi[6];
+    for (int part = 0; part < 2; ++part)
+    {
+      double n = 0;
+      for (int k = 0; k < 3; ++k)
+      {
+        xi[3 * part + k] = normal(rng);
+        n += xi[3 * part + k] * xi[3 * part + k];
+      }
+      for (int k = 0; k < 3; ++k)
+      {
+        xi[3 * part + k] *= (part == 0 ? 0.5 * M_PI / 180 : 0.5) / std::sqrt(n);
+      }
+    }
+    ASSERT_EQ(CorrectPose(truth.Poses[f].data(), W, H, xi, data.Poses[f].data()), PoseStatus::Ok);
+  }
+  auto cornerError = [&](const TrainingData& d) {
+    double total = 0;
+    for (int f : heldOut)
+    {
+      for (double i : { 0.0, W - 1.0 })
+      {
+        for (double j : { 0.0, H - 1.0 })
+        {
+          double d2 = 0;
+          for (int k = 0; k < 3; ++k)
+          {
+            const double* a = d.Poses[f].data();
+            const double* b = truth.Poses[f].data();
+            const double e = (a[4 * k] - b[4 * k]) * i + (a[4 * k + 1] - b[4 * k + 1]) * j + a[4 * k + 3] - b[4 * k + 3];
+            d2 += e * e;
+          }
+          total += std::sqrt(d2);
+        }
+      }
+    }
+    return total / (4.0 * heldOut.size());
+  };
+  RenderOptions options;
+  options.ElevationSigma = 0.5;
+  options.Gamma = 1.0;
+  auto psnrAt = [&](const TrainingData& d) {
+    auto renderer = CreateCpuRenderer();
+    std::vector<float> S(W * H), I(W * H);
+    double total = 0;
+    for (int f : heldOut)
+    {
+      const SliceGeometry g = d.Slice(f);
+      EXPECT_TRUE(renderer->Forward(field.View(), &g, 1, options, S.data(), I.data(), nullptr, nullptr));
+      total += Psnr(I.data(), &truth.Frames[std::size_t(W) * H * f], W * H);
+    }
+    return total / heldOut.size();
+  };
+  const double before = cornerError(data), psnrBefore = psnrAt(data);
+  TrainerSettings s;
+  std::vector<std::array<double, 6>> corrections;
+  std::string error;
+  ASSERT_TRUE(RefinePosesWithFieldFrozen(field, data, heldOut, options, s, 100, "cpu", corrections, &error)) << error;
+  ASSERT_EQ(corrections.size(), heldOut.size());
+  const double after = cornerError(data), psnrAfter = psnrAt(data);
+  std::printf("held-out poses refined with the field frozen (100 steps): corner error %.3f -> %.3f mm, PSNR %.2f -> "
+              "%.2f dB\n", before, after, psnrBefore, psnrAfter);
+  EXPECT_LT(after, 0.5 * before);
+  EXPECT_GT(psnrAfter, psnrBefore + 3.0);
+  for (int f : truth.TrainFrames)
+  {
+    EXPECT_EQ(data.Poses[f], truth.Poses[f]) << "a frame not listed keeps its pose";
+  }
+}
+
 TEST(Trainer, RefiningPosesBringsPerturbedTrainingPosesTowardsTheTruth)
 {
   std::vector<int> heldOut;

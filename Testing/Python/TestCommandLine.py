@@ -218,13 +218,30 @@ def check_refine_poses(sweep, xml, out):
         else:
             moved += difference > 1e-6
     assert moved > 0, "no training frame's pose moved"
+    # `bigus evaluate` plots the corrections along the sweep and lists them, as the field data has them.
+    report = os.path.join(out, "nwire_refined_report")
+    code, out_text, err = run("evaluate", field, sweep, "--calibration", xml, "--frames", "2", "6", "--report", report,
+                              "--refine-poses", "--refine-steps", "5")
+    assert code == 0 and "each frame's pose refined with the field frozen, 5 steps" in out_text, (out_text, err)
+    assert os.path.getsize(os.path.join(report, "pose_corrections.png")) > 0
+    metrics = json.load(open(os.path.join(report, "metrics.json")))
+    refined_poses = metrics["refined_poses"]
+    assert refined_poses["steps"] == 5 and refined_poses["mean"]["frames"] == 2, refined_poses
+    assert [c["frame"] for c in refined_poses["frames"]] == [2, 6], refined_poses
+    assert refined_poses["mean"]["psnr"] > 10, refined_poses
+    listed = metrics["pose_corrections"]
+    assert [c["frame"] for c in listed] == [k for k in range(20) if k % 4 != 2], listed
+    for k, c in enumerate(listed):
+        stored = [corrections.GetComponent(k, i) for i in range(1, 7)]
+        assert max(abs(a - b) for a, b in zip(c["rotation_degrees"] + c["translation_mm"], stored)) < 1e-12, (c, stored)
 
 
 def check_several_sweeps(data, sweep, xml, out):
     """Two sweeps of the spine-phantom volume along different paths (frames of 147 x 106 and 106 x 104): trained
     into one field with the other sweep held out (leave-one-sweep-out), scored on it by `bigus evaluate`; a
-    calibration or mask count that fits neither one for all nor one per sweep, and --refined-poses with two
-    sweeps, are refused before anything is read."""
+    calibration, mask or --refined-poses count that fits neither one for all nor one per sweep is refused before
+    anything is read; with poses refined, --refined-poses writes each sweep with its training frames' poses
+    corrected (the held-out sweep's as tracked)."""
     volume = os.path.join(data, "spine-phantom", "SpinePhantomFreehandReconstructed.mha")
     files = {}
     for name, protocol in (("parallel", "parallel"), ("orthogonal", "orthogonal")):
@@ -238,9 +255,25 @@ def check_several_sweeps(data, sweep, xml, out):
         os.remove(field)
     code, _, err = run("train", a, b, "-o", field, "--calibration", xml, "--calibration", xml, "--calibration", xml)
     assert code == 2 and "2 sweeps and 3 --calibration files" in err, (code, err)
-    code, _, err = run("train", a, b, "-o", field, "--refine-poses", "--refined-poses", os.path.join(out, "r.igs.mha"))
-    assert code == 2 and "--refined-poses writes one sweep" in err, (code, err)
+    refined = [os.path.join(out, "spine_refined_%d.igs.mha" % k) for k in range(2)]
+    code, _, err = run("train", a, b, "-o", field, "--refine-poses", "--refined-poses", refined[0])
+    assert code == 2 and "2 sweeps and 1 --refined-poses files" in err, (code, err)
     assert not os.path.exists(field)
+    code, out_text, err = run("train", a, b, "--mask", a_mask, "--mask", b_mask, "-o", field, "--holdout-sweep", "1",
+                              "--iterations", "40", "--no-pixel-grid-fit", "--initial-gaussians", "2000",
+                              "--elevation-sigma", "1.0", "--refine-poses", "--refined-poses", refined[0],
+                              "--refined-poses", refined[1])
+    assert code == 0 and "poses          8 training frames refined" in out_text, (out_text, err)
+    for k, (tracked_file, moved_expected) in enumerate(((a, True), (b, False))):
+        tracked, back = bigus.vtkUltrasoundSequenceReader(), bigus.vtkUltrasoundSequenceReader()
+        tracked.SetFileName(tracked_file)
+        back.SetFileName(refined[k])
+        tracked.Update()
+        back.Update()
+        p, q = (r.GetOutput().GetFieldData().GetArray("ImageToReference") for r in (tracked, back))
+        assert q.GetNumberOfTuples() == 8, refined[k]
+        moved = sum(max(abs(p.GetComponent(f, c) - q.GetComponent(f, c)) for c in range(16)) > 1e-6 for f in range(8))
+        assert (moved > 0) == moved_expected, (refined[k], moved)
     code, out_text, err = run("train", a, b, "--mask", a_mask, "--mask", b_mask, "-o", field, "--holdout-sweep", "1",
                               "--iterations", "20")
     assert code == 0, (out_text, err)
