@@ -119,6 +119,92 @@ int WriteSliceThrough(vtkPolyData* field, const double pose[16], int width, int 
   return WriteImage(reslice->GetOutput(), path);
 }
 
+/// @p field rendered at @p frames of the poses of @p sequence (its ImageToReference); null with @p error when
+/// nothing was rendered.
+vtkSmartPointer<vtkGaussianFieldSequenceRenderer> RenderAt(vtkPolyData* field, vtkImageData* sequence,
+  const std::vector<int>& frames, const std::string& backend, std::string* error)
+{
+  auto renderer = vtkSmartPointer<vtkGaussianFieldSequenceRenderer>::New();
+  renderer->SetInputData(field);
+  renderer->SetPoseData(sequence);
+  renderer->SetBackend(backend.c_str());
+  vtkNew<vtkIdList> list;
+  for (int k : frames)
+  {
+    list->InsertNextId(k);
+  }
+  renderer->SetFrameList(list);
+  FilterError messages;
+  messages.Watch(renderer);
+  renderer->Update();
+  if (renderer->GetOutput()->GetNumberOfPoints() == 0 || !renderer->GetOutput()->GetScalarPointer())
+  {
+    *error = messages.Or("no frames");
+    return nullptr;
+  }
+  return renderer;
+}
+
+/**
+ * The fair score under pose error (`--refine-poses`): each of @p scored (frames with a non-empty mask) has its
+ * pose in @p data refined with @p field frozen (bigus::RefinePosesWithFieldFrozen), the frames are rendered
+ * again at the refined poses and scored with the same metrics; into @p report and stdout. Returns the exit code.
+ */
+int ScoreAtRefinedPoses(vtkPolyData* field, vtkImageData* truth, bigus::TrainingData& data,
+  const std::vector<int>& scored, const EvaluateOptions& o, nlohmann::json& report)
+{
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
+  std::string message;
+  bigus::GaussianField gaussians;
+  bigus::FieldModel model;
+  std::vector<std::array<double, 6>> corrections;
+  const bigus::TrainerSettings settings;
+  if (!bigus::FieldFromPolyData(field, gaussians, model, &message) ||
+    !bigus::RefinePosesWithFieldFrozen(gaussians, data, scored,
+      bigus::RenderOptionsFor(model, -1, settings.Cutoff), settings, o.RefineSteps, o.Backend, corrections,
+      &message))
+  {
+    return Fail("--refine-poses: " + message);
+  }
+  vtkNew<vtkImageData> refined;
+  refined->ShallowCopy(truth);
+  vtkNew<vtkFieldData> fields;
+  fields->DeepCopy(truth->GetFieldData());
+  refined->SetFieldData(fields);
+  vtkDataArray* poses = fields->GetArray("ImageToReference");
+  for (int k : scored)
+  {
+    poses->SetTuple(k, data.Poses[k].data());
+  }
+  auto again = RenderAt(field, refined, scored, o.Backend, &message);
+  if (!again)
+  {
+    return Fail("rendering at the refined poses failed: " + message);
+  }
+  const auto* againPixels = static_cast<float*>(again->GetOutput()->GetScalarPointer());
+  const bigus::ImageMetrics refinedMean = bigus::MeanFrameMetrics(
+    data, scored, [&](std::size_t m, int) { return againPixels + pixels * m; });
+  double angle = 0, length = 0;
+  for (std::size_t n = 0; n < scored.size(); ++n)
+  {
+    const std::array<double, 6>& xi = corrections[n];
+    const double a = std::sqrt(xi[0] * xi[0] + xi[1] * xi[1] + xi[2] * xi[2]) * 180 / M_PI;
+    const double t = std::sqrt(xi[3] * xi[3] + xi[4] * xi[4] + xi[5] * xi[5]);
+    angle += a / scored.size();
+    length += t / scored.size();
+    report["refined_poses"]["frames"].push_back({ { "frame", scored[n] },
+      { "rotation_degrees", { xi[0] * 180 / M_PI, xi[1] * 180 / M_PI, xi[2] * 180 / M_PI } },
+      { "translation_mm", { xi[3], xi[4], xi[5] } } });
+  }
+  report["refined_poses"]["steps"] = o.RefineSteps;
+  report["refined_poses"]["mean"] = { { "psnr", refinedMean.PSNR }, { "ssim", refinedMean.SSIM },
+    { "ncc", refinedMean.NCC }, { "speckle", refinedMean.Speckle }, { "frames", scored.size() } };
+  std::printf("%6s %8.2f %8.4f %8.4f %8.4f  (each frame's pose refined with the field frozen, %d steps: mean "
+              "correction %.3f degrees, %.3f mm)\n",
+    "refined", refinedMean.PSNR, refinedMean.SSIM, refinedMean.NCC, refinedMean.Speckle, o.RefineSteps, angle, length);
+  return 0;
+}
+
 int RunEvaluate(const EvaluateOptions& o)
 {
   auto field = ReadField(o.Field);
@@ -167,24 +253,12 @@ int RunEvaluate(const EvaluateOptions& o)
   {
     return Fail(o.Sweep.Sweep + ": " + message);
   }
-  vtkNew<vtkGaussianFieldSequenceRenderer> renderer;
-  renderer->SetInputData(field);
-  renderer->SetPoseConnection(reader->GetOutputPort());
-  renderer->SetBackend(o.Backend.c_str());
-  vtkNew<vtkIdList> list;
-  for (int k : frames)
+  auto renderer = RenderAt(field, truth, frames, o.Backend, &message);
+  if (!renderer)
   {
-    list->InsertNextId(k);
+    return Fail("rendering failed: " + message);
   }
-  renderer->SetFrameList(list);
-  FilterError error;
-  error.Watch(renderer);
-  renderer->Update();
   vtkImageData* rendered = renderer->GetOutput();
-  if (rendered->GetNumberOfPoints() == 0)
-  {
-    return Fail("rendering failed: " + error.Or("no frames"));
-  }
   if (::mkdir(o.Report.c_str(), 0755) != 0 && errno != EEXIST)
   {
     return Fail(o.Report + ": cannot create the report folder");
@@ -262,8 +336,6 @@ int RunEvaluate(const EvaluateOptions& o)
   }
   if (o.RefinePoses)
   {
-    // The fair score under pose error: each scored frame's pose refined with the field frozen, then the frames
-    // rendered again at the refined poses (the same renderer and metrics as above).
     std::vector<int> scored;
     for (std::size_t n = 0; n < frames.size(); ++n)
     {
@@ -272,65 +344,10 @@ int RunEvaluate(const EvaluateOptions& o)
         scored.push_back(frames[n]);
       }
     }
-    bigus::GaussianField gaussians;
-    bigus::FieldModel model;
-    std::vector<std::array<double, 6>> corrections;
-    const bigus::TrainerSettings settings;
-    if (!bigus::FieldFromPolyData(field, gaussians, model, &message) ||
-      !bigus::RefinePosesWithFieldFrozen(gaussians, data, scored,
-        bigus::RenderOptionsFor(model, -1, settings.Cutoff), settings, o.RefineSteps, o.Backend, corrections,
-        &message))
+    if (const int code = ScoreAtRefinedPoses(field, truth, data, scored, o, report))
     {
-      return Fail("--refine-poses: " + message);
+      return code;
     }
-    vtkNew<vtkImageData> refined;
-    refined->ShallowCopy(truth);
-    vtkNew<vtkFieldData> fields;
-    fields->DeepCopy(truth->GetFieldData());
-    refined->SetFieldData(fields);
-    vtkDataArray* poses = fields->GetArray("ImageToReference");
-    for (int k : scored)
-    {
-      poses->SetTuple(k, data.Poses[k].data());
-    }
-    vtkNew<vtkGaussianFieldSequenceRenderer> again;
-    again->SetInputData(field);
-    again->SetPoseData(refined);
-    again->SetBackend(o.Backend.c_str());
-    vtkNew<vtkIdList> scoredList;
-    for (int k : scored)
-    {
-      scoredList->InsertNextId(k);
-    }
-    again->SetFrameList(scoredList);
-    FilterError againError;
-    againError.Watch(again);
-    again->Update();
-    const auto* againPixels = static_cast<float*>(again->GetOutput()->GetScalarPointer());
-    if (!againPixels || again->GetOutput()->GetNumberOfPoints() == 0)
-    {
-      return Fail("rendering at the refined poses failed: " + againError.Or("no frames"));
-    }
-    const bigus::ImageMetrics refinedMean = bigus::MeanFrameMetrics(
-      data, scored, [&](std::size_t m, int) { return againPixels + pixels * m; });
-    double angle = 0, length = 0;
-    for (std::size_t n = 0; n < scored.size(); ++n)
-    {
-      const std::array<double, 6>& xi = corrections[n];
-      const double a = std::sqrt(xi[0] * xi[0] + xi[1] * xi[1] + xi[2] * xi[2]) * 180 / M_PI;
-      const double t = std::sqrt(xi[3] * xi[3] + xi[4] * xi[4] + xi[5] * xi[5]);
-      angle += a / scored.size();
-      length += t / scored.size();
-      report["refined_poses"]["frames"].push_back({ { "frame", scored[n] },
-        { "rotation_degrees", { xi[0] * 180 / M_PI, xi[1] * 180 / M_PI, xi[2] * 180 / M_PI } },
-        { "translation_mm", { xi[3], xi[4], xi[5] } } });
-    }
-    report["refined_poses"]["steps"] = o.RefineSteps;
-    report["refined_poses"]["mean"] = { { "psnr", refinedMean.PSNR }, { "ssim", refinedMean.SSIM },
-      { "ncc", refinedMean.NCC }, { "speckle", refinedMean.Speckle }, { "frames", scored.size() } };
-    std::printf("%6s %8.2f %8.4f %8.4f %8.4f  (each frame's pose refined with the field frozen, %d steps: mean "
-                "correction %.3f degrees, %.3f mm)\n",
-      "refined", refinedMean.PSNR, refinedMean.SSIM, refinedMean.NCC, refinedMean.Speckle, o.RefineSteps, angle, length);
   }
   if (vtkDataArray* history = field->GetFieldData()->GetArray("HeldOutPSNR"))
   {
