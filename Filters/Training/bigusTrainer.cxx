@@ -938,8 +938,10 @@ bool Trainer::LoadCheckpoint(const std::string& file, std::string* error)
     if (error)
     {
       *error = file + ": the checkpoint holds pose corrections of " + std::to_string(loaded.PoseCorrections.size()) +
-        " frames and this run " + (this->Settings.RefinePoses ? "refines the poses of " : "refines the poses of none of ") +
-        std::to_string(this->Data->Poses.size()) + " (resume with the settings and sweep the checkpoint was written with)";
+        " frames and this run " +
+        (this->Settings.RefinePoses ? "refines the poses of " : "refines the poses of none of ") +
+        std::to_string(this->Data->Poses.size()) +
+        " (resume with the settings and sweep the checkpoint was written with)";
     }
     return false;
   }
