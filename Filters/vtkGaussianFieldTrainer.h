@@ -50,7 +50,7 @@
  *   DFTs cost about as much as the rest of the loss, so it is an option (e.g. 0.1) rather than the
  *   default; TestImageLoss checks each gradient.
  * - InitialGaussians 0 = automatic: one seed per 200 masked training pixels, at least 20,000 and at
- *   most half of MaximumGaussians (400,000): held-out quality rises with the seed count, and a field
+ *   most half of MaximumGaussians (500,000): held-out quality rises with the seed count, and a field
  *   that is too small underfits (training and held-out PSNR stay equal). Growth and the final prune
  *   then set the count that training ends with, which is reported, not fixed.
  * - Training renders with cutoff k = 4 (held-out metrics and the render filters use 5): a step is

@@ -120,7 +120,10 @@ struct TrainerSettings
   double PruneReflectivity = 1e-3;   ///< |r| below this is pruned (after the first densification)
   double GrowthMargin = 0.005;       ///< growth stops when the validation loss improves by less (relative) ...
   int GrowthPatience = 4;            ///< ... than the best so far over this many densification intervals in a row
-  std::int64_t MaximumGaussians = 400000; ///< hard maximum, gap filling's copies included (GapFillingSettings)
+  /// Hard maximum, gap filling's copies included (GapFillingSettings). 500,000 (was 400,000): room for a Gaussian per
+  /// fan pixel of the volume protocol's two sweeps (docs/FINDINGS.md, "Several sweeps"); the liver main job and
+  /// block hold-outs measured within noise of 400,000.
+  std::int64_t MaximumGaussians = 500000;
   double FinalPruneTolerance = 1.0 / 512; ///< final prune: max change of any training pixel's I
   /// After the final prune, bridge gaps between training frames wider than the beam (FillElevationGaps).
   bool FillGaps = true;
