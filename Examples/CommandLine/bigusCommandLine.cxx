@@ -80,6 +80,16 @@ vtkSmartPointer<vtkUltrasoundSequenceReader> ReadSweep(const SweepOptions& o)
   return reader;
 }
 
+vtkSmartPointer<vtkImageData> WithOwnFieldData(vtkImageData* sweep)
+{
+  auto copy = vtkSmartPointer<vtkImageData>::New();
+  copy->ShallowCopy(sweep);
+  vtkNew<vtkFieldData> fields;
+  fields->DeepCopy(sweep->GetFieldData());
+  copy->SetFieldData(fields);
+  return copy;
+}
+
 vtkSmartPointer<vtkPolyData> ReadField(const std::string& file)
 {
   std::ifstream probe(file);

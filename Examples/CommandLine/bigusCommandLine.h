@@ -86,6 +86,10 @@ vtkSmartPointer<vtkUltrasoundSequenceReader> ReadSweep(const SweepOptions& o);
 /// Reads a Gaussian field (.vtp with point data Scale, Rotation, Reflectivity); null after a message.
 vtkSmartPointer<vtkPolyData> ReadField(const std::string& file);
 
+/// A copy of @p sweep that shares its frames and owns its field data, so that its ImageToReference can be
+/// changed (refined poses) without touching @p sweep.
+vtkSmartPointer<vtkImageData> WithOwnFieldData(vtkImageData* sweep);
+
 /**
  * Whether frame @p k of a sweep may be used: its FrameValid value is non-zero, or the sweep has no
  * FrameValid of one value per frame (every frame valid), as vtkGaussianFieldTrainer and

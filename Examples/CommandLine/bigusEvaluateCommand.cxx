@@ -166,12 +166,8 @@ int ScoreAtRefinedPoses(vtkPolyData* field, vtkImageData* truth, bigus::Training
   {
     return Fail("--refine-poses: " + message);
   }
-  vtkNew<vtkImageData> refined;
-  refined->ShallowCopy(truth);
-  vtkNew<vtkFieldData> fields;
-  fields->DeepCopy(truth->GetFieldData());
-  refined->SetFieldData(fields);
-  vtkDataArray* poses = fields->GetArray("ImageToReference");
+  vtkSmartPointer<vtkImageData> refined = WithOwnFieldData(truth);
+  vtkDataArray* poses = refined->GetFieldData()->GetArray("ImageToReference");
   for (int k : scored)
   {
     poses->SetTuple(k, data.Poses[k].data());

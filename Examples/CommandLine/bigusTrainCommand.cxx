@@ -283,12 +283,8 @@ int RunTrain(const TrainOptions& o)
     for (std::size_t k = 0; k < o.RefinedPoses.size(); ++k)
     {
       vtkImageData* input = readers[k]->GetOutput();
-      vtkNew<vtkImageData> refined;
-      refined->ShallowCopy(input);
-      vtkNew<vtkFieldData> fields;
-      fields->DeepCopy(input->GetFieldData());
-      refined->SetFieldData(fields);
-      vtkDataArray* poses = fields->GetArray("ImageToReference");
+      vtkSmartPointer<vtkImageData> refined = WithOwnFieldData(input);
+      vtkDataArray* poses = refined->GetFieldData()->GetArray("ImageToReference");
       int dims[3];
       input->GetDimensions(dims);
       const int width = grid ? static_cast<int>(grid->GetComponent(0, 0)) : dims[0];
