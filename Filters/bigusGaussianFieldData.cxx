@@ -600,6 +600,15 @@ bool TrainingDataFromSequence(vtkImageData* sequence, vtkImageData* mask, Traini
   {
     poses->GetTuple(k, data.Poses[k].data());
   }
+  data.Timestamps.clear();
+  vtkDataArray* stamps = sequence->GetFieldData()->GetArray("Timestamp");
+  if (stamps && stamps->GetNumberOfComponents() == 1 && stamps->GetNumberOfTuples() == dims[2])
+  {
+    for (int k = 0; k < dims[2]; ++k)
+    {
+      data.Timestamps.push_back(stamps->GetTuple1(k));
+    }
+  }
   data.Mask.resize(maskPixels);
   for (vtkIdType p = 0; p < maskPixels; ++p)
   {
@@ -756,6 +765,7 @@ bool TrainingDataFromSweeps(const std::vector<SweepInput>& sweeps, TrainingData&
     const std::size_t first = data.Poses.size();
     data.Poses.insert(data.Poses.end(), d.Poses.begin(), d.Poses.end());
     data.Sweeps.insert(data.Sweeps.end(), d.Poses.size(), static_cast<int>(s));
+    data.Timestamps.insert(data.Timestamps.end(), d.Timestamps.begin(), d.Timestamps.end());
     data.Frames.resize(pixels * data.Poses.size(), 0.0f);
     data.Mask.resize(pixels * data.Poses.size(), 0);
     for (int f = 0; f < d.Count(); ++f)
@@ -769,6 +779,10 @@ bool TrainingDataFromSweeps(const std::vector<SweepInput>& sweeps, TrainingData&
         std::copy_n(mask + std::size_t(j) * d.Width, d.Width, &data.Mask[to]);
       }
     }
+  }
+  if (data.Timestamps.size() != data.Poses.size())
+  {
+    data.Timestamps.clear(); // a sweep without them: none known
   }
   return true;
 }

@@ -39,17 +39,17 @@ std::string Format(const char* format, Args... args)
   return text;
 }
 
-/// One Adam step (t counts from 1) of a pose correction @p xi (rotation vector, rad; translation, mm) on its
-/// gradient @p g, with the rates @p rate of the rotation and the translation, and the correction's moments.
-void AdamPoseStep(const double g[6], const double rate[2], int t, std::array<double, 6>& xi,
-  std::array<double, 6>& first, std::array<double, 6>& second)
+/// One Adam step (t counts from 1) of @p count parameters @p x (a pose correction: rotation vector, rad;
+/// translation, mm; then, for the shared one, the time offset, s) on their gradient @p g, with a rate per
+/// parameter @p rate and their moments.
+void AdamPoseStep(int count, const double* g, const double* rate, int t, double* x, double* first, double* second)
 {
   const double c1 = 1 - std::pow(AdamBeta1, t), c2 = 1 - std::pow(AdamBeta2, t);
-  for (int k = 0; k < 6; ++k)
+  for (int k = 0; k < count; ++k)
   {
     first[k] = AdamBeta1 * first[k] + (1 - AdamBeta1) * g[k];
     second[k] = AdamBeta2 * second[k] + (1 - AdamBeta2) * g[k] * g[k];
-    xi[k] -= rate[k / 3] * (first[k] / c1) / (std::sqrt(second[k] / c2) + AdamEpsilon);
+    x[k] -= rate[k] * (first[k] / c1) / (std::sqrt(second[k] / c2) + AdamEpsilon);
   }
 }
 
@@ -147,12 +147,32 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
                                            "step; prior %.3g at %.3g degrees and %.3g mm, smoothness %.3g)",
       100 * s.PoseRefinementStart, s.PoseRotationLearningRate, s.PoseTranslationLearningRate, s.PosePrior,
       s.PoseRotationSigma * 180 / M_PI, s.PoseTranslationSigma, s.PoseSmoothness));
-    this->TrackedPoses = this->Data->Poses;
     const std::size_t n = this->Data->Poses.size();
     this->State.PoseCorrections.assign(n, {});
     this->State.PoseFirstMoment.assign(n, {});
     this->State.PoseSecondMoment.assign(n, {});
     this->State.PoseSteps.assign(n, 0);
+  }
+  if (s.RefineTimeOffset)
+  {
+    this->Report.Settings.push_back(Format("RefineTimeOffset = on (Adam %.3g s per step, prior %.3g at %.3g s)",
+      s.TimeOffsetLearningRate, s.PosePrior, s.TimeOffsetSigma));
+  }
+  if (s.RefineImageToProbe)
+  {
+    this->Report.Settings.push_back(Format("RefineImageToProbe = on (Adam %.3g rad and %.3g mm per step, prior %.3g "
+                                           "at %.3g degrees and %.3g mm)",
+      s.PoseRotationLearningRate, s.PoseTranslationLearningRate, s.PosePrior, s.PoseRotationSigma * 180 / M_PI,
+      s.PoseTranslationSigma));
+  }
+  if (s.RefinesPoses())
+  {
+    this->TrackedPoses = this->Data->Poses;
+    for (const std::array<double, 16>& pose : this->TrackedPoses)
+    {
+      SliceFrame frame;
+      this->TrackedValid.push_back(ComputeSliceFrame(pose.data(), 90, frame) == PoseStatus::Ok);
+    }
   }
   this->Engine->SetData(this->Data.get(), nullptr);
 }
@@ -239,6 +259,14 @@ bool Trainer::Initialize(std::string* error)
       }
       return false;
     }
+  }
+  if (this->Settings.RefineTimeOffset && !this->Timeline.Build(data, this->Settings.TimeOffsetWindow, error))
+  {
+    if (error)
+    {
+      *error = "RefineTimeOffset: " + *error;
+    }
+    return false;
   }
   double sum = 0;
   long count = 0;
@@ -510,7 +538,7 @@ StepStatus Trainer::Step(double* loss, std::string* error)
   request.Options = this->Options();
   request.Loss = this->Settings.Loss;
   request.SparseAdam = this->Settings.SparseAdam;
-  const bool refine = this->Settings.RefinePoses && this->ScheduleFraction() >= this->Settings.PoseRefinementStart;
+  const bool refine = this->Settings.RefinesPoses() && this->ScheduleFraction() >= this->Settings.PoseRefinementStart;
   std::vector<double> poseGradients(refine ? 6 * frames.size() : 0);
   request.PoseGradients = refine ? poseGradients.data() : nullptr;
   this->HostCurrent = false;
@@ -545,10 +573,43 @@ void Trainer::UpdatePoses(const std::vector<int>& frames, const std::vector<doub
 {
   const TrainerSettings& s = this->Settings;
   // Constant rates: decaying them as the means' rate decays measured no better on TestTrainer's case.
-  const double rate[2] = { s.PoseRotationLearningRate * this->State.LearningRateScale,
-    s.PoseTranslationLearningRate * this->State.LearningRateScale };
-  const double sigma[2] = { s.PoseRotationSigma, s.PoseTranslationSigma };
-  for (std::size_t b = 0; b < frames.size(); ++b)
+  const double scale = this->State.LearningRateScale;
+  const double rotation = s.PoseRotationLearningRate * scale, translation = s.PoseTranslationLearningRate * scale;
+  const double rate[7] = { rotation, rotation, rotation, translation, translation, translation,
+    s.TimeOffsetLearningRate * scale };
+  const double sigma[7] = { s.PoseRotationSigma, s.PoseRotationSigma, s.PoseRotationSigma, s.PoseTranslationSigma,
+    s.PoseTranslationSigma, s.PoseTranslationSigma, s.TimeOffsetSigma };
+  const bool shared = s.RefineTimeOffset || s.RefineImageToProbe;
+  if (shared)
+  {
+    // The shared corrections move every frame: their gradient is the sum over the batch of the frames' pose
+    // gradients (ImageToProbe, composed last) and of their dot products with the tracked path's velocity (the
+    // time offset).
+    std::array<double, 7>& x = this->State.SharedPoseCorrection;
+    double g[7] = { 0, 0, 0, 0, 0, 0, 0 };
+    for (std::size_t b = 0; b < frames.size(); ++b)
+    {
+      const double* gb = &gradients[6 * b];
+      if (!std::all_of(gb, gb + 6, [](double v) { return std::isfinite(v); }))
+      {
+        continue;
+      }
+      const std::array<double, 6>& velocity = this->Timeline.Velocity(frames[b]);
+      for (int k = 0; k < 6; ++k)
+      {
+        g[k] += gb[k];
+        g[6] += s.RefineTimeOffset ? gb[k] * velocity[k] : 0.0;
+      }
+    }
+    for (int k = 0; k < 7; ++k)
+    {
+      const bool refined = k < 6 ? s.RefineImageToProbe : s.RefineTimeOffset;
+      g[k] = refined ? g[k] + s.PosePrior * x[k] / (sigma[k] * sigma[k]) : 0.0;
+    }
+    AdamPoseStep(7, g, rate, ++this->State.SharedPoseSteps, x.data(), this->State.SharedPoseFirstMoment.data(),
+      this->State.SharedPoseSecondMoment.data());
+  }
+  for (std::size_t b = 0; b < frames.size() && s.RefinePoses; ++b)
   {
     const int f = frames[b];
     std::array<double, 6>& xi = this->State.PoseCorrections[f];
@@ -572,18 +633,55 @@ void Trainer::UpdatePoses(const std::vector<int>& frames, const std::vector<doub
       {
         smooth += n ? xi[k] - (*n)[k] : 0.0;
       }
-      g[k] = gradients[6 * b + k] + (s.PosePrior * xi[k] + s.PoseSmoothness * smooth) / (sigma[k / 3] * sigma[k / 3]);
+      g[k] = gradients[6 * b + k] + (s.PosePrior * xi[k] + s.PoseSmoothness * smooth) / (sigma[k] * sigma[k]);
       finite = finite && std::isfinite(g[k]);
     }
     if (!finite)
     {
       continue; // a non-finite pose gradient moves none of the frame's correction
     }
-    AdamPoseStep(
-      g, rate, ++this->State.PoseSteps[f], xi, this->State.PoseFirstMoment[f], this->State.PoseSecondMoment[f]);
-    CorrectPose(
-      this->TrackedPoses[f].data(), this->Data->Width, this->Data->Height, xi.data(), this->Data->Poses[f].data());
+    AdamPoseStep(6, g, rate, ++this->State.PoseSteps[f], xi.data(), this->State.PoseFirstMoment[f].data(),
+      this->State.PoseSecondMoment[f].data());
   }
+  if (shared)
+  {
+    for (int f = 0; f < this->Data->Count(); ++f)
+    {
+      this->ComposePose(f);
+    }
+  }
+  else
+  {
+    for (int f : frames)
+    {
+      this->ComposePose(f);
+    }
+  }
+}
+
+void Trainer::ComposePose(int frame)
+{
+  const TrainerSettings& s = this->Settings;
+  if (!this->TrackedValid[frame])
+  {
+    return; // a pose the renderer rejects (an invalid frame) stays as it was recorded
+  }
+  const std::array<double, 7>& shared = this->State.SharedPoseCorrection;
+  std::array<double, 16> pose = this->TrackedPoses[frame];
+  if (s.RefineTimeOffset)
+  {
+    this->Timeline.PoseAt(frame, shared[6], pose.data());
+  }
+  if (s.RefinePoses && this->State.PoseSteps[frame] > 0)
+  {
+    CorrectPose(pose.data(), this->Data->Width, this->Data->Height, this->State.PoseCorrections[frame].data(),
+      pose.data());
+  }
+  if (s.RefineImageToProbe)
+  {
+    CorrectPose(pose.data(), this->Data->Width, this->Data->Height, shared.data(), pose.data());
+  }
+  this->Data->Poses[frame] = pose;
 }
 
 bool Trainer::ValidationLoss(double& loss, std::string* error)
@@ -869,6 +967,9 @@ bool Trainer::Finish(std::string* error)
       this->Report.PoseCorrections.push_back({ f, this->State.PoseCorrections[f] });
     }
   }
+  const std::array<double, 7>& shared = this->State.SharedPoseCorrection;
+  this->Report.TimeOffset = shared[6];
+  std::copy_n(shared.begin(), 6, this->Report.ImageToProbeCorrection.begin());
   this->Report.BestValidationLoss = this->State.BestFieldLoss;
   this->Report.BestIteration = this->State.BestFieldIteration;
   if (last > this->State.BestFieldLoss)
@@ -945,16 +1046,22 @@ bool Trainer::LoadCheckpoint(const std::string& file, std::string* error)
     }
     return false;
   }
-  for (std::size_t f = 0; f < frames; ++f)
+  const std::array<double, 7>& shared = loaded.SharedPoseCorrection;
+  const bool imageToProbe = std::any_of(shared.begin(), shared.begin() + 6, [](double v) { return v != 0; });
+  if ((imageToProbe && !this->Settings.RefineImageToProbe) || (shared[6] != 0 && !this->Settings.RefineTimeOffset))
   {
-    if (loaded.PoseSteps[f] == 0)
+    if (error)
     {
-      continue; // never corrected (a held-out frame, or before the corrections moved): as tracked
+      *error = file + ": the checkpoint holds " + (imageToProbe ? "an ImageToProbe correction" : "a time offset") +
+        " that this run does not refine (resume with the settings the checkpoint was written with)";
     }
-    CorrectPose(this->TrackedPoses[f].data(), this->Data->Width, this->Data->Height,
-      loaded.PoseCorrections[f].data(), this->Data->Poses[f].data());
+    return false;
   }
   this->State = std::move(loaded);
+  for (int f = 0; f < this->Data->Count() && this->Settings.RefinesPoses(); ++f)
+  {
+    this->ComposePose(f); // frames never corrected (held out, or before the corrections moved) stay as tracked
+  }
   this->Gamma = gamma;
   this->PixelGrid = false; // a checkpoint comes from a run that takes steps: it goes on with them
   return this->PushState(error);
@@ -981,7 +1088,8 @@ bool RefinePosesWithFieldFrozen(const GaussianField& field, TrainingData& data, 
   request.MaximumLogScale = 1e30;
   double gradient[6];
   request.PoseGradients = gradient;
-  const double rate[2] = { settings.PoseRotationLearningRate, settings.PoseTranslationLearningRate };
+  const double rotation = settings.PoseRotationLearningRate, translation = settings.PoseTranslationLearningRate;
+  const double rate[6] = { rotation, rotation, rotation, translation, translation, translation };
   const double sigma[2] = { settings.PoseRotationSigma, settings.PoseTranslationSigma };
   corrections.assign(frames.size(), {});
   std::vector<std::array<double, 6>> first(frames.size()), second(frames.size());
@@ -1014,7 +1122,7 @@ bool RefinePosesWithFieldFrozen(const GaussianField& field, TrainingData& data, 
         engine->Restore();
         continue; // this frame's correction stays where it is for this step
       }
-      AdamPoseStep(g, rate, t, corrections[b], first[b], second[b]);
+      AdamPoseStep(6, g, rate, t, corrections[b].data(), first[b].data(), second[b].data());
       CorrectPose(tracked[b].data(), data.Width, data.Height, corrections[b].data(), data.Poses[frames[b]].data());
     }
   }

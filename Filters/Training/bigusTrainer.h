@@ -18,6 +18,7 @@
 #include "bigusFrameMetrics.h"
 #include "bigusGapFilling.h"
 #include "bigusImageLoss.h"
+#include "bigusPoseTimeline.h"
 #include "bigusImageMetrics.h"
 #include "bigusReflectivitySolve.h"
 #include "bigusSeeding.h"
@@ -147,6 +148,23 @@ struct TrainerSettings
   /// squared) over consecutive training frames f, g of the sweep: a tracker's error drifts along a sweep,
   /// while a correction that jumps from frame to frame fits the image, not the pose (0: none).
   double PoseSmoothness = 0;
+  /// One time offset between tracker and video shared by every frame: frame f's pose is its tracked pose moved
+  /// along the tracked path's velocity v_f for the offset (bigus::PoseTimeline; needs TrainingData::Timestamps),
+  /// then its own correction (RefinePoses) and the ImageToProbe correction (RefineImageToProbe). Adam on
+  /// sum_f g_f . v_f over the step's frames, g_f the frame's pose gradient, with the prior
+  /// PosePrior / 2 (offset / TimeOffsetSigma)^2. Held-out frames take it too: it belongs to the system, not to
+  /// a frame. From PoseRefinementStart. Off: the tracked poses are the poses at the frames' timestamps.
+  bool RefineTimeOffset = false;
+  double TimeOffsetLearningRate = 5e-4; ///< s per step (Adam's rate)
+  double TimeOffsetSigma = 0.1;         ///< s: the prior's scale
+  double TimeOffsetWindow = 0.25;       ///< s: the window of the path's velocity (PoseTimeline::Build)
+  /// One rigid correction of ImageToProbe shared by every frame: the same correction (rotation vector about the
+  /// centre pixel, translation; CorrectPose) of every frame in its own axes, composed last (ImageToReference =
+  /// ProbeToReference ImageToProbe C), so its gradient is the sum of the frames' pose gradients. The pose rates,
+  /// sigmas and prior of the per-frame corrections. Held-out frames take it too. From PoseRefinementStart.
+  bool RefineImageToProbe = false;
+  /// Whether any of the pose corrections is refined (RefinePoses, RefineTimeOffset, RefineImageToProbe).
+  bool RefinesPoses() const { return this->RefinePoses || this->RefineTimeOffset || this->RefineImageToProbe; }
   // Run
   unsigned Seed = 1;
   int CheckpointInterval = 0;        ///< steps between checkpoints (0 = none)
@@ -215,6 +233,10 @@ struct TrainerReport
     std::array<double, 6> Xi{};
   };
   std::vector<PoseCorrection> PoseCorrections;
+  /// RefineTimeOffset: the offset (s) added to every frame's timestamp to find its tracked pose.
+  double TimeOffset = 0;
+  /// RefineImageToProbe: the correction of every frame (rotation vector, rad; translation, mm; CorrectPose).
+  std::array<double, 6> ImageToProbeCorrection{};
   /// Every setting the run depends on that the trainer chose or was given, one line each
   /// ("ElevationSigma = 0.306 mm (chosen: ...)"), filled by the constructor and Initialize: printed by
   /// `bigus train` and stored in the field data (TrainingSettings) so that a run can be reproduced.
@@ -357,11 +379,16 @@ private:
   double TrainedBefore = 0;        // the run's training seconds before that call
   bool DensificationEnded = false; // the last Train call ended past the densification window
   bool PixelGrid = false;          // the field is the pixel-grid fit (PixelGridFit): Train takes no step
-  // Pose refinement (RefinePoses): the tracked poses (each frame's correction is in State).
+  // Pose refinement (RefinesPoses): the tracked poses and their path in time (the corrections are in State).
   std::vector<std::array<double, 16>> TrackedPoses;
-  /// Adam on the corrections of @p frames from their gradients @p gradients ([frames, 6]) and the prior;
-  /// the frames' poses in the data become their tracked poses corrected.
+  std::vector<bool> TrackedValid; // the renderer accepts the tracked pose (others are never corrected)
+  PoseTimeline Timeline;          // RefineTimeOffset
+  /// Adam on the corrections of @p frames from their gradients @p gradients ([frames, 6]) and the prior, and on
+  /// the shared corrections from their sum; the poses of the frames that moved are composed again.
   void UpdatePoses(const std::vector<int>& frames, const std::vector<double>& gradients);
+  /// Frame @p frame's pose in the data: its tracked pose at its timestamp plus the time offset, then its own
+  /// correction, then the ImageToProbe correction (each when refined).
+  void ComposePose(int frame);
   std::vector<float> S; // scratch for RenderFrame
 };
 

@@ -161,7 +161,7 @@ bool TrainingState::Save(const std::string& file, double gamma, std::string* err
   const std::string temporary = file + ".tmp";
   {
     std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
-    out.write("BIGUSCK4", 8);
+    out.write("BIGUSCK5", 8);
     Put(out, std::int32_t(this->Iteration));
     Put(out, this->LearningRateScale);
     Put(out, gamma);
@@ -197,6 +197,11 @@ bool TrainingState::Save(const std::string& file, double gamma, std::string* err
       }
       Put(out, std::int32_t(this->PoseSteps[f]));
     }
+    for (const auto* v : { &this->SharedPoseCorrection, &this->SharedPoseFirstMoment, &this->SharedPoseSecondMoment })
+    {
+      out.write(reinterpret_cast<const char*>(v->data()), sizeof(double) * 7);
+    }
+    Put(out, std::int32_t(this->SharedPoseSteps));
     out.close();
     if (!out)
     {
@@ -235,11 +240,12 @@ bool TrainingState::Load(const std::string& file, double& gamma, std::string* er
     return fail("cannot open the checkpoint");
   }
   char magic[8];
-  if (!in.read(magic, 8) || std::memcmp(magic, "BIGUSCK", 7) != 0 || magic[7] < '1' || magic[7] > '4')
+  if (!in.read(magic, 8) || std::memcmp(magic, "BIGUSCK", 7) != 0 || magic[7] < '1' || magic[7] > '5')
   {
     return fail("not a BIGUS checkpoint (bad magic)");
   }
-  const bool withBest = magic[7] >= '2', withSeconds = magic[7] >= '3', withPoses = magic[7] >= '4';
+  const bool withBest = magic[7] >= '2', withSeconds = magic[7] >= '3', withPoses = magic[7] >= '4',
+             withShared = magic[7] >= '5';
   TrainingState s;
   std::int32_t iteration, growing, stalled, rolled;
   double storedGamma;
@@ -300,6 +306,23 @@ bool TrainingState::Load(const std::string& file, double& gamma, std::string* er
       return fail("truncated pose corrections");
     }
     s.PoseSteps[f] = steps;
+  }
+  if (withShared)
+  {
+    std::int32_t steps = 0;
+    for (auto* v : { &s.SharedPoseCorrection, &s.SharedPoseFirstMoment, &s.SharedPoseSecondMoment })
+    {
+      if (!in.read(reinterpret_cast<char*>(v->data()), sizeof(double) * 7))
+      {
+        return fail("truncated shared pose correction");
+      }
+    }
+    if (!Get(in, steps) || steps < 0 ||
+      !std::all_of(s.SharedPoseCorrection.begin(), s.SharedPoseCorrection.end(), [](double v) { return std::isfinite(v); }))
+    {
+      return fail("truncated or invalid shared pose correction");
+    }
+    s.SharedPoseSteps = steps;
   }
   s.BestFieldIteration = bestIteration;
   std::istringstream state(text);

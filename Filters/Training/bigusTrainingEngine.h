@@ -45,6 +45,9 @@ struct BIGUSTRAINING_EXPORT TrainingData
   std::vector<unsigned char> Mask; ///< [H, W] fan mask shared by every frame, or [N, H, W] per frame (1 = imaged)
   std::vector<int> TrainFrames;    ///< indices into Frames used for training
   std::vector<int> Sweeps;         ///< [N] the sweep (0, 1, ...) each frame was recorded in; empty: one sweep
+  /// [N] each frame's video timestamp (s, field data Timestamp); empty when unknown. Only the refinement of a
+  /// tracker-to-video time offset reads them (bigus::PoseTimeline).
+  std::vector<double> Timestamps;
   int Count() const { return static_cast<int>(this->Poses.size()); }
   /// The sweep frame @p frame was recorded in (0 with a single sweep). Neighbours along a sweep (the
   /// elevation sigma's frame pairs, gap filling, the pose smoothness prior) are taken within one sweep.
@@ -112,17 +115,23 @@ struct BIGUSTRAINING_EXPORT TrainingState
   std::vector<std::array<double, 6>> PoseFirstMoment;  ///< Adam's moments of the corrections
   std::vector<std::array<double, 6>> PoseSecondMoment;
   std::vector<int> PoseSteps;                          ///< Adam steps each correction took
+  /// The corrections shared by every frame (TrainerSettings::RefineImageToProbe, RefineTimeOffset): the ImageToProbe
+  /// correction (rotation vector, rad; translation, mm: CorrectPose of every frame) then the time offset (s).
+  std::array<double, 7> SharedPoseCorrection{};
+  std::array<double, 7> SharedPoseFirstMoment{}, SharedPoseSecondMoment{}; ///< their Adam moments
+  int SharedPoseSteps = 0;                                                 ///< Adam steps they took
 
   /**
    * Writes the state to @p file (written to FILE.tmp, then renamed; the previous file survives a
-   * failure). Little-endian binary, "BIGUSCK4" | int32 iteration | float64 learning-rate scale |
+   * failure). Little-endian binary, "BIGUSCK5" | int32 iteration | float64 learning-rate scale |
    * float64 gamma | int32 growing | float64 best validation loss | int32 stalled growth steps |
    * int32 rolled-back steps | uint32 length + text of the random engine state | int64 N | field, Adam
    * m, Adam v: each [N,3] means, [N,3] log-scales, [N,4] quaternions, [N] reflectivities as float32 |
    * [N] float32 attribution | [N] int32 seen counts | int64 H + H float64 loss history | float64 best
    * field's validation loss | int32 its iteration | int64 M | best field as above | float64 training
    * seconds | int64 P (frames with a pose correction; 0 without pose refinement) | P x (6 float64
-   * correction, 6 float64 Adam m, 6 float64 Adam v, int32 steps). Load also reads "BIGUSCK3" files (no
+   * correction, 6 float64 Adam m, 6 float64 Adam v, int32 steps) | 7 float64 shared correction, 7 Adam m,
+   * 7 Adam v, int32 steps. Load also reads "BIGUSCK4" files (no shared correction), "BIGUSCK3" files (no
    * pose corrections), "BIGUSCK2" files (no training seconds either: a time budget starts afresh) and
    * "BIGUSCK1" files (neither those nor a best field: early stopping starts afresh too).
    * Returns false with @p error naming the file.

@@ -1408,64 +1408,6 @@ TEST(Trainer, ADenseStartKeepsToItsCountAndSolvesTheReflectivities)
 // its own axes). Training with RefinePoses brings the poses back towards the truth: the mean distance of
 // the frames' corners from where they truly lie falls by more than half (the error a tracker would leave
 // in a volume), and the held-out frames (at their true poses, never refined) come out better.
-namespace
-{
-/// @p truth with the pose of each of @p frames moved by a rotation of @p degrees about its centre pixel and a
-/// translation of @p mm, in random directions (uniform on the sphere; generator seeded with @p seed).
-TrainingData PerturbedPoses(
-  const TrainingData& truth, const std::vector<int>& frames, double degrees, double mm, unsigned seed)
-{
-  TrainingData perturbed = truth;
-  std::mt19937_64 rng(seed);
-  std::normal_distribution<double> normal(0, 1);
-  auto unit = [&](double* v, double length) {
-    double n = 0;
-    for (int k = 0; k < 3; ++k)
-    {
-      v[k] = normal(rng);
-      n += v[k] * v[k];
-    }
-    for (int k = 0; k < 3; ++k)
-    {
-      v[k] *= length / std::sqrt(n);
-    }
-  };
-  for (int f : frames)
-  {
-    double xi[6];
-    unit(xi, degrees * M_PI / 180);
-    unit(xi + 3, mm);
-    EXPECT_EQ(CorrectPose(truth.Poses[f].data(), W, H, xi, perturbed.Poses[f].data()), PoseStatus::Ok);
-  }
-  return perturbed;
-}
-
-/// Mean distance (mm) of the four corner pixels of each of @p frames in @p d from where they lie in @p truth.
-double CornerError(const TrainingData& d, const TrainingData& truth, const std::vector<int>& frames)
-{
-  double total = 0;
-  for (int f : frames)
-  {
-    for (double i : { 0.0, W - 1.0 })
-    {
-      for (double j : { 0.0, H - 1.0 })
-      {
-        double d2 = 0;
-        for (int k = 0; k < 3; ++k)
-        {
-          const double* a = d.Poses[f].data();
-          const double* b = truth.Poses[f].data();
-          const double e = (a[4 * k] - b[4 * k]) * i + (a[4 * k + 1] - b[4 * k + 1]) * j + a[4 * k + 3] - b[4 * k + 3];
-          d2 += e * e;
-        }
-        total += std::sqrt(d2);
-      }
-    }
-  }
-  return total / (4.0 * frames.size());
-}
-}
-
 TEST(Trainer, HeldOutPosesRefinedWithTheFieldFrozenComeBackToTheTruth)
 {
   // The fair score of held-out frames: the known field that rendered the sweep, frozen; each held-out frame's
@@ -1474,7 +1416,7 @@ TEST(Trainer, HeldOutPosesRefinedWithTheFieldFrozenComeBackToTheTruth)
   const GaussianField field = KnownField(200, 7);
   std::vector<int> heldOut;
   const TrainingData truth = SyntheticSweep(field, 0.5, heldOut);
-  TrainingData data = PerturbedPoses(truth, heldOut, 0.5, 0.5, 5);
+  TrainingData data = PerturbedPoses(truth, heldOut, 0.5, 0.5, 5, W, H);
   RenderOptions options;
   options.ElevationSigma = 0.5;
   options.Gamma = 1.0;
@@ -1490,13 +1432,13 @@ TEST(Trainer, HeldOutPosesRefinedWithTheFieldFrozenComeBackToTheTruth)
     }
     return total / heldOut.size();
   };
-  const double before = CornerError(data, truth, heldOut), psnrBefore = psnrAt(data);
+  const double before = CornerError(data, truth, heldOut, W, H), psnrBefore = psnrAt(data);
   TrainerSettings s;
   std::vector<std::array<double, 6>> corrections;
   std::string error;
   ASSERT_TRUE(RefinePosesWithFieldFrozen(field, data, heldOut, options, s, 100, "cpu", corrections, &error)) << error;
   ASSERT_EQ(corrections.size(), heldOut.size());
-  const double after = CornerError(data, truth, heldOut), psnrAfter = psnrAt(data);
+  const double after = CornerError(data, truth, heldOut, W, H), psnrAfter = psnrAt(data);
   std::printf("held-out poses refined with the field frozen (100 steps): corner error %.3f -> %.3f mm, PSNR %.2f -> "
               "%.2f dB\n", before, after, psnrBefore, psnrAfter);
   EXPECT_LT(after, 0.5 * before);
@@ -1511,8 +1453,8 @@ TEST(Trainer, RefiningPosesBringsPerturbedTrainingPosesTowardsTheTruth)
 {
   std::vector<int> heldOut;
   TrainingData truth = SyntheticSweep(KnownField(200, 7), 0.5, heldOut);
-  const TrainingData perturbed = PerturbedPoses(truth, truth.TrainFrames, 0.5, 0.5, 21);
-  const double before = CornerError(perturbed, truth, truth.TrainFrames);
+  const TrainingData perturbed = PerturbedPoses(truth, truth.TrainFrames, 0.5, 0.5, 21, W, H);
+  const double before = CornerError(perturbed, truth, truth.TrainFrames, W, H);
   TrainerSettings s;
   s.ElevationSigma = 0.5;
   s.PixelGridFit = false;
@@ -1523,7 +1465,7 @@ TEST(Trainer, RefiningPosesBringsPerturbedTrainingPosesTowardsTheTruth)
   std::string error;
   ASSERT_TRUE(trainer.Initialize(&error)) << error;
   ASSERT_TRUE(trainer.Run(nullptr, nullptr, &error)) << error;
-  const double after = CornerError(trainer.GetData(), truth, truth.TrainFrames);
+  const double after = CornerError(trainer.GetData(), truth, truth.TrainFrames, W, H);
   s.RefinePoses = false;
   Trainer trusting(perturbed, s);
   ASSERT_TRUE(trusting.Initialize(&error)) << error;

@@ -4,6 +4,7 @@
 #define bigusTrainingTestUtilities_h
 
 #include "bigusRenderer.h"
+#include "bigusSliceFrame.h"
 #include "bigusTrainingEngine.h"
 
 #include <gtest/gtest.h>
@@ -65,6 +66,63 @@ inline void ExpectSameField(const GaussianField& a, const GaussianField& b)
   EXPECT_EQ(a.LogScales, b.LogScales);
   EXPECT_EQ(a.Quaternions, b.Quaternions);
   EXPECT_EQ(a.Reflectivities, b.Reflectivities);
+}
+
+/// @p truth (frames of @p width x @p height pixels) with the pose of each of @p frames moved by a rotation of
+/// @p degrees about its centre pixel and a translation of @p mm, in random directions (uniform on the sphere;
+/// generator seeded with @p seed).
+inline TrainingData PerturbedPoses(const TrainingData& truth, const std::vector<int>& frames, double degrees,
+  double mm, unsigned seed, int width, int height)
+{
+  TrainingData perturbed = truth;
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> normal(0, 1);
+  auto unit = [&](double* v, double length) {
+    double n = 0;
+    for (int k = 0; k < 3; ++k)
+    {
+      v[k] = normal(rng);
+      n += v[k] * v[k];
+    }
+    for (int k = 0; k < 3; ++k)
+    {
+      v[k] *= length / std::sqrt(n);
+    }
+  };
+  for (int f : frames)
+  {
+    double xi[6];
+    unit(xi, degrees * M_PI / 180);
+    unit(xi + 3, mm);
+    EXPECT_EQ(CorrectPose(truth.Poses[f].data(), width, height, xi, perturbed.Poses[f].data()), PoseStatus::Ok);
+  }
+  return perturbed;
+}
+
+/// Mean distance (mm) of the four corner pixels of each of @p frames in @p d from where they lie in @p truth.
+inline double CornerError(
+  const TrainingData& d, const TrainingData& truth, const std::vector<int>& frames, int width, int height)
+{
+  double total = 0;
+  for (int f : frames)
+  {
+    for (double i : { 0.0, width - 1.0 })
+    {
+      for (double j : { 0.0, height - 1.0 })
+      {
+        double d2 = 0;
+        for (int k = 0; k < 3; ++k)
+        {
+          const double* a = d.Poses[f].data();
+          const double* b = truth.Poses[f].data();
+          const double e = (a[4 * k] - b[4 * k]) * i + (a[4 * k + 1] - b[4 * k + 1]) * j + a[4 * k + 3] - b[4 * k + 3];
+          d2 += e * e;
+        }
+        total += std::sqrt(d2);
+      }
+    }
+  }
+  return total / (4.0 * frames.size());
 }
 }
 

@@ -1,0 +1,144 @@
+#include "bigusPoseTimeline.h"
+
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <cmath>
+#include <utility>
+
+namespace bigus
+{
+
+PoseStatus PoseCorrectionBetween(const double from[16], const double to[16], int width, int height, double xi[6])
+{
+  double Fa[3][3], Fb[3][3], oa[3], ob[3], planeA[3], planeB[3];
+  PoseStatus status = ComputeRenderingFrame(from, 90, Fa, oa, planeA);
+  if (status == PoseStatus::Ok)
+  {
+    status = ComputeRenderingFrame(to, 90, Fb, ob, planeB);
+  }
+  if (status != PoseStatus::Ok)
+  {
+    return status;
+  }
+  // CorrectSliceFrame: F' = E^T F and o' = o + F^T (pivot + t - E pivot), so E = F F'^T and
+  // t = F (o' - o) - pivot + E pivot.
+  Eigen::Matrix3d E;
+  Eigen::Vector3d d;
+  for (int i = 0; i < 3; ++i)
+  {
+    for (int j = 0; j < 3; ++j)
+    {
+      E(i, j) = Fa[i][0] * Fb[j][0] + Fa[i][1] * Fb[j][1] + Fa[i][2] * Fb[j][2];
+    }
+    d[i] = Fa[i][0] * (ob[0] - oa[0]) + Fa[i][1] * (ob[1] - oa[1]) + Fa[i][2] * (ob[2] - oa[2]);
+  }
+  const Eigen::AngleAxisd rotation(E);
+  const Eigen::Vector3d omega = rotation.angle() * rotation.axis();
+  double pivot[3];
+  SliceCentre(planeA, width, height, pivot);
+  const Eigen::Vector3d p(pivot[0], pivot[1], pivot[2]);
+  const Eigen::Vector3d t = d - p + E * p;
+  for (int k = 0; k < 3; ++k)
+  {
+    xi[k] = omega[k];
+    xi[3 + k] = t[k];
+  }
+  return PoseStatus::Ok;
+}
+
+bool PoseTimeline::Build(const TrainingData& data, double window, std::string* error)
+{
+  const int n = data.Count();
+  auto fail = [error](const std::string& what) {
+    if (error)
+    {
+      *error = what;
+    }
+    return false;
+  };
+  if (static_cast<int>(data.Timestamps.size()) != n)
+  {
+    return fail("the frames have no timestamps (field data Timestamp, one per frame), so the time between "
+                "tracker and video cannot be refined");
+  }
+  this->Width = data.Width;
+  this->Height = data.Height;
+  this->Poses = data.Poses;
+  this->Velocities.assign(n, {});
+  int sweeps = 0;
+  for (int f = 0; f < n; ++f)
+  {
+    if (!std::isfinite(data.Timestamps[f]))
+    {
+      return fail("frame " + std::to_string(f) + ": its timestamp is not a finite number of seconds");
+    }
+    sweeps = std::max(sweeps, data.SweepOf(f) + 1);
+  }
+  for (int s = 0; s < sweeps; ++s)
+  {
+    // The sweep's frames with a pose the renderer accepts, in time order.
+    std::vector<std::pair<double, int>> path;
+    for (int f = 0; f < n; ++f)
+    {
+      SliceFrame frame;
+      if (data.SweepOf(f) == s && ComputeSliceFrame(data.Poses[f].data(), 90, frame) == PoseStatus::Ok)
+      {
+        path.emplace_back(data.Timestamps[f], f);
+      }
+    }
+    std::stable_sort(path.begin(), path.end(),
+      [](const std::pair<double, int>& a, const std::pair<double, int>& b) { return a.first < b.first; });
+    if (path.size() < 2 || path.front().first == path.back().first)
+    {
+      return fail("sweep " + std::to_string(s) +
+        ": no two frames with a valid pose and different timestamps, so it has no tracked path in time");
+    }
+    for (std::size_t k = 0; k < path.size(); ++k)
+    {
+      const double t = path[k].first;
+      // a: the last frame at or before t - window / 2 (else the first); b: the first at or after t + window / 2
+      // (else the last); further apart when they share a timestamp.
+      std::size_t a = k, b = k;
+      while (a > 0 && path[a].first > t - 0.5 * window)
+      {
+        --a;
+      }
+      while (b + 1 < path.size() && path[b].first < t + 0.5 * window)
+      {
+        ++b;
+      }
+      while (path[b].first == path[a].first)
+      {
+        a = a > 0 ? a - 1 : a;
+        b = b + 1 < path.size() ? b + 1 : b;
+      }
+      const int f = path[k].second;
+      double xa[6], xb[6];
+      PoseCorrectionBetween(data.Poses[f].data(), data.Poses[path[a].second].data(), data.Width, data.Height, xa);
+      PoseCorrectionBetween(data.Poses[f].data(), data.Poses[path[b].second].data(), data.Width, data.Height, xb);
+      for (int c = 0; c < 6; ++c)
+      {
+        this->Velocities[f][c] = (xb[c] - xa[c]) / (path[b].first - path[a].first);
+      }
+    }
+  }
+  return true;
+}
+
+void PoseTimeline::PoseAt(int frame, double offset, double pose[16]) const
+{
+  if (offset == 0)
+  {
+    std::copy(this->Poses[frame].begin(), this->Poses[frame].end(), pose);
+    return;
+  }
+  double xi[6];
+  for (int k = 0; k < 6; ++k)
+  {
+    xi[k] = offset * this->Velocities[frame][k];
+  }
+  CorrectPose(this->Poses[frame].data(), this->Width, this->Height, xi, pose);
+}
+
+} // namespace bigus

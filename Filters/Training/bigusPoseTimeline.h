@@ -1,0 +1,73 @@
+/**
+ * @file bigusPoseTimeline.h
+ * @brief The tracked path of a sweep in time, for the refinement of a tracker-to-video time offset.
+ *
+ * A tracked frame's ImageToReference is the tracker's pose at the frame's video timestamp. When the tracker's
+ * clock and the video's are off by a constant delay (latency, a temporal calibration left undone), the pose
+ * that truly belongs to frame f is the tracked pose at Timestamp[f] + offset. For offsets of the order of
+ * tens of milliseconds PoseTimeline takes that pose to first order: frame f's tracked pose moved along the
+ * path's velocity there,
+ *
+ *     P_f(offset) = CorrectPose(P_f, offset v_f),    v_f = (xi_fb - xi_fa) / (t_b - t_a),
+ *
+ * xi_fa and xi_fb the corrections (PoseCorrectionBetween) from frame f to the frames a and b of its sweep
+ * about Window / 2 before and after it (the sweep's first and last frames at its ends; frames whose pose the
+ * renderer rejects left out), so d P_f / d offset = v_f exactly and a loss's gradient with respect to the
+ * offset is the pose gradient (FieldGradients::SlicePoses) dotted with v_f. Why not interpolate between the
+ * tracked poses on either side of the shifted time: with a tracker's error in every pose, moving a frame
+ * towards its neighbour's pose averages its own error away whatever the sign of the offset, so the offset
+ * that fits best is biased towards half a frame interval; the velocity over a window is independent of the
+ * frame's own error.
+ */
+#ifndef bigusPoseTimeline_h
+#define bigusPoseTimeline_h
+
+#include "bigusSliceFrame.h"
+#include "bigusTrainingEngine.h"
+#include "bigusTrainingModule.h" // For export macro
+
+#include <array>
+#include <string>
+#include <vector>
+
+namespace bigus
+{
+
+/**
+ * The rigid correction @p xi (rotation vector, rad, about the centre pixel of a @p width x @p height slice;
+ * translation, mm; both in @p from's rendering axes, as bigus::CorrectPose takes it) that moves the slice
+ * of pose @p from onto the slice of pose @p to: CorrectPose(from, width, height, xi) = to when @p to is
+ * @p from moved rigidly (pixel spacing and shear alike). The inverse of CorrectPose. Returns the status of
+ * the first pose the renderer rejects (@p xi untouched then).
+ */
+BIGUSTRAINING_EXPORT PoseStatus PoseCorrectionBetween(
+  const double from[16], const double to[16], int width, int height, double xi[6]);
+
+class BIGUSTRAINING_EXPORT PoseTimeline
+{
+public:
+  /**
+   * The velocity of each frame's tracked path from @p data's Poses (the tracked ones: take them before any
+   * correction), Timestamps (s) and Sweeps, over a window of @p window seconds. Returns false with @p error
+   * when @p data has no timestamps (one per frame), a timestamp is not finite, or a sweep has no two frames
+   * with a pose the renderer accepts and different timestamps.
+   */
+  bool Build(const TrainingData& data, double window, std::string* error);
+
+  /// Frame @p frame's tracked pose ([16], row-major ImageToReference) at its timestamp plus @p offset (s),
+  /// to first order; with @p offset 0 its own tracked pose, exactly.
+  void PoseAt(int frame, double offset, double pose[16]) const;
+
+  /// d xi / d offset of frame @p frame ([6]: rotation, rad/s; translation, mm/s; in its rendering axes about
+  /// its centre pixel); zero for a frame whose pose the renderer rejects.
+  const std::array<double, 6>& Velocity(int frame) const { return this->Velocities[frame]; }
+
+private:
+  int Width = 0, Height = 0;
+  std::vector<std::array<double, 16>> Poses;     ///< [N] tracked
+  std::vector<std::array<double, 6>> Velocities; ///< [N]
+};
+
+} // namespace bigus
+
+#endif
