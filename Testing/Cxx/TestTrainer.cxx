@@ -428,16 +428,23 @@ TEST(Trainer, AResumedRunCountsTheSecondsBeforeItsCheckpointTowardsItsTimeBudget
   EXPECT_GT(second.GetIteration(), iteration);
   EXPECT_EQ(second.GetField().Count(), loaded) << "densified after the window had closed";
 
-  // Checkpoints of the previous formats still load: version 3 (no pose corrections; this run has none, so its
-  // file ends with their count 0) with the training seconds, version 2 (no training seconds either) with none.
+  // Checkpoints of the previous formats still load: version 4 (no shared pose correction: the file ends with
+  // it, 3 x 7 doubles and a step count), version 3 (no pose corrections; this run has none, so its file then
+  // ends with their count 0) with the training seconds, version 2 (no training seconds either) with none.
   std::ifstream in(checkpoint, std::ios::binary);
   std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  ASSERT_EQ(bytes.compare(0, 8, "BIGUSCK4"), 0);
+  ASSERT_EQ(bytes.compare(0, 8, "BIGUSCK5"), 0);
+  bytes = bytes.substr(0, bytes.size() - 21 * sizeof(double) - sizeof(std::int32_t));
+  bytes[7] = '4';
+  std::ofstream(checkpoint + ".v4", std::ios::binary) << bytes;
+  TrainingState old;
+  double gamma = 0;
+  ASSERT_TRUE(old.Load(checkpoint + ".v4", gamma, &error)) << error;
+  EXPECT_EQ(old.TrainingSeconds, saved);
+  EXPECT_EQ(old.SharedPoseSteps, 0);
   bytes = bytes.substr(0, bytes.size() - sizeof(std::int64_t));
   bytes[7] = '3';
   std::ofstream(checkpoint + ".v3", std::ios::binary) << bytes;
-  TrainingState old;
-  double gamma = 0;
   ASSERT_TRUE(old.Load(checkpoint + ".v3", gamma, &error)) << error;
   EXPECT_EQ(old.TrainingSeconds, saved);
   EXPECT_TRUE(old.PoseCorrections.empty());
@@ -448,6 +455,7 @@ TEST(Trainer, AResumedRunCountsTheSecondsBeforeItsCheckpointTowardsItsTimeBudget
   EXPECT_EQ(old.Iteration, iteration);
   std::remove(checkpoint.c_str());
   std::remove((checkpoint + ".v2").c_str());
+  std::remove((checkpoint + ".v4").c_str());
 }
 
 TEST(Trainer, CheckpointHoldsTheWholeTrainingState)
@@ -456,10 +464,14 @@ TEST(Trainer, CheckpointHoldsTheWholeTrainingState)
   // truncated file is refused without touching the state it was read into.
   std::vector<int> heldOut;
   const TrainingData data = SyntheticSweep(KnownField(200, 7), 0.5, heldOut);
-  Trainer trainer(data, ShortSettings());
+  TrainerSettings settings = ShortSettings();
+  settings.RefineImageToProbe = true; // the shared pose correction moves from the start
+  settings.PoseRefinementStart = 0;
+  Trainer trainer(data, settings);
   std::string error;
   ASSERT_TRUE(trainer.Initialize(&error)) << error;
   ASSERT_TRUE(trainer.Train(nullptr, [&]() { return trainer.GetIteration() >= 150; }, &error)) << error;
+  ASSERT_GT(trainer.GetState().SharedPoseSteps, 0);
   const std::string file = std::string(BIGUS_TEST_OUTPUT) + "/state.ckpt";
   ASSERT_TRUE(trainer.SaveCheckpoint(file, &error)) << error;
   const TrainingState& saved = trainer.GetState();
@@ -488,6 +500,10 @@ TEST(Trainer, CheckpointHoldsTheWholeTrainingState)
   }
   EXPECT_EQ(loaded.Gaussians.Attribution, saved.Gaussians.Attribution);
   EXPECT_EQ(loaded.Gaussians.SeenCount, saved.Gaussians.SeenCount);
+  EXPECT_EQ(loaded.SharedPoseCorrection, saved.SharedPoseCorrection);
+  EXPECT_EQ(loaded.SharedPoseFirstMoment, saved.SharedPoseFirstMoment);
+  EXPECT_EQ(loaded.SharedPoseSecondMoment, saved.SharedPoseSecondMoment);
+  EXPECT_EQ(loaded.SharedPoseSteps, saved.SharedPoseSteps);
 
   // Truncated: refused, and the state read into stays as it was.
   std::ifstream in(file, std::ios::binary);
