@@ -14,6 +14,7 @@
 #include "vtkInformation.h"
 #include "vtkInformationVector.h"
 #include "vtkIntArray.h"
+#include "vtkMatrix4x4.h"
 #include "vtkNew.h"
 #include "vtkObjectFactory.h"
 #include "vtkPointData.h"
@@ -47,6 +48,8 @@ vtkGaussianFieldTrainer::vtkGaussianFieldTrainer()
   this->PixelGridFit = d.PixelGridFit;
   this->RefinePoses = d.RefinePoses;
   this->PoseSmoothness = d.PoseSmoothness;
+  this->RefineTimeOffset = d.RefineTimeOffset;
+  this->RefineImageToProbe = d.RefineImageToProbe;
   this->SparseAdam = d.SparseAdam;
   this->Iterations = d.Iterations;
   this->TimeBudget = d.TimeBudget;
@@ -213,6 +216,8 @@ int vtkGaussianFieldTrainer::RequestData(
   s.PixelGridFit = this->PixelGridFit;
   s.RefinePoses = this->RefinePoses;
   s.PoseSmoothness = this->PoseSmoothness;
+  s.RefineTimeOffset = this->RefineTimeOffset;
+  s.RefineImageToProbe = this->RefineImageToProbe;
   s.SparseAdam = this->SparseAdam;
   s.InitialGaussians = this->InitialGaussians;
   s.MaximumGaussians = this->MaximumGaussians;
@@ -415,6 +420,58 @@ int vtkGaussianFieldTrainer::RequestData(
     }
     output->GetFieldData()->AddArray(corrections);
   }
+  if (s.RefinesPoses())
+  {
+    // Every input frame's pose as refined, for a sequence written with them (bigus train --refined-poses).
+    vtkNew<vtkDoubleArray> refined;
+    refined->SetName("RefinedPoses");
+    refined->SetNumberOfComponents(16);
+    for (const std::array<double, 16>& pose : trainer.GetData().Poses)
+    {
+      refined->InsertNextTuple(pose.data());
+    }
+    output->GetFieldData()->AddArray(refined);
+  }
+  if (s.RefineTimeOffset)
+  {
+    vtkNew<vtkDoubleArray> offset;
+    offset->SetName("TimeOffset");
+    offset->InsertNextValue(report.TimeOffset);
+    output->GetFieldData()->AddArray(offset);
+  }
+  if (s.RefineImageToProbe)
+  {
+    const std::array<double, 6>& xi = report.ImageToProbeCorrection;
+    const double degrees = 180.0 / vtkMath::Pi();
+    vtkNew<vtkDoubleArray> correction;
+    correction->SetName("ImageToProbeCorrection");
+    correction->SetNumberOfComponents(6);
+    const char* names[6] = { "RotationU (degrees)", "RotationV (degrees)", "RotationN (degrees)", "TranslationU (mm)",
+      "TranslationV (mm)", "TranslationN (mm)" };
+    for (int k = 0; k < 6; ++k)
+    {
+      correction->SetComponentName(k, names[k]);
+    }
+    const double tuple[6] = { xi[0] * degrees, xi[1] * degrees, xi[2] * degrees, xi[3], xi[4], xi[5] };
+    correction->InsertNextTuple(tuple);
+    output->GetFieldData()->AddArray(correction);
+    // M = P^-1 CorrectPose(P, xi): the correction acts in the image's own axes, so M is the same for every
+    // pose P of the frame grid's pixel spacing (a training frame's).
+    double pose[16], corrected[16];
+    const std::array<double, 16>& P = trainer.GetData().Poses[trainer.GetData().TrainFrames.front()];
+    std::copy(P.begin(), P.end(), pose);
+    bigus::CorrectPose(pose, trainer.GetData().Width, trainer.GetData().Height, xi.data(), corrected);
+    vtkNew<vtkMatrix4x4> inverse, after, m;
+    inverse->DeepCopy(pose);
+    inverse->Invert();
+    after->DeepCopy(corrected);
+    vtkMatrix4x4::Multiply4x4(inverse, after, m);
+    vtkNew<vtkDoubleArray> matrix;
+    matrix->SetName("ImageToProbeCorrectionMatrix");
+    matrix->SetNumberOfComponents(16);
+    matrix->InsertNextTuple(&m->GetData()[0]);
+    output->GetFieldData()->AddArray(matrix);
+  }
   if (history->GetNumberOfTuples() > 0)
   {
     output->GetFieldData()->AddArray(history);
@@ -444,6 +501,8 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "PixelGridFit: " << this->PixelGridFit << "\n";
   os << indent << "RefinePoses: " << this->RefinePoses << "\n";
   os << indent << "PoseSmoothness: " << this->PoseSmoothness << "\n";
+  os << indent << "RefineTimeOffset: " << this->RefineTimeOffset << "\n";
+  os << indent << "RefineImageToProbe: " << this->RefineImageToProbe << "\n";
   os << indent << "SparseAdam: " << this->SparseAdam << "\n";
   os << indent << "Iterations: " << this->Iterations << "\n";
   os << indent << "TimeBudget: " << this->TimeBudget << "\n";

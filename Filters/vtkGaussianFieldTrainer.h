@@ -151,10 +151,28 @@ public:
   ///@{ Pose refinement (default off): a rigid correction of each training frame's pose, optimised with the
   /// field (bigus::TrainerSettings::RefinePoses). The output's field data then holds PoseCorrections, one
   /// tuple per training frame: Frame, rotation about the frame's u, v, n axes through its centre pixel
-  /// (degrees), translation along u, v, n (mm) (bigus::CorrectPose), and TrainingPoses are the refined poses.
+  /// (degrees), translation along u, v, n (mm) (bigus::CorrectPose), TrainingPoses are the refined poses, and
+  /// RefinedPoses (16 components, one tuple per input frame, the sweeps' frames in turn) every frame's pose as
+  /// refined (held-out frames take the shared corrections only).
   vtkSetMacro(RefinePoses, bool);
   vtkGetMacro(RefinePoses, bool);
   vtkBooleanMacro(RefinePoses, bool);
+  ///@}
+  ///@{ Refinement of one tracker-to-video time offset shared by every frame (default off;
+  /// bigus::TrainerSettings::RefineTimeOffset; needs the sweeps' Timestamp). The output's field data then holds
+  /// TimeOffset (s, added to every frame's timestamp to find its tracked pose) and RefinedPoses.
+  vtkSetMacro(RefineTimeOffset, bool);
+  vtkGetMacro(RefineTimeOffset, bool);
+  vtkBooleanMacro(RefineTimeOffset, bool);
+  ///@}
+  ///@{ Refinement of one ImageToProbe correction shared by every frame (default off;
+  /// bigus::TrainerSettings::RefineImageToProbe). The output's field data then holds ImageToProbeCorrection
+  /// (rotation about u, v, n through the centre pixel of the frame grid, degrees; translation along u, v, n,
+  /// mm), ImageToProbeCorrectionMatrix (row-major 4x4 M in pixel indices: the corrected ImageToProbe is
+  /// ImageToProbe M) and RefinedPoses.
+  vtkSetMacro(RefineImageToProbe, bool);
+  vtkGetMacro(RefineImageToProbe, bool);
+  vtkBooleanMacro(RefineImageToProbe, bool);
   ///@}
   ///@{ Weight of the smoothness prior on the pose corrections along the sweep (default 0;
   /// bigus::TrainerSettings::PoseSmoothness).
@@ -312,6 +330,8 @@ protected:
   bool PixelGridFit;
   bool RefinePoses;
   double PoseSmoothness;
+  bool RefineTimeOffset;
+  bool RefineImageToProbe;
   bool SparseAdam;
   int Iterations;
   double TimeBudget;

@@ -45,7 +45,7 @@ struct TrainOptions
   double GrowthMargin = 0;
   int GrowthPatience = 0, SolveIterations = 0;
   bool NoFillGaps = false, ReflectivitySolve = false, DenseStart = false, DenseAdam = false,
-       NoPixelGridFit = false, RefinePoses = false;
+       NoPixelGridFit = false, RefinePoses = false, RefineTimeOffset = false, RefineImageToProbe = false;
   std::vector<std::string> RefinedPoses; ///< one per sweep
   double PoseSmoothness = 0;
   unsigned Seed = 0;
@@ -80,6 +80,11 @@ int RunTrain(const TrainOptions& o)
         count, files->size(), what);
       return 2;
     }
+  }
+  if (!o.RefinedPoses.empty() && !o.RefinePoses && !o.RefineTimeOffset && !o.RefineImageToProbe)
+  {
+    std::fprintf(stderr, "bigus: --refined-poses needs --refine-poses, --refine-time-offset or --refine-image-to-probe\n");
+    return 2;
   }
   if (!o.RefinedPoses.empty() && o.RefinedPoses.size() != count)
   {
@@ -151,6 +156,8 @@ int RunTrain(const TrainOptions& o)
   trainer->SetDenseInitialisation(o.DenseStart);
   trainer->SetPixelGridFit(!o.NoPixelGridFit);
   trainer->SetRefinePoses(o.RefinePoses);
+  trainer->SetRefineTimeOffset(o.RefineTimeOffset);
+  trainer->SetRefineImageToProbe(o.RefineImageToProbe);
   trainer->SetPoseSmoothness(o.PoseSmoothness);
   trainer->SetSparseAdam(!o.DenseAdam);
   trainer->SetElevationSigma(o.ElevationSigma);
@@ -276,36 +283,34 @@ int RunTrain(const TrainOptions& o)
                 "mean %.3f, largest %.3f mm\n",
       static_cast<long long>(n), sum[0] / std::max<vtkIdType>(1, n), largest[0], sum[1] / std::max<vtkIdType>(1, n),
       largest[1]);
-    // Each input sweep with its training frames' ImageToReference corrected (the held-out frames as tracked). A
-    // correction turns about the centre pixel of the trainer's frame grid (the largest sweep's frame size).
-    vtkDataArray* grid = fd->GetArray("TrainingFrameSize");
-    std::int64_t first = 0; // index of the sweep's first frame among all sweeps' frames
+  }
+  if (vtkDataArray* offset = fd->GetArray("TimeOffset"))
+  {
+    std::printf("time offset    %.1f ms (added to every frame's timestamp to find its tracked pose)\n",
+      1000 * offset->GetTuple1(0));
+  }
+  if (vtkDataArray* correction = fd->GetArray("ImageToProbeCorrection"))
+  {
+    const double* c = correction->GetTuple(0);
+    std::printf("ImageToProbe   corrected by rotation %.3f %.3f %.3f degrees about u, v, n and translation %.3f %.3f "
+                "%.3f mm (field data ImageToProbeCorrectionMatrix: ImageToProbe M)\n",
+      c[0], c[1], c[2], c[3], c[4], c[5]);
+  }
+  if (vtkDataArray* all = fd->GetArray("RefinedPoses"))
+  {
+    // Each input sweep with every frame's ImageToReference as refined (RefinedPoses: the sweeps' frames in turn).
+    vtkIdType first = 0; // index of the sweep's first frame among all sweeps' frames
     for (std::size_t k = 0; k < o.RefinedPoses.size(); ++k)
     {
       vtkImageData* input = readers[k]->GetOutput();
       vtkSmartPointer<vtkImageData> refined = WithOwnFieldData(input);
       vtkDataArray* poses = refined->GetFieldData()->GetArray("ImageToReference");
-      int dims[3];
-      input->GetDimensions(dims);
-      const int width = grid ? static_cast<int>(grid->GetComponent(0, 0)) : dims[0];
-      const int height = grid ? static_cast<int>(grid->GetComponent(0, 1)) : dims[1];
-      for (vtkIdType i = 0; i < n; ++i)
+      const vtkIdType frames = input->GetDimensions()[2];
+      for (vtkIdType f = 0; f < frames && first + f < all->GetNumberOfTuples(); ++f)
       {
-        const double* c = corrections->GetTuple(i);
-        const std::int64_t frame = static_cast<std::int64_t>(c[0]) - first;
-        if (frame < 0 || frame >= dims[2])
-        {
-          continue; // another sweep's frame
-        }
-        const double radians = vtkMath::Pi() / 180.0;
-        const double xi[6] = { c[1] * radians, c[2] * radians, c[3] * radians, c[4], c[5], c[6] };
-        double pose[16];
-        if (bigus::CorrectPose(poses->GetTuple(frame), width, height, xi, pose) == bigus::PoseStatus::Ok)
-        {
-          poses->SetTuple(frame, pose);
-        }
+        poses->SetTuple(f, all->GetTuple(first + f));
       }
-      first += dims[2];
+      first += frames;
       const std::string temporaryPoses = TemporaryName(o.RefinedPoses[k]);
       vtkNew<vtkUltrasoundSequenceWriter> sequenceWriter;
       sequenceWriter->SetInputData(refined);
@@ -315,7 +320,7 @@ int RunTrain(const TrainOptions& o)
         std::remove(temporaryPoses.c_str());
         return Fail(o.RefinedPoses[k] + ": cannot write the refined sequence");
       }
-      std::printf("refined poses  %s: %s with its training frames' ImageToReference corrected\n",
+      std::printf("refined poses  %s: %s with its frames' ImageToReference as refined\n",
         o.RefinedPoses[k].c_str(), o.Sweeps[k].c_str());
     }
   }
@@ -393,12 +398,16 @@ Command AddTrainCommand(CLI::App& app)
   trainCommand->add_flag("--refine-poses", train.RefinePoses,
     "Refine each training frame's tracked pose with the field (a rigid correction about its centre pixel, a prior "
     "towards the tracked pose; default: the tracked poses are trusted)");
+  trainCommand->add_flag("--refine-time-offset", train.RefineTimeOffset,
+    "Refine one time offset between tracker and video shared by every frame (needs the sweeps' timestamps; found "
+    "from sweeps whose frames cross, not from one smooth sweep: docs/FINDINGS.md)");
+  trainCommand->add_flag("--refine-image-to-probe", train.RefineImageToProbe,
+    "Refine one correction of ImageToProbe shared by every frame (printed, and in the field data)");
   trainCommand
     ->add_option("--refined-poses", train.RefinedPoses,
-      "With --refine-poses: write the sweep with its training frames' ImageToReference corrected (.igs.mha); one per "
-      "sweep, in their order (repeat the option)")
-    ->allow_extra_args(false)
-    ->needs("--refine-poses");
+      "With a --refine-* option: write the sweep with its frames' ImageToReference as refined (.igs.mha; held-out "
+      "frames take the shared corrections only); one per sweep, in their order (repeat the option)")
+    ->allow_extra_args(false);
   trainCommand->add_option("--pose-smoothness", train.PoseSmoothness,
     "With --refine-poses: weight of the prior that keeps the corrections smooth along the sweep (0: none)")
     ->needs("--refine-poses")

@@ -187,7 +187,7 @@ def check_refine_poses(sweep, xml, out):
     field = os.path.join(out, "nwire_refined.vtp")
     refined = os.path.join(out, "nwire_refined.igs.mha")
     code, _, err = run("train", sweep, "--calibration", xml, "-o", field, "--refined-poses", refined)
-    assert code == 2 and "requires --refine-poses" in err, (code, err)
+    assert code == 2 and "needs --refine-poses" in err, (code, err)
     code, out_text, err = run("train", sweep, "--calibration", xml, "-o", field, "--holdout-every", "4",
                               "--holdout-offset", "2", "--iterations", "60", "--initial-gaussians", "2000",
                               "--no-pixel-grid-fit", "--elevation-sigma", "1.0", "--refine-poses",
@@ -234,6 +234,35 @@ def check_refine_poses(sweep, xml, out):
     for k, c in enumerate(listed):
         stored = [corrections.GetComponent(k, i) for i in range(1, 7)]
         assert max(abs(a - b) for a, b in zip(c["rotation_degrees"] + c["translation_mm"], stored)) < 1e-12, (c, stored)
+
+    # The shared corrections: --refine-image-to-probe and --refine-time-offset print their values and store them;
+    # with the ImageToProbe correction alone every frame, held out or not, is its tracked pose times the stored
+    # matrix M (ImageToReference M).
+    code, out_text, err = run("train", sweep, "--calibration", xml, "-o", field, "--holdout-every", "4",
+                              "--holdout-offset", "2", "--iterations", "60", "--initial-gaussians", "2000",
+                              "--no-pixel-grid-fit", "--elevation-sigma", "1.0", "--refine-image-to-probe",
+                              "--refined-poses", refined)
+    assert code == 0 and "RefineImageToProbe = on" in out_text and "ImageToProbe   corrected by" in out_text, \
+        (out_text, err)
+    reader.Modified()
+    reader.Update()
+    fd = reader.GetOutput().GetFieldData()
+    assert fd.GetArray("PoseCorrections") is None and fd.GetArray("TimeOffset") is None
+    assert fd.GetArray("ImageToProbeCorrection").GetNumberOfComponents() == 6
+    m = [fd.GetArray("ImageToProbeCorrectionMatrix").GetComponent(0, c) for c in range(16)]
+    assert max(abs(m[c] - (1.0 if c % 5 == 0 else 0.0)) for c in range(16)) > 1e-9, m
+    assert fd.GetArray("RefinedPoses").GetNumberOfTuples() == 20
+    back.Modified()
+    back.Update()
+    b = back.GetOutput().GetFieldData().GetArray("ImageToReference")
+    for k in range(20):
+        p = [a.GetComponent(k, c) for c in range(16)]
+        expected = [sum(p[4 * r + i] * m[4 * i + c] for i in range(4)) for r in range(4) for c in range(4)]
+        assert max(abs(b.GetComponent(k, c) - expected[c]) for c in range(16)) < 1e-6, k
+    code, out_text, err = run("train", sweep, "--calibration", xml, "-o", field, "--iterations", "30",
+                              "--initial-gaussians", "2000", "--no-pixel-grid-fit", "--elevation-sigma", "1.0",
+                              "--refine-time-offset")
+    assert code == 0 and "RefineTimeOffset = on" in out_text and "time offset    " in out_text, (out_text, err)
 
 
 def check_several_sweeps(data, sweep, xml, out):
