@@ -140,6 +140,20 @@ def main():
              % (most_inserted(both_volume), most_inserted(volume)))
     print("two sweeps: one field trained on both, or on one with the other held out; compounded together")
 
+    # The pose refinement panel: each switch reaches the filter, whose output then holds what it refined.
+    refined = pvs.TrainGaussianField(Input=reader, Iterations=20, TimeBudget=0, InitialGaussians=300,
+                                     ElevationSigma=0.5, HoldOutEvery=4, HoldOutOffset=2, RefinePoses=1,
+                                     RefineTimeOffset=1, RefineImageToProbe=1)
+    refined.UpdatePipeline()
+    fd = refined.GetClientSideObject().GetOutputDataObject(0).GetFieldData()
+    for name, tuples in (("PoseCorrections", 15), ("TimeOffset", 1), ("ImageToProbeCorrection", 1),
+                         ("ImageToProbeCorrectionMatrix", 1), ("RefinedPoses", 20)):
+        if not fd.GetArray(name) or fd.GetArray(name).GetNumberOfTuples() != tuples:
+            fail("RefinePoses, RefineTimeOffset and RefineImageToProbe on: field data %s %s" % (
+                name, fd.GetArray(name).GetNumberOfTuples() if fd.GetArray(name) else "missing"))
+    print("pose refinement: per-frame corrections, time offset %.2f ms and ImageToProbe correction stored"
+          % (1000 * fd.GetArray("TimeOffset").GetTuple1(0)))
+
     # A chain built before anything ran, updated from its end (the slice asks for a small extent): the
     # trainer still gets every frame.
     fresh = pvs.TrackedUltrasoundSequenceReader(FileName=sweep, CalibrationFileName=calibration)
