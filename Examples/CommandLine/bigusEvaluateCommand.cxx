@@ -41,7 +41,7 @@ struct EvaluateOptions
   SweepOptions Sweep;
   int HoldOutEvery = 0, HoldOutOffset = 0;
   std::vector<int> Frames;
-  bool RefinePoses = false;
+  bool RefinePoses = false, TrackedPoses = false;
   int RefineSteps = 50;
 };
 
@@ -212,6 +212,36 @@ int RunEvaluate(const EvaluateOptions& o)
   vtkImageData* truth = reader->GetOutput();
   int dims[3];
   truth->GetDimensions(dims);
+  // A field trained with pose refinement: the frames at the poses it was trained with (RefinedPoses: the
+  // training frames' own corrections, and the shared time offset and ImageToProbe correction on every frame,
+  // held out or not), unless --tracked-poses.
+  vtkSmartPointer<vtkImageData> atRefinedPoses;
+  std::string posesUsed = "tracked";
+  if (vtkDataArray* refined = field->GetFieldData()->GetArray("RefinedPoses"))
+  {
+    if (o.TrackedPoses)
+    {
+      std::printf("poses          the sweep's own (--tracked-poses), not the field's RefinedPoses\n");
+    }
+    else if (refined->GetNumberOfTuples() == dims[2] && refined->GetNumberOfComponents() == 16)
+    {
+      atRefinedPoses = WithOwnFieldData(truth);
+      vtkDataArray* poses = atRefinedPoses->GetFieldData()->GetArray("ImageToReference");
+      for (vtkIdType f = 0; f < dims[2]; ++f)
+      {
+        poses->SetTuple(f, refined->GetTuple(f));
+      }
+      truth = atRefinedPoses;
+      posesUsed = "refined";
+      std::printf("poses          the field's RefinedPoses (its training frames' corrections; its shared time offset "
+                  "and ImageToProbe correction on every frame); --tracked-poses: the sweep's own\n");
+    }
+    else
+    {
+      std::printf("poses          the sweep's own: the field's RefinedPoses hold %lld frames, the sweep %d\n",
+        static_cast<long long>(refined->GetNumberOfTuples()), dims[2]);
+    }
+  }
   for (int k : o.Frames)
   {
     if (k < 0 || k >= dims[2])
@@ -267,6 +297,7 @@ int RunEvaluate(const EvaluateOptions& o)
   nlohmann::json report;
   report["field"] = o.Field;
   report["sweep"] = o.Sweep.Sweep;
+  report["poses"] = posesUsed;
   report["render_seconds_per_frame"] = renderer->GetSecondsPerFrame();
   std::size_t used = 0;
   std::printf("%6s %8s %8s %8s %8s\n", "frame", "PSNR", "SSIM", "NCC", "speckle");
@@ -404,6 +435,9 @@ Command AddEvaluateCommand(CLI::App& app)
   evaluateCommand->add_flag("--refine-poses", evaluate.RefinePoses,
     "Score each frame also at its pose refined with the field frozen (the fair score of held-out frames whose tracked "
     "poses are imperfect, as view-synthesis papers report it); both scores are printed and in metrics.json");
+  evaluateCommand->add_flag("--tracked-poses", evaluate.TrackedPoses,
+    "Score at the sweep's own poses even when the field holds RefinedPoses (default: a field trained with pose "
+    "refinement is scored at the poses it refined, held-out frames with its shared corrections)");
   evaluateCommand->add_option("--refine-steps", evaluate.RefineSteps, "Adam steps per frame of --refine-poses")
     ->check(CLI::PositiveNumber)
     ->capture_default_str();

@@ -259,6 +259,14 @@ def check_refine_poses(sweep, xml, out):
         p = [a.GetComponent(k, c) for c in range(16)]
         expected = [sum(p[4 * r + i] * m[4 * i + c] for i in range(4)) for r in range(4) for c in range(4)]
         assert max(abs(b.GetComponent(k, c) - expected[c]) for c in range(16)) < 1e-6, k
+    # `bigus evaluate` scores such a field at the poses it refined (held-out frames with the shared correction),
+    # or at the sweep's own with --tracked-poses.
+    for extra, poses in (([], "refined"), (["--tracked-poses"], "tracked")):
+        code, out_text, err = run("evaluate", field, sweep, "--calibration", xml, "--frames", "2", "6", "--report",
+                                  report, *extra)
+        assert code == 0, (out_text, err)
+        assert json.load(open(os.path.join(report, "metrics.json")))["poses"] == poses, out_text
+    assert "poses          the sweep's own (--tracked-poses)" in out_text, out_text
     code, out_text, err = run("train", sweep, "--calibration", xml, "-o", field, "--iterations", "30",
                               "--initial-gaussians", "2000", "--no-pixel-grid-fit", "--elevation-sigma", "1.0",
                               "--refine-time-offset")
