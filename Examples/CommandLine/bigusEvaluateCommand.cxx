@@ -394,6 +394,20 @@ int RunEvaluate(const EvaluateOptions& o)
   {
     return Fail(o.Report + "/pose_corrections.png: cannot write");
   }
+  // The shared corrections of a field trained with them.
+  if (vtkDataArray* offset = field->GetFieldData()->GetArray("TimeOffset"))
+  {
+    report["time_offset_ms"] = 1000 * offset->GetTuple1(0);
+  }
+  if (vtkDataArray* shared = field->GetFieldData()->GetArray("ImageToProbeCorrection"))
+  {
+    if (shared->GetNumberOfComponents() == 6)
+    {
+      const double* c = shared->GetTuple(0);
+      report["image_to_probe_correction"] = { { "rotation_degrees", { c[0], c[1], c[2] } },
+        { "translation_mm", { c[3], c[4], c[5] } } };
+    }
+  }
   report["mean"] = { { "psnr", mean.PSNR }, { "ssim", mean.SSIM }, { "ncc", mean.NCC }, { "speckle", mean.Speckle },
     { "frames", used } };
   std::printf("%6s %8.2f %8.4f %8.4f %8.4f  (%zu frames, %zu left out: empty mask; %.1f ms per rendered frame)\n",

@@ -265,7 +265,12 @@ def check_refine_poses(sweep, xml, out):
         code, out_text, err = run("evaluate", field, sweep, "--calibration", xml, "--frames", "2", "6", "--report",
                                   report, *extra)
         assert code == 0, (out_text, err)
-        assert json.load(open(os.path.join(report, "metrics.json")))["poses"] == poses, out_text
+        metrics = json.load(open(os.path.join(report, "metrics.json")))
+        assert metrics["poses"] == poses, out_text
+        stored = [fd.GetArray("ImageToProbeCorrection").GetComponent(0, c) for c in range(6)]
+        shared = metrics["image_to_probe_correction"]
+        assert shared["rotation_degrees"] + shared["translation_mm"] == stored, (shared, stored)
+        assert "time_offset_ms" not in metrics
     assert "poses          the sweep's own (--tracked-poses)" in out_text, out_text
     code, out_text, err = run("train", sweep, "--calibration", xml, "-o", field, "--iterations", "30",
                               "--initial-gaussians", "2000", "--no-pixel-grid-fit", "--elevation-sigma", "1.0",
