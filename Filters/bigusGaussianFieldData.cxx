@@ -600,6 +600,15 @@ bool TrainingDataFromSequence(vtkImageData* sequence, vtkImageData* mask, Traini
   {
     poses->GetTuple(k, data.Poses[k].data());
   }
+  data.Valid.clear();
+  vtkDataArray* valid = sequence->GetFieldData()->GetArray("FrameValid");
+  if (valid && valid->GetNumberOfTuples() == dims[2])
+  {
+    for (int k = 0; k < dims[2]; ++k)
+    {
+      data.Valid.push_back(valid->GetTuple1(k) != 0 ? 1 : 0);
+    }
+  }
   data.Timestamps.clear();
   vtkDataArray* stamps = sequence->GetFieldData()->GetArray("Timestamp");
   if (stamps && stamps->GetNumberOfComponents() == 1 && stamps->GetNumberOfTuples() == dims[2])
@@ -766,6 +775,14 @@ bool TrainingDataFromSweeps(const std::vector<SweepInput>& sweeps, TrainingData&
     data.Poses.insert(data.Poses.end(), d.Poses.begin(), d.Poses.end());
     data.Sweeps.insert(data.Sweeps.end(), d.Poses.size(), static_cast<int>(s));
     data.Timestamps.insert(data.Timestamps.end(), d.Timestamps.begin(), d.Timestamps.end());
+    if (d.Valid.empty())
+    {
+      data.Valid.insert(data.Valid.end(), d.Poses.size(), 1);
+    }
+    else
+    {
+      data.Valid.insert(data.Valid.end(), d.Valid.begin(), d.Valid.end());
+    }
     data.Frames.resize(pixels * data.Poses.size(), 0.0f);
     data.Mask.resize(pixels * data.Poses.size(), 0);
     for (int f = 0; f < d.Count(); ++f)

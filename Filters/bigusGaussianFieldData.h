@@ -217,7 +217,7 @@ BIGUSFILTERS_EXPORT void FieldToPolyData(const GaussianField& field, const Field
 
 /**
  * Frames, poses and mask of a tracked frame sequence (DESIGN section 2) as training data: intensities
- * scaled to [0, 1] (unsigned char / 255, float clamped), ImageToReference per frame, the field data Timestamp (s) when it has one per frame, and @p mask (a
+ * scaled to [0, 1] (unsigned char / 255, float clamped), ImageToReference per frame, the field data Timestamp (s) and FrameValid when they have one per frame, and @p mask (a
  * W x H x 1 fan mask or a W x H x N per-frame mask; non-zero = imaged). TrainFrames is left empty.
  * Returns false with @p error when the sequence is not W x H x N one-component scalars with N
  * ImageToReference tuples of 16, or the mask has neither size.

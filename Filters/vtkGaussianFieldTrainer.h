@@ -169,7 +169,8 @@ public:
   /// bigus::TrainerSettings::RefineImageToProbe). The output's field data then holds ImageToProbeCorrection
   /// (rotation about u, v, n through the centre pixel of the frame grid, degrees; translation along u, v, n,
   /// mm), ImageToProbeCorrectionMatrix (row-major 4x4 M in pixel indices: the corrected ImageToProbe is
-  /// ImageToProbe M) and RefinedPoses.
+  /// ImageToProbe M; M depends on the pixel spacing, and is the first training frame's sweep's when sweeps of
+  /// other spacings are trained together) and RefinedPoses.
   vtkSetMacro(RefineImageToProbe, bool);
   vtkGetMacro(RefineImageToProbe, bool);
   vtkBooleanMacro(RefineImageToProbe, bool);

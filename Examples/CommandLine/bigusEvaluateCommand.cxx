@@ -201,6 +201,55 @@ int ScoreAtRefinedPoses(vtkPolyData* field, vtkImageData* truth, bigus::Training
   return 0;
 }
 
+/**
+ * Where @p sweep's frames lie in a field's RefinedPoses @p refined (every trained sweep's frames in turn): the
+ * first block of as many consecutive poses whose frames' corners all lie within 5 mm of the sweep's own (pose
+ * corrections are of the order of a millimetre; frames marked invalid are not compared). -1 when none does:
+ * another sweep, or another frame range.
+ */
+vtkIdType RefinedPosesOf(vtkImageData* sweep, vtkDataArray* refined)
+{
+  int dims[3];
+  sweep->GetDimensions(dims);
+  vtkDataArray* own = sweep->GetFieldData()->GetArray("ImageToReference");
+  if (!own || refined->GetNumberOfComponents() != 16 || refined->GetNumberOfTuples() < dims[2])
+  {
+    return -1;
+  }
+  for (vtkIdType first = 0; first + dims[2] <= refined->GetNumberOfTuples(); ++first)
+  {
+    bool close = true;
+    for (int k = 0; k < dims[2] && close; ++k)
+    {
+      if (!FrameIsValid(sweep, k))
+      {
+        continue;
+      }
+      double a[16], b[16];
+      own->GetTuple(k, a);
+      refined->GetTuple(first + k, b);
+      for (double i : { 0.0, dims[0] - 1.0 })
+      {
+        for (double j : { 0.0, dims[1] - 1.0 })
+        {
+          double d2 = 0;
+          for (int r = 0; r < 3; ++r)
+          {
+            const double d = (a[4 * r] - b[4 * r]) * i + (a[4 * r + 1] - b[4 * r + 1]) * j + a[4 * r + 3] - b[4 * r + 3];
+            d2 += d * d;
+          }
+          close = close && d2 < 25.0; // also false for a non-finite pose
+        }
+      }
+    }
+    if (close)
+    {
+      return first;
+    }
+  }
+  return -1;
+}
+
 int RunEvaluate(const EvaluateOptions& o)
 {
   auto field = ReadField(o.Field);
@@ -223,13 +272,13 @@ int RunEvaluate(const EvaluateOptions& o)
     {
       std::printf("poses          the sweep's own (--tracked-poses), not the field's RefinedPoses\n");
     }
-    else if (refined->GetNumberOfTuples() == dims[2] && refined->GetNumberOfComponents() == 16)
+    else if (const vtkIdType first = RefinedPosesOf(truth, refined); first >= 0)
     {
       atRefinedPoses = WithOwnFieldData(truth);
       vtkDataArray* poses = atRefinedPoses->GetFieldData()->GetArray("ImageToReference");
       for (vtkIdType f = 0; f < dims[2]; ++f)
       {
-        poses->SetTuple(f, refined->GetTuple(f));
+        poses->SetTuple(f, refined->GetTuple(first + f));
       }
       truth = atRefinedPoses;
       posesUsed = "refined";
@@ -238,7 +287,8 @@ int RunEvaluate(const EvaluateOptions& o)
     }
     else
     {
-      std::printf("poses          the sweep's own: the field's RefinedPoses hold %lld frames, the sweep %d\n",
+      std::printf("poses          the sweep's own: none of the field's RefinedPoses (%lld frames) match its %d frames "
+                  "within 5 mm (another sweep or frame range)\n",
         static_cast<long long>(refined->GetNumberOfTuples()), dims[2]);
     }
   }
@@ -395,13 +445,14 @@ int RunEvaluate(const EvaluateOptions& o)
     return Fail(o.Report + "/pose_corrections.png: cannot write");
   }
   // The shared corrections of a field trained with them.
-  if (vtkDataArray* offset = field->GetFieldData()->GetArray("TimeOffset"))
+  vtkDataArray* offset = field->GetFieldData()->GetArray("TimeOffset");
+  if (offset && offset->GetNumberOfTuples() > 0)
   {
     report["time_offset_ms"] = 1000 * offset->GetTuple1(0);
   }
   if (vtkDataArray* shared = field->GetFieldData()->GetArray("ImageToProbeCorrection"))
   {
-    if (shared->GetNumberOfComponents() == 6)
+    if (shared->GetNumberOfComponents() == 6 && shared->GetNumberOfTuples() > 0)
     {
       const double* c = shared->GetTuple(0);
       report["image_to_probe_correction"] = { { "rotation_degrees", { c[0], c[1], c[2] } },

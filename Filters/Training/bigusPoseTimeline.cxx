@@ -77,12 +77,13 @@ bool PoseTimeline::Build(const TrainingData& data, double window, std::string* e
   }
   for (int s = 0; s < sweeps; ++s)
   {
-    // The sweep's frames with a pose the renderer accepts, in time order.
+    // The sweep's valid frames with a pose the renderer accepts, in time order.
     std::vector<std::pair<double, int>> path;
     for (int f = 0; f < n; ++f)
     {
       SliceFrame frame;
-      if (data.SweepOf(f) == s && ComputeSliceFrame(data.Poses[f].data(), 90, frame) == PoseStatus::Ok)
+      if (data.SweepOf(f) == s && data.IsValid(f) &&
+        ComputeSliceFrame(data.Poses[f].data(), 90, frame) == PoseStatus::Ok)
       {
         path.emplace_back(data.Timestamps[f], f);
       }

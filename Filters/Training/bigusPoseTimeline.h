@@ -11,9 +11,10 @@
  *     P_f(offset) = CorrectPose(P_f, offset v_f),    v_f = (xi_fb - xi_fa) / (t_b - t_a),
  *
  * xi_fa and xi_fb the corrections (PoseCorrectionBetween) from frame f to the frames a and b of its sweep
- * about Window / 2 before and after it (the sweep's first and last frames at its ends; frames whose pose the
- * renderer rejects left out), so d P_f / d offset = v_f exactly and a loss's gradient with respect to the
- * offset is the pose gradient (FieldGradients::SlicePoses) dotted with v_f. Why not interpolate between the
+ * about Window / 2 before and after it (the sweep's first and last frames at its ends; frames marked invalid
+ * (TrainingData::Valid) or whose pose the renderer rejects left out), so d P_f / d offset = v_f exactly, and a
+ * loss's gradient with respect to the offset is the pose gradient (FieldGradients::SlicePoses) dotted with v_f
+ * (to first order when further corrections follow the offset, as in the trainer). Why not interpolate between the
  * tracked poses on either side of the shifted time: with a tracker's error in every pose, moving a frame
  * towards its neighbour's pose averages its own error away whatever the sign of the offset, so the offset
  * that fits best is biased towards half a frame interval; the velocity over a window is independent of the
@@ -59,8 +60,11 @@ public:
   void PoseAt(int frame, double offset, double pose[16]) const;
 
   /// d xi / d offset of frame @p frame ([6]: rotation, rad/s; translation, mm/s; in its rendering axes about
-  /// its centre pixel); zero for a frame whose pose the renderer rejects.
+  /// its centre pixel); zero for a frame left out of the path.
   const std::array<double, 6>& Velocity(int frame) const { return this->Velocities[frame]; }
+
+  /// Whether Build succeeded for @p frames frames.
+  bool IsBuilt(int frames) const { return static_cast<int>(this->Velocities.size()) == frames && frames > 0; }
 
 private:
   int Width = 0, Height = 0;

@@ -153,17 +153,22 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
     this->State.PoseSecondMoment.assign(n, {});
     this->State.PoseSteps.assign(n, 0);
   }
+  // A change common to the frames of one smooth sweep is a warp of the scene the field takes up
+  // (docs/FINDINGS.md, "Shared pose corrections"): said where it is switched on.
+  const bool oneSweep = std::none_of(
+    this->Data->Sweeps.begin(), this->Data->Sweeps.end(), [](int sweep) { return sweep != 0; });
+  const std::string caveat = oneSweep ? "; one sweep: not determined, sweeps whose frames cross are" : "";
   if (s.RefineTimeOffset)
   {
-    this->Report.Settings.push_back(Format("RefineTimeOffset = on (Adam %.3g s per step, prior %.3g at %.3g s)",
-      s.TimeOffsetLearningRate, s.PosePrior, s.TimeOffsetSigma));
+    this->Report.Settings.push_back(Format("RefineTimeOffset = on (Adam %.3g s per step, prior %.3g at %.3g s",
+      s.TimeOffsetLearningRate, s.PosePrior, s.TimeOffsetSigma) + caveat + ")");
   }
   if (s.RefineImageToProbe)
   {
     this->Report.Settings.push_back(Format("RefineImageToProbe = on (Adam %.3g rad and %.3g mm per step, prior %.3g "
-                                           "at %.3g degrees and %.3g mm)",
+                                           "at %.3g degrees and %.3g mm",
       s.PoseRotationLearningRate, s.PoseTranslationLearningRate, s.PosePrior, s.PoseRotationSigma * 180 / M_PI,
-      s.PoseTranslationSigma));
+      s.PoseTranslationSigma) + caveat + ")");
   }
   if (s.RefinesPoses())
   {
@@ -171,7 +176,9 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
     for (const std::array<double, 16>& pose : this->TrackedPoses)
     {
       SliceFrame frame;
-      this->TrackedValid.push_back(ComputeSliceFrame(pose.data(), 90, frame) == PoseStatus::Ok);
+      const int f = static_cast<int>(this->TrackedValid.size());
+      this->TrackedValid.push_back(
+        this->Data->IsValid(f) && ComputeSliceFrame(pose.data(), 90, frame) == PoseStatus::Ok);
     }
   }
   this->Engine->SetData(this->Data.get(), nullptr);
@@ -594,11 +601,10 @@ void Trainer::UpdatePoses(const std::vector<int>& frames, const std::vector<doub
       {
         continue;
       }
-      const std::array<double, 6>& velocity = this->Timeline.Velocity(frames[b]);
       for (int k = 0; k < 6; ++k)
       {
         g[k] += gb[k];
-        g[6] += s.RefineTimeOffset ? gb[k] * velocity[k] : 0.0;
+        g[6] += s.RefineTimeOffset ? gb[k] * this->Timeline.Velocity(frames[b])[k] : 0.0;
       }
     }
     for (int k = 0; k < 7; ++k)
@@ -1030,6 +1036,14 @@ bool Trainer::LoadCheckpoint(const std::string& file, std::string* error)
   double gamma = this->Gamma;
   if (!loaded.Load(file, gamma, error))
   {
+    return false;
+  }
+  if (this->Settings.RefineTimeOffset && !this->Timeline.IsBuilt(this->Data->Count()))
+  {
+    if (error)
+    {
+      *error = file + ": a run that refines the time offset loads a checkpoint after Initialize";
+    }
     return false;
   }
   // The pose corrections go on from where the checkpoint left them (the same settings, the same sweep).

@@ -317,8 +317,11 @@ bool TrainingState::Load(const std::string& file, double& gamma, std::string* er
         return fail("truncated shared pose correction");
       }
     }
-    if (!Get(in, steps) || steps < 0 ||
-      !std::all_of(s.SharedPoseCorrection.begin(), s.SharedPoseCorrection.end(), [](double v) { return std::isfinite(v); }))
+    auto finite = [](const std::array<double, 7>& v) {
+      return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x); });
+    };
+    if (!Get(in, steps) || steps < 0 || !finite(s.SharedPoseCorrection) || !finite(s.SharedPoseFirstMoment) ||
+      !finite(s.SharedPoseSecondMoment))
     {
       return fail("truncated or invalid shared pose correction");
     }

@@ -48,6 +48,10 @@ struct BIGUSTRAINING_EXPORT TrainingData
   /// [N] each frame's video timestamp (s, field data Timestamp); empty when unknown. Only the refinement of a
   /// tracker-to-video time offset reads them (bigus::PoseTimeline).
   std::vector<double> Timestamps;
+  /// [N] 0 for a frame the sweep marks invalid (field data FrameValid 0: its pose is no tracked pose); empty:
+  /// every frame valid. The tracked path in time (bigus::PoseTimeline) and the pose corrections skip them.
+  std::vector<unsigned char> Valid;
+  bool IsValid(int frame) const { return this->Valid.empty() || this->Valid[frame] != 0; }
   int Count() const { return static_cast<int>(this->Poses.size()); }
   /// The sweep frame @p frame was recorded in (0 with a single sweep). Neighbours along a sweep (the
   /// elevation sigma's frame pairs, gap filling, the pose smoothness prior) are taken within one sweep.

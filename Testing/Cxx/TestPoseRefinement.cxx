@@ -142,6 +142,21 @@ TEST(PoseTimeline, AFramesPoseMovesAlongThePathsVelocityOverTheWindow)
     ExpectPosesNear(at, expected, 1e-9);
   }
 
+  // A frame the sweep marks invalid (its pose no tracked pose: here the first frame's) is left out of the path.
+  TrainingData gap = d;
+  gap.Valid.assign(12, 1);
+  gap.Valid[6] = 0;
+  gap.Poses[6] = p0;
+  ASSERT_TRUE(timeline.Build(gap, 0.1, &error)) << error;
+  for (int f : { 5, 7 })
+  {
+    for (int c = 0; c < 3; ++c)
+    {
+      EXPECT_NEAR(timeline.Velocity(f)[c], xi[c], 1e-9) << "frame " << f;
+    }
+  }
+  EXPECT_EQ(timeline.Velocity(6), (std::array<double, 6>{})) << "no velocity of its own";
+
   // Each sweep has its own path: a second sweep standing still has velocity 0.
   TrainingData two = d;
   for (int k = 0; k < 12; ++k)

@@ -504,6 +504,17 @@ TEST(Trainer, CheckpointHoldsTheWholeTrainingState)
   EXPECT_EQ(loaded.SharedPoseFirstMoment, saved.SharedPoseFirstMoment);
   EXPECT_EQ(loaded.SharedPoseSecondMoment, saved.SharedPoseSecondMoment);
   EXPECT_EQ(loaded.SharedPoseSteps, saved.SharedPoseSteps);
+  // A run with the same settings resumes at the same poses; one that does not refine the shared correction
+  // refuses the checkpoint.
+  Trainer resumed(data, settings);
+  ASSERT_TRUE(resumed.Initialize(&error)) << error;
+  ASSERT_TRUE(resumed.LoadCheckpoint(file, &error)) << error;
+  EXPECT_EQ(resumed.GetData().Poses, trainer.GetData().Poses);
+  EXPECT_NE(resumed.GetData().Poses, data.Poses) << "the shared correction moved the poses";
+  Trainer without(data, ShortSettings());
+  ASSERT_TRUE(without.Initialize(&error)) << error;
+  EXPECT_FALSE(without.LoadCheckpoint(file, &error));
+  EXPECT_NE(error.find("an ImageToProbe correction that this run does not refine"), std::string::npos) << error;
 
   // Truncated: refused, and the state read into stays as it was.
   std::ifstream in(file, std::ios::binary);

@@ -261,6 +261,7 @@ def check_refine_poses(sweep, xml, out):
         assert max(abs(b.GetComponent(k, c) - expected[c]) for c in range(16)) < 1e-6, k
     # `bigus evaluate` scores such a field at the poses it refined (held-out frames with the shared correction),
     # or at the sweep's own with --tracked-poses.
+    psnr = {}
     for extra, poses in (([], "refined"), (["--tracked-poses"], "tracked")):
         code, out_text, err = run("evaluate", field, sweep, "--calibration", xml, "--frames", "2", "6", "--report",
                                   report, *extra)
@@ -271,11 +272,14 @@ def check_refine_poses(sweep, xml, out):
         shared = metrics["image_to_probe_correction"]
         assert shared["rotation_degrees"] + shared["translation_mm"] == stored, (shared, stored)
         assert "time_offset_ms" not in metrics
+        psnr[poses] = metrics["mean"]["psnr"]
+    assert psnr["refined"] != psnr["tracked"], psnr  # rendered at other poses
     assert "poses          the sweep's own (--tracked-poses)" in out_text, out_text
     code, out_text, err = run("train", sweep, "--calibration", xml, "-o", field, "--iterations", "30",
                               "--initial-gaussians", "2000", "--no-pixel-grid-fit", "--elevation-sigma", "1.0",
                               "--refine-time-offset")
     assert code == 0 and "RefineTimeOffset = on" in out_text and "time offset    " in out_text, (out_text, err)
+    assert "one sweep: not determined" in out_text, out_text
 
 
 def check_several_sweeps(data, sweep, xml, out):
