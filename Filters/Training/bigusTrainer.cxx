@@ -731,6 +731,8 @@ bool Trainer::CheckValidation(double& loss, std::string* error)
     state.BestFieldLoss = loss;
     state.BestFieldIteration = state.Iteration;
     state.BestField = this->GetField();
+    state.BestPoseCorrections = state.PoseCorrections;
+    state.BestSharedPoseCorrection = state.SharedPoseCorrection;
   }
   return true;
 }
@@ -965,8 +967,31 @@ bool Trainer::Finish(std::string* error)
     return false;
   }
   this->Report.LastValidationLoss = last;
+  this->Report.BestValidationLoss = this->State.BestFieldLoss;
+  this->Report.BestIteration = this->State.BestFieldIteration;
+  if (last > this->State.BestFieldLoss)
+  {
+    // Fresh optimiser moments, as after SetField, but the record of the best field stays.
+    this->State.Gaussians = OptimizerState();
+    this->State.Gaussians.Field = this->State.BestField;
+    this->State.Gaussians.ResizeToField();
+    // ... at the poses it was measured at.
+    if (this->State.BestPoseCorrections.size() == this->State.PoseCorrections.size())
+    {
+      this->State.PoseCorrections = this->State.BestPoseCorrections;
+    }
+    this->State.SharedPoseCorrection = this->State.BestSharedPoseCorrection;
+    for (int f = 0; f < this->Data->Count() && s.RefinesPoses(); ++f)
+    {
+      this->ComposePose(f);
+    }
+    if (!this->PushState(error))
+    {
+      return false;
+    }
+  }
   this->Report.PoseCorrections.clear();
-  if (this->Settings.RefinePoses)
+  if (s.RefinePoses)
   {
     for (int f : this->Data->TrainFrames)
     {
@@ -976,19 +1001,6 @@ bool Trainer::Finish(std::string* error)
   const std::array<double, 7>& shared = this->State.SharedPoseCorrection;
   this->Report.TimeOffset = shared[6];
   std::copy_n(shared.begin(), 6, this->Report.ImageToProbeCorrection.begin());
-  this->Report.BestValidationLoss = this->State.BestFieldLoss;
-  this->Report.BestIteration = this->State.BestFieldIteration;
-  if (last > this->State.BestFieldLoss)
-  {
-    // Fresh optimiser moments, as after SetField, but the record of the best field stays.
-    this->State.Gaussians = OptimizerState();
-    this->State.Gaussians.Field = this->State.BestField;
-    this->State.Gaussians.ResizeToField();
-    if (!this->PushState(error))
-    {
-      return false;
-    }
-  }
   const std::int64_t pruned = this->FinalPrune(error);
   if (pruned < 0)
   {

@@ -202,6 +202,12 @@ bool TrainingState::Save(const std::string& file, double gamma, std::string* err
       out.write(reinterpret_cast<const char*>(v->data()), sizeof(double) * 7);
     }
     Put(out, std::int32_t(this->SharedPoseSteps));
+    Put(out, std::int64_t(this->BestPoseCorrections.size()));
+    for (const std::array<double, 6>& xi : this->BestPoseCorrections)
+    {
+      out.write(reinterpret_cast<const char*>(xi.data()), sizeof(double) * 6);
+    }
+    out.write(reinterpret_cast<const char*>(this->BestSharedPoseCorrection.data()), sizeof(double) * 7);
     out.close();
     if (!out)
     {
@@ -326,6 +332,24 @@ bool TrainingState::Load(const std::string& file, double& gamma, std::string* er
       return fail("truncated or invalid shared pose correction");
     }
     s.SharedPoseSteps = steps;
+    std::int64_t best = 0;
+    if (!Get(in, best) || (best != 0 && best != poses))
+    {
+      return fail("truncated or invalid best field's pose corrections");
+    }
+    s.BestPoseCorrections.resize(best);
+    for (std::array<double, 6>& xi : s.BestPoseCorrections)
+    {
+      if (!in.read(reinterpret_cast<char*>(xi.data()), sizeof(double) * 6))
+      {
+        return fail("truncated best field's pose corrections");
+      }
+    }
+    if (!in.read(reinterpret_cast<char*>(s.BestSharedPoseCorrection.data()), sizeof(double) * 7) ||
+      !finite(s.BestSharedPoseCorrection))
+    {
+      return fail("truncated or invalid best field's pose corrections");
+    }
   }
   s.BestFieldIteration = bestIteration;
   std::istringstream state(text);

@@ -124,6 +124,10 @@ struct BIGUSTRAINING_EXPORT TrainingState
   std::array<double, 7> SharedPoseCorrection{};
   std::array<double, 7> SharedPoseFirstMoment{}, SharedPoseSecondMoment{}; ///< their Adam moments
   int SharedPoseSteps = 0;                                                 ///< Adam steps they took
+  /// The corrections when BestField was measured (PoseCorrections, SharedPoseCorrection): early stopping keeps
+  /// them with it. Empty / zero without pose refinement.
+  std::vector<std::array<double, 6>> BestPoseCorrections;
+  std::array<double, 7> BestSharedPoseCorrection{};
 
   /**
    * Writes the state to @p file (written to FILE.tmp, then renamed; the previous file survives a
@@ -135,7 +139,7 @@ struct BIGUSTRAINING_EXPORT TrainingState
    * field's validation loss | int32 its iteration | int64 M | best field as above | float64 training
    * seconds | int64 P (frames with a pose correction; 0 without pose refinement) | P x (6 float64
    * correction, 6 float64 Adam m, 6 float64 Adam v, int32 steps) | 7 float64 shared correction, 7 Adam m,
-   * 7 Adam v, int32 steps. Load also reads "BIGUSCK4" files (no shared correction), "BIGUSCK3" files (no
+   * 7 Adam v, int32 steps | int64 B + B x 6 float64 and 7 float64: the corrections of the best field. Load also reads "BIGUSCK4" files (no shared correction), "BIGUSCK3" files (no
    * pose corrections), "BIGUSCK2" files (no training seconds either: a time budget starts afresh) and
    * "BIGUSCK1" files (neither those nor a best field: early stopping starts afresh too).
    * Returns false with @p error naming the file.

@@ -429,12 +429,14 @@ TEST(Trainer, AResumedRunCountsTheSecondsBeforeItsCheckpointTowardsItsTimeBudget
   EXPECT_EQ(second.GetField().Count(), loaded) << "densified after the window had closed";
 
   // Checkpoints of the previous formats still load: version 4 (no shared pose correction: the file ends with
-  // it, 3 x 7 doubles and a step count), version 3 (no pose corrections; this run has none, so its file then
+  // it, 3 x 7 doubles and a step count, then the best field's corrections, here a count 0 and 7 doubles),
+  // version 3 (no pose corrections; this run has none, so its file then
   // ends with their count 0) with the training seconds, version 2 (no training seconds either) with none.
   std::ifstream in(checkpoint, std::ios::binary);
   std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   ASSERT_EQ(bytes.compare(0, 8, "BIGUSCK5"), 0);
-  bytes = bytes.substr(0, bytes.size() - 21 * sizeof(double) - sizeof(std::int32_t));
+  bytes = bytes.substr(
+    0, bytes.size() - 28 * sizeof(double) - sizeof(std::int32_t) - sizeof(std::int64_t));
   bytes[7] = '4';
   std::ofstream(checkpoint + ".v4", std::ios::binary) << bytes;
   TrainingState old;
@@ -504,6 +506,8 @@ TEST(Trainer, CheckpointHoldsTheWholeTrainingState)
   EXPECT_EQ(loaded.SharedPoseFirstMoment, saved.SharedPoseFirstMoment);
   EXPECT_EQ(loaded.SharedPoseSecondMoment, saved.SharedPoseSecondMoment);
   EXPECT_EQ(loaded.SharedPoseSteps, saved.SharedPoseSteps);
+  EXPECT_EQ(loaded.BestPoseCorrections, saved.BestPoseCorrections);
+  EXPECT_EQ(loaded.BestSharedPoseCorrection, saved.BestSharedPoseCorrection);
   // A run with the same settings resumes at the same poses; one that does not refine the shared correction
   // refuses the checkpoint.
   Trainer resumed(data, settings);
