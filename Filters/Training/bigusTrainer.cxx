@@ -651,10 +651,7 @@ void Trainer::UpdatePoses(const std::vector<int>& frames, const std::vector<doub
   }
   if (shared)
   {
-    for (int f = 0; f < this->Data->Count(); ++f)
-    {
-      this->ComposePose(f);
-    }
+    this->ComposePoses();
   }
   else
   {
@@ -662,6 +659,14 @@ void Trainer::UpdatePoses(const std::vector<int>& frames, const std::vector<doub
     {
       this->ComposePose(f);
     }
+  }
+}
+
+void Trainer::ComposePoses()
+{
+  for (int f = 0; f < this->Data->Count() && this->Settings.RefinesPoses(); ++f)
+  {
+    this->ComposePose(f);
   }
 }
 
@@ -981,10 +986,7 @@ bool Trainer::Finish(std::string* error)
       this->State.PoseCorrections = this->State.BestPoseCorrections;
     }
     this->State.SharedPoseCorrection = this->State.BestSharedPoseCorrection;
-    for (int f = 0; f < this->Data->Count() && s.RefinesPoses(); ++f)
-    {
-      this->ComposePose(f);
-    }
+    this->ComposePoses();
     if (!this->PushState(error))
     {
       return false;
@@ -1084,10 +1086,7 @@ bool Trainer::LoadCheckpoint(const std::string& file, std::string* error)
     return false;
   }
   this->State = std::move(loaded);
-  for (int f = 0; f < this->Data->Count() && this->Settings.RefinesPoses(); ++f)
-  {
-    this->ComposePose(f); // frames never corrected (held out, or before the corrections moved) stay as tracked
-  }
+  this->ComposePoses(); // frames never corrected (held out, or before the corrections moved) stay as tracked
   this->Gamma = gamma;
   this->PixelGrid = false; // a checkpoint comes from a run that takes steps: it goes on with them
   return this->PushState(error);

@@ -389,6 +389,8 @@ private:
   /// Frame @p frame's pose in the data: its tracked pose at its timestamp plus the time offset, then its own
   /// correction, then the ImageToProbe correction (each when refined).
   void ComposePose(int frame);
+  /// ComposePose of every frame (after a shared correction moved, or the state was replaced).
+  void ComposePoses();
   std::vector<float> S; // scratch for RenderFrame
 };
 
