@@ -29,6 +29,23 @@
 #include <vector>
 
 vtkStandardNewMacro(vtkGaussianFieldTrainer);
+
+namespace
+{
+/// How the field data stores a pose correction (bigus::CorrectPose's xi: rotation vector, rad; translation, mm):
+/// these six components, written by StoredCorrection.
+const char* const CorrectionComponents[6] = { "RotationU (degrees)", "RotationV (degrees)", "RotationN (degrees)",
+  "TranslationU (mm)", "TranslationV (mm)", "TranslationN (mm)" };
+
+void StoredCorrection(const std::array<double, 6>& xi, double stored[6])
+{
+  const double degrees = 180.0 / vtkMath::Pi();
+  for (int k = 0; k < 6; ++k)
+  {
+    stored[k] = k < 3 ? xi[k] * degrees : xi[k];
+  }
+}
+}
 vtkCxxSetObjectMacro(vtkGaussianFieldTrainer, TrainingFrameList, vtkIdList);
 
 vtkGaussianFieldTrainer::vtkGaussianFieldTrainer()
@@ -405,17 +422,15 @@ int vtkGaussianFieldTrainer::RequestData(
     vtkNew<vtkDoubleArray> corrections;
     corrections->SetName("PoseCorrections");
     corrections->SetNumberOfComponents(7);
-    const char* names[7] = { "Frame", "RotationU (degrees)", "RotationV (degrees)", "RotationN (degrees)",
-      "TranslationU (mm)", "TranslationV (mm)", "TranslationN (mm)" };
-    for (int k = 0; k < 7; ++k)
+    corrections->SetComponentName(0, "Frame");
+    for (int k = 0; k < 6; ++k)
     {
-      corrections->SetComponentName(k, names[k]);
+      corrections->SetComponentName(k + 1, CorrectionComponents[k]);
     }
     for (const bigus::TrainerReport::PoseCorrection& p : report.PoseCorrections)
     {
-      const double degrees = 180.0 / vtkMath::Pi();
-      const double tuple[7] = { double(p.Frame), p.Xi[0] * degrees, p.Xi[1] * degrees, p.Xi[2] * degrees, p.Xi[3],
-        p.Xi[4], p.Xi[5] };
+      double tuple[7] = { double(p.Frame) };
+      StoredCorrection(p.Xi, tuple + 1);
       corrections->InsertNextTuple(tuple);
     }
     output->GetFieldData()->AddArray(corrections);
@@ -442,17 +457,15 @@ int vtkGaussianFieldTrainer::RequestData(
   if (s.RefineImageToProbe)
   {
     const std::array<double, 6>& xi = report.ImageToProbeCorrection;
-    const double degrees = 180.0 / vtkMath::Pi();
     vtkNew<vtkDoubleArray> correction;
     correction->SetName("ImageToProbeCorrection");
     correction->SetNumberOfComponents(6);
-    const char* names[6] = { "RotationU (degrees)", "RotationV (degrees)", "RotationN (degrees)", "TranslationU (mm)",
-      "TranslationV (mm)", "TranslationN (mm)" };
     for (int k = 0; k < 6; ++k)
     {
-      correction->SetComponentName(k, names[k]);
+      correction->SetComponentName(k, CorrectionComponents[k]);
     }
-    const double tuple[6] = { xi[0] * degrees, xi[1] * degrees, xi[2] * degrees, xi[3], xi[4], xi[5] };
+    double tuple[6];
+    StoredCorrection(xi, tuple);
     correction->InsertNextTuple(tuple);
     output->GetFieldData()->AddArray(correction);
     // M = P^-1 CorrectPose(P, xi): the correction acts in the image's own axes, so M is the same for every
