@@ -47,16 +47,6 @@ void ExpectPosesNear(const double* a, const double* b, double tolerance)
   }
 }
 
-double Psnr(const float* a, const float* b, std::size_t n)
-{
-  double mse = 0;
-  for (std::size_t p = 0; p < n; ++p)
-  {
-    mse += (double(a[p]) - b[p]) * (double(a[p]) - b[p]);
-  }
-  return 10 * std::log10(1.0 / std::max(mse / n, 1e-20));
-}
-
 /// Mean PSNR (dB) of @p field rendered at @p truth's poses of @p frames against @p truth's frames.
 double PsnrAt(const GaussianField& field, const RenderOptions& options, const TrainingData& truth,
   const std::vector<int>& frames)

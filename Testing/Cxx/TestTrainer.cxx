@@ -83,17 +83,6 @@ TrainingData SyntheticSweep(const GaussianField& truth, double sigmaE, std::vect
   return RenderedSweep(truth, poses, W, H, sigmaE, heldOut);
 }
 
-double Psnr(const float* a, const float* b, int n)
-{
-  double mse = 0;
-  for (int p = 0; p < n; ++p)
-  {
-    mse += (double(a[p]) - b[p]) * (double(a[p]) - b[p]);
-  }
-  mse /= n;
-  return 10 * std::log10(1.0 / std::max(mse, 1e-20));
-}
-
 double HeldOutPsnr(const Trainer& trainer, const std::vector<int>& heldOut)
 {
   auto renderer = CreateCpuRenderer();

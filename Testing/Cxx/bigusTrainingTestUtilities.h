@@ -9,6 +9,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <random>
@@ -56,6 +57,17 @@ inline void AppendRandomRotation(GaussianField& field, std::mt19937_64& rng, std
   {
     field.Quaternions.push_back(static_cast<float>(v / std::sqrt(n2)));
   }
+}
+
+/// PSNR (dB, peak 1) of @p n intensities @p a against @p b, every pixel counted.
+inline double Psnr(const float* a, const float* b, std::size_t n)
+{
+  double mse = 0;
+  for (std::size_t p = 0; p < n; ++p)
+  {
+    mse += (double(a[p]) - b[p]) * (double(a[p]) - b[p]);
+  }
+  return 10 * std::log10(1.0 / std::max(mse / n, 1e-20));
 }
 
 /// Every parameter of every Gaussian of @p a and @p b equal, bit for bit.
