@@ -8,6 +8,7 @@
 //   bigus render FIELD.vtp --volume [--spacing MM] -o volume.mha|.vti
 //   bigus evaluate FIELD.vtp SWEEP [--holdout-every K --holdout-offset J | --frames LIST] --report DIR
 //   bigus sweep VOLUME -o SWEEP.igs.mha [--mask-output MASK.mha] [--protocol parallel|oblique|orthogonal] ...
+//   bigus batch MANIFEST.json [--summary DIR]   (also under mpirun -n P: the ranks share a work queue)
 //   bigus benchmark [--quick] [--section all|defaults|volume|blocks|ablations|pareto] [--output DIR]
 //
 // Exit codes: 0 success, 1 a bad file or a failed step (one line on stderr), 2 bad arguments.
@@ -34,7 +35,7 @@ int main(int argc, char** argv)
   using namespace bigus::cli;
   const std::vector<Command> commands = { AddInfoCommand(app), AddTrainCommand(app), AddRenderCommand(app),
     AddEvaluateCommand(app), AddSweepCommand(app), AddFillGapsCommand(app),
-    AddBenchmarkCommand(app, BIGUS_SOURCE_DIR) };
+    AddBatchCommand(app), AddBenchmarkCommand(app, BIGUS_SOURCE_DIR) };
   try
   {
     app.parse(argc, argv);

@@ -42,6 +42,8 @@ Command AddRenderCommand(CLI::App& app);
 Command AddEvaluateCommand(CLI::App& app);
 Command AddSweepCommand(CLI::App& app);
 Command AddFillGapsCommand(CLI::App& app);
+/// `bigus batch`: the jobs of a manifest, in one process or on MPI ranks (bigusBatchCommand.cxx).
+Command AddBatchCommand(CLI::App& app);
 /// @p sourceDirectory: where `bigus benchmark` finds Examples/Data and Testing/Data unless --data says.
 Command AddBenchmarkCommand(CLI::App& app, const std::string& sourceDirectory);
 

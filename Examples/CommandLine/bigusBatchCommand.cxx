@@ -1,0 +1,874 @@
+// `bigus batch MANIFEST.json`: train and evaluate many jobs, on one process or on MPI ranks sharing a work
+// queue held by rank 0; a summary of every job; a rerun skips the jobs whose outputs are complete.
+#include "bigusCommandLine.h"
+#include "bigusPlot.h"
+#include "vtkDataArray.h"
+#include "vtkFieldData.h"
+#include "vtkNew.h"
+#include "vtkPolyData.h"
+#include "vtkXMLPolyDataReader.h"
+
+#include <CLI/CLI.hpp>
+#include <mpi.h>
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fcntl.h>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <new>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <unistd.h>
+#include <vector>
+
+namespace bigus::cli
+{
+namespace
+{
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+struct BatchOptions
+{
+  std::string Manifest, Summary;
+};
+
+/// One job of the manifest: the arguments of its `bigus train` and `bigus evaluate`, resolved and checked.
+struct BatchJob
+{
+  std::string Name, Output; ///< Output: the job's folder (field.vtp, metrics.json, log.txt, job.json)
+  int Line = 0;             ///< line of the job in the manifest
+  std::vector<std::string> TrainArguments, EvaluateArguments;
+  /// --frames jobs: the training frames, whose complement in the sweep is scored (found when the job runs).
+  std::vector<int> TrainingFrames;
+};
+
+/// Where the manifest's jobs and keys are (1-based lines): JSON parsers give values, not positions.
+struct ManifestLines
+{
+  std::vector<int> Jobs;
+  std::vector<std::map<std::string, int>> JobKeys;
+  std::map<std::string, int> DefaultKeys;
+};
+
+ManifestLines LocateLines(const std::string& text)
+{
+  ManifestLines lines;
+  std::vector<std::string> openedBy; // per open container: the top-level key whose value it is
+  std::string key;
+  int line = 1;
+  for (std::size_t i = 0; i < text.size(); ++i)
+  {
+    const char c = text[i];
+    if (c == '\n')
+    {
+      ++line;
+    }
+    else if (c == '"')
+    {
+      const std::size_t start = ++i;
+      for (; i < text.size() && text[i] != '"'; ++i)
+      {
+        i += text[i] == '\\';
+      }
+      const std::size_t next = text.find_first_not_of(" \t\r\n", i + 1);
+      if (next != std::string::npos && text[next] == ':')
+      {
+        key = text.substr(start, i - start);
+        const std::size_t depth = openedBy.size();
+        if (depth == 3 && openedBy[1] == "jobs" && !lines.JobKeys.empty())
+        {
+          lines.JobKeys.back()[key] = line;
+        }
+        else if (depth == 2 && openedBy[1] == "defaults")
+        {
+          lines.DefaultKeys[key] = line;
+        }
+      }
+    }
+    else if (c == '{' || c == '[')
+    {
+      openedBy.push_back(openedBy.size() == 1 ? key : (openedBy.size() > 1 ? openedBy[1] : ""));
+      if (openedBy.size() == 3 && openedBy[1] == "jobs" && c == '{')
+      {
+        lines.Jobs.push_back(line);
+        lines.JobKeys.emplace_back();
+      }
+      key.clear();
+    }
+    else if ((c == '}' || c == ']') && !openedBy.empty())
+    {
+      openedBy.pop_back();
+    }
+  }
+  return lines;
+}
+
+/// Runs a `bigus` command on @p arguments (as on the command line after "bigus"); @p dryRun parses only.
+/// Throws CLI::ParseError for bad arguments.
+int RunCommand(const std::vector<std::string>& arguments, bool dryRun)
+{
+  CLI::App app;
+  app.require_subcommand(1);
+  const Command train = AddTrainCommand(app), evaluate = AddEvaluateCommand(app);
+  std::vector<std::string> reversed(arguments.rbegin(), arguments.rend());
+  app.parse(reversed);
+  if (dryRun)
+  {
+    return 0;
+  }
+  return train.App->parsed() ? train.Run() : evaluate.Run();
+}
+
+/// The options of `bigus train` that are paths, resolved against the manifest's folder ("sweep" too) or the
+/// job's output folder; "resume" is refused (a rerun of the batch resumes), "output" is the job's folder.
+bool IsInputPath(const std::string& key)
+{
+  return key == "sweep" || key == "calibration" || key == "mask";
+}
+bool IsOutputPath(const std::string& key)
+{
+  return key == "checkpoint" || key == "refined-poses";
+}
+
+/// The manifest's jobs, checked before any runs; false with @p error naming the line that is wrong.
+bool ReadManifest(const std::string& file, std::vector<BatchJob>& jobs, std::string& error)
+{
+  std::ifstream in(file, std::ios::binary);
+  if (!in)
+  {
+    error = file + ": cannot open the manifest";
+    return false;
+  }
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  const std::string text = buffer.str();
+  json manifest;
+  try
+  {
+    manifest = json::parse(text);
+  }
+  catch (const json::parse_error& e)
+  {
+    const std::size_t end = std::min<std::size_t>(e.byte, text.size());
+    const long line = 1 + std::count(text.begin(), text.begin() + static_cast<std::ptrdiff_t>(end), '\n');
+    error = file + ", line " + std::to_string(line) + ": not JSON (" + e.what() + ")";
+    return false;
+  }
+  if (!manifest.is_object() || !manifest.contains("jobs") || !manifest["jobs"].is_array() || manifest["jobs"].empty())
+  {
+    error = file + ": a manifest is an object with \"jobs\": [ {\"sweep\": ..., \"output\": ...}, ... ] and "
+                   "optionally \"defaults\": { ... }";
+    return false;
+  }
+  for (const auto& [key, value] : manifest.items())
+  {
+    if (key != "jobs" && key != "defaults")
+    {
+      error = file + ": unknown key \"" + key + "\" (a manifest has \"jobs\" and \"defaults\")";
+      return false;
+    }
+  }
+  const json defaults = manifest.value("defaults", json::object());
+  const ManifestLines lines = LocateLines(text);
+  if (!defaults.is_object() || lines.Jobs.size() != manifest["jobs"].size())
+  {
+    error = file + ": \"defaults\" must be an object and every entry of \"jobs\" an object";
+    return false;
+  }
+  const fs::path folder = fs::absolute(fs::path(file)).parent_path();
+  std::map<std::string, std::size_t> outputs; // canonical output folder -> job
+  // The options bigus train declares, to tell an unknown key from a misspelt one before anything runs.
+  CLI::App scratch;
+  const CLI::App* train = AddTrainCommand(scratch).App;
+  for (std::size_t j = 0; j < manifest["jobs"].size(); ++j)
+  {
+    BatchJob job;
+    job.Line = lines.Jobs[j];
+    json settings = defaults;
+    settings.update(manifest["jobs"][j]);
+    if (settings.contains("name") && !settings["name"].is_string())
+    {
+      error = file + ", line " + std::to_string(job.Line) + " (job " + std::to_string(j) + "): \"name\" must be a string";
+      return false;
+    }
+    auto where = [&](const std::string& key) {
+      auto own = lines.JobKeys[j].find(key);
+      const bool fromDefaults = own == lines.JobKeys[j].end() && lines.DefaultKeys.count(key);
+      const int line = own != lines.JobKeys[j].end() ? own->second
+        : fromDefaults                               ? lines.DefaultKeys.at(key)
+                                                     : job.Line;
+      return file + ", line " + std::to_string(line) + " (job " + std::to_string(j) +
+        (key.empty() ? std::string() : (fromDefaults ? ", \"defaults\" " : ", ") + ("\"" + key + "\"")) + "): ";
+    };
+    for (const char* required : { "sweep", "output" })
+    {
+      if (!settings.contains(required))
+      {
+        error = where("") + "missing \"" + required + "\"";
+        return false;
+      }
+    }
+    if (!settings["output"].is_string() || settings["output"].get<std::string>().empty())
+    {
+      error = where("output") + "the job's output folder must be a non-empty string";
+      return false;
+    }
+    job.Output = (folder / settings["output"].get<std::string>()).lexically_normal().string();
+    job.Name = settings.value("name", fs::path(job.Output).filename().string());
+    const std::string canonical = fs::weakly_canonical(job.Output).string();
+    if (outputs.count(canonical))
+    {
+      error = where("output") + "output folder " + job.Output + " is also job " + std::to_string(outputs[canonical]) +
+        "'s (line " + std::to_string(lines.Jobs[outputs[canonical]]) + ")";
+      return false;
+    }
+    outputs[canonical] = j;
+    std::vector<std::string> sweeps, arguments = { "train" };
+    int holdOutSweep = -1;
+    std::string holdOutEvery, holdOutOffset, backend;
+    std::map<std::string, std::vector<std::string>> perSweep; // calibration, mask (one for all or one per sweep), transform
+    for (const auto& [key, value] : settings.items())
+    {
+      if (key == "output" || key == "name")
+      {
+        continue;
+      }
+      if (key == "resume")
+      {
+        error = where(key) + "not a batch option: rerunning the batch resumes it (completed jobs are skipped)";
+        return false;
+      }
+      if (key != "sweep" && !train->get_option_no_throw("--" + key))
+      {
+        error = where(key) + "unknown option (neither a batch key, \"sweep\", \"output\", \"name\", nor an option "
+                             "of bigus train: bigus train --help)";
+        return false;
+      }
+      std::vector<json> values = value.is_array() ? value.get<std::vector<json>>() : std::vector<json>{ value };
+      std::vector<std::string> texts;
+      for (const json& v : values)
+      {
+        if (v.is_string())
+        {
+          const std::string s = v.get<std::string>();
+          texts.push_back(IsInputPath(key) ? (folder / s).lexically_normal().string()
+              : IsOutputPath(key)          ? (fs::path(job.Output) / s).lexically_normal().string()
+                                           : s);
+        }
+        else if (v.is_number_integer())
+        {
+          texts.push_back(std::to_string(v.get<long long>()));
+        }
+        else if (v.is_number())
+        {
+          texts.push_back(v.dump());
+        }
+        else if (v.is_boolean() && !value.is_array())
+        {
+          texts.push_back(v.get<bool>() ? "true" : "false");
+        }
+        else
+        {
+          error = where(key) + "expects a string, a number, true / false, or a list of strings or numbers";
+          return false;
+        }
+      }
+      if (key == "sweep")
+      {
+        sweeps = texts;
+        continue;
+      }
+      if (key == "holdout-sweep")
+      {
+        holdOutSweep = std::atoi(texts.front().c_str());
+      }
+      holdOutEvery = key == "holdout-every" ? texts.front() : holdOutEvery;
+      holdOutOffset = key == "holdout-offset" ? texts.front() : holdOutOffset;
+      backend = key == "backend" ? texts.front() : backend;
+      if (key == "calibration" || key == "mask" || key == "transform")
+      {
+        perSweep[key] = texts;
+      }
+      if (key == "frames")
+      {
+        for (const std::string& t : texts)
+        {
+          job.TrainingFrames.push_back(std::atoi(t.c_str()));
+        }
+      }
+      if (value.is_boolean())
+      {
+        if (value.get<bool>())
+        {
+          arguments.push_back("--" + key);
+        }
+        continue;
+      }
+      for (const std::string& t : texts)
+      {
+        arguments.push_back("--" + key);
+        arguments.push_back(t);
+      }
+    }
+    arguments.insert(arguments.begin() + 1, sweeps.begin(), sweeps.end());
+    arguments.push_back("-o");
+    arguments.push_back((fs::path(job.Output) / "field.vtp").string());
+    try
+    {
+      RunCommand(arguments, true);
+    }
+    catch (const CLI::ParseError& e)
+    {
+      std::string what = e.what();
+      what.erase(std::remove(what.begin(), what.end(), '\n'), what.end());
+      error = where("") + what;
+      return false;
+    }
+    // What is scored: the held-out sweep, or the one sweep's frames that were held out.
+    const std::size_t scored = holdOutSweep >= 0 ? static_cast<std::size_t>(holdOutSweep) : 0;
+    if (holdOutSweep < 0 && sweeps.size() > 1)
+    {
+      error = where("sweep") + "a job of several sweeps is scored on one left out: give \"holdout-sweep\"";
+      return false;
+    }
+    if (holdOutSweep < 0 && holdOutEvery.empty() && job.TrainingFrames.empty())
+    {
+      error = where("") + "no held-out frames to score: give \"holdout-every\" (and \"holdout-offset\"), "
+                          "\"frames\" or \"holdout-sweep\"";
+      return false;
+    }
+    if (scored >= sweeps.size())
+    {
+      error = where("holdout-sweep") + "there is no sweep " + std::to_string(scored) + " (the job has " +
+        std::to_string(sweeps.size()) + ")";
+      return false;
+    }
+    job.EvaluateArguments = { "evaluate", (fs::path(job.Output) / "field.vtp").string(), sweeps[scored] };
+    for (const auto& [key, files] : perSweep)
+    {
+      job.EvaluateArguments.push_back("--" + key);
+      job.EvaluateArguments.push_back(files[files.size() == 1 ? 0 : std::min(scored, files.size() - 1)]);
+    }
+    if (holdOutSweep < 0 && !holdOutEvery.empty())
+    {
+      job.EvaluateArguments.insert(job.EvaluateArguments.end(),
+        { "--holdout-every", holdOutEvery, "--holdout-offset", holdOutOffset.empty() ? "0" : holdOutOffset });
+    }
+    if (!backend.empty())
+    {
+      job.EvaluateArguments.insert(job.EvaluateArguments.end(), { "--backend", backend });
+    }
+    job.EvaluateArguments.insert(job.EvaluateArguments.end(), { "--report", job.Output });
+    job.TrainArguments = arguments;
+    jobs.push_back(job);
+  }
+  return true;
+}
+
+/// The job's record (job.json) when its outputs are complete and were made by these arguments: the field
+/// reads back with the recorded count of Gaussians and metrics.json has its mean. Otherwise null.
+json CompletedJob(const BatchJob& job)
+{
+  try
+  {
+    std::ifstream in(fs::path(job.Output) / "job.json");
+    std::ifstream metricsFile(fs::path(job.Output) / "metrics.json");
+    if (!in || !metricsFile)
+    {
+      return nullptr;
+    }
+    json record = json::parse(in);
+    const json metrics = json::parse(metricsFile);
+    if (record.value("status", "") != "done" || record.value("train", json()) != json(job.TrainArguments) ||
+      record.value("evaluate", json()) != json(job.EvaluateArguments) || !metrics.contains("mean"))
+    {
+      return nullptr;
+    }
+    const std::string field = (fs::path(job.Output) / "field.vtp").string();
+    if (!fs::exists(field))
+    {
+      return nullptr;
+    }
+    vtkNew<vtkXMLPolyDataReader> reader;
+    reader->SetFileName(field.c_str());
+    reader->Update();
+    if (reader->GetErrorCode() != 0 || reader->GetOutput()->GetNumberOfPoints() != record.value("gaussians", -1LL))
+    {
+      return nullptr;
+    }
+    return record;
+  }
+  catch (const json::exception&)
+  {
+    return nullptr;
+  }
+}
+
+/// Writes @p text to @p path through a temporary file; false when it cannot.
+bool WriteText(const std::string& path, const std::string& text)
+{
+  const std::string temporary = TemporaryName(path);
+  std::ofstream out(temporary);
+  out << text;
+  out.close();
+  if (!out)
+  {
+    std::remove(temporary.c_str());
+    return false;
+  }
+  return Publish(temporary, path);
+}
+
+/// The job's stdout and stderr go to its log.txt while it runs (this process runs one job at a time).
+class LogRedirect
+{
+public:
+  explicit LogRedirect(const std::string& path)
+  {
+    std::fflush(stdout);
+    std::fflush(stderr);
+    const int log = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    if (log < 0)
+    {
+      return;
+    }
+    this->Saved[0] = ::dup(STDOUT_FILENO);
+    this->Saved[1] = ::dup(STDERR_FILENO);
+    ::dup2(log, STDOUT_FILENO);
+    ::dup2(log, STDERR_FILENO);
+    ::close(log);
+  }
+  ~LogRedirect()
+  {
+    std::fflush(stdout);
+    std::fflush(stderr);
+    for (int k = 0; k < 2; ++k)
+    {
+      if (this->Saved[k] >= 0)
+      {
+        ::dup2(this->Saved[k], k ? STDERR_FILENO : STDOUT_FILENO);
+        ::close(this->Saved[k]);
+      }
+    }
+  }
+  LogRedirect(const LogRedirect&) = delete;
+  LogRedirect& operator=(const LogRedirect&) = delete;
+
+private:
+  int Saved[2] = { -1, -1 };
+};
+
+/// The last "bigus: ..." line of a job's log: the error its command reported.
+std::string LastError(const std::string& log)
+{
+  std::ifstream in(log);
+  std::string error;
+  for (std::string line; std::getline(in, line);)
+  {
+    if (line.rfind("bigus: ", 0) == 0)
+    {
+      error = line.substr(7);
+    }
+  }
+  return error;
+}
+
+/// Adds "--frames" and the frames of the scored sweep not in @p training to @p evaluate (the arguments of
+/// `bigus evaluate`); returns 1 after a message when the sweep cannot be read.
+int AddHeldOutFrames(const std::vector<int>& training, std::vector<std::string>& evaluate)
+{
+  SweepOptions sweep;
+  sweep.Sweep = evaluate[2];
+  for (std::size_t k = 3; k + 1 < evaluate.size(); ++k)
+  {
+    sweep.Calibration = evaluate[k] == "--calibration" ? evaluate[k + 1] : sweep.Calibration;
+    sweep.Chain = evaluate[k] == "--transform" ? evaluate[k + 1] : sweep.Chain;
+  }
+  auto reader = ReadSweep(sweep);
+  if (!reader)
+  {
+    return 1;
+  }
+  evaluate.push_back("--frames");
+  for (int k = 0; k < reader->GetOutput()->GetDimensions()[2]; ++k)
+  {
+    if (std::find(training.begin(), training.end(), k) == training.end())
+    {
+      evaluate.push_back(std::to_string(k));
+    }
+  }
+  return 0;
+}
+
+/// Trains and evaluates one job into its folder; returns its record (also written as job.json, last).
+json RunJob(const BatchJob& job, int rank, int threads)
+{
+  const auto start = std::chrono::steady_clock::now();
+  json record = { { "name", job.Name }, { "output", job.Output }, { "train", job.TrainArguments },
+    { "evaluate", job.EvaluateArguments }, { "rank", rank } };
+  std::error_code made;
+  fs::create_directories(job.Output, made);
+  fs::remove(fs::path(job.Output) / "job.json", made); // a rerun's outputs are not complete until it ends
+  const std::string log = (fs::path(job.Output) / "log.txt").string();
+  int code = 1;
+  std::string error;
+  {
+    LogRedirect redirect(log);
+    try
+    {
+      std::vector<std::string> train = job.TrainArguments;
+      if (threads > 0 && std::find(train.begin(), train.end(), "--threads") == train.end())
+      {
+        train.insert(train.end(), { "--threads", std::to_string(threads) });
+      }
+      std::vector<std::string> evaluate = job.EvaluateArguments;
+      code = RunCommand(train, false);
+      code = code == 0 && !job.TrainingFrames.empty() ? AddHeldOutFrames(job.TrainingFrames, evaluate) : code;
+      code = code == 0 ? RunCommand(evaluate, false) : code;
+    }
+    catch (const std::bad_alloc&)
+    {
+      error = "out of memory";
+    }
+    catch (const std::exception& e)
+    {
+      error = e.what();
+    }
+  }
+  record["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (code == 0 && error.empty())
+  {
+    vtkNew<vtkXMLPolyDataReader> reader;
+    const std::string field = (fs::path(job.Output) / "field.vtp").string();
+    reader->SetFileName(field.c_str());
+    reader->Update();
+    std::ifstream metrics(fs::path(job.Output) / "metrics.json");
+    try
+    {
+      record["metrics"] = json::parse(metrics).at("mean");
+      record["gaussians"] = static_cast<long long>(reader->GetOutput()->GetNumberOfPoints());
+      record["status"] = "done";
+    }
+    catch (const json::exception&)
+    {
+      error = "metrics.json unreadable after evaluate";
+    }
+  }
+  if (!record.contains("status"))
+  {
+    record["status"] = "failed";
+    record["error"] = error.empty() ? LastError(log) : error;
+    if (record["error"].get<std::string>().empty())
+    {
+      record["error"] = "exit code " + std::to_string(code) + " (see " + log + ")";
+    }
+  }
+  if (!WriteText((fs::path(job.Output) / "job.json").string(), record.dump(2) + "\n"))
+  {
+    record["status"] = "failed";
+    record["error"] = job.Output + "/job.json: cannot write";
+  }
+  return record;
+}
+
+/// Mean, sample standard deviation, smallest and largest of @p values.
+json Spread(const std::vector<double>& values)
+{
+  if (values.empty())
+  {
+    return nullptr;
+  }
+  double sum = 0, squares = 0;
+  for (double v : values)
+  {
+    sum += v;
+  }
+  const double mean = sum / values.size();
+  for (double v : values)
+  {
+    squares += (v - mean) * (v - mean);
+  }
+  return { { "mean", mean }, { "sd", values.size() > 1 ? std::sqrt(squares / (values.size() - 1)) : 0.0 },
+    { "min", *std::min_element(values.begin(), values.end()) },
+    { "max", *std::max_element(values.begin(), values.end()) }, { "jobs", values.size() } };
+}
+
+/// summary.json and summary.md in @p folder; false when they cannot be written.
+bool WriteSummary(const std::string& folder, const std::string& manifest, const std::vector<json>& records,
+  int ranks, double seconds)
+{
+  const char* metrics[] = { "psnr", "ssim", "ncc", "speckle" };
+  std::map<std::string, std::vector<double>> values;
+  int counts[3] = { 0, 0, 0 }; // done now, kept (complete before this run), failed
+  for (const json& r : records)
+  {
+    const std::string status = r.value("status", "");
+    counts[status == "done" ? 0 : status == "kept" ? 1 : 2]++;
+    if (status == "failed")
+    {
+      continue;
+    }
+    for (const char* m : metrics)
+    {
+      values[m].push_back(r["metrics"].value(m, 0.0));
+    }
+    values["gaussians"].push_back(r.value("gaussians", 0.0));
+    values["seconds"].push_back(r.value("seconds", 0.0));
+  }
+  json summary = { { "manifest", manifest }, { "ranks", ranks }, { "wall_seconds", seconds },
+    { "done", counts[0] }, { "kept", counts[1] }, { "failed", counts[2] }, { "jobs", records } };
+  for (const auto& [name, list] : values)
+  {
+    summary["statistics"][name] = Spread(list);
+  }
+  std::ostringstream md;
+  char cell[256];
+  md << "# bigus batch " << manifest << "\n\n"
+     << records.size() << " jobs: " << counts[0] << " done, " << counts[1] << " kept (complete before this run), "
+     << counts[2] << " failed; " << ranks << (ranks == 1 ? " process" : " MPI ranks") << ", "
+     << std::lround(seconds) << " s wall-clock.\n\n"
+     << "| job | status | rank | seconds | Gaussians | PSNR (dB) | SSIM | NCC | speckle | error |\n"
+     << "|---|---|---|---|---|---|---|---|---|---|\n";
+  for (const json& r : records)
+  {
+    const bool scored = r.value("status", "") != "failed";
+    std::snprintf(cell, sizeof(cell), "| %s | %s | %d | %.1f | ", r.value("name", "").c_str(),
+      r.value("status", "").c_str(), r.value("rank", 0), r.value("seconds", 0.0));
+    md << cell;
+    if (scored)
+    {
+      std::snprintf(cell, sizeof(cell), "%lld | %.2f | %.4f | %.4f | %.4f | |\n", r.value("gaussians", 0LL),
+        r["metrics"].value("psnr", 0.0), r["metrics"].value("ssim", 0.0), r["metrics"].value("ncc", 0.0),
+        r["metrics"].value("speckle", 0.0));
+      md << cell;
+    }
+    else
+    {
+      md << "| | | | | " << r.value("error", "") << " |\n";
+    }
+  }
+  if (!values.empty())
+  {
+    auto stat = [&](const char* name, const char* format) {
+      const json& s = summary["statistics"][name];
+      std::snprintf(cell, sizeof(cell), format, s["mean"].get<double>(), s["sd"].get<double>());
+      return std::string(cell);
+    };
+    md << "| mean +- sd (" << values["seconds"].size() << " scored) | | | " << stat("seconds", "%.1f +- %.1f")
+       << " | " << stat("gaussians", "%.0f +- %.0f") << " | " << stat("psnr", "%.2f +- %.2f") << " | "
+       << stat("ssim", "%.4f +- %.4f") << " | " << stat("ncc", "%.4f +- %.4f") << " | "
+       << stat("speckle", "%.4f +- %.4f") << " | |\n";
+  }
+  return WriteText(folder + "/summary.json", summary.dump(2) + "\n") && WriteText(folder + "/summary.md", md.str());
+}
+
+/// True when this process was started by mpirun / mpiexec (Open MPI, MPICH, PMIx launchers).
+bool LaunchedByMpi()
+{
+  for (const char* variable : { "OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "PMIX_RANK" })
+  {
+    if (std::getenv(variable))
+    {
+      return true;
+    }
+  }
+  return false;
+}
+
+constexpr int RequestTag = 1; ///< worker -> rank 0: the record of its last job (empty at first), and a request
+constexpr int JobTag = 2;     ///< rank 0 -> worker: the index of its next job, -1 when none is left
+
+int RunBatch(const BatchOptions& o)
+{
+  const auto start = std::chrono::steady_clock::now();
+  int rank = 0, ranks = 1, threads = 0;
+  const bool mpi = LaunchedByMpi();
+  if (mpi)
+  {
+    // Funneled: only the main thread calls MPI; on rank 0 a second thread trains while it serves the queue.
+    int provided = 0;
+    MPI_Init_thread(nullptr, nullptr, MPI_THREAD_FUNNELED, &provided);
+    MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+    MPI_Comm_size(MPI_COMM_WORLD, &ranks);
+    // The ranks on one machine share its cores.
+    MPI_Comm node;
+    int local = 1;
+    MPI_Comm_split_type(MPI_COMM_WORLD, MPI_COMM_TYPE_SHARED, 0, MPI_INFO_NULL, &node);
+    MPI_Comm_size(node, &local);
+    MPI_Comm_free(&node);
+    threads = local > 1 ? std::max(1, static_cast<int>(std::thread::hardware_concurrency()) / local) : 0;
+  }
+  auto finish = [&](int code) {
+    if (mpi)
+    {
+      // Wait for every rank without spinning a core (a blocking barrier polls), then finalise.
+      MPI_Request request;
+      MPI_Ibarrier(MPI_COMM_WORLD, &request);
+      for (int done = 0; !done;)
+      {
+        MPI_Test(&request, &done, MPI_STATUS_IGNORE);
+        if (!done)
+        {
+          std::this_thread::sleep_for(std::chrono::milliseconds(50));
+        }
+      }
+      MPI_Finalize();
+    }
+    return code;
+  };
+  std::vector<BatchJob> jobs;
+  std::string error;
+  if (!ReadManifest(o.Manifest, jobs, error))
+  {
+    if (rank == 0)
+    {
+      std::fprintf(stderr, "bigus: %s\n", error.c_str());
+    }
+    return finish(2); // every rank read the same manifest and refused it
+  }
+  const std::string summaryFolder =
+    o.Summary.empty() ? fs::absolute(fs::path(o.Manifest)).parent_path().string() : o.Summary;
+  // The batch's own lines go to the terminal even while a job's output goes to its log.
+  FILE* console = fdopen(::dup(STDOUT_FILENO), "w");
+  std::mutex printing;
+  auto report = [&](const json& r, std::size_t index) {
+    std::lock_guard<std::mutex> lock(printing);
+    if (r.value("status", "") == "failed")
+    {
+      std::fprintf(console, "job %zu/%zu %s: failed on rank %d after %.1f s: %s\n", index + 1, jobs.size(),
+        r.value("name", "").c_str(), r.value("rank", 0), r.value("seconds", 0.0), r.value("error", "").c_str());
+    }
+    else
+    {
+      std::fprintf(console, "job %zu/%zu %s: %s on rank %d in %.1f s: %lld Gaussians, held-out PSNR %.2f dB\n",
+        index + 1, jobs.size(), r.value("name", "").c_str(),
+        r.value("status", "") == "kept" ? "kept (complete before this run), trained" : "done", r.value("rank", 0),
+        r.value("seconds", 0.0), r.value("gaussians", 0LL), r["metrics"].value("psnr", 0.0));
+    }
+    std::fflush(console);
+  };
+  std::vector<json> records(jobs.size());
+  if (rank != 0)
+  {
+    std::string last;
+    for (;;)
+    {
+      MPI_Send(last.data(), static_cast<int>(last.size()), MPI_CHAR, 0, RequestTag, MPI_COMM_WORLD);
+      int index = -1;
+      MPI_Recv(&index, 1, MPI_INT, 0, JobTag, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+      if (index < 0 || index >= static_cast<int>(jobs.size()))
+      {
+        break;
+      }
+      json r = RunJob(jobs[index], rank, threads);
+      r["index"] = index;
+      last = r.dump();
+    }
+    std::fclose(console);
+    return finish(0);
+  }
+  // Rank 0: the queue of the jobs not complete before this run.
+  std::vector<int> pending;
+  for (std::size_t j = 0; j < jobs.size(); ++j)
+  {
+    records[j] = CompletedJob(jobs[j]);
+    if (records[j].is_null())
+    {
+      pending.push_back(static_cast<int>(j));
+    }
+    else
+    {
+      records[j]["status"] = "kept";
+      report(records[j], j);
+    }
+  }
+  std::fprintf(console, "batch          %zu jobs (%zu to run, %zu complete before this run) on %d %s\n", jobs.size(),
+    pending.size(), jobs.size() - pending.size(), ranks, ranks == 1 ? "process" : "MPI ranks sharing a queue");
+  std::fflush(console);
+  std::atomic<std::size_t> next{ 0 };
+  auto take = [&]() { const std::size_t k = next++; return k < pending.size() ? pending[k] : -1; };
+  std::mutex recording;
+  auto record = [&](json r, int index) {
+    {
+      std::lock_guard<std::mutex> lock(recording);
+      records[index] = r;
+    }
+    report(r, index);
+  };
+  std::thread local([&] {
+    for (int index; (index = take()) >= 0;)
+    {
+      record(RunJob(jobs[index], 0, threads), index);
+    }
+  });
+  for (int active = ranks - 1; active > 0;)
+  {
+    int waiting = 0;
+    MPI_Status status;
+    MPI_Iprobe(MPI_ANY_SOURCE, RequestTag, MPI_COMM_WORLD, &waiting, &status);
+    if (!waiting)
+    {
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+      continue;
+    }
+    int length = 0;
+    MPI_Get_count(&status, MPI_CHAR, &length);
+    std::string message(length, '\0');
+    MPI_Recv(message.data(), length, MPI_CHAR, status.MPI_SOURCE, RequestTag, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+    if (!message.empty())
+    {
+      json r = json::parse(message);
+      record(r, r["index"].get<int>());
+    }
+    int index = take();
+    MPI_Send(&index, 1, MPI_INT, status.MPI_SOURCE, JobTag, MPI_COMM_WORLD);
+    active -= index < 0;
+  }
+  local.join();
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  int failed = 0;
+  for (const json& r : records)
+  {
+    failed += r.value("status", "") == "failed";
+  }
+  if (!WriteSummary(summaryFolder, o.Manifest, records, ranks, seconds))
+  {
+    std::fclose(console);
+    return finish(Fail(summaryFolder + ": cannot write summary.json / summary.md"));
+  }
+  std::fprintf(console, "summary        %s/summary.json, summary.md: %zu jobs, %d failed, %.1f s\n",
+    summaryFolder.c_str(), jobs.size(), failed, seconds);
+  std::fclose(console);
+  return finish(failed ? 1 : 0);
+}
+}
+
+Command AddBatchCommand(CLI::App& app)
+{
+  auto options = std::make_shared<BatchOptions>();
+  CLI::App* batch = app.add_subcommand("batch",
+    "Train and evaluate the jobs of a manifest (under mpirun -n P: P ranks share a work queue); a rerun skips "
+    "completed jobs");
+  batch->add_option("MANIFEST", options->Manifest,
+      "JSON: {\"defaults\": {...}, \"jobs\": [{\"sweep\": FILE or [FILES], \"output\": FOLDER, \"name\": ..., "
+      "and any bigus train option without its dashes: \"calibration\", \"holdout-every\", \"time-budget\", ...}]}; "
+      "paths relative to the manifest's folder")
+    ->required()
+    ->check(CLI::ExistingFile);
+  batch->add_option("--summary", options->Summary,
+    "Folder for summary.json and summary.md (default: the manifest's folder)");
+  return { batch, [options] { return RunBatch(*options); } };
+}
+
+} // namespace bigus::cli

@@ -1,0 +1,204 @@
+"""`bigus batch` on the N-wire fixture, in one process and under `mpirun -n 2 --oversubscribe`: bad manifests
+refused before any job starts with the line that is wrong; the same fields and metrics from 2 ranks as from one
+process; a job with a malformed sweep reported while the others complete; a rank killed half-way ends the run
+(no hang) and a rerun finishes only the jobs that were missing.
+
+Usage: TestBatch.py TESTING_DATA_DIR BIGUS_EXECUTABLE MPIEXEC OUTPUT_DIR
+"""
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import vtk
+from vtk.util.numpy_support import vtk_to_numpy
+
+DATA, BIGUS, OUT = (os.path.abspath(a) for a in (sys.argv[1], sys.argv[2], sys.argv[4]))
+MPIEXEC = sys.argv[3]
+NWIRE = os.path.join(DATA, "nwire-phantom")
+SWEEP = os.path.join(NWIRE, "NwirePhantomFreehandCropped.igs.mha")
+XML = os.path.join(NWIRE, "PlusDeviceSet_NwirePhantomFreehand_vtkVolumeReconstructorTest2.xml")
+MALFORMED = os.path.join(DATA, "Malformed", "corrupt_body.igs.mha")
+# As root (containers, CI) Open MPI wants to be told; --oversubscribe: more ranks than cores.
+MPI = [MPIEXEC, "--oversubscribe"] + (["--allow-run-as-root"] if os.geteuid() == 0 else [])
+failures = []
+
+
+def check(condition, what):
+    if not condition:
+        failures.append(what)
+        print("FAIL:", what)
+
+
+def write_manifest(folder, jobs, defaults=None, text=None):
+    os.makedirs(folder, exist_ok=True)
+    path = os.path.join(folder, "manifest.json")
+    with open(path, "w") as f:
+        f.write(text if text is not None else json.dumps({"defaults": defaults or {}, "jobs": jobs}, indent=2))
+    return path
+
+
+def batch(manifest, ranks=0, timeout=600):
+    command = (MPI + ["-n", str(ranks)] if ranks else []) + [BIGUS, "batch", manifest]
+    return subprocess.run(command, capture_output=True, text=True, timeout=timeout)
+
+
+def field_arrays(path):
+    reader = vtk.vtkXMLPolyDataReader()
+    reader.SetFileName(path)
+    reader.Update()
+    field = reader.GetOutput()
+    arrays = {"points": vtk_to_numpy(field.GetPoints().GetData())}
+    for name in ("Scale", "Rotation", "Reflectivity"):
+        arrays[name] = vtk_to_numpy(field.GetPointData().GetArray(name))
+    return arrays
+
+
+DEFAULTS = {"calibration": XML, "threads": 1, "seed": 7}
+JOBS = [
+    {"sweep": SWEEP, "output": "runs/grid", "holdout-every": 4, "holdout-offset": 1},
+    {"sweep": SWEEP, "output": "runs/adam", "holdout-every": 4, "holdout-offset": 2, "no-pixel-grid-fit": True,
+     "iterations": 60},
+    {"sweep": MALFORMED, "output": "runs/malformed", "holdout-every": 4},
+    {"sweep": SWEEP, "output": "runs/frames", "frames": [0, 1, 2, 4, 5, 6, 8, 9, 10, 12, 13, 14, 16, 17, 18],
+     "no-pixel-grid-fit": True, "iterations": 40},
+]
+
+
+def bad_manifests():
+    """Each bad manifest: exit 2, one message naming the line, and no job folder made."""
+    folder = os.path.join(OUT, "bad")
+    shutil.rmtree(folder, ignore_errors=True)
+    good = {"sweep": SWEEP, "calibration": XML, "output": "a", "holdout-every": 4}
+    cases = {
+        # name: (manifest text, what the message must hold)
+        "missing key": (json.dumps({"jobs": [good, {"sweep": SWEEP, "holdout-every": 4}]}, indent=2),
+                        ["line 9", "job 1", "missing \"output\""]),
+        "unknown option": (json.dumps({"jobs": [dict(good, **{"max-gausians": 100})]}, indent=2),
+                           ["line 8", "\"max-gausians\"", "unknown option"]),
+        "unknown option in defaults": (json.dumps({"defaults": {"iteration": 3}, "jobs": [good]}, indent=2),
+                                       ["line 3", "\"defaults\" \"iteration\"", "unknown option"]),
+        "path that does not exist": (json.dumps({"jobs": [good, dict(good, sweep="no_such.igs.mha", output="b")]},
+                                                indent=2), ["line 9", "job 1", "no_such.igs.mha"]),
+        "duplicate output": (json.dumps({"jobs": [good, dict(good, output="./a")]}, indent=2),
+                             ["line 12", "job 1", "also job 0's (line 3)"]),
+        "not JSON": ('{\n  "jobs": [\n    {"sweep": "x",\n     "output" "a"}\n  ]\n}\n', ["line 4", "not JSON"]),
+        "no held-out frames": (json.dumps({"jobs": [{"sweep": SWEEP, "calibration": XML, "output": "a"}]}, indent=2),
+                               ["line 3", "no held-out frames"]),
+        "bad option value": (json.dumps({"jobs": [dict(good, iterations="many")]}, indent=2), ["line 3", "iterations"]),
+    }
+    for name, (text, expected) in cases.items():
+        manifest = write_manifest(os.path.join(folder, name.replace(" ", "_")), None, text=text)
+        result = batch(manifest)
+        message = result.stderr.strip()
+        check(result.returncode == 2, f"bad manifest ({name}): exit {result.returncode}, not 2 ({message})")
+        check(len(message.splitlines()) == 1 and all(e in message for e in expected),
+              f"bad manifest ({name}): message {message!r} lacks {expected}")
+        made = [e for e in os.listdir(os.path.dirname(manifest)) if e != "manifest.json"]
+        check(not made, f"bad manifest ({name}): {made} written though no job may start")
+
+
+def same_jobs_on_one_process_and_two_ranks():
+    """4 jobs, one with a malformed sweep: reported with its error, the others complete; on 2 ranks sharing the
+    queue the fields and metrics are those of one process (same seed, one thread per job)."""
+    results = {}
+    for ranks in (0, 2):
+        folder = os.path.join(OUT, f"ranks{ranks}")
+        shutil.rmtree(folder, ignore_errors=True)
+        manifest = write_manifest(folder, JOBS, DEFAULTS)
+        result = batch(manifest, ranks)
+        check(result.returncode == 1, f"{ranks} ranks: exit {result.returncode}, not 1 (a job failed): {result.stderr}")
+        with open(os.path.join(folder, "summary.json")) as f:
+            summary = json.load(f)
+        check(summary["ranks"] == max(1, ranks), f"{ranks} ranks: summary says {summary['ranks']} ranks")
+        statuses = [j["status"] for j in summary["jobs"]]
+        check(statuses == ["done", "done", "failed", "done"], f"{ranks} ranks: statuses {statuses}")
+        bad = summary["jobs"][2]
+        check("corrupt_body.igs.mha" in bad.get("error", "") and "corrupt" in bad.get("error", ""),
+              f"{ranks} ranks: the malformed job's error is {bad.get('error')!r}")
+        check(summary["statistics"]["psnr"]["jobs"] == 3, f"{ranks} ranks: statistics over {summary['statistics']}")
+        with open(os.path.join(folder, "summary.md")) as f:
+            table = f.read()
+        check("| malformed | failed |" in table and "mean +- sd (3 scored)" in table, f"{ranks} ranks: summary.md {table}")
+        results[ranks] = (folder, summary)
+    (one, s1), (two, s2) = results[0], results[2]
+    for k, job in enumerate(JOBS):
+        if s1["jobs"][k]["status"] != "done":
+            continue
+        name = os.path.basename(job["output"])
+        a = field_arrays(os.path.join(one, "runs", name, "field.vtp"))
+        b = field_arrays(os.path.join(two, "runs", name, "field.vtp"))
+        for key in a:
+            check(a[key].shape == b[key].shape and (a[key] == b[key]).all(),
+                  f"job {name}: {key} differs between one process and 2 ranks")
+        check(s1["jobs"][k]["metrics"] == s2["jobs"][k]["metrics"],
+              f"job {name}: metrics {s1['jobs'][k]['metrics']} (one process) != {s2['jobs'][k]['metrics']} (2 ranks)")
+
+
+def rank_killed_then_rerun():
+    """Under mpirun -n 2, rank 1 killed once a job is complete: the run ends (non-zero, mpirun names the rank)
+    instead of hanging; a rerun in one process trains only the jobs without complete outputs."""
+    folder = os.path.join(OUT, "killed")
+    shutil.rmtree(folder, ignore_errors=True)
+    slow = {"no-pixel-grid-fit": True, "iterations": 400, "holdout-every": 4}
+    jobs = [dict(slow, sweep=SWEEP, output=f"runs/job{k}", **{"holdout-offset": k % 4}) for k in range(6)]
+    manifest = write_manifest(folder, jobs, DEFAULTS)
+    process = subprocess.Popen(MPI + ["-n", "2", BIGUS, "batch", manifest], stdout=subprocess.PIPE,
+                               stderr=subprocess.STDOUT, text=True)
+    records = lambda: [k for k in range(6) if os.path.exists(os.path.join(folder, "runs", f"job{k}", "job.json"))]
+    deadline = time.time() + 300
+    while not records() and time.time() < deadline and process.poll() is None:
+        time.sleep(0.2)
+    victim = None
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            with open(f"/proc/{pid}/environ", "rb") as f:
+                environment = f.read().split(b"\0")
+            with open(f"/proc/{pid}/cmdline", "rb") as f:
+                command = f.read()
+        except OSError:
+            continue
+        if b"OMPI_COMM_WORLD_RANK=1" in environment and manifest.encode() in command:
+            victim = int(pid)
+    check(victim is not None, "could not find rank 1 to kill")
+    if victim is None:
+        process.kill()
+        return
+    os.kill(victim, signal.SIGKILL)
+    try:
+        output, _ = process.communicate(timeout=120)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        check(False, "the batch hung after rank 1 was killed")
+        return
+    check(process.returncode != 0, f"the batch with a killed rank exited {process.returncode}")
+    check("rank 1" in output or "signal 9" in output, f"no word of the killed rank in: {output[-600:]}")
+    complete = records()
+    check(0 < len(complete) < 6, f"{len(complete)} jobs complete before the kill (expected some, not all)")
+    times = {k: os.path.getmtime(os.path.join(folder, "runs", f"job{k}", "field.vtp")) for k in complete}
+    # A half-written output (a field without its job.json) must not count: make one.
+    missing = [k for k in range(6) if k not in complete]
+    with open(os.path.join(folder, "runs", f"job{missing[0]}", "field.vtp"), "w") as f:
+        f.write("<VTKFile half written")
+    result = batch(manifest)
+    check(result.returncode == 0, f"rerun exit {result.returncode}: {result.stderr}")
+    with open(os.path.join(folder, "summary.json")) as f:
+        summary = json.load(f)
+    check(summary["kept"] == len(complete) and summary["done"] == 6 - len(complete),
+          f"rerun: kept {summary['kept']} done {summary['done']}, expected {len(complete)} / {6 - len(complete)}")
+    for k, t in times.items():
+        check(os.path.getmtime(os.path.join(folder, "runs", f"job{k}", "field.vtp")) == t,
+              f"job{k} was complete and was trained again")
+    check(all(summary["jobs"][k]["status"] == "done" for k in missing), f"rerun statuses {summary['jobs']}")
+
+
+bad_manifests()
+same_jobs_on_one_process_and_two_ranks()
+rank_killed_then_rerun()
+if failures:
+    print(f"{len(failures)} failures")
+    sys.exit(1)
+print("ok")
