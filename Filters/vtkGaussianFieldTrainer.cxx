@@ -15,6 +15,7 @@
 #include "vtkInformationVector.h"
 #include "vtkIntArray.h"
 #include "vtkMatrix4x4.h"
+#include "vtkMultiProcessController.h"
 #include "vtkNew.h"
 #include "vtkObjectFactory.h"
 #include "vtkPointData.h"
@@ -29,9 +30,52 @@
 #include <vector>
 
 vtkStandardNewMacro(vtkGaussianFieldTrainer);
+vtkCxxSetObjectMacro(vtkGaussianFieldTrainer, Controller, vtkMultiProcessController);
 
 namespace
 {
+/// The sums of data-parallel training (bigus::ProcessReduction) over a VTK controller's processes.
+class ControllerReduction : public bigus::ProcessReduction
+{
+public:
+  explicit ControllerReduction(vtkMultiProcessController* controller)
+    : Controller(controller)
+  {
+  }
+  int Rank() const override { return this->Controller->GetLocalProcessId(); }
+  int Size() const override { return this->Controller->GetNumberOfProcesses(); }
+  bool Sum(float* values, std::size_t count, std::string* error) override
+  {
+    return this->Reduce(values, count, vtkCommunicator::SUM_OP, error);
+  }
+  bool Sum(double* values, std::size_t count, std::string* error) override
+  {
+    return this->Reduce(values, count, vtkCommunicator::SUM_OP, error);
+  }
+  bool Maximum(double* values, std::size_t count, std::string* error) override
+  {
+    return this->Reduce(values, count, vtkCommunicator::MAX_OP, error);
+  }
+
+private:
+  template <typename T>
+  bool Reduce(T* values, std::size_t count, int operation, std::string* error)
+  {
+    const std::vector<T> mine(values, values + count);
+    if (!this->Controller->AllReduce(mine.data(), values, static_cast<vtkIdType>(count), operation))
+    {
+      if (error)
+      {
+        *error = "the sum across processes (AllReduce of " + std::to_string(count) + " values) failed on rank " +
+          std::to_string(this->Rank());
+      }
+      return false;
+    }
+    return true;
+  }
+  vtkMultiProcessController* Controller;
+};
+
 /// How the field data stores a pose correction (bigus::CorrectPose's xi: rotation vector, rad; translation, mm):
 /// these six components, written by StoredCorrection.
 const char* const CorrectionComponents[6] = { "RotationU (degrees)", "RotationV (degrees)", "RotationN (degrees)",
@@ -92,6 +136,7 @@ vtkGaussianFieldTrainer::~vtkGaussianFieldTrainer()
   this->SetCheckpointFile(nullptr);
   this->SetResumeFile(nullptr);
   this->SetBackend(nullptr);
+  this->SetController(nullptr);
 }
 
 int vtkGaussianFieldTrainer::FillInputPortInformation(int port, vtkInformation* info)
@@ -252,6 +297,7 @@ int vtkGaussianFieldTrainer::RequestData(
   s.GrowthPatience = this->GrowthPatience;
   s.FillGaps = this->FillGaps;
   s.Seed = this->Seed;
+  s.FramesPerStep = this->FramesPerStep;
   s.CheckpointInterval = this->CheckpointInterval;
   s.CheckpointFile = this->CheckpointFile ? this->CheckpointFile : "";
 
@@ -269,7 +315,8 @@ int vtkGaussianFieldTrainer::RequestData(
   }
   this->BackendInUse = engine->GetName();
   bigus::Trainer trainer(std::move(data), s, std::move(engine));
-  if (!trainer.Initialize(&error) ||
+  ControllerReduction reduction(this->Controller);
+  if ((this->Controller && !trainer.SetProcessReduction(&reduction, &error)) || !trainer.Initialize(&error) ||
     (this->ResumeFile && *this->ResumeFile && !trainer.LoadCheckpoint(this->ResumeFile, &error)))
   {
     vtkErrorMacro(<< error);
@@ -504,6 +551,8 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
 {
   this->Superclass::PrintSelf(os, indent);
   os << indent << "ElevationSigma: " << this->ElevationSigma << "\n";
+  os << indent << "FramesPerStep: " << this->FramesPerStep << "\n";
+  os << indent << "Controller: " << this->Controller << "\n";
   os << indent << "BeamIntegration: " << this->BeamIntegration << "\n";
   os << indent << "NonNegativeReflectivity: " << this->NonNegativeReflectivity << "\n";
   os << indent << "HarrisInitialisation: " << this->HarrisInitialisation << "\n";

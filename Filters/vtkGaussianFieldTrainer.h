@@ -89,6 +89,8 @@
 
 #include <string> // For std::string
 
+class vtkMultiProcessController;
+
 class vtkIdList;
 
 class BIGUSFILTERS_EXPORT vtkGaussianFieldTrainer : public vtkPolyDataAlgorithm
@@ -272,6 +274,24 @@ public:
   const char* GetBackendInUse() const { return this->BackendInUse.c_str(); }
   ///@}
 
+  ///@{
+  /**
+   * Data-parallel training, as VTK's parallel filters take it: with a controller of more than one process
+   * (vtkMPIController under mpirun; every process runs this filter on the same inputs and settings), each
+   * process renders and differentiates its share of every step's frames, and the gradients, EA-D
+   * accumulators and loss are summed over the processes every step (AllReduce), so that every process takes the
+   * same Adam step and the same densification decisions and ends with the same field (bigus::ProcessReduction).
+   * A step has FramesPerStep frames per process. Only process 0 writes checkpoints. Null (default) or one
+   * process: training on this process alone. The cpu backend only (another fails the request with an error).
+   */
+  virtual void SetController(vtkMultiProcessController* controller);
+  vtkGetObjectMacro(Controller, vtkMultiProcessController);
+  ///@}
+  ///@{ Training frames rendered per step (per process with a Controller); their losses are averaged.
+  vtkSetClampMacro(FramesPerStep, int, 1, 4096);
+  vtkGetMacro(FramesPerStep, int);
+  ///@}
+
   ///@{ Checkpoints: written every CheckpointInterval steps (0 = never) to CheckpointFile;
   /// ResumeFile continues from one, schedule included: the seconds trained before it count towards
   /// TimeBudget (a run stopped at 70 % of its budget and resumed trains for the remaining 30 %).
@@ -358,6 +378,8 @@ protected:
   char* ResumeFile = nullptr;
   char* Backend = nullptr;
   std::string BackendInUse;
+  vtkMultiProcessController* Controller = nullptr;
+  int FramesPerStep = 1;
 
   int CurrentIteration = 0;
   double CurrentLoss = 0;

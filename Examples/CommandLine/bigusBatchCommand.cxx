@@ -673,19 +673,6 @@ bool WriteSummary(const std::string& folder, const std::string& manifest, const 
   return WriteText(folder + "/summary.json", summary.dump(2) + "\n") && WriteText(folder + "/summary.md", md.str());
 }
 
-/// True when this process was started by mpirun / mpiexec (Open MPI, MPICH, PMIx launchers).
-bool LaunchedByMpi()
-{
-  for (const char* variable : { "OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "PMIX_RANK" })
-  {
-    if (std::getenv(variable))
-    {
-      return true;
-    }
-  }
-  return false;
-}
-
 constexpr int RequestTag = 1; ///< worker -> rank 0: the record of its last job (empty at first), and a request
 constexpr int JobTag = 2;     ///< rank 0 -> worker: the index of its next job, -1 when none is left
 
@@ -701,13 +688,7 @@ int RunBatch(const BatchOptions& o)
     MPI_Init_thread(nullptr, nullptr, MPI_THREAD_FUNNELED, &provided);
     MPI_Comm_rank(MPI_COMM_WORLD, &rank);
     MPI_Comm_size(MPI_COMM_WORLD, &ranks);
-    // The ranks on one machine share its cores.
-    MPI_Comm node;
-    int local = 1;
-    MPI_Comm_split_type(MPI_COMM_WORLD, MPI_COMM_TYPE_SHARED, 0, MPI_INFO_NULL, &node);
-    MPI_Comm_size(node, &local);
-    MPI_Comm_free(&node);
-    threads = local > 1 ? std::max(1, static_cast<int>(std::thread::hardware_concurrency()) / local) : 0;
+    threads = ThreadsPerRank();
   }
   auto finish = [&](int code) {
     if (mpi)

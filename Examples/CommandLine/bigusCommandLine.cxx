@@ -17,6 +17,9 @@
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
+#include <cstdlib>
+#include <mpi.h>
+#include <thread>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -165,6 +168,28 @@ void AddSweepOptions(CLI::App* command, SweepOptions& o, const char* what)
   command->add_option("--transform", o.Chain,
     std::string("Transform chain for ImageToReference of the ") + what +
       ", e.g. \"inverse(ReferenceToTracker) * ProbeToTracker * ImageToProbe\"");
+}
+
+bool LaunchedByMpi()
+{
+  for (const char* variable : { "OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "PMIX_RANK" })
+  {
+    if (std::getenv(variable))
+    {
+      return true;
+    }
+  }
+  return false;
+}
+
+int ThreadsPerRank()
+{
+  MPI_Comm node;
+  int local = 1;
+  MPI_Comm_split_type(MPI_COMM_WORLD, MPI_COMM_TYPE_SHARED, 0, MPI_INFO_NULL, &node);
+  MPI_Comm_size(node, &local);
+  MPI_Comm_free(&node);
+  return std::max(1, static_cast<int>(std::thread::hardware_concurrency()) / local);
 }
 
 int WriteImage(vtkImageData* image, const std::string& path)

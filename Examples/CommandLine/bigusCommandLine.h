@@ -106,6 +106,12 @@ std::vector<int> ChooseFrames(int count, int every, int offset, const std::vecto
 /// on failure prints what is wrong and returns null.
 vtkSmartPointer<vtkImageData> ReadMask(const std::string& file, const int dims[3]);
 
+/// True when this process was started by mpirun / mpiexec (Open MPI, MPICH or PMIx launchers).
+bool LaunchedByMpi();
+/// With MPI initialised: this machine's cores divided among the ranks on it (at least 1), so that ranks that
+/// share a machine do not oversubscribe its cores.
+int ThreadsPerRank();
+
 /// Writes an image: .png (8-bit, rows flipped so that row 0 is the top), .mha (MetaImage), .vti.
 /// Returns the exit code (1 after a message).
 int WriteImage(vtkImageData* image, const std::string& path);

@@ -11,6 +11,7 @@
 #include "vtkGaussianFieldTrainer.h"
 #include "vtkIdList.h"
 #include "vtkImageData.h"
+#include "vtkMPIController.h"
 #include "vtkMath.h"
 #include "vtkNew.h"
 #include "vtkSMPTools.h"
@@ -38,7 +39,8 @@ struct TrainOptions
   std::vector<std::string> Sweeps, Calibrations, Masks; ///< one calibration / mask for all, or one per sweep
   std::string Chain;                                     ///< --transform, for every sweep
   std::string Output, Checkpoint, Resume, Backend = "auto";
-  int HoldOutEvery = 0, HoldOutOffset = 0, HoldOutSweep = -1, Iterations = 0, Threads = 0;
+  int HoldOutEvery = 0, HoldOutOffset = 0, HoldOutSweep = -1, Iterations = 0, Threads = 0, FramesPerStep = 1;
+  bool Distributed = false;
   std::vector<int> Frames; ///< explicit training frames (empty: the hold-out rule)
   double TimeBudget = 0, ElevationSigma = 0, EvaluationInterval = 0;
   long long MaxGaussians = 0, InitialGaussians = 0;
@@ -62,14 +64,51 @@ struct TrainOptions
     this->GrowthPatience = defaults->GetGrowthPatience();
     this->SolveIterations = defaults->GetSolveIterations();
     this->Seed = defaults->GetSeed();
+    this->FramesPerStep = defaults->GetFramesPerStep();
+  }
+};
+
+/// --distributed under mpirun: the MPI controller of the run (finalised when the command ends), this rank.
+struct Processes
+{
+  vtkSmartPointer<vtkMPIController> Controller;
+  int Rank = 0;
+  ~Processes()
+  {
+    if (this->Controller)
+    {
+      this->Controller->Finalize();
+    }
   }
 };
 
 int RunTrain(const TrainOptions& o)
 {
-  if (o.Threads > 0)
+  Processes processes;
+  int threads = o.Threads;
+  if (o.Distributed && LaunchedByMpi())
   {
-    vtkSMPTools::Initialize(o.Threads);
+    processes.Controller = vtkSmartPointer<vtkMPIController>::New();
+    processes.Controller->Initialize(nullptr, nullptr);
+    processes.Rank = processes.Controller->GetLocalProcessId();
+    threads = threads > 0 ? threads : ThreadsPerRank();
+    if (processes.Rank != 0)
+    {
+      // Rank 0 reports and writes; the others' errors still reach stderr.
+      std::fflush(stdout);
+      if (!std::freopen("/dev/null", "w", stdout))
+      {
+        return Fail("cannot silence the output of rank " + std::to_string(processes.Rank));
+      }
+    }
+  }
+  else if (o.Distributed)
+  {
+    std::printf("distributed    not started by mpirun: this process trains alone\n");
+  }
+  if (threads > 0)
+  {
+    vtkSMPTools::Initialize(threads);
   }
   const std::size_t count = o.Sweeps.size();
   for (const auto& [files, what] : { std::make_pair(&o.Calibrations, "--calibration"), std::make_pair(&o.Masks, "--mask") })
@@ -162,6 +201,8 @@ int RunTrain(const TrainOptions& o)
   trainer->SetSparseAdam(!o.DenseAdam);
   trainer->SetElevationSigma(o.ElevationSigma);
   trainer->SetSeed(o.Seed);
+  trainer->SetFramesPerStep(o.FramesPerStep);
+  trainer->SetController(processes.Controller);
   trainer->SetEvaluationInterval(o.EvaluationInterval);
   trainer->SetBackend(o.Backend.c_str());
   if (!o.Checkpoint.empty())
@@ -232,7 +273,12 @@ int RunTrain(const TrainOptions& o)
   }
   if (trainer->GetNumberOfGaussians() == 0)
   {
-    return Fail("training failed: " + error.Or("no field"));
+    return Fail((processes.Rank ? "rank " + std::to_string(processes.Rank) + ": " : std::string()) +
+      "training failed: " + error.Or("no field"));
+  }
+  if (processes.Rank != 0)
+  {
+    return 0; // every rank holds the same field; rank 0 writes it
   }
   const std::string temporary = TemporaryName(o.Output);
   vtkNew<vtkXMLPolyDataWriter> writer;
@@ -418,7 +464,16 @@ Command AddTrainCommand(CLI::App& app)
     ->capture_default_str();
   trainCommand->add_option("--backend", train.Backend, "Training backend: auto, cpu or cuda (as registered)")
     ->capture_default_str();
-  trainCommand->add_option("--threads", train.Threads, "Threads (0: all cores)");
+  trainCommand->add_option("--threads", train.Threads,
+    "Threads (0: all cores; with --distributed, the cores divided among the ranks on each machine)");
+  trainCommand->add_option("--frames-per-step", train.FramesPerStep,
+    "Training frames rendered per step (per rank with --distributed); their losses are averaged")
+    ->capture_default_str()
+    ->check(CLI::Range(1, 4096));
+  trainCommand->add_flag("--distributed", train.Distributed,
+    "Under mpirun -n P: data-parallel training, each rank renders its share of every step's frames and the "
+    "gradients are summed every step (MPI_Allreduce through vtkMPIController); rank 0 writes the field and "
+    "checkpoints. Resume with the same P");
   trainCommand->add_option("--seed", train.Seed, "Random seed")->capture_default_str();
   trainCommand->add_option("--checkpoint", train.Checkpoint, "Checkpoint file, written every 200 steps");
   trainCommand->add_option("--resume", train.Resume, "Continue from this checkpoint (same settings; the seconds trained before it count towards --time-budget)")

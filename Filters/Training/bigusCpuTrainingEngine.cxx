@@ -100,6 +100,12 @@ public:
 
   StepStatus Step(const StepRequest& request, double* loss, std::string* error) override;
 
+  bool SetReduction(ProcessReduction* reduction, std::string*) override
+  {
+    this->Reduction = reduction && reduction->Size() > 1 ? reduction : nullptr;
+    return true;
+  }
+
   bool ApplyBasis(const float* r, const int* frames, int count, const RenderOptions& options, float* S,
     std::string* error) override
   {
@@ -107,15 +113,20 @@ public:
     view.Reflectivities = r;
     const RenderOptions linear = Linear(options);
     const std::size_t pixels = std::size_t(this->Data->Width) * this->Data->Height;
-    for (int k = 0; k < count; ++k)
+    bool ok = true;
+    for (int k = 0; k < count && ok; ++k)
     {
       const SliceGeometry slice = this->Data->Slice(frames[k]);
-      if (!this->Backend->Forward(view, &slice, 1, linear, S + pixels * k, nullptr, nullptr, error))
+      if (!this->Owns(k))
       {
-        return FrameError(frames[k], error);
+        std::fill(S + pixels * k, S + pixels * (k + 1), 0.f); // another process's frame: its share of the sum
+      }
+      else if (!this->Backend->Forward(view, &slice, 1, linear, S + pixels * k, nullptr, nullptr, error))
+      {
+        ok = FrameError(frames[k], error);
       }
     }
-    return true;
+    return this->Agree(ok, error) && (!this->Reduction || this->Reduction->Sum(S, pixels * count, error));
   }
 
   bool ApplyBasisTranspose(const float* y, const int* frames, int count, const RenderOptions& options, double* out,
@@ -126,8 +137,16 @@ public:
     const std::size_t pixels = std::size_t(this->Data->Width) * this->Data->Height;
     const RenderOptions linear = Linear(options);
     FieldGradients grads;
-    for (int k = 0; k < count; ++k)
+    // With several processes each sums its own frames into a vector of its own, then the vectors are summed.
+    std::vector<double> own(this->Reduction ? n : 0, 0.0);
+    double* sum = this->Reduction ? own.data() : out;
+    bool ok = true;
+    for (int k = 0; k < count && ok; ++k)
     {
+      if (!this->Owns(k))
+      {
+        continue;
+      }
       this->Gradients.assign(n, 0.f);
       grads.Reflectivities = this->Gradients.data();
       const SliceGeometry slice = this->Data->Slice(frames[k]);
@@ -135,31 +154,36 @@ public:
       if (!this->Backend->Backward(this->State.Field.View(), &slice, 1, linear, y + pixels * k, y + pixels * k, true,
             grads, nullptr, error))
       {
-        return FrameError(frames[k], error);
+        ok = FrameError(frames[k], error);
+        break;
       }
       vtkSMPTools::For(0, n, 8192, [&](std::int64_t b, std::int64_t e) {
         for (std::int64_t i = b; i < e; ++i)
         {
-          out[i] += this->Gradients[i];
+          sum[i] += this->Gradients[i];
         }
       });
     }
-    return true;
+    return this->Agree(ok, error) && this->AddSum(own, out, error);
   }
 
   bool BasisNorms(const float* weights, const int* frames, int count, const RenderOptions& options, double* out,
     std::string* error) override
   {
     const std::size_t pixels = std::size_t(this->Data->Width) * this->Data->Height;
-    for (int k = 0; k < count; ++k)
+    std::vector<double> own(this->Reduction ? this->State.Count() : 0, 0.0);
+    double* sum = this->Reduction ? own.data() : out;
+    bool ok = true;
+    for (int k = 0; k < count && ok; ++k)
     {
       const SliceGeometry slice = this->Data->Slice(frames[k]);
-      if (!AccumulateBasisNorms(this->State.Field.View(), &slice, 1, options, weights + pixels * k, out, error))
+      if (this->Owns(k) &&
+        !AccumulateBasisNorms(this->State.Field.View(), &slice, 1, options, weights + pixels * k, sum, error))
       {
-        return FrameError(frames[k], error);
+        ok = FrameError(frames[k], error);
       }
     }
-    return true;
+    return this->Agree(ok, error) && this->AddSum(own, out, error);
   }
 
 private:
@@ -167,13 +191,40 @@ private:
   /// parameter in its meaningful range (unit quaternions, clamped log-scales); false when a gradient
   /// or an updated parameter is not finite.
   bool Adam(const StepRequest& request);
+  /// Data-parallel step (Reduction): after this process's frames (@p ok: all rendered), the loss sum @p total,
+  /// the pose gradients, the field's gradients and the EA-D accumulators summed over the processes.
+  StepStatus Reduce(const StepRequest& request, double& total, bool ok, std::string* error);
+
+  /// Whether this process renders position @p k of a step's or an operator's frames (all of them alone).
+  bool Owns(int k) const { return !this->Reduction || k % this->Reduction->Size() == this->Reduction->Rank(); }
+  /// With several processes, whether every one succeeded (ProcessReduction::AllSucceeded); alone, @p ok.
+  bool Agree(bool ok, std::string* error) { return this->Reduction ? this->Reduction->AllSucceeded(ok, error) : ok; }
+  /// With several processes: @p own (this process's sums) summed over the processes and added to @p out.
+  bool AddSum(std::vector<double>& own, double* out, std::string* error)
+  {
+    if (!this->Reduction)
+    {
+      return true;
+    }
+    if (!this->Reduction->Sum(own.data(), own.size(), error))
+    {
+      return false;
+    }
+    for (std::size_t i = 0; i < own.size(); ++i)
+    {
+      out[i] += own[i];
+    }
+    return true;
+  }
 
   std::unique_ptr<Renderer> Backend;
+  ProcessReduction* Reduction = nullptr; // data-parallel: this process's share, summed (SetReduction)
   const TrainingData* Data = nullptr;
   OptimizerState State;
   GaussianField Saved, SavedFirst, SavedSecond; // last known-good field and moments
   // Scratch, kept between steps
   std::vector<float> S, I, LossGradient, Gradients;
+  std::vector<int> Seen; // a data-parallel step's seen counts, before they are summed
   ImageLossWorkspace LossWorkspace;
 };
 
@@ -185,23 +236,35 @@ StepStatus CpuTrainingEngine::Step(const StepRequest& request, double* loss, std
   this->S.resize(pixels);
   this->I.resize(pixels);
   this->LossGradient.resize(pixels);
-  this->Gradients.assign(11 * n, 0.f); // [N, 3] means, [N, 3] log-scales, [N, 4] quaternions, [N] r
+  // [N, 3] means, [N, 3] log-scales, [N, 4] quaternions, [N] r; with several processes then this step's
+  // attribution [N] and seen counts [N] (as float: exact to 2^24 frames), all summed in one reduction.
+  this->Gradients.assign((this->Reduction ? 13 : 11) * n, 0.f);
   FieldGradients grads;
   grads.Means = this->Gradients.data();
   grads.LogScales = this->Gradients.data() + 3 * n;
   grads.Quaternions = this->Gradients.data() + 6 * n;
   grads.Reflectivities = this->Gradients.data() + 10 * n;
-  grads.Attribution = this->State.Attribution.data();
-  grads.VisibleCount = this->State.SeenCount.data();
+  grads.Attribution = this->Reduction ? this->Gradients.data() + 11 * n : this->State.Attribution.data();
+  this->Seen.assign(this->Reduction ? n : 0, 0);
+  grads.VisibleCount = this->Reduction ? this->Seen.data() : this->State.SeenCount.data();
+  if (request.PoseGradients)
+  {
+    std::fill(request.PoseGradients, request.PoseGradients + 6 * request.Count, 0.0);
+  }
   double total = 0;
   for (int b = 0; b < request.Count; ++b)
   {
     const int f = request.Frames[b];
     const SliceGeometry slice = data.Slice(f);
+    if (!this->Owns(b))
+    {
+      continue;
+    }
     if (!this->Backend->Forward(this->State.Field.View(), &slice, 1, request.Options, this->S.data(), this->I.data(),
           nullptr, error))
     {
-      return Failed(f, error);
+      FrameError(f, error);
+      return this->Reduction ? this->Reduce(request, total, false, error) : StepStatus::Failed;
     }
     const ImageLossTerms terms = ComputeImageLoss(this->I.data(), &data.Frames[pixels * f], data.MaskOf(f), data.Width,
       data.Height, request.Loss, this->LossGradient.data(), false, &this->LossWorkspace);
@@ -215,14 +278,18 @@ StepStatus CpuTrainingEngine::Step(const StepRequest& request, double* loss, std
     }
     if (request.PoseGradients)
     {
-      std::fill(request.PoseGradients + 6 * b, request.PoseGradients + 6 * b + 6, 0.0);
       grads.SlicePoses = request.PoseGradients + 6 * b;
     }
     if (!this->Backend->Backward(this->State.Field.View(), &slice, 1, request.Options, this->S.data(),
           this->LossGradient.data(), false, grads, nullptr, error))
     {
-      return Failed(f, error);
+      FrameError(f, error);
+      return this->Reduction ? this->Reduce(request, total, false, error) : StepStatus::Failed;
     }
+  }
+  if (this->Reduction && this->Reduce(request, total, true, error) == StepStatus::Failed)
+  {
+    return StepStatus::Failed;
   }
   *loss = total / request.Count;
   if (!std::isfinite(*loss))
@@ -230,6 +297,39 @@ StepStatus CpuTrainingEngine::Step(const StepRequest& request, double* loss, std
     return StepStatus::NonFinite;
   }
   return this->Adam(request) ? StepStatus::Done : StepStatus::NonFinite;
+}
+
+StepStatus CpuTrainingEngine::Reduce(const StepRequest& request, double& total, bool ok, std::string* error)
+{
+  // First whether every process rendered its frames, then one sum of the loss and pose gradients and one of
+  // the field's gradients and EA-D accumulators.
+  if (!this->Reduction->AllSucceeded(ok, error))
+  {
+    return StepStatus::Failed;
+  }
+  const std::int64_t n = this->State.Count();
+  std::vector<double> small(1 + (request.PoseGradients ? 6 * request.Count : 0));
+  small[0] = total;
+  std::copy(request.PoseGradients, request.PoseGradients + (small.size() - 1), small.begin() + 1);
+  float* seen = this->Gradients.data() + 12 * n;
+  for (std::int64_t i = 0; i < n; ++i)
+  {
+    seen[i] = static_cast<float>(this->Seen[i]);
+  }
+  if (!this->Reduction->Sum(small.data(), small.size(), error) ||
+    !this->Reduction->Sum(this->Gradients.data(), this->Gradients.size(), error))
+  {
+    return StepStatus::Failed;
+  }
+  total = small[0];
+  std::copy(small.begin() + 1, small.end(), request.PoseGradients);
+  const float* attribution = this->Gradients.data() + 11 * n;
+  for (std::int64_t i = 0; i < n; ++i)
+  {
+    this->State.Attribution[i] += attribution[i];
+    this->State.SeenCount[i] += static_cast<int>(std::lround(seen[i]));
+  }
+  return StepStatus::Done;
 }
 
 bool CpuTrainingEngine::Adam(const StepRequest& request)

@@ -400,8 +400,29 @@ bool Trainer::FitInitialReflectivities(std::string* error)
   {
     return false;
   }
-  this->State.TrainingSeconds += this->Report.LastSolve.Seconds;
-  this->Report.Seconds += this->Report.LastSolve.Seconds;
+  double seconds = this->Report.LastSolve.Seconds; // the slowest process's, so that every schedule agrees
+  if (this->Reduction && !this->Reduction->Maximum(&seconds, 1, error))
+  {
+    return false;
+  }
+  this->State.TrainingSeconds += seconds;
+  this->Report.Seconds += seconds;
+  return true;
+}
+
+bool Trainer::SetProcessReduction(ProcessReduction* reduction, std::string* error)
+{
+  if (!this->Engine->SetReduction(reduction, error))
+  {
+    return false;
+  }
+  this->Reduction = reduction && reduction->Size() > 1 ? reduction : nullptr;
+  if (this->Reduction)
+  {
+    this->Report.Settings.push_back(Format("Processes = %d (data-parallel: each renders its share of the %d frames "
+                                           "of a step, FramesPerStep %d per process; gradients summed every step)",
+      reduction->Size(), reduction->Size() * this->Settings.FramesPerStep, this->Settings.FramesPerStep));
+  }
   return true;
 }
 
@@ -496,7 +517,9 @@ bool Trainer::FitReflectivityScale(std::string* error)
 
 double Trainer::TrainingSeconds() const
 {
-  return this->TrainStart > 0 ? this->TrainedBefore + (Seconds() - this->TrainStart) : this->State.TrainingSeconds;
+  return this->TrainStart > 0
+    ? this->TrainedBefore + (this->Reduction ? this->AgreedElapsed : Seconds() - this->TrainStart)
+    : this->State.TrainingSeconds;
 }
 
 double Trainer::ScheduleFraction() const
@@ -526,7 +549,7 @@ StepStatus Trainer::Step(double* loss, std::string* error)
 {
   TrainingState& state = this->State;
   const std::vector<int>& train = this->Data->TrainFrames;
-  std::vector<int> frames(this->Settings.FramesPerStep);
+  std::vector<int> frames(this->Settings.FramesPerStep * (this->Reduction ? this->Reduction->Size() : 1));
   for (int& f : frames)
   {
     f = train[static_cast<std::size_t>(Uniform(state.Random) * train.size())];
@@ -852,6 +875,7 @@ bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>
   const double start = Seconds();
   this->TrainStart = start;
   this->TrainedBefore = this->State.TrainingSeconds;
+  this->AgreedElapsed = 0;
   const TrainerSettings& s = this->Settings;
   const TrainingState& state = this->State;
   this->Report.StopReason = "iterations";
@@ -868,7 +892,20 @@ bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>
   bool ok = true;
   while (!this->PixelGrid && (s.Iterations <= 0 || state.Iteration < s.Iterations))
   {
-    if (abort && abort())
+    bool aborted = abort && abort();
+    if (this->Reduction)
+    {
+      // Every process stops at the same step: on the slowest clock, when any was asked to.
+      double agreed[2] = { Seconds() - start, aborted ? 1.0 : 0.0 };
+      if (!this->Reduction->Maximum(agreed, 2, error))
+      {
+        ok = false;
+        break;
+      }
+      this->AgreedElapsed = agreed[0];
+      aborted = agreed[1] > 0;
+    }
+    if (aborted)
     {
       this->Report.StopReason = "aborted";
       break;
@@ -929,11 +966,15 @@ bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>
       recent = 0;
       recentCount = 0;
     }
-    if (s.CheckpointInterval > 0 && !s.CheckpointFile.empty() && it % s.CheckpointInterval == 0 &&
-      !this->SaveCheckpoint(s.CheckpointFile, error))
+    if (s.CheckpointInterval > 0 && !s.CheckpointFile.empty() && it % s.CheckpointInterval == 0)
     {
-      ok = false;
-      break;
+      // Data-parallel: rank 0 writes, and the others learn whether it could.
+      const bool saved = (this->Reduction && this->Reduction->Rank() != 0) || this->SaveCheckpoint(s.CheckpointFile, error);
+      if (!(this->Reduction ? this->Reduction->AllSucceeded(saved, error) : saved))
+      {
+        ok = false;
+        break;
+      }
     }
     if (progress && (it % 10 == 0 || it == s.Iterations))
     {

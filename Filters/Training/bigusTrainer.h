@@ -265,6 +265,16 @@ public:
    * bigus::DefaultMaximumShearAngle, also the reader's default limit).
    */
   bool Initialize(std::string* error);
+  /**
+   * Data-parallel training over the processes of @p reduction (null: this process alone); call before
+   * Initialize, on every process with the same data and settings. Every process draws the same FramesPerStep x
+   * Size() frames per step and renders its share, the engine sums gradients, EA-D accumulators and the loss
+   * (TrainingEngine::SetReduction), so every process takes the same Adam step and the same densification and
+   * pruning decisions: the fields stay identical. The clock of a time budget is the slowest process's; only
+   * rank 0 writes checkpoints (a resumed run reads them on every process). False with @p error when the engine
+   * cannot sum across processes.
+   */
+  bool SetProcessReduction(ProcessReduction* reduction, std::string* error);
   /// Start from a given field instead (gamma still from the data).
   bool SetField(const GaussianField& field, std::string* error);
 
@@ -375,6 +385,8 @@ private:
   double Gamma = 1;
   double PixelSpacing = 1; // mean in-plane pixel spacing of the training frames, mm
   TrainerReport Report;
+  ProcessReduction* Reduction = nullptr; // data-parallel training (SetProcessReduction), null alone
+  double AgreedElapsed = 0;              // data-parallel: the slowest process's seconds in this Train call
   double TrainStart = 0;           // Seconds() at the start of the Train call in progress, 0 outside
   double TrainedBefore = 0;        // the run's training seconds before that call
   bool DensificationEnded = false; // the last Train call ended past the densification window

@@ -19,6 +19,50 @@ namespace bigus
 
 TrainingEngine::~TrainingEngine() = default;
 
+bool TrainingEngine::SetReduction(ProcessReduction* reduction, std::string* error)
+{
+  if (reduction && reduction->Size() > 1)
+  {
+    if (error)
+    {
+      *error = std::string("the ") + this->GetName() + " training engine does not train data-parallel (sums across " +
+        "processes); use the cpu backend with several processes";
+    }
+    return false;
+  }
+  return true;
+}
+
+ProcessReduction::~ProcessReduction() = default;
+
+bool ProcessReduction::AllSucceeded(bool ok, std::string* error)
+{
+  // A failed process puts 1 in its own slot: the sum says whether any failed, and which.
+  std::vector<double> failed(this->Size(), 0.0);
+  failed[this->Rank()] = ok ? 0.0 : 1.0;
+  std::string communication;
+  if (!this->Sum(failed.data(), failed.size(), &communication))
+  {
+    if (error)
+    {
+      *error = communication;
+    }
+    return false;
+  }
+  for (int r = 0; r < this->Size(); ++r)
+  {
+    if (failed[r] != 0)
+    {
+      if (ok && error)
+      {
+        *error = "another process failed (rank " + std::to_string(r) + "; its own message is on its error output)";
+      }
+      return false;
+    }
+  }
+  return true;
+}
+
 double PhysicalMemoryBytes()
 {
   const long pages = sysconf(_SC_PHYS_PAGES), size = sysconf(_SC_PAGE_SIZE);

@@ -181,6 +181,34 @@ struct StepRequest
 /// before large allocations (the reflectivity solve, a trainer's MaximumGaussians).
 BIGUSTRAINING_EXPORT double PhysicalMemoryBytes();
 
+/**
+ * Sums across the processes of a data-parallel run (one per MPI rank; DESIGN section 5). Each process renders
+ * and differentiates its share of a step's frames (batch positions b with b mod Size() == Rank()) and the
+ * sums give every process the same gradients, EA-D accumulators and loss, so that the same Adam update and the
+ * same densification keep the processes' fields identical. Every call is collective: the trainer and the
+ * engines make them in the same order on every process. vtkGaussianFieldTrainer implements it over a
+ * vtkMultiProcessController (AllReduce; vtkMPIController under mpirun).
+ */
+class BIGUSTRAINING_EXPORT ProcessReduction
+{
+public:
+  virtual ~ProcessReduction();
+  virtual int Rank() const = 0; ///< this process, 0 to Size() - 1
+  virtual int Size() const = 0; ///< processes in the run
+  /// @p values ([count]) become their element-wise sum over the processes; false with @p error when the
+  /// communication failed.
+  virtual bool Sum(float* values, std::size_t count, std::string* error) = 0;
+  virtual bool Sum(double* values, std::size_t count, std::string* error) = 0;
+  /// @p values ([count]) become their element-wise maximum over the processes (the trainer's clock).
+  virtual bool Maximum(double* values, std::size_t count, std::string* error) = 0;
+  /**
+   * Collective agreement on success: true when @p ok on every process. Otherwise false, with @p error kept on
+   * a process that failed and set to "another process failed (rank R)" on the others, so that no process
+   * waits in a sum that a failed one never enters.
+   */
+  bool AllSucceeded(bool ok, std::string* error);
+};
+
 enum class StepStatus
 {
   Done,      ///< the state took the step
@@ -215,6 +243,14 @@ public:
   virtual void Snapshot() = 0;
   /// Back to the last known-good field and moments (the accumulators are kept).
   virtual void Restore() = 0;
+
+  /**
+   * Data-parallel training (ProcessReduction): from now on Step, ApplyBasis, ApplyBasisTranspose and
+   * BasisNorms work on this process's share of their frames and sum the results over the processes; Render
+   * stays local. Null: one process. The base class refuses (false with @p error naming the engine) any
+   * reduction of more than one process; an engine that sums across processes overrides it.
+   */
+  virtual bool SetReduction(ProcessReduction* reduction, std::string* error);
 
   /// Renders the engine's current field at @p count slices (bigus::Renderer::Forward).
   virtual bool Render(const SliceGeometry* slices, int count, const RenderOptions& options, float* S, float* I,
