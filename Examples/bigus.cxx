@@ -8,6 +8,7 @@
 //   bigus render FIELD.vtp --volume [--spacing MM] -o volume.mha|.vti
 //   bigus evaluate FIELD.vtp SWEEP [--holdout-every K --holdout-offset J | --frames LIST] --report DIR
 //   bigus sweep VOLUME -o SWEEP.igs.mha [--mask-output MASK.mha] [--protocol parallel|oblique|orthogonal] ...
+//   mpirun -n P bigus train SWEEP -o FIELD.vtp --distributed ...   (data-parallel: gradients summed every step)
 //   bigus batch MANIFEST.json [--summary DIR]   (also under mpirun -n P: the ranks share a work queue)
 //   bigus benchmark [--quick] [--section all|defaults|volume|blocks|ablations|pareto] [--output DIR]
 //

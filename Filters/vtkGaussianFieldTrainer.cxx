@@ -56,13 +56,19 @@ public:
   {
     return this->Reduce(values, count, vtkCommunicator::MAX_OP, error);
   }
+  double Seconds = 0; ///< wall-clock seconds inside AllReduce (waiting for the slowest process included)
+  double Bytes = 0;   ///< bytes this process contributed to the sums
 
 private:
   template <typename T>
   bool Reduce(T* values, std::size_t count, int operation, std::string* error)
   {
+    const auto start = std::chrono::steady_clock::now();
     const std::vector<T> mine(values, values + count);
-    if (!this->Controller->AllReduce(mine.data(), values, static_cast<vtkIdType>(count), operation))
+    const bool ok = this->Controller->AllReduce(mine.data(), values, static_cast<vtkIdType>(count), operation) != 0;
+    this->Seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    this->Bytes += static_cast<double>(count * sizeof(T));
+    if (!ok)
     {
       if (error)
       {
@@ -540,6 +546,8 @@ int vtkGaussianFieldTrainer::RequestData(
   this->NumberOfGaussians = n;
   this->TrainingSeconds = report.Seconds;
   this->CompletedIterations = report.Iterations;
+  this->ReductionSeconds = reduction.Seconds;
+  this->ReductionBytes = reduction.Bytes;
   this->FinalLoss = report.LastLoss;
   this->Gamma = trainer.GetGamma();
   this->StopReason = report.StopReason;

@@ -315,6 +315,10 @@ public:
   vtkGetMacro(TrainingSeconds, double);
   vtkGetMacro(CompletedIterations, int);
   vtkGetMacro(FinalLoss, double);
+  /// With a Controller of several processes: seconds this process spent in the sums across processes
+  /// (AllReduce, waiting for the slowest included) and the bytes it contributed to them; 0 alone.
+  vtkGetMacro(ReductionSeconds, double);
+  vtkGetMacro(ReductionBytes, double);
   vtkGetMacro(Gamma, double);
   const char* GetStopReason() const { return this->StopReason.c_str(); }
   const char* GetGrowthStopReason() const { return this->GrowthStopReason.c_str(); }
@@ -380,6 +384,8 @@ protected:
   std::string BackendInUse;
   vtkMultiProcessController* Controller = nullptr;
   int FramesPerStep = 1;
+  double ReductionSeconds = 0;
+  double ReductionBytes = 0;
 
   int CurrentIteration = 0;
   double CurrentLoss = 0;

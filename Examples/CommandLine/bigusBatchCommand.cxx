@@ -710,7 +710,16 @@ int RunBatch(const BatchOptions& o)
   };
   std::vector<BatchJob> jobs;
   std::string error;
-  if (!ReadManifest(o.Manifest, jobs, error))
+  bool read = false;
+  try
+  {
+    read = ReadManifest(o.Manifest, jobs, error);
+  }
+  catch (const json::exception& e)
+  {
+    error = o.Manifest + ": " + e.what();
+  }
+  if (!read)
   {
     if (rank == 0)
     {

@@ -309,6 +309,14 @@ int RunTrain(const TrainOptions& o)
     std::printf("gap filling    %s\n", gaps->GetVariantValue(0).ToString().c_str());
   }
   std::printf("backend        %s\n", trainer->GetBackendInUse());
+  if (processes.Controller && processes.Controller->GetNumberOfProcesses() > 1)
+  {
+    const int steps = std::max(1, trainer->GetCompletedIterations());
+    std::printf("distributed    %d ranks: %.1f s of %.1f s training in sums across ranks (AllReduce, waiting "
+                "included) on rank 0; %.3f MB summed per step\n",
+      processes.Controller->GetNumberOfProcesses(), trainer->GetReductionSeconds(), trainer->GetTrainingSeconds(),
+      trainer->GetReductionBytes() / steps / 1e6);
+  }
   if (vtkDataArray* corrections = fd->GetArray("PoseCorrections"))
   {
     // Per training frame: the rotation's angle (degrees) and the translation's length (mm).
