@@ -27,6 +27,7 @@ NWIRE_XML = os.path.join(ROOT, "Testing/Data/nwire-phantom/PlusDeviceSet_NwirePh
 # The model's assumptions (not measured here): per-message latency of one ring step, link bandwidths.
 LATENCY_S = 2e-6
 LINKS_GBIT = (100, 400)
+GPU_SPEEDUP = 100  # a step's compute on a GPU against one core of this machine, assumed (no GPU measured)
 
 
 def mpi(mpiexec, ranks):
@@ -104,10 +105,11 @@ def model_rows(step_compute_s, gaussians_measured):
             times = {}
             for p in (8, 64, 512):
                 times[p] = 2 * (p - 1) / p * nbytes / bandwidth + 2 * (p - 1) * LATENCY_S
-            # P at which the allreduce takes as long as the compute (communication dominates beyond it).
-            crossover = next((p for p in range(2, 1 << 20) if
-                              2 * (p - 1) / p * nbytes / bandwidth + 2 * (p - 1) * LATENCY_S >= compute), None)
-            rows.append((n, gbit, compute, nbytes, times, crossover))
+            # P at which the allreduce takes as long as the compute (communication dominates beyond it), for
+            # this machine's compute and for a compute GPU_SPEEDUP times faster.
+            crossovers = [next((p for p in range(2, 1 << 20) if 2 * (p - 1) / p * nbytes / bandwidth +
+                                2 * (p - 1) * LATENCY_S >= c), None) for c in (compute, compute / GPU_SPEEDUP)]
+            rows.append((n, gbit, compute, nbytes, times, crossovers))
     return rows
 
 
@@ -173,16 +175,17 @@ def main():
         f"({compute_two * 1000:.1f} ms at {two['gaussians']} Gaussians on one core), scaled linearly in the "
         "Gaussians. The sum is a ring allreduce of 52 bytes per Gaussian: 2 (P - 1) / P x bytes / bandwidth + "
         f"2 (P - 1) x {LATENCY_S * 1e6:.0f} us latency (assumed, not measured). Communication dominates from the "
-        "P in the last column.",
+        f"P in the last columns: with this machine's compute, and with a compute {GPU_SPEEDUP} times faster (a GPU; "
+        "assumed, not measured).",
         "",
         "| Gaussians | link | compute per step (ms) | MB per step | allreduce P=8 (ms) | P=64 | P=512 | "
-        "communication dominates from P = |",
-        "|---|---|---|---|---|---|---|---|",
+        f"communication dominates from P = | the same, compute / {GPU_SPEEDUP} |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
-    for n, gbit, compute, nbytes, times, crossover in model_rows(compute_two, two["gaussians"]):
+    for n, gbit, compute, nbytes, times, crossovers in model_rows(compute_two, two["gaussians"]):
+        cells = [f"{c:,}" if c else "beyond 10^6" for c in crossovers]
         lines.append(f"| {n:,} | {gbit} Gb/s | {compute * 1000:.1f} | {nbytes / 1e6:.1f} | {times[8] * 1000:.2f} | "
-                     f"{times[64] * 1000:.2f} | {times[512] * 1000:.2f} | "
-                     f"{crossover if crossover else 'never below 10^6'} |")
+                     f"{times[64] * 1000:.2f} | {times[512] * 1000:.2f} | {cells[0]} | {cells[1]} |")
     text = "\n".join(lines) + "\n"
     with open(a.report, "w") as f:
         f.write(text)

@@ -117,16 +117,12 @@ public:
     for (int k = 0; k < count && ok; ++k)
     {
       const SliceGeometry slice = this->Data->Slice(frames[k]);
-      if (!this->Owns(k))
-      {
-        std::fill(S + pixels * k, S + pixels * (k + 1), 0.f); // another process's frame: its share of the sum
-      }
-      else if (!this->Backend->Forward(view, &slice, 1, linear, S + pixels * k, nullptr, nullptr, error))
+      if (!this->Backend->Forward(view, &slice, 1, linear, S + pixels * k, nullptr, nullptr, error))
       {
         ok = FrameError(frames[k], error);
       }
     }
-    return this->Agree(ok, error) && (!this->Reduction || this->Reduction->Sum(S, pixels * count, error));
+    return this->Agree(ok, error); // data-parallel: this process's frames' images stay here
   }
 
   bool ApplyBasisTranspose(const float* y, const int* frames, int count, const RenderOptions& options, double* out,
@@ -143,10 +139,6 @@ public:
     bool ok = true;
     for (int k = 0; k < count && ok; ++k)
     {
-      if (!this->Owns(k))
-      {
-        continue;
-      }
       this->Gradients.assign(n, 0.f);
       grads.Reflectivities = this->Gradients.data();
       const SliceGeometry slice = this->Data->Slice(frames[k]);
@@ -177,8 +169,7 @@ public:
     for (int k = 0; k < count && ok; ++k)
     {
       const SliceGeometry slice = this->Data->Slice(frames[k]);
-      if (this->Owns(k) &&
-        !AccumulateBasisNorms(this->State.Field.View(), &slice, 1, options, weights + pixels * k, sum, error))
+      if (!AccumulateBasisNorms(this->State.Field.View(), &slice, 1, options, weights + pixels * k, sum, error))
       {
         ok = FrameError(frames[k], error);
       }
@@ -195,7 +186,7 @@ private:
   /// the pose gradients, the field's gradients and the EA-D accumulators summed over the processes.
   StepStatus Reduce(const StepRequest& request, double& total, bool ok, std::string* error);
 
-  /// Whether this process renders position @p k of a step's or an operator's frames (all of them alone).
+  /// Whether this process renders position @p k of a step's frames (all of them alone).
   bool Owns(int k) const { return !this->Reduction || k % this->Reduction->Size() == this->Reduction->Rank(); }
   /// With several processes, whether every one succeeded (ProcessReduction::AllSucceeded); alone, @p ok.
   bool Agree(bool ok, std::string* error) { return this->Reduction ? this->Reduction->AllSucceeded(ok, error) : ok; }

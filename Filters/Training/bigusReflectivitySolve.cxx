@@ -74,23 +74,43 @@ double ReflectivitySolveBytes(std::int64_t gaussians, std::int64_t pixels)
   return double(gaussians) * (6 * sizeof(double) + sizeof(float)) + double(pixels) * 2 * sizeof(float);
 }
 
-bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const std::vector<int>& frames,
+bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const std::vector<int>& allFrames,
   const RenderOptions& options, const ReflectivitySolveSettings& settings, std::vector<float>& reflectivities,
-  ReflectivitySolveReport* report, std::string* error)
+  ReflectivitySolveReport* report, std::string* error, ProcessReduction* reduction)
 {
   const double start = Now();
+  reduction = reduction && reduction->Size() > 1 ? reduction : nullptr;
+  if (allFrames.empty())
+  {
+    return Fail(error, "nothing to solve: no frame given");
+  }
+  // Data-parallel: this process's share of the frames; the sums over the data space are summed over processes.
+  std::vector<int> frames;
+  for (std::size_t k = 0; k < allFrames.size(); ++k)
+  {
+    if (!reduction || static_cast<int>(k % reduction->Size()) == reduction->Rank())
+    {
+      frames.push_back(allFrames[k]);
+    }
+  }
+  bool communicated = true;
+  auto total = [&](double local) {
+    communicated = communicated && (!reduction || reduction->Sum(&local, 1, error));
+    return local;
+  };
   const std::int64_t n = static_cast<std::int64_t>(reflectivities.size());
   const std::int64_t pixels = std::int64_t(data.Width) * data.Height;
   const int count = static_cast<int>(frames.size());
   const std::int64_t m = pixels * count;
-  if (count == 0)
-  {
-    return Fail(error, "nothing to solve: no frame given");
-  }
   // Refused before anything is allocated when its vectors alone would not fit in this machine's memory.
   const double needed = ReflectivitySolveBytes(n, m);
   const double physical = PhysicalMemoryBytes();
-  if (physical > 0 && needed > physical)
+  const bool fits = physical <= 0 || needed <= physical;
+  if (reduction && !reduction->AllSucceeded(fits, error))
+  {
+    return fits ? false : Fail(error, "the reflectivity solve does not fit in memory on this process");
+  }
+  if (!fits)
   {
     char text[300];
     std::snprintf(text, sizeof(text),
@@ -111,9 +131,15 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
     return std::min(std::max(double(recorded[k / pixels][k % pixels]), 0.0), settings.MaximumIntensity);
   };
   auto root = [&](std::int64_t k) { return masks[k / pixels][k % pixels] ? gamma * (1 - intensity(k)) : 0.0; };
-  if (Sum(m, [&](std::int64_t k) { return root(k) > 0 ? 1.0 : 0.0; }) == 0)
+  const double imaged = total(Sum(m, [&](std::int64_t k) { return root(k) > 0 ? 1.0 : 0.0; }));
+  if (!communicated)
   {
-    return Fail(error, "nothing to solve: the fan masks of the " + std::to_string(count) + " frames are empty");
+    return false;
+  }
+  if (imaged == 0)
+  {
+    return Fail(error, "nothing to solve: the fan masks of the " + std::to_string(allFrames.size()) +
+        " frames are empty");
   }
   // Data-space vectors: the residual rho and q (A p, the weights G, the input of A^T).
   std::vector<float> rho(m), q(m);
@@ -134,7 +160,7 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
   if (seen == 0)
   {
     return Fail(error, "nothing to solve: no Gaussian of the field reaches a pixel inside the fan masks of the " +
-        std::to_string(count) + " frames");
+        std::to_string(allFrames.size()) + " frames");
   }
   const double lambda = settings.Ridge * meanDiagonal / seen;
   const double rootLambda = std::sqrt(lambda);
@@ -158,7 +184,7 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
     ridge[i] = -rootLambda * reflectivities[i];
   });
   auto objective = [&]() {
-    return Sum(m, [&](std::int64_t k) { return double(rho[k]) * rho[k]; }) +
+    return total(Sum(m, [&](std::int64_t k) { return double(rho[k]) * rho[k]; })) +
       Sum(n, [&](std::int64_t i) { return ridge[i] * ridge[i]; });
   };
   // s = B^T residual; q is scratch here.
@@ -178,7 +204,7 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
   r.Lambda = lambda;
   r.UnseenGaussians = n - seen;
   r.Objective.push_back(objective());
-  if (!transpose())
+  if (!communicated || !transpose())
   {
     return false;
   }
@@ -194,8 +220,12 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
       return false;
     }
     ForEach(m, [&](std::int64_t k) { q[k] = static_cast<float>(q[k] * root(k)); });
-    const double delta = Sum(m, [&](std::int64_t k) { return double(q[k]) * q[k]; }) +
+    const double delta = total(Sum(m, [&](std::int64_t k) { return double(q[k]) * q[k]; })) +
       lambda * Sum(n, [&](std::int64_t i) { return applied[i] * double(applied[i]); });
+    if (!communicated)
+    {
+      return false;
+    }
     const double alpha = norm / delta;
     if (!std::isfinite(alpha))
     {
@@ -208,6 +238,10 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
     ForEach(m, [&](std::int64_t k) { rho[k] -= static_cast<float>(alpha * q[k]); });
     r.Objective.push_back(objective());
     r.Iterations = it + 1;
+    if (!communicated)
+    {
+      return false;
+    }
     if (!transpose())
     {
       return false;

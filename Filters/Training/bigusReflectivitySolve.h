@@ -67,10 +67,17 @@ BIGUSTRAINING_EXPORT double ReflectivitySolveBytes(std::int64_t gaussians, std::
  * Returns false with @p error when the engine fails (a rejected pose), when no frame is given or no
  * pixel of them is inside the fan mask ("nothing to solve: ..."), when its vectors would not fit in
  * memory, or when the solve meets a non-finite value; @p reflectivities are unchanged then.
+ *
+ * Data-parallel (@p reduction of several processes, the one the engine was given: every process calls this with
+ * the same @p frames and field): each process keeps the residual of its share of @p frames (positions k with
+ * k mod P == rank) and applies A and A^T to them only; A^T's N-vectors and the data-space inner products are
+ * summed over the processes (ProcessReduction), so every process takes the same CGLS steps and returns the same
+ * reflectivities.
  */
 BIGUSTRAINING_EXPORT bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data,
   const std::vector<int>& frames, const RenderOptions& options, const ReflectivitySolveSettings& settings,
-  std::vector<float>& reflectivities, ReflectivitySolveReport* report, std::string* error);
+  std::vector<float>& reflectivities, ReflectivitySolveReport* report, std::string* error,
+  ProcessReduction* reduction = nullptr);
 
 } // namespace bigus
 

@@ -435,7 +435,7 @@ bool Trainer::SolveFieldReflectivities(std::string* error)
   OptimizerState& G = this->State.Gaussians;
   std::vector<float> r = G.Field.Reflectivities;
   if (!SolveReflectivities(*this->Engine, *this->Data, this->Data->TrainFrames, this->Options(), this->Settings.Solve, r,
-        &this->Report.LastSolve, error))
+        &this->Report.LastSolve, error, this->Reduction))
   {
     if (error)
     {

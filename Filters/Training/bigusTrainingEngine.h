@@ -245,9 +245,11 @@ public:
   virtual void Restore() = 0;
 
   /**
-   * Data-parallel training (ProcessReduction): from now on Step, ApplyBasis, ApplyBasisTranspose and
-   * BasisNorms work on this process's share of their frames and sum the results over the processes; Render
-   * stays local. Null: one process. The base class refuses (false with @p error naming the engine) any
+   * Data-parallel training (ProcessReduction): from now on Step renders this process's share of the request's
+   * frames and sums the gradients over the processes; the operators of the solve take this process's frames
+   * (the caller splits them: bigus::SolveReflectivities), ApplyBasis keeps their images here, and
+   * ApplyBasisTranspose and BasisNorms sum their N-vectors over the processes; Render stays local. Every call
+   * agrees on success first (ProcessReduction::AllSucceeded). Null: one process. The base class refuses (false with @p error naming the engine) any
    * reduction of more than one process; an engine that sums across processes overrides it.
    */
   virtual bool SetReduction(ProcessReduction* reduction, std::string* error);
