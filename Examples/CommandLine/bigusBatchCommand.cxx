@@ -141,6 +141,158 @@ bool IsOutputPath(const std::string& key)
   return key == "checkpoint" || key == "refined-poses";
 }
 
+/// A manifest value as `bigus train` arguments (a list: one per element): paths resolved (IsInputPath against
+/// @p folder, IsOutputPath against the job's @p output), numbers as written, a flag's true / false. False when
+/// the value is of no such kind.
+bool OptionTexts(const std::string& key, const json& value, const fs::path& folder, const fs::path& output,
+  std::vector<std::string>& texts)
+{
+  for (const json& v : value.is_array() ? value.get<std::vector<json>>() : std::vector<json>{ value })
+  {
+    if (v.is_string())
+    {
+      const std::string s = v.get<std::string>();
+      texts.push_back(IsInputPath(key) ? (folder / s).lexically_normal().string()
+          : IsOutputPath(key)          ? (output / s).lexically_normal().string()
+                                       : s);
+    }
+    else if (v.is_number_integer())
+    {
+      texts.push_back(std::to_string(v.get<long long>()));
+    }
+    else if (v.is_number())
+    {
+      texts.push_back(v.dump());
+    }
+    else if (v.is_boolean() && !value.is_array())
+    {
+      texts.push_back(v.get<bool>() ? "true" : "false");
+    }
+    else
+    {
+      return false;
+    }
+  }
+  return true;
+}
+
+/**
+ * The arguments of a job's `bigus train` and `bigus evaluate` from its @p settings (defaults merged; job.Output
+ * set), checked by parsing them with @p train's options. Returns "" or what is wrong, as "key<TAB>message" when
+ * a key is to blame.
+ */
+std::string ReadJob(const json& settings, const fs::path& folder, const CLI::App& train, BatchJob& job)
+{
+  std::vector<std::string> sweeps, arguments = { "train" };
+  int holdOutSweep = -1;
+  std::string holdOutEvery, holdOutOffset = "0";
+  std::vector<std::string> shared; // evaluate's options from the job's: the backend
+  std::map<std::string, std::vector<std::string>> perSweep; // calibration, mask (one for all or one per sweep), transform
+  for (const auto& [key, value] : settings.items())
+  {
+    if (key == "output" || key == "name")
+    {
+      continue;
+    }
+    if (key == "resume")
+    {
+      return key + "\tnot a batch option: rerunning the batch resumes it (completed jobs are skipped)";
+    }
+    if (key != "sweep" && !train.get_option_no_throw("--" + key))
+    {
+      return key + "\tunknown option (neither a batch key, \"sweep\", \"output\", \"name\", nor an option of bigus "
+                   "train: bigus train --help)";
+    }
+    std::vector<std::string> texts;
+    if (!OptionTexts(key, value, folder, job.Output, texts) || texts.empty())
+    {
+      return key + "\texpects a string, a number, true / false, or a non-empty list of strings or numbers";
+    }
+    if (key == "sweep")
+    {
+      sweeps = texts;
+      continue;
+    }
+    holdOutSweep = key == "holdout-sweep" ? std::atoi(texts.front().c_str()) : holdOutSweep;
+    holdOutEvery = key == "holdout-every" ? texts.front() : holdOutEvery;
+    holdOutOffset = key == "holdout-offset" ? texts.front() : holdOutOffset;
+    if (key == "backend")
+    {
+      shared = { "--backend", texts.front() };
+    }
+    if (key == "calibration" || key == "mask" || key == "transform")
+    {
+      perSweep[key] = texts;
+    }
+    for (const std::string& t : key == "frames" ? texts : std::vector<std::string>())
+    {
+      job.TrainingFrames.push_back(std::atoi(t.c_str()));
+    }
+    for (const std::string& t : texts)
+    {
+      if (!value.is_boolean())
+      {
+        arguments.insert(arguments.end(), { "--" + key, t });
+      }
+      else if (value.get<bool>())
+      {
+        arguments.push_back("--" + key);
+      }
+    }
+  }
+  const std::string field = (fs::path(job.Output) / "field.vtp").string();
+  arguments.insert(arguments.begin() + 1, sweeps.begin(), sweeps.end());
+  arguments.insert(arguments.end(), { "-o", field });
+  try
+  {
+    RunCommand(arguments, true);
+  }
+  catch (const CLI::ParseError& e)
+  {
+    std::string what = e.what();
+    what.erase(std::remove(what.begin(), what.end(), '\n'), what.end());
+    return what;
+  }
+  // What is scored: the held-out sweep, or the one sweep's frames that were held out.
+  if (holdOutSweep < 0 && sweeps.size() > 1)
+  {
+    return "sweep\ta job of several sweeps is scored on one left out: give \"holdout-sweep\"";
+  }
+  if (holdOutSweep < 0 && holdOutEvery.empty() && job.TrainingFrames.empty())
+  {
+    return "no held-out frames to score: give \"holdout-every\" (and \"holdout-offset\"), \"frames\" or "
+           "\"holdout-sweep\"";
+  }
+  const std::size_t scored = std::max(0, holdOutSweep);
+  if (scored >= sweeps.size())
+  {
+    return "holdout-sweep\tthere is no sweep " + std::to_string(scored) + " (the job has " +
+      std::to_string(sweeps.size()) + ")";
+  }
+  for (const auto& [key, files] : perSweep)
+  {
+    if (files.size() != 1 && files.size() != sweeps.size())
+    {
+      return key + "\t" + std::to_string(files.size()) + " files for " + std::to_string(sweeps.size()) +
+        " sweeps: give one for every sweep, or one per sweep in their order";
+    }
+  }
+  job.TrainArguments = arguments;
+  job.EvaluateArguments = { "evaluate", field, sweeps[scored] };
+  for (const auto& [key, files] : perSweep)
+  {
+    job.EvaluateArguments.insert(job.EvaluateArguments.end(), { "--" + key, files[files.size() == 1 ? 0 : scored] });
+  }
+  if (holdOutSweep < 0 && !holdOutEvery.empty())
+  {
+    job.EvaluateArguments.insert(job.EvaluateArguments.end(),
+      { "--holdout-every", holdOutEvery, "--holdout-offset", holdOutOffset });
+  }
+  job.EvaluateArguments.insert(job.EvaluateArguments.end(), shared.begin(), shared.end());
+  job.EvaluateArguments.insert(job.EvaluateArguments.end(), { "--report", job.Output });
+  return "";
+}
+
 /// The manifest's jobs, checked before any runs; false with @p error naming the line that is wrong.
 bool ReadManifest(const std::string& file, std::vector<BatchJob>& jobs, std::string& error)
 {
@@ -197,11 +349,6 @@ bool ReadManifest(const std::string& file, std::vector<BatchJob>& jobs, std::str
     job.Line = lines.Jobs[j];
     json settings = defaults;
     settings.update(manifest["jobs"][j]);
-    if (settings.contains("name") && !settings["name"].is_string())
-    {
-      error = file + ", line " + std::to_string(job.Line) + " (job " + std::to_string(j) + "): \"name\" must be a string";
-      return false;
-    }
     auto where = [&](const std::string& key) {
       auto own = lines.JobKeys[j].find(key);
       const bool fromDefaults = own == lines.JobKeys[j].end() && lines.DefaultKeys.count(key);
@@ -211,6 +358,11 @@ bool ReadManifest(const std::string& file, std::vector<BatchJob>& jobs, std::str
       return file + ", line " + std::to_string(line) + " (job " + std::to_string(j) +
         (key.empty() ? std::string() : (fromDefaults ? ", \"defaults\" " : ", ") + ("\"" + key + "\"")) + "): ";
     };
+    if (settings.contains("name") && !settings["name"].is_string())
+    {
+      error = where("name") + "must be a string";
+      return false;
+    }
     for (const char* required : { "sweep", "output" })
     {
       if (!settings.contains(required))
@@ -234,143 +386,14 @@ bool ReadManifest(const std::string& file, std::vector<BatchJob>& jobs, std::str
       return false;
     }
     outputs[canonical] = j;
-    std::vector<std::string> sweeps, arguments = { "train" };
-    int holdOutSweep = -1;
-    std::string holdOutEvery, holdOutOffset, backend;
-    std::map<std::string, std::vector<std::string>> perSweep; // calibration, mask (one for all or one per sweep), transform
-    for (const auto& [key, value] : settings.items())
+    const std::string problem = ReadJob(settings, folder, *train, job);
+    if (!problem.empty())
     {
-      if (key == "output" || key == "name")
-      {
-        continue;
-      }
-      if (key == "resume")
-      {
-        error = where(key) + "not a batch option: rerunning the batch resumes it (completed jobs are skipped)";
-        return false;
-      }
-      if (key != "sweep" && !train->get_option_no_throw("--" + key))
-      {
-        error = where(key) + "unknown option (neither a batch key, \"sweep\", \"output\", \"name\", nor an option "
-                             "of bigus train: bigus train --help)";
-        return false;
-      }
-      std::vector<json> values = value.is_array() ? value.get<std::vector<json>>() : std::vector<json>{ value };
-      std::vector<std::string> texts;
-      for (const json& v : values)
-      {
-        if (v.is_string())
-        {
-          const std::string s = v.get<std::string>();
-          texts.push_back(IsInputPath(key) ? (folder / s).lexically_normal().string()
-              : IsOutputPath(key)          ? (fs::path(job.Output) / s).lexically_normal().string()
-                                           : s);
-        }
-        else if (v.is_number_integer())
-        {
-          texts.push_back(std::to_string(v.get<long long>()));
-        }
-        else if (v.is_number())
-        {
-          texts.push_back(v.dump());
-        }
-        else if (v.is_boolean() && !value.is_array())
-        {
-          texts.push_back(v.get<bool>() ? "true" : "false");
-        }
-        else
-        {
-          error = where(key) + "expects a string, a number, true / false, or a list of strings or numbers";
-          return false;
-        }
-      }
-      if (key == "sweep")
-      {
-        sweeps = texts;
-        continue;
-      }
-      if (key == "holdout-sweep")
-      {
-        holdOutSweep = std::atoi(texts.front().c_str());
-      }
-      holdOutEvery = key == "holdout-every" ? texts.front() : holdOutEvery;
-      holdOutOffset = key == "holdout-offset" ? texts.front() : holdOutOffset;
-      backend = key == "backend" ? texts.front() : backend;
-      if (key == "calibration" || key == "mask" || key == "transform")
-      {
-        perSweep[key] = texts;
-      }
-      if (key == "frames")
-      {
-        for (const std::string& t : texts)
-        {
-          job.TrainingFrames.push_back(std::atoi(t.c_str()));
-        }
-      }
-      if (value.is_boolean())
-      {
-        if (value.get<bool>())
-        {
-          arguments.push_back("--" + key);
-        }
-        continue;
-      }
-      for (const std::string& t : texts)
-      {
-        arguments.push_back("--" + key);
-        arguments.push_back(t);
-      }
-    }
-    arguments.insert(arguments.begin() + 1, sweeps.begin(), sweeps.end());
-    arguments.push_back("-o");
-    arguments.push_back((fs::path(job.Output) / "field.vtp").string());
-    try
-    {
-      RunCommand(arguments, true);
-    }
-    catch (const CLI::ParseError& e)
-    {
-      std::string what = e.what();
-      what.erase(std::remove(what.begin(), what.end(), '\n'), what.end());
-      error = where("") + what;
+      const std::size_t split = problem.find('\t'); // "key<TAB>message": the key names the line
+      error = where(split == std::string::npos ? "" : problem.substr(0, split)) +
+        (split == std::string::npos ? problem : problem.substr(split + 1));
       return false;
     }
-    // What is scored: the held-out sweep, or the one sweep's frames that were held out.
-    const std::size_t scored = holdOutSweep >= 0 ? static_cast<std::size_t>(holdOutSweep) : 0;
-    if (holdOutSweep < 0 && sweeps.size() > 1)
-    {
-      error = where("sweep") + "a job of several sweeps is scored on one left out: give \"holdout-sweep\"";
-      return false;
-    }
-    if (holdOutSweep < 0 && holdOutEvery.empty() && job.TrainingFrames.empty())
-    {
-      error = where("") + "no held-out frames to score: give \"holdout-every\" (and \"holdout-offset\"), "
-                          "\"frames\" or \"holdout-sweep\"";
-      return false;
-    }
-    if (scored >= sweeps.size())
-    {
-      error = where("holdout-sweep") + "there is no sweep " + std::to_string(scored) + " (the job has " +
-        std::to_string(sweeps.size()) + ")";
-      return false;
-    }
-    job.EvaluateArguments = { "evaluate", (fs::path(job.Output) / "field.vtp").string(), sweeps[scored] };
-    for (const auto& [key, files] : perSweep)
-    {
-      job.EvaluateArguments.push_back("--" + key);
-      job.EvaluateArguments.push_back(files[files.size() == 1 ? 0 : std::min(scored, files.size() - 1)]);
-    }
-    if (holdOutSweep < 0 && !holdOutEvery.empty())
-    {
-      job.EvaluateArguments.insert(job.EvaluateArguments.end(),
-        { "--holdout-every", holdOutEvery, "--holdout-offset", holdOutOffset.empty() ? "0" : holdOutOffset });
-    }
-    if (!backend.empty())
-    {
-      job.EvaluateArguments.insert(job.EvaluateArguments.end(), { "--backend", backend });
-    }
-    job.EvaluateArguments.insert(job.EvaluateArguments.end(), { "--report", job.Output });
-    job.TrainArguments = arguments;
     jobs.push_back(job);
   }
   return true;

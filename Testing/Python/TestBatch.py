@@ -10,27 +10,11 @@ import os
 import shutil
 import signal
 import subprocess
-import sys
 import time
 
-import vtk
-from vtk.util.numpy_support import vtk_to_numpy
+from mpi_testing import BIGUS, DATA, MPI, OUT, SWEEP, XML, check, field_arrays, find_rank, finish
 
-DATA, BIGUS, OUT = (os.path.abspath(a) for a in (sys.argv[1], sys.argv[2], sys.argv[4]))
-MPIEXEC = sys.argv[3]
-NWIRE = os.path.join(DATA, "nwire-phantom")
-SWEEP = os.path.join(NWIRE, "NwirePhantomFreehandCropped.igs.mha")
-XML = os.path.join(NWIRE, "PlusDeviceSet_NwirePhantomFreehand_vtkVolumeReconstructorTest2.xml")
 MALFORMED = os.path.join(DATA, "Malformed", "corrupt_body.igs.mha")
-# As root (containers, CI) Open MPI wants to be told; --oversubscribe: more ranks than cores.
-MPI = [MPIEXEC, "--oversubscribe"] + (["--allow-run-as-root"] if os.geteuid() == 0 else [])
-failures = []
-
-
-def check(condition, what):
-    if not condition:
-        failures.append(what)
-        print("FAIL:", what)
 
 
 def write_manifest(folder, jobs, defaults=None, text=None):
@@ -44,17 +28,6 @@ def write_manifest(folder, jobs, defaults=None, text=None):
 def batch(manifest, ranks=0, timeout=600):
     command = (MPI + ["-n", str(ranks)] if ranks else []) + [BIGUS, "batch", manifest]
     return subprocess.run(command, capture_output=True, text=True, timeout=timeout)
-
-
-def field_arrays(path):
-    reader = vtk.vtkXMLPolyDataReader()
-    reader.SetFileName(path)
-    reader.Update()
-    field = reader.GetOutput()
-    arrays = {"points": vtk_to_numpy(field.GetPoints().GetData())}
-    for name in ("Scale", "Rotation", "Reflectivity"):
-        arrays[name] = vtk_to_numpy(field.GetPointData().GetArray(name))
-    return arrays
 
 
 DEFAULTS = {"calibration": XML, "threads": 1, "seed": 7}
@@ -152,17 +125,7 @@ def rank_killed_then_rerun():
     deadline = time.time() + 300
     while not records() and time.time() < deadline and process.poll() is None:
         time.sleep(0.2)
-    victim = None
-    for pid in filter(str.isdigit, os.listdir("/proc")):
-        try:
-            with open(f"/proc/{pid}/environ", "rb") as f:
-                environment = f.read().split(b"\0")
-            with open(f"/proc/{pid}/cmdline", "rb") as f:
-                command = f.read()
-        except OSError:
-            continue
-        if b"OMPI_COMM_WORLD_RANK=1" in environment and manifest.encode() in command:
-            victim = int(pid)
+    victim = find_rank(1, manifest.encode(), process)
     check(victim is not None, "could not find rank 1 to kill")
     if victim is None:
         process.kill()
@@ -198,7 +161,4 @@ def rank_killed_then_rerun():
 bad_manifests()
 same_jobs_on_one_process_and_two_ranks()
 rank_killed_then_rerun()
-if failures:
-    print(f"{len(failures)} failures")
-    sys.exit(1)
-print("ok")
+finish()

@@ -11,28 +11,14 @@ import os
 import shutil
 import signal
 import subprocess
-import sys
 import time
 
 import numpy as np
-import vtk
-from vtk.util.numpy_support import vtk_to_numpy
 
-DATA, BIGUS, OUT = (os.path.abspath(a) for a in (sys.argv[1], sys.argv[2], sys.argv[4]))
-MPIEXEC = sys.argv[3]
-NWIRE = os.path.join(DATA, "nwire-phantom")
-SWEEP = os.path.join(NWIRE, "NwirePhantomFreehandCropped.igs.mha")
-XML = os.path.join(NWIRE, "PlusDeviceSet_NwirePhantomFreehand_vtkVolumeReconstructorTest2.xml")
-MPI = [MPIEXEC, "--oversubscribe"] + (["--allow-run-as-root"] if os.geteuid() == 0 else [])
+from mpi_testing import BIGUS, MPI, OUT, SWEEP, XML, check, field_arrays, find_rank, finish
+
 COMMON = [SWEEP, "--calibration", XML, "--holdout-every", "4", "--holdout-offset", "2", "--threads", "1",
           "--seed", "7"]
-failures = []
-
-
-def check(condition, what):
-    if not condition:
-        failures.append(what)
-        print("FAIL:", what)
 
 
 def train(name, *options, ranks=0):
@@ -45,17 +31,6 @@ def train(name, *options, ranks=0):
     if ranks:
         check("Processes = 2" in result.stdout, f"{name}: no data-parallel setting line in {result.stdout[-800:]}")
     return field, result.stdout
-
-
-def field_arrays(path):
-    reader = vtk.vtkXMLPolyDataReader()
-    reader.SetFileName(path)
-    reader.Update()
-    field = reader.GetOutput()
-    arrays = {"Means": vtk_to_numpy(field.GetPoints().GetData()).astype(np.float64)}
-    for name in ("Scale", "Rotation", "Reflectivity"):
-        arrays[name] = vtk_to_numpy(field.GetPointData().GetArray(name)).astype(np.float64)
-    return arrays
 
 
 def same_field(one, two, what, tolerance):
@@ -114,19 +89,7 @@ process = subprocess.Popen(MPI + ["-n", "2", BIGUS, "train"] + COMMON +
                            ["--no-pixel-grid-fit", "--iterations", "100000", "--distributed", "-o",
                             os.path.join(OUT, "killed.vtp")], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                            text=True)
-victim, deadline = None, time.time() + 120
-while victim is None and time.time() < deadline and process.poll() is None:
-    time.sleep(1)
-    for pid in filter(str.isdigit, os.listdir("/proc")):
-        try:
-            with open(f"/proc/{pid}/environ", "rb") as f:
-                environment = f.read().split(b"\0")
-            with open(f"/proc/{pid}/cmdline", "rb") as f:
-                command = f.read()
-        except OSError:
-            continue
-        if b"OMPI_COMM_WORLD_RANK=1" in environment and b"killed.vtp" in command:
-            victim = int(pid)
+victim = find_rank(1, b"killed.vtp", process)
 check(victim is not None, "could not find rank 1 to kill")
 if victim is not None:
     time.sleep(2)  # into the training steps
@@ -140,7 +103,4 @@ except subprocess.TimeoutExpired:
     check(False, "training hung after rank 1 was killed")
 check(not os.path.exists(os.path.join(OUT, "killed.vtp")), "a field was written by a run whose rank died")
 
-if failures:
-    print(f"{len(failures)} failures")
-    sys.exit(1)
-print("ok")
+finish()
