@@ -144,6 +144,7 @@ def rank_killed_then_rerun():
     times = {k: os.path.getmtime(os.path.join(folder, "runs", f"job{k}", "field.vtp")) for k in complete}
     # A half-written output (a field without its job.json) must not count: make one.
     missing = [k for k in range(6) if k not in complete]
+    os.makedirs(os.path.join(folder, "runs", f"job{missing[0]}"), exist_ok=True)
     with open(os.path.join(folder, "runs", f"job{missing[0]}", "field.vtp"), "w") as f:
         f.write("<VTKFile half written")
     result = batch(manifest)
