@@ -282,7 +282,11 @@ public:
    * accumulators and loss are summed over the processes every step (AllReduce), so that every process takes the
    * same Adam step and the same densification decisions and ends with the same field (bigus::ProcessReduction).
    * A step has FramesPerStep frames per process. Only process 0 writes checkpoints. Null (default) or one
-   * process: training on this process alone. The cpu backend only (another fails the request with an error).
+   * process: training on this process alone. Backends: cpu, and cuda (trained through the CPU engine over the
+   * CUDA renderer); an engine that cannot sum across processes fails the request with an error. The trainer's
+   * own checks and the checkpoint's read are agreed across the processes, but a process whose input this filter
+   * refuses (an error before training) never reaches the first sum: end every process then (MPI_Abort), as
+   * `bigus train --distributed` does.
    */
   virtual void SetController(vtkMultiProcessController* controller);
   vtkGetObjectMacro(Controller, vtkMultiProcessController);

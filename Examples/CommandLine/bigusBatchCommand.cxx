@@ -37,6 +37,8 @@ namespace
 {
 namespace fs = std::filesystem;
 using json = nlohmann::json;
+/// Records are written with invalid UTF-8 (an error text may name a file in any bytes) replaced, not thrown on.
+constexpr json::error_handler_t Utf8Replace = json::error_handler_t::replace;
 
 struct BatchOptions
 {
@@ -131,7 +133,8 @@ int RunCommand(const std::vector<std::string>& arguments, bool dryRun)
 }
 
 /// The options of `bigus train` that are paths, resolved against the manifest's folder ("sweep" too) or the
-/// job's output folder; "resume" is refused (a rerun of the batch resumes), "output" is the job's folder.
+/// job's output folder; "resume" is refused (a rerun of the batch resumes), and so is "distributed" (a job trains
+/// on one rank), "output" is the job's folder.
 bool IsInputPath(const std::string& key)
 {
   return key == "sweep" || key == "calibration" || key == "mask";
@@ -197,6 +200,11 @@ std::string ReadJob(const json& settings, const fs::path& folder, const CLI::App
     if (key == "resume")
     {
       return key + "\tnot a batch option: rerunning the batch resumes it (completed jobs are skipped)";
+    }
+    if (key == "distributed")
+    {
+      return key + "\tnot a batch option: under mpirun the batch shares its jobs between the ranks, each job "
+                   "trained by one of them";
     }
     if (key != "sweep" && !train.get_option_no_throw("--" + key))
     {
@@ -597,7 +605,7 @@ json RunJob(const BatchJob& job, int rank, int threads)
       record["error"] = "exit code " + std::to_string(code) + " (see " + log + ")";
     }
   }
-  if (!WriteText((fs::path(job.Output) / "job.json").string(), record.dump(2) + "\n"))
+  if (!WriteText((fs::path(job.Output) / "job.json").string(), record.dump(2, ' ', false, Utf8Replace) + "\n"))
   {
     record["status"] = "failed";
     record["error"] = job.Output + "/job.json: cannot write";
@@ -693,7 +701,8 @@ bool WriteSummary(const std::string& folder, const std::string& manifest, const 
        << stat("ssim", "%.4f +- %.4f") << " | " << stat("ncc", "%.4f +- %.4f") << " | "
        << stat("speckle", "%.4f +- %.4f") << " | |\n";
   }
-  return WriteText(folder + "/summary.json", summary.dump(2) + "\n") && WriteText(folder + "/summary.md", md.str());
+  return WriteText(folder + "/summary.json", summary.dump(2, ' ', false, Utf8Replace) + "\n") &&
+    WriteText(folder + "/summary.md", md.str());
 }
 
 constexpr int RequestTag = 1; ///< worker -> rank 0: the record of its last job (empty at first), and a request
@@ -711,6 +720,16 @@ int RunBatch(const BatchOptions& o)
     MPI_Init_thread(nullptr, nullptr, MPI_THREAD_FUNNELED, &provided);
     MPI_Comm_rank(MPI_COMM_WORLD, &rank);
     MPI_Comm_size(MPI_COMM_WORLD, &ranks);
+    if (provided < MPI_THREAD_FUNNELED)
+    {
+      if (rank == 0)
+      {
+        std::fprintf(stderr, "bigus: this MPI library does not allow threads (MPI_THREAD_FUNNELED), which rank 0 "
+                             "needs to train while it serves the queue\n");
+      }
+      MPI_Finalize();
+      return 1;
+    }
     threads = ThreadsPerRank();
   }
   auto finish = [&](int code) {
@@ -786,7 +805,7 @@ int RunBatch(const BatchOptions& o)
       }
       json r = RunJob(jobs[index], rank, threads);
       r["index"] = index;
-      last = r.dump();
+      last = r.dump(-1, ' ', false, Utf8Replace);
     }
     std::fclose(console);
     return finish(0);

@@ -25,6 +25,7 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <mpi.h>
 #include <sstream>
 #include <string>
 #include <unistd.h>
@@ -80,11 +81,33 @@ struct Processes
       this->Controller->Finalize();
     }
   }
+  /**
+   * The command's exit code @p code. A rank that fails with others running ends them all (MPI_Abort, after its
+   * own message): they may be waiting for it in a sum it will never enter (its sweep could not be read, or it
+   * failed outside the trainer's agreed checks).
+   */
+  int Exit(int code) const
+  {
+    if (code != 0 && this->Controller && this->Controller->GetNumberOfProcesses() > 1)
+    {
+      std::fflush(stdout);
+      std::fflush(stderr);
+      MPI_Abort(MPI_COMM_WORLD, code);
+    }
+    return code;
+  }
 };
+
+int TrainOnThisProcess(const TrainOptions& o, Processes& processes);
 
 int RunTrain(const TrainOptions& o)
 {
   Processes processes;
+  return processes.Exit(TrainOnThisProcess(o, processes));
+}
+
+int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
+{
   int threads = o.Threads;
   if (o.Distributed && LaunchedByMpi())
   {

@@ -234,6 +234,18 @@ const TrainingState& Trainer::GetState() const
 
 bool Trainer::Initialize(std::string* error)
 {
+  const bool prepared = this->PrepareInitialField(error);
+  // Data-parallel: what PrepareInitialField checks is this process's own (its copy of the data, its machine's
+  // memory), so every process learns of a failure here instead of waiting for the failed one in the first sum.
+  if (!(this->Reduction ? this->Reduction->AllSucceeded(prepared, error) : prepared))
+  {
+    return false;
+  }
+  return this->FitInitialReflectivities(error);
+}
+
+bool Trainer::PrepareInitialField(std::string* error)
+{
   const TrainingData& data = *this->Data;
   const std::size_t pixels = std::size_t(data.Width) * data.Height;
   if (data.TrainFrames.empty() || pixels == 0 ||
@@ -355,7 +367,7 @@ bool Trainer::Initialize(std::string* error)
                                         ? "are at most twice MaximumGaussians, a grid of that many"
                                         : "fit under MaximumGaussians") +
       grid + "; reflectivities solved, no geometry steps)");
-    return this->FitInitialReflectivities(error);
+    return true;
   }
   if (this->Settings.DenseInitialisation)
   {
@@ -365,7 +377,7 @@ bool Trainer::Initialize(std::string* error)
     this->Report.InitialGaussians = field.Count();
     this->Report.Settings.push_back(Format("InitialGaussians = %lld (dense start: ", static_cast<long long>(field.Count())) +
       grid + ")");
-    return this->FitInitialReflectivities(error);
+    return true;
   }
   this->Report.InitialGaussians = seeds;
   this->Report.Settings.push_back(Format("InitialGaussians = %lld (", static_cast<long long>(seeds)) +
@@ -382,7 +394,7 @@ bool Trainer::Initialize(std::string* error)
   {
     SeedUniform(data, seeds, rng, shape, field);
   }
-  return this->FitInitialReflectivities(error);
+  return true;
 }
 
 bool Trainer::FitInitialReflectivities(std::string* error)
@@ -728,22 +740,33 @@ bool Trainer::ValidationLoss(double& loss, std::string* error)
   ImageLossWorkspace workspace;
   double total = 0;
   int used = 0;
+  bool ok = true;
   const int frames = static_cast<int>(data.TrainFrames.size());
   const int stride = std::max(1, frames / 8);
-  for (int n = 0; n < frames && used < 8; n += stride, ++used)
+  for (int n = 0; n < frames && used < 8 && ok; n += stride, ++used)
   {
+    // Data-parallel: each process renders its share of the frames, and the losses are summed, so that the
+    // growth and early-stopping decisions are taken from one agreed value on every process.
+    if (this->Reduction && used % this->Reduction->Size() != this->Reduction->Rank())
+    {
+      continue;
+    }
     const int f = data.TrainFrames[n];
     const SliceGeometry slice = data.Slice(f);
-    if (!this->Engine->Render(&slice, 1, o, S.data(), I.data(), error))
+    ok = this->Engine->Render(&slice, 1, o, S.data(), I.data(), error);
+    if (ok)
     {
-      return false;
+      total += ComputeImageLoss(I.data(), &data.Frames[pixels * f], data.MaskOf(f), data.Width, data.Height,
+        this->Settings.Loss, nullptr, false, &workspace)
+                 .Total;
     }
-    total += ComputeImageLoss(I.data(), &data.Frames[pixels * f], data.MaskOf(f), data.Width, data.Height,
-      this->Settings.Loss, nullptr, false, &workspace)
-               .Total;
+  }
+  if (this->Reduction && !(this->Reduction->AllSucceeded(ok, error) && this->Reduction->Sum(&total, 1, error)))
+  {
+    return false;
   }
   loss = total / std::max(1, used);
-  return true;
+  return ok;
 }
 
 bool Trainer::CheckValidation(double& loss, std::string* error)
@@ -1086,6 +1109,13 @@ bool Trainer::SaveCheckpoint(const std::string& file, std::string* error)
 }
 
 bool Trainer::LoadCheckpoint(const std::string& file, std::string* error)
+{
+  // Data-parallel: every process reads the file (rank 0 wrote it); one that cannot fails them all here.
+  const bool loaded = this->ReadCheckpoint(file, error);
+  return this->Reduction ? this->Reduction->AllSucceeded(loaded, error) : loaded;
+}
+
+bool Trainer::ReadCheckpoint(const std::string& file, std::string* error)
 {
   TrainingState loaded;
   double gamma = this->Gamma;

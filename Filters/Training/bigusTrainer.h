@@ -262,7 +262,8 @@ public:
    * Initial field (Harris or random) and gamma. Returns false with @p error on bad data: no training
    * frame, inconsistent sizes, an empty mask, or a training pose the renderer rejects ("training
    * frame 12: ImageToReference is sheared ... by 7.20 degrees; the renderer accepts at most 5.00":
-   * bigus::DefaultMaximumShearAngle, also the reader's default limit).
+   * bigus::DefaultMaximumShearAngle, also the reader's default limit). Data-parallel: a process that fails
+   * these checks fails every process before the first sum ("another process failed (rank R)").
    */
   bool Initialize(std::string* error);
   /**
@@ -306,7 +307,8 @@ public:
    */
   StepStatus Step(double* loss, std::string* error);
 
-  /// Checkpoint: the whole TrainingState and gamma (format in bigusTrainingEngine.h).
+  /// Checkpoint: the whole TrainingState and gamma (format in bigusTrainingEngine.h). Data-parallel: every
+  /// process loads the file, and one that cannot fails every process (ProcessReduction::AllSucceeded).
   bool SaveCheckpoint(const std::string& file, std::string* error);
   bool LoadCheckpoint(const std::string& file, std::string* error);
 
@@ -349,8 +351,12 @@ private:
   /// The seeds' shape for this run's data, settings and gamma (bigusSeeding.h).
   SeedShape SeedShapeOf() const;
   bool FitReflectivityScale(std::string* error);
+  /// Initialize's part on this process alone: the data's checks, gamma, the memory check and the seeded field.
+  bool PrepareInitialField(std::string* error);
   /// The engine takes the seeded field; its reflectivities are then solved (ReflectivitySolve) or scaled.
   bool FitInitialReflectivities(std::string* error);
+  /// LoadCheckpoint's part on this process alone.
+  bool ReadCheckpoint(const std::string& file, std::string* error);
   /// The reflectivities of the current geometry by least squares (ReflectivitySolve); fresh Adam
   /// moments for them.
   bool SolveFieldReflectivities(std::string* error);

@@ -1,7 +1,8 @@
 """`bigus batch` on the N-wire fixture, in one process and under `mpirun -n 2 --oversubscribe`: bad manifests
 refused before any job starts with the line that is wrong; the same fields and metrics from 2 ranks as from one
 process; a job with a malformed sweep reported while the others complete; a rank killed half-way ends the run
-(no hang) and a rerun finishes only the jobs that were missing.
+(no hang) and a rerun trains only the jobs without complete outputs (missing, or a field cut short); a job
+whose arguments changed is trained again.
 
 Usage: TestBatch.py TESTING_DATA_DIR BIGUS_EXECUTABLE MPIEXEC OUTPUT_DIR
 """
@@ -61,6 +62,8 @@ def bad_manifests():
         "not JSON": ('{\n  "jobs": [\n    {"sweep": "x",\n     "output" "a"}\n  ]\n}\n', ["line 4", "not JSON"]),
         "no held-out frames": (json.dumps({"jobs": [{"sweep": SWEEP, "calibration": XML, "output": "a"}]}, indent=2),
                                ["line 3", "no held-out frames"]),
+        "a job trained on every rank": (json.dumps({"jobs": [dict(good, distributed=True)]}, indent=2),
+                                        ["line 8", "\"distributed\"", "not a batch option"]),
         "bad option value": (json.dumps({"jobs": [dict(good, iterations="many")]}, indent=2), ["line 3", "iterations"]),
     }
     for name, (text, expected) in cases.items():
@@ -113,7 +116,8 @@ def same_jobs_on_one_process_and_two_ranks():
 
 def rank_killed_then_rerun():
     """Under mpirun -n 2, rank 1 killed once a job is complete: the run ends (non-zero, mpirun names the rank)
-    instead of hanging; a rerun in one process trains only the jobs without complete outputs."""
+    instead of hanging; a rerun in one process trains only the jobs without complete outputs; after a change to
+    one job's arguments, only that job."""
     folder = os.path.join(OUT, "killed")
     shutil.rmtree(folder, ignore_errors=True)
     slow = {"no-pixel-grid-fit": True, "iterations": 400, "holdout-every": 4}
@@ -141,22 +145,39 @@ def rank_killed_then_rerun():
     check("rank 1" in output or "signal 9" in output, f"no word of the killed rank in: {output[-600:]}")
     complete = records()
     check(0 < len(complete) < 6, f"{len(complete)} jobs complete before the kill (expected some, not all)")
-    times = {k: os.path.getmtime(os.path.join(folder, "runs", f"job{k}", "field.vtp")) for k in complete}
-    # A half-written output (a field without its job.json) must not count: make one.
+    # Half-written outputs must not count: a field without its job.json (a job the kill interrupted), and a
+    # complete job's field cut short after its job.json was written (a disk that filled, a copy interrupted).
     missing = [k for k in range(6) if k not in complete]
     os.makedirs(os.path.join(folder, "runs", f"job{missing[0]}"), exist_ok=True)
     with open(os.path.join(folder, "runs", f"job{missing[0]}", "field.vtp"), "w") as f:
         f.write("<VTKFile half written")
+    cut = complete[0]
+    path = os.path.join(folder, "runs", f"job{cut}", "field.vtp")
+    os.truncate(path, os.path.getsize(path) // 2)
+    kept = [k for k in complete if k != cut]
+    times = {k: os.path.getmtime(os.path.join(folder, "runs", f"job{k}", "field.vtp")) for k in kept}
     result = batch(manifest)
     check(result.returncode == 0, f"rerun exit {result.returncode}: {result.stderr}")
-    with open(os.path.join(folder, "summary.json")) as f:
-        summary = json.load(f)
-    check(summary["kept"] == len(complete) and summary["done"] == 6 - len(complete),
-          f"rerun: kept {summary['kept']} done {summary['done']}, expected {len(complete)} / {6 - len(complete)}")
+    summary = read_summary(folder)
+    check(summary["kept"] == len(kept) and summary["done"] == 6 - len(kept),
+          f"rerun: kept {summary['kept']} done {summary['done']}, expected {len(kept)} / {6 - len(kept)}")
     for k, t in times.items():
         check(os.path.getmtime(os.path.join(folder, "runs", f"job{k}", "field.vtp")) == t,
               f"job{k} was complete and was trained again")
-    check(all(summary["jobs"][k]["status"] == "done" for k in missing), f"rerun statuses {summary['jobs']}")
+    check(all(summary["jobs"][k]["status"] == "done" for k in missing + [cut]), f"rerun statuses {summary['jobs']}")
+    # A job whose arguments changed since its outputs were written is trained again, and only that one.
+    jobs[missing[-1]]["iterations"] = 100
+    write_manifest(folder, jobs, DEFAULTS)
+    result = batch(manifest)
+    summary = read_summary(folder)
+    check(result.returncode == 0 and summary["kept"] == 5 and summary["done"] == 1 and
+          summary["jobs"][missing[-1]]["status"] == "done",
+          f"changed arguments: exit {result.returncode}, kept {summary['kept']} done {summary['done']}")
+
+
+def read_summary(folder):
+    with open(os.path.join(folder, "summary.json")) as f:
+        return json.load(f)
 
 
 bad_manifests()

@@ -2,7 +2,8 @@
 process with the same seed and the same frames per step (2 ranks x 1 frame = 1 process x 2 frames): the same
 field after 50 steps (count, and parameters to float rounding), the same held-out PSNR (within 0.2 dB) after
 densification and reflectivity solves, the pixel-grid fit's distributed solve, a checkpoint written by rank 0
-resumed on 2 ranks, and a killed rank that ends the run instead of hanging it.
+resumed on 2 ranks, a rank that cannot read its checkpoint and a killed rank, each of which ends the run instead
+of hanging it.
 
 Usage: TestDistributedTraining.py TESTING_DATA_DIR BIGUS_EXECUTABLE MPIEXEC OUTPUT_DIR
 """
@@ -83,6 +84,24 @@ one, _ = train("resumed_one", *resume)
 two, text = train("resumed_two", *resume, ranks=2)
 check("after 260 iterations" in text, f"the resumed run did not reach 260 iterations: {text[-600:]}")
 same_field(one, two, "resumed from rank 0's checkpoint", 1e-3)
+
+# A rank that cannot read the checkpoint (rank 1 is given a file that is not one) fails every rank with a
+# message, instead of leaving rank 0 waiting for it in the first sum.
+broken = os.path.join(OUT, "broken.ck")
+with open(broken, "wb") as f:
+    f.write(b"not a checkpoint")
+ranks = [COMMON + ["--no-pixel-grid-fit", "--iterations", "260", "--distributed", "-o",
+                   os.path.join(OUT, "broken.vtp"), "--resume", ck] for ck in (checkpoint, broken)]
+try:
+    result = subprocess.run(MPI + ["-n", "1", BIGUS, "train"] + ranks[0] + [":", "-n", "1", BIGUS, "train"] + ranks[1],
+                            capture_output=True, text=True, timeout=120)
+    output = result.stdout + result.stderr
+    check(result.returncode != 0, f"a rank without its checkpoint: exit {result.returncode}")
+    check("broken.ck" in output and "another process failed (rank 1;" in output,
+          f"a rank without its checkpoint: no word of the file and the rank in: {output[-800:]}")
+except subprocess.TimeoutExpired:
+    check(False, "training hung when rank 1 could not read its checkpoint")
+check(not os.path.exists(os.path.join(OUT, "broken.vtp")), "a field was written by a run whose rank failed")
 
 # A rank that dies ends the run with an error on the others (Open MPI's runtime ends the job), not a hang.
 process = subprocess.Popen(MPI + ["-n", "2", BIGUS, "train"] + COMMON +
