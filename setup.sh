@@ -21,7 +21,7 @@ packages=(
   build-essential cmake ninja-build pkg-config
   libvtk9-dev python3-vtk9 vtk9 python3-dev python3-numpy
   libeigen3-dev libopencv-dev zlib1g-dev
-  libopenmpi-dev openmpi-bin
+  libopenmpi-dev openmpi-bin python3-mpi4py
   libgtest-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev
   clang libclang-rt-14-dev
   xvfb xauth

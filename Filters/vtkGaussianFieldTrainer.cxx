@@ -95,6 +95,94 @@ void StoredCorrection(const std::array<double, 6>& xi, double stored[6])
     stored[k] = k < 3 ? xi[k] * degrees : xi[k];
   }
 }
+
+/// What vtkGaussianFieldTrainer trains on, read from its input ports.
+struct TrainerInputs
+{
+  bigus::TrainingData Data;      ///< every sweep's frames in turn, with the training frames chosen
+  std::vector<bool> Valid;       ///< per frame of all sweeps: FrameValid
+  std::vector<int> IndexInSweep; ///< per frame of all sweeps: its index in its own sweep
+  int SweepCount = 0, MaskCount = 0;
+};
+
+/// The sweeps (port 0) and their fan masks (port 1) as training data, with the training frames that the hold-out
+/// settings (or @p frameList) leave; false with @p error (the filter's message) when the inputs are refused.
+bool ReadTrainerInputs(vtkInformationVector** inputVector, int holdOutEvery, int holdOutOffset, int holdOutSweep,
+  vtkIdList* frameList, TrainerInputs& in, std::string& error)
+{
+  // The sweeps (port 0) and their fan masks (port 1: none, every one estimated, or one per sweep).
+  const int sweepCount = in.SweepCount = inputVector[0]->GetNumberOfInformationObjects();
+  const int maskCount = in.MaskCount = inputVector[1]->GetNumberOfInformationObjects();
+  if (!bigus::CheckMaskCount(maskCount, sweepCount, &error))
+  {
+    return false;
+  }
+  std::vector<vtkSmartPointer<vtkImageData>> masks(sweepCount);
+  std::vector<bigus::SweepInput> sweeps(sweepCount);
+  for (int k = 0; k < sweepCount; ++k)
+  {
+    vtkImageData* sequence = vtkImageData::GetData(inputVector[0], k);
+    masks[k] = maskCount ? vtkImageData::GetData(inputVector[1], k) : nullptr;
+    if (!masks[k] && sequence)
+    {
+      vtkNew<vtkUltrasoundFanMask> estimate;
+      estimate->SetInputData(sequence);
+      estimate->Update();
+      masks[k] = estimate->GetOutput();
+    }
+    sweeps[k] = { sequence, masks[k], sweepCount > 1 ? "sweep " + std::to_string(k) : std::string("input") };
+    int dims[3] = { 0, 0, 0 };
+    if (sequence)
+    {
+      sequence->GetDimensions(dims);
+    }
+    vtkDataArray* isValid = sequence ? sequence->GetFieldData()->GetArray("FrameValid") : nullptr;
+    for (int f = 0; f < dims[2]; ++f)
+    {
+      in.Valid.push_back(!isValid || isValid->GetNumberOfTuples() != dims[2] || isValid->GetTuple1(f) != 0);
+      in.IndexInSweep.push_back(f);
+    }
+  }
+  bigus::TrainingData& data = in.Data;
+  if (!bigus::TrainingDataFromSweeps(sweeps, data, &error))
+  {
+    return false;
+  }
+  if (holdOutSweep >= sweepCount)
+  {
+    error = "HoldOutSweep " + std::to_string(holdOutSweep) + ": there are " + std::to_string(sweepCount) +
+      " sweeps (0 to " + std::to_string(sweepCount - 1) + ")";
+    return false;
+  }
+  std::vector<vtkIdType> listed;
+  if (!bigus::ChosenFrames(frameList, data.Count(), listed, &error))
+  {
+    error = "TrainingFrameList: " + error;
+    return false;
+  }
+  for (int k = 0; k < data.Count(); ++k)
+  {
+    bool train = in.Valid[k] && data.SweepOf(k) != holdOutSweep;
+    if (frameList && frameList->GetNumberOfIds() > 0)
+    {
+      train = train && frameList->IsId(k) >= 0;
+    }
+    else if (holdOutEvery > 0)
+    {
+      train = train && in.IndexInSweep[k] % holdOutEvery != holdOutOffset;
+    }
+    if (train)
+    {
+      data.TrainFrames.push_back(k);
+    }
+  }
+  if (data.TrainFrames.empty())
+  {
+    error = "no valid training frames (" + std::to_string(data.Count()) + " frames in the input)";
+    return false;
+  }
+  return true;
+}
 }
 vtkCxxSetObjectMacro(vtkGaussianFieldTrainer, TrainingFrameList, vtkIdList);
 
@@ -195,82 +283,14 @@ int vtkGaussianFieldTrainer::RequestData(
   this->NumberOfGaussians = 0;
   this->BackendInUse.clear();
 
-  // The sweeps (port 0) and their fan masks (port 1: none, every one estimated, or one per sweep).
-  const int sweepCount = inputVector[0]->GetNumberOfInformationObjects();
-  const int maskCount = inputVector[1]->GetNumberOfInformationObjects();
+  // Data-parallel: a process whose inputs are refused, or that has no such backend, fails every process here
+  // (ProcessReduction::AllSucceeded), before the trainer's first sum, instead of leaving them waiting for it.
+  TrainerInputs in;
   std::string error;
-  if (!bigus::CheckMaskCount(maskCount, sweepCount, &error))
-  {
-    vtkErrorMacro(<< error);
-    return 0;
-  }
-  std::vector<vtkSmartPointer<vtkImageData>> masks(sweepCount);
-  std::vector<bigus::SweepInput> sweeps(sweepCount);
-  std::vector<bool> valid;        // per frame of all sweeps
-  std::vector<int> indexInSweep;  // per frame of all sweeps
-  for (int k = 0; k < sweepCount; ++k)
-  {
-    vtkImageData* sequence = vtkImageData::GetData(inputVector[0], k);
-    masks[k] = maskCount ? vtkImageData::GetData(inputVector[1], k) : nullptr;
-    if (!masks[k] && sequence)
-    {
-      vtkNew<vtkUltrasoundFanMask> estimate;
-      estimate->SetInputData(sequence);
-      estimate->Update();
-      masks[k] = estimate->GetOutput();
-    }
-    sweeps[k] = { sequence, masks[k], sweepCount > 1 ? "sweep " + std::to_string(k) : std::string("input") };
-    int dims[3] = { 0, 0, 0 };
-    if (sequence)
-    {
-      sequence->GetDimensions(dims);
-    }
-    vtkDataArray* isValid = sequence ? sequence->GetFieldData()->GetArray("FrameValid") : nullptr;
-    for (int f = 0; f < dims[2]; ++f)
-    {
-      valid.push_back(!isValid || isValid->GetNumberOfTuples() != dims[2] || isValid->GetTuple1(f) != 0);
-      indexInSweep.push_back(f);
-    }
-  }
-  bigus::TrainingData data;
-  if (!bigus::TrainingDataFromSweeps(sweeps, data, &error))
-  {
-    vtkErrorMacro(<< error);
-    return 0;
-  }
-  if (this->HoldOutSweep >= sweepCount)
-  {
-    vtkErrorMacro("HoldOutSweep " << this->HoldOutSweep << ": there are " << sweepCount << " sweeps (0 to "
-                                  << sweepCount - 1 << ")");
-    return 0;
-  }
-  std::vector<vtkIdType> listed;
-  if (!bigus::ChosenFrames(this->TrainingFrameList, data.Count(), listed, &error))
-  {
-    vtkErrorMacro("TrainingFrameList: " << error);
-    return 0;
-  }
-  for (int k = 0; k < data.Count(); ++k)
-  {
-    bool train = valid[k] && data.SweepOf(k) != this->HoldOutSweep;
-    if (this->TrainingFrameList && this->TrainingFrameList->GetNumberOfIds() > 0)
-    {
-      train = train && this->TrainingFrameList->IsId(k) >= 0;
-    }
-    else if (this->HoldOutEvery > 0)
-    {
-      train = train && indexInSweep[k] % this->HoldOutEvery != this->HoldOutOffset;
-    }
-    if (train)
-    {
-      data.TrainFrames.push_back(k);
-    }
-  }
-  if (data.TrainFrames.empty())
-  {
-    vtkErrorMacro("no valid training frames (" << data.Count() << " frames in the input)");
-    return 0;
-  }
+  bool ready = ReadTrainerInputs(inputVector, this->HoldOutEvery, this->HoldOutOffset, this->HoldOutSweep,
+    this->TrainingFrameList, in, error);
+  bigus::TrainingData& data = in.Data;
+  const int sweepCount = in.SweepCount, maskCount = in.MaskCount;
 
   bigus::TrainerSettings s;
   s.ElevationSigma = this->ElevationSigma;
@@ -308,11 +328,21 @@ int vtkGaussianFieldTrainer::RequestData(
   s.CheckpointFile = this->CheckpointFile ? this->CheckpointFile : "";
 
   std::string notice;
-  std::unique_ptr<bigus::TrainingEngine> engine =
-    bigus::CreateTrainingEngine(this->Backend ? this->Backend : "auto", &error, &notice);
-  if (!engine)
+  std::unique_ptr<bigus::TrainingEngine> engine;
+  if (ready)
   {
-    vtkErrorMacro("Backend: " << error);
+    engine = bigus::CreateTrainingEngine(this->Backend ? this->Backend : "auto", &error, &notice);
+    ready = engine != nullptr;
+    error = ready ? error : "Backend: " + error;
+  }
+  ControllerReduction reduction(this->Controller);
+  if (this->Controller && this->Controller->GetNumberOfProcesses() > 1)
+  {
+    ready = reduction.AllSucceeded(ready, &error);
+  }
+  if (!ready)
+  {
+    vtkErrorMacro(<< error);
     return 0;
   }
   if (!notice.empty())
@@ -321,7 +351,6 @@ int vtkGaussianFieldTrainer::RequestData(
   }
   this->BackendInUse = engine->GetName();
   bigus::Trainer trainer(std::move(data), s, std::move(engine));
-  ControllerReduction reduction(this->Controller);
   if ((this->Controller && !trainer.SetProcessReduction(&reduction, &error)) || !trainer.Initialize(&error) ||
     (this->ResumeFile && *this->ResumeFile && !trainer.LoadCheckpoint(this->ResumeFile, &error)))
   {
@@ -349,7 +378,7 @@ int vtkGaussianFieldTrainer::RequestData(
   std::vector<int> heldOut;
   for (int k = 0; k < trainer.GetData().Count(); ++k)
   {
-    if (valid[k] && !std::binary_search(trainer.GetData().TrainFrames.begin(), trainer.GetData().TrainFrames.end(), k))
+    if (in.Valid[k] && !std::binary_search(trainer.GetData().TrainFrames.begin(), trainer.GetData().TrainFrames.end(), k))
     {
       heldOut.push_back(k);
     }
@@ -465,7 +494,7 @@ int vtkGaussianFieldTrainer::RequestData(
     trainingSweeps->SetComponentName(1, "Frame");
     for (int f : trainer.GetData().TrainFrames)
     {
-      const int tuple[2] = { trainer.GetData().SweepOf(f), indexInSweep[f] };
+      const int tuple[2] = { trainer.GetData().SweepOf(f), in.IndexInSweep[f] };
       trainingSweeps->InsertNextTypedTuple(tuple);
     }
     output->GetFieldData()->AddArray(trainingSweeps);

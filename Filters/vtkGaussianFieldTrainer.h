@@ -283,10 +283,11 @@ public:
    * same Adam step and the same densification decisions and ends with the same field (bigus::ProcessReduction).
    * A step has FramesPerStep frames per process. Only process 0 writes checkpoints. Null (default) or one
    * process: training on this process alone. Backends: cpu, and cuda (trained through the CPU engine over the
-   * CUDA renderer); an engine that cannot sum across processes fails the request with an error. The trainer's
-   * own checks and the checkpoint's read are agreed across the processes, but a process whose input this filter
-   * refuses (an error before training) never reaches the first sum: end every process then (MPI_Abort), as
-   * `bigus train --distributed` does.
+   * CUDA renderer); an engine that cannot sum across processes fails the request with an error. Whether each
+   * process could read its inputs and create its backend, the trainer's own checks and the checkpoint's read are
+   * agreed across the processes, so a refusal on one fails the request on all ("another process failed (rank
+   * R)"). A process whose pipeline fails before this filter runs (a reader's error) never reaches it: end every
+   * process then (MPI_Abort), as `bigus train --distributed` does.
    */
   virtual void SetController(vtkMultiProcessController* controller);
   vtkGetObjectMacro(Controller, vtkMultiProcessController);
