@@ -113,14 +113,16 @@ def distributed_training(a, out):
                    mpi(a.mpiexec, 2) + [a.bigus, "train"] + common + ["--distributed", "-o", field])
         result, _, peaks = run(command, marker=field)
         text = result.stdout
-        found = re.search(r"field .*: (\d+) Gaussians .* after (\d+) iterations in ([\d.]+) s", text)
+        found = re.search(r"field .*: (\d+) Gaussians \(from (\d+) seeds\) after (\d+) iterations in ([\d.]+) s", text)
         sums = re.search(r"distributed +\d+ ranks: ([\d.]+) s of ([\d.]+) s .*; ([\d.]+) MB summed per step", text)
         report = os.path.join(out, f"liver_{ranks}_report")
         run([a.bigus, "evaluate", field, LIVER, "--holdout-every", "4", "--holdout-offset", "2", "--report", report])
         with open(os.path.join(report, "metrics.json")) as f:
             psnr = json.load(f)["mean"]["psnr"]
-        results[ranks] = {"gaussians": int(found.group(1)), "iterations": int(found.group(2)),
-                          "seconds": float(found.group(3)), "sums": float(sums.group(1)) if sums else 0.0,
+        # The steps ran on the seeds (no densification within these steps); the field is pruned at the end.
+        results[ranks] = {"gaussians": int(found.group(1)), "stepped": int(found.group(2)),
+                          "iterations": int(found.group(3)), "seconds": float(found.group(4)),
+                          "sums": float(sums.group(1)) if sums else 0.0,
                           "megabytes": float(sums.group(3)) if sums else 0.0, "psnr": psnr,
                           "peaks": peaks}
     return results
@@ -131,23 +133,41 @@ def mib(peaks):
     return ", ".join(f"{p:.0f}" for p in peaks) if peaks else "not sampled"
 
 
-def model_rows(step_compute_s, gaussians_measured):
-    """Ring allreduce of 52 bytes per Gaussian (11 gradients, attribution, seen count as float32) against the
-    compute of a step that renders 1 frame per rank, scaled linearly in the Gaussians from the measurement."""
+def touched_per_frame(megabytes, gaussians):
+    """The share of the field one frame touches, from the bytes a 2-rank step summed: one byte per Gaussian (which
+    any rank touched), then 52 bytes (13 float32) per Gaussian either rank's frame touched, the union u2 of two
+    frames; with frames touching independent shares f, u2 = 1 - (1 - f)^2."""
+    union = min(1.0, max(0.0, (megabytes * 1e6 - gaussians) / (52 * gaussians)))
+    return 1 - (1 - union) ** 0.5
+
+
+def step_bytes(n, p, touched):
+    """Bytes one step sums at P ranks: the touched flags (1 byte per Gaussian), then 52 bytes per Gaussian in the
+    union of the P frames' shares."""
+    return n, 52 * n * (1 - (1 - touched) ** p)
+
+
+def allreduce_seconds(nbytes, p, bandwidth):
+    """Ring allreduce of the step's two sums: 2 (P - 1) / P x bytes / bandwidth + 2 (P - 1) latencies each."""
+    return sum(2 * (p - 1) / p * b / bandwidth + 2 * (p - 1) * LATENCY_S for b in nbytes)
+
+
+def model_rows(step_compute_s, gaussians_measured, touched):
+    """The step's sums against the compute of a step that renders 1 frame per rank, scaled linearly in the
+    Gaussians from the measurement; each frame touching the share `touched` of the field."""
     rows = []
     for n in (200_000, 2_000_000):
         compute = step_compute_s * n / gaussians_measured
-        nbytes = 52 * n
         for gbit in LINKS_GBIT:
             bandwidth = gbit * 1e9 / 8
-            times = {}
-            for p in (8, 64, 512):
-                times[p] = 2 * (p - 1) / p * nbytes / bandwidth + 2 * (p - 1) * LATENCY_S
-            # P at which the allreduce takes as long as the compute (communication dominates beyond it), for
-            # this machine's compute and for a compute GPU_SPEEDUP times faster.
-            crossovers = [next((p for p in range(2, 1 << 20) if 2 * (p - 1) / p * nbytes / bandwidth +
-                                2 * (p - 1) * LATENCY_S >= c), None) for c in (compute, compute / GPU_SPEEDUP)]
-            rows.append((n, gbit, compute, nbytes, times, crossovers))
+            sizes = {p: sum(step_bytes(n, p, touched)) for p in (8, 64, 512)}
+            times = {p: allreduce_seconds(step_bytes(n, p, touched), p, bandwidth) for p in (8, 64, 512)}
+            # P at which the sums take as long as the compute (communication dominates beyond it), for this
+            # machine's compute and for a compute GPU_SPEEDUP times faster.
+            crossovers = [next((p for p in range(2, 1 << 20)
+                                if allreduce_seconds(step_bytes(n, p, touched), p, bandwidth) >= c), None)
+                          for c in (compute, compute / GPU_SPEEDUP)]
+            rows.append((n, gbit, compute, sizes, times, crossovers))
     return rows
 
 
@@ -166,6 +186,7 @@ def main():
     step_one = one["seconds"] / one["iterations"]
     step_two = two["seconds"] / two["iterations"]
     compute_two = (two["seconds"] - two["sums"]) / two["iterations"]
+    touched = touched_per_frame(two["megabytes"], two["stepped"])
     commit = subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"], capture_output=True,
                             text=True).stdout.strip()
     lines = [
@@ -196,36 +217,45 @@ def main():
         "against 2 ranks (1 thread and 1 frame each). Sums: rank 0's seconds inside AllReduce, waiting for the "
         "other rank included (the two ranks' frames differ in cost).",
         "",
-        "| run | Gaussians | s per step | of it in sums | MB summed per step | peak resident MiB per process | "
+        "| run | Gaussians (in the steps / after the final prune) | s per step | of it in sums | MB summed per step | "
+        "peak resident MiB per process | "
         "held-out PSNR (dB) |",
         "|---|---|---|---|---|---|---|",
-        f"| 1 process | {one['gaussians']} | {step_one:.4f} | - | - | {mib(one['peaks'])} | {one['psnr']:.2f} |",
-        f"| 2 ranks | {two['gaussians']} | {step_two:.4f} | {two['sums'] / two['iterations']:.4f} | "
+        f"| 1 process | {one['stepped']} / {one['gaussians']} | {step_one:.4f} | - | - | {mib(one['peaks'])} | "
+        f"{one['psnr']:.2f} |",
+        f"| 2 ranks | {two['stepped']} / {two['gaussians']} | {step_two:.4f} | {two['sums'] / two['iterations']:.4f} | "
         f"{two['megabytes']:.3f} | {mib(two['peaks'])} | {two['psnr']:.2f} |",
         "",
         "What each rank holds: every training frame and mask (read by every rank), the whole field with its Adam "
         "moments and EA-D accumulators (identical on every rank), and one step's gradient buffer of 52 bytes per "
-        "Gaussian with its copy for the sum. Memory per rank therefore does not fall with P (the peak resident "
-        "memory above, sampled every 0.2 s from /proc, VmHWM); what P divides is the rendering of a step's frames "
+        "Gaussian with the packed copy of its touched entries for the sum. Memory per rank therefore does not fall "
+        "with P (the peak resident memory above, sampled every 0.2 s from /proc, VmHWM); what P divides is the "
+        "rendering of a step's frames "
         "(a step renders FramesPerStep x P frames, each rank its share) and the reflectivity solve's data-space "
         "vectors (each rank keeps the residual of its own frames).",
         "",
         "## Model of the step at more ranks",
         "",
         f"A step renders 1 frame per rank; its compute is this run's 2-rank compute per step "
-        f"({compute_two * 1000:.1f} ms at {two['gaussians']} Gaussians on one core), scaled linearly in the "
-        "Gaussians. The sum is a ring allreduce of 52 bytes per Gaussian: 2 (P - 1) / P x bytes / bandwidth + "
-        f"2 (P - 1) x {LATENCY_S * 1e6:.0f} us latency (assumed, not measured). Communication dominates from the "
-        f"P in the last columns: with this machine's compute, and with a compute {GPU_SPEEDUP} times faster (a GPU; "
-        "assumed, not measured).",
+        f"({compute_two * 1000:.1f} ms at the {two['stepped']} Gaussians the steps ran on, on one core), scaled "
+        "linearly in the Gaussians. A step sums two things: one byte per Gaussian (which Gaussians any rank's frame "
+        "touched, a maximum), then 13 float32 (52 bytes) per Gaussian in that union. From this run's bytes per "
+        "step, one liver "
+        f"frame touches {touched * 100:.1f} % of the field; the union of P frames is taken as 1 - (1 - "
+        f"{touched:.3f})^P (frames touching independent shares: an assumption; along one long sweep, or several, "
+        "a frame touches a smaller share and the union grows more slowly). Each sum is a ring allreduce: 2 (P - 1) "
+        f"/ P x bytes / bandwidth + 2 (P - 1) x {LATENCY_S * 1e6:.0f} us latency (assumed, not measured). "
+        "Communication dominates from the P in the last columns: with this machine's compute, and with a compute "
+        f"{GPU_SPEEDUP} times faster (a GPU; assumed, not measured).",
         "",
-        "| Gaussians | link | compute per step (ms) | MB per step | allreduce P=8 (ms) | P=64 | P=512 | "
+        "| Gaussians | link | compute per step (ms) | MB per step P=8 / 64 / 512 | sums P=8 (ms) | P=64 | P=512 | "
         f"communication dominates from P = | the same, compute / {GPU_SPEEDUP} |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
-    for n, gbit, compute, nbytes, times, crossovers in model_rows(compute_two, two["gaussians"]):
+    for n, gbit, compute, sizes, times, crossovers in model_rows(compute_two, two["stepped"], touched):
         cells = [f"{c:,}" if c else "beyond 10^6" for c in crossovers]
-        lines.append(f"| {n:,} | {gbit} Gb/s | {compute * 1000:.1f} | {nbytes / 1e6:.1f} | {times[8] * 1000:.2f} | "
+        lines.append(f"| {n:,} | {gbit} Gb/s | {compute * 1000:.1f} | "
+                     f"{' / '.join(f'{sizes[p] / 1e6:.1f}' for p in (8, 64, 512))} | {times[8] * 1000:.2f} | "
                      f"{times[64] * 1000:.2f} | {times[512] * 1000:.2f} | {cells[0]} | {cells[1]} |")
     text = "\n".join(lines) + "\n"
     with open(a.report, "w") as f:

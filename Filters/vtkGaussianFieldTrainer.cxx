@@ -56,6 +56,10 @@ public:
   {
     return this->Reduce(values, count, vtkCommunicator::MAX_OP, error);
   }
+  bool Maximum(unsigned char* values, std::size_t count, std::string* error) override
+  {
+    return this->Reduce(values, count, vtkCommunicator::MAX_OP, error);
+  }
   double Seconds = 0; ///< wall-clock seconds inside AllReduce (waiting for the slowest process included)
   double Bytes = 0;   ///< bytes this process contributed to the sums
 

@@ -7,9 +7,11 @@
 #include "vtkSMPTools.h"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <limits>
+#include <utility>
 
 namespace bigus
 {
@@ -303,19 +305,77 @@ StepStatus CpuTrainingEngine::Reduce(const StepRequest& request, double& total, 
   small[0] = total;
   std::copy(request.PoseGradients, request.PoseGradients + (small.size() - 1), small.begin() + 1);
   float* seen = this->Gradients.data() + 12 * n;
+  // A step's frames touch the Gaussians near their planes only, and every other entry is 0 on every process. So
+  // first which Gaussians any process touched (one byte each, a maximum), then the 13 values of those alone: the
+  // bytes summed follow the step's frames, not the field, and the sums are the same numbers (x + 0 = x).
+  std::vector<unsigned char> touched(n);
+  // Each block of the gradient buffer as (first entry in units of N, values per Gaussian): means, log-scales,
+  // quaternions, reflectivities, attribution, seen counts.
+  const std::array<std::pair<int, int>, 6> blocks = { { { 0, 3 }, { 3, 3 }, { 6, 4 }, { 10, 1 }, { 11, 1 },
+    { 12, 1 } } };
   for (std::int64_t i = 0; i < n; ++i)
   {
     seen[i] = static_cast<float>(this->Seen[i]);
+    bool any = false;
+    for (const auto& [first, width] : blocks)
+    {
+      for (int c = 0; c < width; ++c)
+      {
+        any = any || this->Gradients[first * n + width * i + c] != 0.f;
+      }
+    }
+    touched[i] = any ? 1 : 0;
   }
   if (!this->Reduction->Sum(small.data(), small.size(), error) ||
-    !this->Reduction->Sum(this->Gradients.data(), this->Gradients.size(), error))
+    !this->Reduction->Maximum(touched.data(), touched.size(), error))
   {
     return StepStatus::Failed;
   }
+  std::vector<std::int64_t> touchedIndices;
+  for (std::int64_t i = 0; i < n; ++i)
+  {
+    if (touched[i])
+    {
+      touchedIndices.push_back(i);
+    }
+  }
+  // [M, 13] per touched Gaussian: mean gradient 3, log-scale 3, quaternion 4, reflectivity 1, attribution 1, seen 1.
+  const std::size_t m = touchedIndices.size();
+  std::vector<float> packed(13 * m);
+  auto move = [&](bool pack) {
+    vtkSMPTools::For(0, static_cast<std::int64_t>(m), 8192, [&](std::int64_t begin, std::int64_t end) {
+      for (std::int64_t k = begin; k < end; ++k)
+      {
+        const std::int64_t i = touchedIndices[k];
+        float* entry = packed.data() + 13 * k;
+        for (const auto& [first, width] : blocks)
+        {
+          for (int c = 0; c < width; ++c, ++entry)
+          {
+            float& value = this->Gradients[first * n + width * i + c];
+            if (pack)
+            {
+              *entry = value;
+            }
+            else
+            {
+              value = *entry;
+            }
+          }
+        }
+      }
+    });
+  };
+  move(true);
+  if (!this->Reduction->Sum(packed.data(), packed.size(), error))
+  {
+    return StepStatus::Failed;
+  }
+  move(false);
   total = small[0];
   std::copy(small.begin() + 1, small.end(), request.PoseGradients);
   const float* attribution = this->Gradients.data() + 11 * n;
-  for (std::int64_t i = 0; i < n; ++i)
+  for (const std::int64_t i : touchedIndices)
   {
     this->State.Attribution[i] += attribution[i];
     this->State.SeenCount[i] += static_cast<int>(std::lround(seen[i]));

@@ -199,8 +199,10 @@ public:
   /// communication failed.
   virtual bool Sum(float* values, std::size_t count, std::string* error) = 0;
   virtual bool Sum(double* values, std::size_t count, std::string* error) = 0;
-  /// @p values ([count]) become their element-wise maximum over the processes (the trainer's clock).
+  /// @p values ([count]) become their element-wise maximum over the processes (the trainer's clock; with bytes,
+  /// flags: which Gaussians any process's frames touched).
   virtual bool Maximum(double* values, std::size_t count, std::string* error) = 0;
+  virtual bool Maximum(unsigned char* values, std::size_t count, std::string* error) = 0;
   /**
    * Collective agreement on success: true when @p ok on every process. Otherwise false, with @p error kept on
    * a process that failed and set to "another process failed (rank R)" on the others, so that no process

@@ -1,7 +1,7 @@
 """`bigus train --distributed` under `mpirun -n 2 --oversubscribe` on the N-wire fixture against training in one
 process with the same seed and the same frames per step (2 ranks x 1 frame = 1 process x 2 frames): the same
-field after 50 steps (count, and parameters to float rounding), the same held-out PSNR (within 0.2 dB) after
-densification and reflectivity solves, the pixel-grid fit's distributed solve, a checkpoint written by rank 0
+field after 50 steps (count, and parameters to float rounding) with only the touched Gaussians summed, the same
+held-out PSNR (within 0.2 dB) after densification and reflectivity solves, the pixel-grid fit's distributed solve, a checkpoint written by rank 0
 resumed on 2 ranks, a rank that cannot read its checkpoint, a rank whose input vtkGaussianFieldTrainer refuses
 (driven from Python with a vtkMPIController: distributed_trainer_rank.py) and a killed rank, each of which ends
 the run instead of hanging it.
@@ -10,6 +10,7 @@ Usage: TestDistributedTraining.py TESTING_DATA_DIR BIGUS_EXECUTABLE MPIEXEC OUTP
 """
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -62,7 +63,14 @@ os.makedirs(OUT)
 
 # The first 50 steps: the same field (with 2 ranks the sum of two frames' gradients is the one process's).
 adam = ["--no-pixel-grid-fit", "--iterations", "50"]
-same_field(train("steps50_one", *adam)[0], train("steps50_two", *adam, ranks=2)[0], "50 steps", 1e-5)
+two, text = train("steps50_two", *adam, ranks=2)
+same_field(train("steps50_one", *adam)[0], two, "50 steps", 1e-5)
+# Only the Gaussians some rank's frame touched are summed (52 bytes each, after one byte per Gaussian saying which):
+# fewer bytes than 52 per Gaussian of the field the steps ran on.
+seeds = re.search(r"\(from (\d+) seeds\)", text)
+summed = re.search(r"; ([\d.]+) MB summed per step", text)
+check(seeds and summed and float(summed.group(1)) * 1e6 < 0.9 * 52 * int(seeds.group(1)),
+      f"the sums of a step are not limited to the touched Gaussians: {text[-400:]}")
 
 # Longer, with densification and reflectivity solves: the same count and held-out PSNR within 0.2 dB.
 longer = ["--no-pixel-grid-fit", "--reflectivity-solve", "--iterations", "400"]
