@@ -237,11 +237,7 @@ bool Trainer::Initialize(std::string* error)
   const bool prepared = this->PrepareInitialField(error);
   // Data-parallel: what PrepareInitialField checks is this process's own (its copy of the data, its machine's
   // memory), so every process learns of a failure here instead of waiting for the failed one in the first sum.
-  if (!(this->Reduction ? this->Reduction->AllSucceeded(prepared, error) : prepared))
-  {
-    return false;
-  }
-  return this->FitInitialReflectivities(error);
+  return this->Agree(prepared, error) && this->FitInitialReflectivities(error);
 }
 
 bool Trainer::PrepareInitialField(std::string* error)
@@ -420,6 +416,11 @@ bool Trainer::FitInitialReflectivities(std::string* error)
   this->State.TrainingSeconds += seconds;
   this->Report.Seconds += seconds;
   return true;
+}
+
+bool Trainer::Agree(bool ok, std::string* error)
+{
+  return this->Reduction ? this->Reduction->AllSucceeded(ok, error) : ok;
 }
 
 bool Trainer::SetProcessReduction(ProcessReduction* reduction, std::string* error)
@@ -761,12 +762,12 @@ bool Trainer::ValidationLoss(double& loss, std::string* error)
                  .Total;
     }
   }
-  if (this->Reduction && !(this->Reduction->AllSucceeded(ok, error) && this->Reduction->Sum(&total, 1, error)))
+  if (!this->Agree(ok, error) || (this->Reduction && !this->Reduction->Sum(&total, 1, error)))
   {
     return false;
   }
   loss = total / std::max(1, used);
-  return ok;
+  return true;
 }
 
 bool Trainer::CheckValidation(double& loss, std::string* error)
@@ -993,7 +994,7 @@ bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>
     {
       // Data-parallel: rank 0 writes, and the others learn whether it could.
       const bool saved = (this->Reduction && this->Reduction->Rank() != 0) || this->SaveCheckpoint(s.CheckpointFile, error);
-      if (!(this->Reduction ? this->Reduction->AllSucceeded(saved, error) : saved))
+      if (!this->Agree(saved, error))
       {
         ok = false;
         break;
@@ -1112,7 +1113,7 @@ bool Trainer::LoadCheckpoint(const std::string& file, std::string* error)
 {
   // Data-parallel: every process reads the file (rank 0 wrote it); one that cannot fails them all here.
   const bool loaded = this->ReadCheckpoint(file, error);
-  return this->Reduction ? this->Reduction->AllSucceeded(loaded, error) : loaded;
+  return this->Agree(loaded, error);
 }
 
 bool Trainer::ReadCheckpoint(const std::string& file, std::string* error)

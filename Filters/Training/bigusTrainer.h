@@ -357,6 +357,8 @@ private:
   bool FitInitialReflectivities(std::string* error);
   /// LoadCheckpoint's part on this process alone.
   bool ReadCheckpoint(const std::string& file, std::string* error);
+  /// With several processes, whether every one succeeded (ProcessReduction::AllSucceeded, collective); alone, @p ok.
+  bool Agree(bool ok, std::string* error);
   /// The reflectivities of the current geometry by least squares (ReflectivitySolve); fresh Adam
   /// moments for them.
   bool SolveFieldReflectivities(std::string* error);
