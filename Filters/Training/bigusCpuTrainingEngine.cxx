@@ -342,7 +342,7 @@ StepStatus CpuTrainingEngine::Reduce(const StepRequest& request, double& total, 
   // [M, 13] per touched Gaussian: mean gradient 3, log-scale 3, quaternion 4, reflectivity 1, attribution 1, seen 1.
   const std::size_t m = touchedIndices.size();
   std::vector<float> packed(13 * m);
-  auto move = [&](bool pack) {
+  auto packOrUnpack = [&](bool pack) {
     vtkSMPTools::For(0, static_cast<std::int64_t>(m), 8192, [&](std::int64_t begin, std::int64_t end) {
       for (std::int64_t k = begin; k < end; ++k)
       {
@@ -366,12 +366,12 @@ StepStatus CpuTrainingEngine::Reduce(const StepRequest& request, double& total, 
       }
     });
   };
-  move(true);
+  packOrUnpack(true);
   if (!this->Reduction->Sum(packed.data(), packed.size(), error))
   {
     return StepStatus::Failed;
   }
-  move(false);
+  packOrUnpack(false);
   total = small[0];
   std::copy(small.begin() + 1, small.end(), request.PoseGradients);
   const float* attribution = this->Gradients.data() + 11 * n;
