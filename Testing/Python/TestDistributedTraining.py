@@ -1,10 +1,10 @@
 """`bigus train --distributed` under `mpirun -n 2 --oversubscribe` on the N-wire fixture against training in one
 process with the same seed and the same frames per step (2 ranks x 1 frame = 1 process x 2 frames): the same
 field after 50 steps (count, and parameters to float rounding) with only the touched Gaussians summed, the same
-held-out PSNR (within 0.2 dB) after densification and reflectivity solves, the pixel-grid fit's distributed solve, a checkpoint written by rank 0
-resumed on 2 ranks, a rank that cannot read its checkpoint, a rank whose input vtkGaussianFieldTrainer refuses
-(driven from Python with a vtkMPIController: distributed_trainer_rank.py) and a killed rank, each of which ends
-the run instead of hanging it.
+held-out PSNR (within 0.2 dB) after densification and reflectivity solves, the pixel-grid fit's distributed solve,
+a checkpoint written by rank 0 resumed on 2 ranks, a rank that cannot read its checkpoint, a rank whose input
+vtkGaussianFieldTrainer refuses (driven from Python with a vtkMPIController: distributed_trainer_rank.py) and a
+killed rank, each of which ends the run instead of hanging it.
 
 Usage: TestDistributedTraining.py TESTING_DATA_DIR BIGUS_EXECUTABLE MPIEXEC OUTPUT_DIR
 """
@@ -58,6 +58,15 @@ def held_out_psnr(field, name):
         return json.load(f)["mean"]["psnr"]
 
 
+def without_hanging(command, what):
+    """`command`'s result, or None (a failure recorded) when it had not ended after 120 s."""
+    try:
+        return subprocess.run(command, capture_output=True, text=True, timeout=120)
+    except subprocess.TimeoutExpired:
+        check(False, f"{what}: hung")
+        return None
+
+
 shutil.rmtree(OUT, ignore_errors=True)
 os.makedirs(OUT)
 
@@ -102,29 +111,25 @@ with open(broken, "wb") as f:
     f.write(b"not a checkpoint")
 ranks = [COMMON + ["--no-pixel-grid-fit", "--iterations", "260", "--distributed", "-o",
                    os.path.join(OUT, "broken.vtp"), "--resume", ck] for ck in (checkpoint, broken)]
-try:
-    result = subprocess.run(MPI + ["-n", "1", BIGUS, "train"] + ranks[0] + [":", "-n", "1", BIGUS, "train"] + ranks[1],
-                            capture_output=True, text=True, timeout=120)
+result = without_hanging(MPI + ["-n", "1", BIGUS, "train"] + ranks[0] + [":", "-n", "1", BIGUS, "train"] + ranks[1],
+                         "training when rank 1 could not read its checkpoint")
+if result:
     output = result.stdout + result.stderr
     check(result.returncode != 0, f"a rank without its checkpoint: exit {result.returncode}")
     check("broken.ck" in output and "another process failed (rank 1;" in output,
           f"a rank without its checkpoint: no word of the file and the rank in: {output[-800:]}")
-except subprocess.TimeoutExpired:
-    check(False, "training hung when rank 1 could not read its checkpoint")
 check(not os.path.exists(os.path.join(OUT, "broken.vtp")), "a field was written by a run whose rank failed")
 
 # The VTK filter with a vtkMPIController, as a Python program drives it: a rank whose input the filter refuses
 # before training (a sweep that does not exist to hold out) fails every rank, each with a message, no hang.
 script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "distributed_trainer_rank.py")
-try:
-    result = subprocess.run(MPI + ["-n", "2", sys.executable, script, SWEEP, XML, "1"], capture_output=True, text=True,
-                            timeout=120)
+result = without_hanging(MPI + ["-n", "2", sys.executable, script, SWEEP, XML, "1"],
+                         "the filter when rank 1's input was refused")
+if result:
     check(result.returncode == 0 and "rank 1: 0 Gaussians; error: " in result.stdout and "HoldOutSweep 3" in
           result.stdout and "rank 0: 0 Gaussians; error: " in result.stdout and
           "another process failed (rank 1;" in result.stdout,
           f"the filter with a refused input on rank 1: exit {result.returncode}: {result.stdout[-800:]}")
-except subprocess.TimeoutExpired:
-    check(False, "the filter hung when rank 1's input was refused")
 
 # A rank that dies ends the run with an error on the others (Open MPI's runtime ends the job), not a hang.
 process = subprocess.Popen(MPI + ["-n", "2", BIGUS, "train"] + COMMON +
