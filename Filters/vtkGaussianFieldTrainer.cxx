@@ -471,6 +471,16 @@ int vtkGaussianFieldTrainer::RequestData(
   bigus::GapFillingSettings gaps;
   gaps.MaximumGaussians = this->MaximumGaussians;
   addText("GapFilling", this->FillGaps ? bigus::DescribeGapFilling(report.GapFilling, gaps) : std::string("off"));
+  if (report.Solves > 0)
+  {
+    const bigus::ReflectivitySolveReport& last = report.LastSolve;
+    char text[300];
+    std::snprintf(text, sizeof(text), "%d in %.1f s; the last: %d CGLS iterations%s, objective %.4g -> %.4g",
+      report.Solves, report.SolveSeconds, last.Iterations,
+      last.TimeLimitReached ? " (ended by its share of the time budget)" : "",
+      last.Objective.empty() ? 0.0 : last.Objective.front(), last.Objective.empty() ? 0.0 : last.Objective.back());
+    addText("ReflectivitySolves", text);
+  }
   addText("StopReason", report.StopReason);
   addText("GrowthStopReason", report.GrowthStopReason);
   addText("Backend", this->BackendInUse);

@@ -19,7 +19,8 @@
  * `StopReason`, `GrowthStopReason`, with several sweeps `TrainingSweeps` (2 components per training frame:
  * Sweep, Frame within it), early stopping's `BestIteration`, `BestValidationLoss` and
  * `LastValidationLoss`, `ValidationHistory` (3 components per validation: Iteration, Loss, Gaussians),
- * `GapFilling` (string: what FillGaps added, or "off")
+ * `GapFilling` (string: what FillGaps added, or "off"), `ReflectivitySolves` (string, when the reflectivities were
+ * solved: how many solves, their seconds, the last one's CGLS iterations and objective)
  * (bigus::TrainerReport), the training geometry `TrainingPoses`, `TrainingFrameSize`,
  * `TrainingFanMask` (what the render filters' Coverage array is computed from), `TrainingSettings` (strings: every setting the run chose or was
  * given, "name = value (why)", as bigus::TrainerReport::Settings, plus the fan mask's origin).

@@ -331,6 +331,10 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
   {
     std::printf("gap filling    %s\n", gaps->GetVariantValue(0).ToString().c_str());
   }
+  if (vtkAbstractArray* solves = fd->GetAbstractArray("ReflectivitySolves"))
+  {
+    std::printf("solves         %s\n", solves->GetVariantValue(0).ToString().c_str());
+  }
   std::printf("backend        %s\n", trainer->GetBackendInUse());
   if (processes.Controller && processes.Controller->GetNumberOfProcesses() > 1)
   {

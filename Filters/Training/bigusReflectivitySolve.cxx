@@ -211,9 +211,32 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
   direction = s;
   double norm = Sum(n, [&](std::int64_t i) { return s[i] * s[i]; });
   const double norm0 = norm;
+  // The time limit: stop when one more iteration, as long as the last, would pass it (on the slowest clock).
+  double iterationStart = Now();
+  auto outOfTime = [&]() {
+    if (settings.TimeLimit <= 0)
+    {
+      return false;
+    }
+    const double now = Now();
+    double clock[2] = { now - start, now - iterationStart };
+    iterationStart = now;
+    communicated = communicated && (!reduction || reduction->Maximum(clock, 2, error));
+    r.TimeLimitReached = clock[0] + clock[1] > settings.TimeLimit;
+    return r.TimeLimitReached;
+  };
   for (int it = 0; it < settings.MaximumIterations && norm > 0 && norm > settings.Tolerance * settings.Tolerance * norm0;
        ++it)
   {
+    const bool stop = it > 0 && outOfTime();
+    if (!communicated)
+    {
+      return false;
+    }
+    if (stop)
+    {
+      break;
+    }
     ForEach(n, [&](std::int64_t i) { applied[i] = static_cast<float>(P[i] * direction[i]); });
     if (!engine.ApplyBasis(applied.data(), frames.data(), count, options, q.data(), error))
     {

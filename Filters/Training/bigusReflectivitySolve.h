@@ -44,6 +44,10 @@ struct ReflectivitySolveSettings
   double Tolerance = 1e-3;        ///< stop when |A^T G residual| falls below this share of its start
   double Ridge = 1e-4;            ///< lambda as a share of the mean of diag(A^T G A) over the Gaussians
   double MaximumIntensity = 0.98; ///< recorded intensities are clamped to this before the map is inverted
+  /// Seconds the solve may take (0 = no limit): it ends after the iteration past which one more iteration, as
+  /// long as the last one took, would exceed the limit. At least one iteration is taken; each one lowers the
+  /// objective, so a solve cut short is still no worse a fit than its starting point.
+  double TimeLimit = 0;
 };
 
 struct ReflectivitySolveReport
@@ -54,6 +58,7 @@ struct ReflectivitySolveReport
   double Lambda = 0;                ///< the ridge weight used
   std::int64_t UnseenGaussians = 0; ///< Gaussians that no pixel of the frames weighs (their r goes to 0)
   double Seconds = 0;
+  bool TimeLimitReached = false; ///< it ended on settings.TimeLimit before MaximumIterations or Tolerance
 };
 
 /// Bytes a solve allocates for @p gaussians Gaussians over @p pixels pixels (frames x H x W): 52 per
@@ -72,7 +77,7 @@ BIGUSTRAINING_EXPORT double ReflectivitySolveBytes(std::int64_t gaussians, std::
  * the same @p frames and field): each process keeps the residual of its share of @p frames (positions k with
  * k mod P == rank) and applies A and A^T to them only; A^T's N-vectors and the data-space inner products are
  * summed over the processes (ProcessReduction), so every process takes the same CGLS steps and returns the same
- * reflectivities.
+ * reflectivities; the time limit is judged on the slowest process's clock (a maximum over the processes).
  */
 BIGUSTRAINING_EXPORT bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data,
   const std::vector<int>& frames, const RenderOptions& options, const ReflectivitySolveSettings& settings,

@@ -84,7 +84,9 @@ struct TrainerSettings
   /// liver 35.83 against 33.09 dB held out, spine phantom 21.18 against 20.59, volume protocol 36.82
   /// against 35.71): a liver solve costs 30 to 100 s on 2 cores, and on 1.5-pixel Harris seeds it fits
   /// the frames to 18 dB only (docs/FINDINGS.md).
-  /// Ignored (off) with NonNegativeReflectivity, whose model is not linear in r.
+  /// Ignored (off) with NonNegativeReflectivity, whose model is not linear in r. With a TimeBudget (and no
+  /// Solve.TimeLimit given) each solve may take a quarter of the budget left when it starts, the pixel-grid fit's
+  /// all of it (ReflectivitySolveSettings::TimeLimit).
   bool ReflectivitySolve = false;
   ReflectivitySolveSettings Solve;
   int SolveInterval = 0; ///< steps between solves besides those after densification; 0 = none

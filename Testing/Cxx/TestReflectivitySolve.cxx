@@ -302,6 +302,37 @@ TEST(ReflectivitySolve, TheObjectiveNeverIncreasesBetweenIterations)
   EXPECT_LT(report.Objective.back(), 0.5 * report.Objective.front());
 }
 
+TEST(ReflectivitySolve, ASolveOutOfTimeEndsAfterOneIterationNoWorseThanItsStart)
+{
+  const double sigmaE = 0.5;
+  const GaussianField truth = HardCaseField(200, 21, 40 * Spacing, 36 * Spacing);
+  const GaussianField geometry = HardCaseField(120, 22, 40 * Spacing, 36 * Spacing);
+  const TrainingData data = Frames(truth, 4, 40, 36, sigmaE);
+  auto engine = EngineFor(data, geometry);
+  ReflectivitySolveSettings settings;
+  settings.MaximumIterations = 40;
+  settings.Tolerance = 0;
+  settings.TimeLimit = 1e-9; // spent before the first iteration ends
+  std::vector<float> limited = geometry.Reflectivities;
+  ReflectivitySolveReport report;
+  std::string error;
+  ASSERT_TRUE(SolveReflectivities(*engine, data, data.TrainFrames, Options(sigmaE), settings, limited, &report, &error))
+    << error;
+  EXPECT_TRUE(report.TimeLimitReached);
+  EXPECT_EQ(report.Iterations, 1);
+  ASSERT_EQ(report.Objective.size(), 2u);
+  EXPECT_LT(report.Objective[1], report.Objective[0]);
+  // The same first iteration as a solve without a limit stopped there by MaximumIterations.
+  settings.TimeLimit = 0;
+  settings.MaximumIterations = 1;
+  std::vector<float> one = geometry.Reflectivities;
+  ReflectivitySolveReport unlimited;
+  ASSERT_TRUE(SolveReflectivities(*engine, data, data.TrainFrames, Options(sigmaE), settings, one, &unlimited, &error))
+    << error;
+  EXPECT_FALSE(unlimited.TimeLimitReached);
+  EXPECT_EQ(limited, one);
+}
+
 TEST(ReflectivitySolve, IntensitiesAtOneGiveFiniteReflectivities)
 {
   const double sigmaE = 0.5;

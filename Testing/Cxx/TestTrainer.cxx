@@ -1401,6 +1401,16 @@ TEST(Trainer, ADenseStartKeepsToItsCountAndSolvesTheReflectivities)
   ImageMetrics m;
   ASSERT_TRUE(trainer.Evaluate(data.TrainFrames, m, &error)) << error;
   EXPECT_GT(m.PSNR, 35.0) << "training frames right after the dense start";
+  EXPECT_FALSE(trainer.GetReport().LastSolve.TimeLimitReached) << "no TimeBudget, no limit";
+
+  // With a TimeBudget the solve keeps to a share of it: a budget spent at once leaves it one iteration.
+  TrainerSettings budgeted = s;
+  budgeted.TimeBudget = 1e-6;
+  Trainer hurried(data, budgeted);
+  ASSERT_TRUE(hurried.Initialize(&error)) << error;
+  EXPECT_TRUE(hurried.GetReport().LastSolve.TimeLimitReached);
+  EXPECT_EQ(hurried.GetReport().LastSolve.Iterations, 1);
+  EXPECT_GT(trainer.GetReport().LastSolve.Iterations, 1);
 
   // More seeds than the maximum is refused before any is made.
   s.InitialGaussians = 30000;
