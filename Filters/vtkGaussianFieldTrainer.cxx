@@ -222,6 +222,7 @@ vtkGaussianFieldTrainer::vtkGaussianFieldTrainer()
   this->DensifyEnd = d.DensifyEnd;
   this->DensifyInterval = d.DensifyInterval;
   this->DensifyPercentile = d.DensifyPercentile;
+  this->ResidualSeedShare = d.ResidualSeedShare;
   this->GrowthMargin = d.GrowthMargin;
   this->GrowthPatience = d.GrowthPatience;
   this->FillGaps = d.FillGaps;
@@ -323,6 +324,7 @@ int vtkGaussianFieldTrainer::RequestData(
   s.DensifyEnd = this->DensifyEnd;
   s.DensifyInterval = this->DensifyInterval;
   s.DensifyPercentile = this->DensifyPercentile;
+  s.ResidualSeedShare = this->ResidualSeedShare;
   s.GrowthMargin = this->GrowthMargin;
   s.GrowthPatience = this->GrowthPatience;
   s.FillGaps = this->FillGaps;
@@ -625,7 +627,8 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "LossWeights: " << this->LossWeights[0] << " " << this->LossWeights[1] << " " << this->LossWeights[2]
      << "\n";
   os << indent << "Densify schedule: start " << this->DensifyStart << ", end " << this->DensifyEnd << ", interval "
-     << this->DensifyInterval << ", percentile " << this->DensifyPercentile << "\n";
+     << this->DensifyInterval << ", percentile " << this->DensifyPercentile
+     << ", residual seeds " << this->ResidualSeedShare << "\n";
   os << indent << "GrowthMargin: " << this->GrowthMargin << ", GrowthPatience: " << this->GrowthPatience << "\n";
   os << indent << "FillGaps: " << this->FillGaps << "\n";
   os << indent << "HoldOutEvery: " << this->HoldOutEvery << ", HoldOutOffset: " << this->HoldOutOffset

@@ -226,6 +226,11 @@ public:
   vtkSetClampMacro(DensifyPercentile, double, 0.0, 100.0);
   vtkGetMacro(DensifyPercentile, double);
   ///@}
+  ///@{ New Gaussians where the residual is largest at each densification, as a share of those densified
+  /// (default 0.25; 0 = off): their reflectivity is the residual (Image-GS; bigus::TrainerSettings::ResidualSeedShare).
+  vtkSetClampMacro(ResidualSeedShare, double, 0.0, 100.0);
+  vtkGetMacro(ResidualSeedShare, double);
+  ///@}
   ///@{ Growth stops when the validation loss improves by less than GrowthMargin (relative) on the best
   /// so far over GrowthPatience densification intervals in a row (bigus::TrainerSettings).
   vtkSetClampMacro(GrowthMargin, double, 0.0, 1.0);
@@ -374,6 +379,7 @@ protected:
   int DensifyEnd;
   int DensifyInterval;
   double DensifyPercentile;
+  double ResidualSeedShare;
   double GrowthMargin;
   int GrowthPatience;
   bool FillGaps;

@@ -45,7 +45,7 @@ struct TrainOptions
   std::vector<int> Frames; ///< explicit training frames (empty: the hold-out rule)
   double TimeBudget = 0, ElevationSigma = 0, EvaluationInterval = 0;
   long long MaxGaussians = 0, InitialGaussians = 0;
-  double GrowthMargin = 0;
+  double GrowthMargin = 0, ResidualSeedShare = 0;
   int GrowthPatience = 0, SolveIterations = 0;
   bool NoFillGaps = false, ReflectivitySolve = false, DenseStart = false, DenseAdam = false,
        NoPixelGridFit = false, RefinePoses = false, RefineTimeOffset = false, RefineImageToProbe = false;
@@ -63,6 +63,7 @@ struct TrainOptions
     this->InitialGaussians = defaults->GetInitialGaussians();
     this->GrowthMargin = defaults->GetGrowthMargin();
     this->GrowthPatience = defaults->GetGrowthPatience();
+    this->ResidualSeedShare = defaults->GetResidualSeedShare();
     this->SolveIterations = defaults->GetSolveIterations();
     this->Seed = defaults->GetSeed();
     this->FramesPerStep = defaults->GetFramesPerStep();
@@ -212,6 +213,7 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
   trainer->SetInitialGaussians(o.InitialGaussians);
   trainer->SetGrowthMargin(o.GrowthMargin);
   trainer->SetGrowthPatience(o.GrowthPatience);
+  trainer->SetResidualSeedShare(o.ResidualSeedShare);
   trainer->SetFillGaps(!o.NoFillGaps);
   trainer->SetReflectivitySolve(o.ReflectivitySolve);
   trainer->SetSolveIterations(o.SolveIterations);
@@ -460,6 +462,11 @@ Command AddTrainCommand(CLI::App& app)
     "... over this many densification intervals in a row")
     ->capture_default_str()
     ->check(CLI::PositiveNumber);
+  trainCommand->add_option("--residual-seeds", train.ResidualSeedShare,
+    "New Gaussians where the residual is largest at each densification, as a share of those split or cloned, "
+    "their reflectivity the residual (Image-GS; 0: off)")
+    ->capture_default_str()
+    ->check(CLI::Range(0.0, 100.0));
   trainCommand->add_flag("--reflectivity-solve", train.ReflectivitySolve,
     "Variable projection: solve the reflectivities by least squares after seeding and after every densification, "
     "Adam between the solves (default: Adam alone)");

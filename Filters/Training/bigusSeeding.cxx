@@ -116,6 +116,34 @@ void SeedHarris(const TrainingData& data, std::int64_t total, std::mt19937_64& r
   }
 }
 
+std::int64_t SeedResidual(const TrainingData& data, int f, const float* residual, std::int64_t count,
+  std::mt19937_64& rng, const SeedShape& shape, GaussianField& field)
+{
+  const int W = data.Width;
+  const std::size_t pixels = std::size_t(W) * data.Height;
+  const unsigned char* mask = data.MaskOf(f);
+  std::vector<double> cumulative(pixels);
+  double running = 0;
+  for (std::size_t p = 0; p < pixels; ++p)
+  {
+    running += mask[p] && std::isfinite(residual[p]) ? std::abs(double(residual[p])) : 0.0;
+    cumulative[p] = running;
+  }
+  if (!(running > 0))
+  {
+    return 0;
+  }
+  for (std::int64_t s = 0; s < count; ++s)
+  {
+    const double target = Uniform(rng) * running;
+    const std::size_t p = std::upper_bound(cumulative.begin(), cumulative.end(), target) - cumulative.begin();
+    const std::size_t pixel = std::min(p, pixels - 1);
+    AddSeed(field, data.Poses[f], double(pixel % W), double(pixel / W), shape.InPlaneScale, shape.ElevationScale,
+      residual[pixel]);
+  }
+  return count;
+}
+
 void SeedUniform(const TrainingData& data, std::int64_t total, std::mt19937_64& rng, const SeedShape& shape,
   GaussianField& field)
 {

@@ -125,8 +125,11 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
       ? Format("Densification = every %d steps from step %d to ", s.DensifyInterval, s.DensifyStart) +
         (s.DensifyEnd >= 0 ? Format("step %d", s.DensifyEnd)
                            : Format("%.0f %% of the schedule", 100 * DensifyEndFraction)) +
-        Format(", top %.3g %% by attribution, at most %lld Gaussians", s.DensifyPercentile,
-          static_cast<long long>(s.MaximumGaussians)) +
+        Format(", top %.3g %% by attribution", s.DensifyPercentile) +
+        (s.ResidualSeedShare > 0 ? Format(" and %.3g as many seeds where the residual of %d frames is largest",
+                                     s.ResidualSeedShare, s.ResidualSeedFrames)
+                                 : std::string()) +
+        Format(", at most %lld Gaussians", static_cast<long long>(s.MaximumGaussians)) +
         Format("; growth stops when the validation loss improves by less than %.3g %%", 100 * s.GrowthMargin) +
         Format(" over %d intervals", s.GrowthPatience)
       : "Densification = off");
@@ -825,9 +828,49 @@ bool Trainer::DensifyAndPrune(double validation, std::string* error)
   {
     return false;
   }
+  // Image-GS's new Gaussians from the residual: rendered before densification changes the field.
+  const double residualShare = this->Settings.ResidualSeedShare;
+  const int residualFrames = this->Settings.ResidualSeedFrames;
+  const TrainingData& data = *this->Data;
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
+  std::vector<int> residualFrameList;
+  std::vector<float> residuals;
+  if (residualShare > 0 && residualFrames > 0 && state.Growing)
+  {
+    const RenderOptions o = this->Options();
+    residuals.resize(pixels * residualFrames);
+    for (int k = 0; k < residualFrames; ++k)
+    {
+      const int f = data.TrainFrames[static_cast<std::size_t>(Uniform(state.Random) * data.TrainFrames.size())];
+      residualFrameList.push_back(f);
+      const SliceGeometry slice = data.Slice(f);
+      float* S = &residuals[pixels * k];
+      if (!this->Engine->Render(&slice, 1, o, S, nullptr, error))
+      {
+        return false;
+      }
+      const float* frame = &data.Frames[pixels * f];
+      for (std::size_t p = 0; p < pixels; ++p)
+      {
+        S[p] = static_cast<float>(ScatteringOfIntensity(frame[p], this->Gamma) - S[p]);
+      }
+    }
+  }
   const DensificationResult result = bigus::DensifyAndPrune(state.Gaussians, state.Growing,
     this->Settings.DensifyPercentile, this->Settings.MaximumGaussians,
     this->Settings.SplitScalePixels * this->PixelSpacing, this->Settings.PruneReflectivity);
+  if (!residualFrameList.empty() && result.Added > 0)
+  {
+    const std::int64_t room = this->Settings.MaximumGaussians - state.Gaussians.Count();
+    const std::int64_t count = std::min<std::int64_t>(room, std::llround(residualShare * result.Added));
+    const SeedShape shape = this->SeedShapeOf();
+    for (std::size_t k = 0; k < residualFrameList.size(); ++k)
+    {
+      const std::int64_t share = count / residualFrames + (std::int64_t(k) < count % residualFrames ? 1 : 0);
+      SeedResidual(data, residualFrameList[k], &residuals[pixels * k], share, state.Random, shape, state.Gaussians.Field);
+    }
+    state.Gaussians.ResizeToField();
+  }
   if (state.Growing && result.MaximumReached)
   {
     state.Growing = false;

@@ -1379,6 +1379,44 @@ TEST(Trainer, WhenOneGaussianPerFanPixelFitsTheDefaultsFitThePixelGridAndTakeNoS
   }
 }
 
+TEST(Trainer, ResidualSeedsLieWhereTheResidualIsAndCarryIt)
+{
+  std::vector<int> heldOut;
+  TrainingData data = SyntheticSweep(KnownField(50, 9), 0.5, heldOut);
+  data.Mask[5 * W + 60] = 0; // a pixel outside the fan
+  const int frame = data.TrainFrames[3];
+  std::vector<float> residual(W * H, 0.f);
+  SeedShape shape;
+  shape.InPlaneScale = 0.45;
+  shape.ElevationScale = 0.5;
+  GaussianField field = KnownField(10, 1); // seeds are appended to what is there
+  std::mt19937_64 rng(4);
+  EXPECT_EQ(SeedResidual(data, frame, residual.data(), 100, rng, shape, field), 0) << "no residual, no seed";
+  EXPECT_EQ(field.Count(), 10);
+  residual[20 * W + 10] = 0.6f;  // pixel (i, j) = (10, 20)
+  residual[40 * W + 30] = -0.2f; // (30, 40)
+  residual[5 * W + 60] = 50.f;   // outside the mask: never seeded
+  ASSERT_EQ(SeedResidual(data, frame, residual.data(), 1000, rng, shape, field), 1000);
+  ASSERT_EQ(field.Count(), 1010);
+  const std::array<double, 16>& m = data.Poses[frame];
+  int positive = 0;
+  for (std::int64_t i = 10; i < field.Count(); ++i)
+  {
+    const float r = field.Reflectivities[i];
+    ASSERT_TRUE(r == 0.6f || r == -0.2f) << "seed " << i << ": r " << r;
+    const double pi = r > 0 ? 10 : 30, pj = r > 0 ? 20 : 40;
+    for (int k = 0; k < 3; ++k)
+    {
+      EXPECT_NEAR(field.Means[3 * i + k], m[4 * k] * pi + m[4 * k + 1] * pj + m[4 * k + 3], 1e-4) << "seed " << i;
+    }
+    EXPECT_NEAR(std::exp(field.LogScales[3 * i]), 0.45, 1e-6);
+    EXPECT_NEAR(std::exp(field.LogScales[3 * i + 2]), 0.5, 1e-6);
+    positive += r > 0 ? 1 : 0;
+  }
+  // Drawn in proportion to |residual|: 750 of the 1000 expected (binomial standard deviation 14).
+  EXPECT_NEAR(positive, 750, 70);
+}
+
 TEST(Trainer, ADenseStartKeepsToItsCountAndSolvesTheReflectivities)
 {
   std::vector<int> heldOut;
