@@ -831,30 +831,12 @@ bool Trainer::DensifyAndPrune(double validation, std::string* error)
   // Image-GS's new Gaussians from the residual: rendered before densification changes the field.
   const double residualShare = this->Settings.ResidualSeedShare;
   const int residualFrames = this->Settings.ResidualSeedFrames;
-  const TrainingData& data = *this->Data;
-  const std::size_t pixels = std::size_t(data.Width) * data.Height;
   std::vector<int> residualFrameList;
   std::vector<float> residuals;
-  if (residualShare > 0 && residualFrames > 0 && state.Growing)
+  if (residualShare > 0 && residualFrames > 0 && state.Growing &&
+    !this->RenderResiduals(residualFrames, residualFrameList, residuals, error))
   {
-    const RenderOptions o = this->Options();
-    residuals.resize(pixels * residualFrames);
-    for (int k = 0; k < residualFrames; ++k)
-    {
-      const int f = data.TrainFrames[static_cast<std::size_t>(Uniform(state.Random) * data.TrainFrames.size())];
-      residualFrameList.push_back(f);
-      const SliceGeometry slice = data.Slice(f);
-      float* S = &residuals[pixels * k];
-      if (!this->Engine->Render(&slice, 1, o, S, nullptr, error))
-      {
-        return false;
-      }
-      const float* frame = &data.Frames[pixels * f];
-      for (std::size_t p = 0; p < pixels; ++p)
-      {
-        S[p] = static_cast<float>(ScatteringOfIntensity(frame[p], this->Gamma) - S[p]);
-      }
-    }
+    return false;
   }
   const DensificationResult result = bigus::DensifyAndPrune(state.Gaussians, state.Growing,
     this->Settings.DensifyPercentile, this->Settings.MaximumGaussians,
@@ -864,10 +846,12 @@ bool Trainer::DensifyAndPrune(double validation, std::string* error)
     const std::int64_t room = this->Settings.MaximumGaussians - state.Gaussians.Count();
     const std::int64_t count = std::min<std::int64_t>(room, std::llround(residualShare * result.Added));
     const SeedShape shape = this->SeedShapeOf();
+    const std::size_t pixels = std::size_t(this->Data->Width) * this->Data->Height;
     for (std::size_t k = 0; k < residualFrameList.size(); ++k)
     {
       const std::int64_t share = count / residualFrames + (std::int64_t(k) < count % residualFrames ? 1 : 0);
-      SeedResidual(data, residualFrameList[k], &residuals[pixels * k], share, state.Random, shape, state.Gaussians.Field);
+      SeedResidual(*this->Data, residualFrameList[k], &residuals[pixels * k], share, state.Random, shape,
+        state.Gaussians.Field);
     }
     state.Gaussians.ResizeToField();
   }
@@ -878,6 +862,31 @@ bool Trainer::DensifyAndPrune(double validation, std::string* error)
       " Gaussians reached (iteration " + std::to_string(state.Iteration) + ")";
   }
   return this->PushState(error);
+}
+
+bool Trainer::RenderResiduals(int count, std::vector<int>& frames, std::vector<float>& residuals, std::string* error)
+{
+  const TrainingData& data = *this->Data;
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
+  const RenderOptions o = this->Options();
+  residuals.resize(pixels * count);
+  for (int k = 0; k < count; ++k)
+  {
+    const int f = data.TrainFrames[static_cast<std::size_t>(Uniform(this->State.Random) * data.TrainFrames.size())];
+    frames.push_back(f);
+    const SliceGeometry slice = data.Slice(f);
+    float* S = &residuals[pixels * k];
+    if (!this->Engine->Render(&slice, 1, o, S, nullptr, error))
+    {
+      return false;
+    }
+    const float* frame = &data.Frames[pixels * f];
+    for (std::size_t p = 0; p < pixels; ++p)
+    {
+      S[p] = static_cast<float>(ScatteringOfIntensity(frame[p], this->Gamma) - S[p]);
+    }
+  }
+  return true;
 }
 
 bool Trainer::Evaluate(

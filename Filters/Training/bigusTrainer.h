@@ -376,6 +376,9 @@ private:
     return (this->Settings.ReflectivitySolve || this->PixelGrid) && !this->Settings.NonNegativeReflectivity;
   }
   bool DensifyAndPrune(double validation, std::string* error);
+  /// The S-space residuals t - S ([count, H, W]) of @p count training frames drawn from the run's generator, of
+  /// the engine's field (ResidualSeedShare).
+  bool RenderResiduals(int count, std::vector<int>& frames, std::vector<float>& residuals, std::string* error);
   bool ValidationLoss(double& loss, std::string* error);
   /// Measures the validation loss; keeps a copy of the field when it is the best so far.
   bool CheckValidation(double& loss, std::string* error);
