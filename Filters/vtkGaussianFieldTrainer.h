@@ -227,7 +227,7 @@ public:
   vtkGetMacro(DensifyPercentile, double);
   ///@}
   ///@{ New Gaussians where the residual is largest at each densification, as a share of those densified
-  /// (default 0.25; 0 = off): their reflectivity is the residual (Image-GS; bigus::TrainerSettings::ResidualSeedShare).
+  /// (default 0 = off; 0.25 measured): their reflectivity is the residual (Image-GS; bigus::TrainerSettings::ResidualSeedShare).
   vtkSetClampMacro(ResidualSeedShare, double, 0.0, 100.0);
   vtkGetMacro(ResidualSeedShare, double);
   ///@}

@@ -123,8 +123,9 @@ struct TrainerSettings
   /// (0 = off): seeds on ResidualSeedFrames training frames drawn at random, in proportion to |residual|, each
   /// taking the residual as its reflectivity (bigus::SeedResidual; Image-GS, Zhang et al. 2025). The liver at
   /// 120 s, 2 seeds (docs/FINDINGS.md): 0.25 and 0.5 gave +0.23 / +0.22 dB held out, 1.0 nothing; 8 % more
-  /// Gaussians by a larger DensifyPercentile instead +0.02.
-  double ResidualSeedShare = 0.25;
+  /// Gaussians by a larger DensifyPercentile instead +0.02; but at 300 s nothing on the main job and -1.8 dB on
+  /// the 8-frame block hold-out (29.66 against 31.48), so off by default.
+  double ResidualSeedShare = 0;
   int ResidualSeedFrames = 4;
   double SplitScalePixels = 3.0;     ///< largest scale above which a Gaussian is split, not cloned
   double PruneReflectivity = 1e-3;   ///< |r| below this is pruned (after the first densification)
