@@ -21,6 +21,14 @@ double Uniform(std::mt19937_64& rng)
   return (rng() >> 11) * (1.0 / 9007199254740992.0);
 }
 
+/// A pixel drawn from @p cumulative, the running sum of per-pixel weights whose last entry is @p total (> 0).
+std::size_t DrawPixel(const std::vector<double>& cumulative, double total, std::mt19937_64& rng)
+{
+  const double target = Uniform(rng) * total;
+  const std::size_t p = std::upper_bound(cumulative.begin(), cumulative.end(), target) - cumulative.begin();
+  return std::min(p, cumulative.size() - 1);
+}
+
 /// The point (mm) of pixel (i, j) of a frame with ImageToReference @p m.
 void Apply(const std::array<double, 16>& m, double i, double j, double out[3])
 {
@@ -105,9 +113,7 @@ void SeedHarris(const TrainingData& data, std::int64_t total, std::mt19937_64& r
     const std::int64_t seeds = total / frames + (n < total % frames ? 1 : 0);
     for (std::int64_t s = 0; s < seeds; ++s)
     {
-      const double target = Uniform(rng) * running;
-      const std::size_t p = std::upper_bound(cumulative.begin(), cumulative.end(), target) - cumulative.begin();
-      const std::size_t pixel = std::min(p, pixels - 1);
+      const std::size_t pixel = DrawPixel(cumulative, running, rng);
       const double i = double(pixel % W) + Uniform(rng) - 0.5;
       const double j = double(pixel / W) + Uniform(rng) - 0.5;
       AddSeed(field, data.Poses[f], i, j, shape.InPlaneScale, shape.ElevationScale,
@@ -135,9 +141,7 @@ std::int64_t SeedResidual(const TrainingData& data, int f, const float* residual
   }
   for (std::int64_t s = 0; s < count; ++s)
   {
-    const double target = Uniform(rng) * running;
-    const std::size_t p = std::upper_bound(cumulative.begin(), cumulative.end(), target) - cumulative.begin();
-    const std::size_t pixel = std::min(p, pixels - 1);
+    const std::size_t pixel = DrawPixel(cumulative, running, rng);
     AddSeed(field, data.Poses[f], double(pixel % W), double(pixel / W), shape.InPlaneScale, shape.ElevationScale,
       residual[pixel]);
   }

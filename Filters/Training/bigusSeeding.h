@@ -44,11 +44,11 @@ void SeedHarris(const TrainingData& data, std::int64_t total, std::mt19937_64& r
   GaussianField& field);
 
 /**
- * Appends to @p field up to @p count seeds on frame @p frame of @p data where its residual is largest: pixels
+ * Appends to @p field @p count seeds on frame @p frame of @p data where its residual is largest: pixels
  * inside the frame's mask drawn in proportion to |@p residual| ([H, W], the target scattering field minus the
  * rendered one, S-space), each seed with the residual at its pixel as reflectivity (new Gaussians taking their
  * reflectivity from the residual, as Image-GS does: Zhang et al., SIGGRAPH 2025), shaped as Harris seeds.
- * Returns how many it added (0 when the residual is 0 everywhere in the mask).
+ * Returns how many it added: @p count, or 0 when the residual is 0 everywhere in the mask.
  */
 std::int64_t SeedResidual(const TrainingData& data, int frame, const float* residual, std::int64_t count,
   std::mt19937_64& rng, const SeedShape& shape, GaussianField& field);
