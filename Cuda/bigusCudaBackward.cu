@@ -27,7 +27,7 @@ __global__ void ScatteringGradientKernel(const float* S, const float* dL, std::i
  * lane 0 runs the setup's backward and adds to the Gaussian's gradients, which no other warp touches.
  */
 __global__ void BackwardKernel(DeviceField field, PreparedSlice s, double sigmaE, double cutoff, bool nonNegative,
-  const float* gS, FieldGradients out, Counters* counters)
+  const float* gS, FieldGradients out, PoseShares pose, Counters* counters)
 {
   const std::int64_t i = (std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x) / WarpSize;
   const int lane = threadIdx.x & (WarpSize - 1);
@@ -83,13 +83,44 @@ __global__ void BackwardKernel(DeviceField field, PreparedSlice s, double sigmaE
   {
     return;
   }
-  AddGaussianGradients(f, cache, s.Frame, sigmaE, sum, r, g.Reflectivity, nonNegative, out, i);
+  AddGaussianGradients(f, cache, s.Frame, sigmaE, sum, r, g.Reflectivity, nonNegative, out, i, pose.Pivot,
+    pose.Shares ? pose.Shares + 6 * i : nullptr);
   if (out.VisibleCount)
   {
     out.VisibleCount[i] += 1;
   }
   atomicAdd(&counters->Visible, 1ull);
   atomicAdd(&counters->Evaluations, static_cast<unsigned long long>(boxPixels));
+}
+
+/**
+ * The slice's pose gradient from the Gaussians' shares [N, 6]: block c sums component c, each thread a
+ * fixed stride of Gaussians in index order, then a fixed tree in shared memory, so the sum is the same
+ * on every run (the CPU sums in index order: the two differ by rounding).
+ */
+__global__ void PoseShareSumKernel(const double* shares, std::int64_t count, double* total)
+{
+  __shared__ double partial[PoseSumBlock];
+  const int c = blockIdx.x;
+  double sum = 0;
+  for (std::int64_t i = threadIdx.x; i < count; i += PoseSumBlock)
+  {
+    sum += shares[6 * i + c];
+  }
+  partial[threadIdx.x] = sum;
+  __syncthreads();
+  for (int half = PoseSumBlock / 2; half > 0; half /= 2)
+  {
+    if (threadIdx.x < half)
+    {
+      partial[threadIdx.x] += partial[threadIdx.x + half];
+    }
+    __syncthreads();
+  }
+  if (threadIdx.x == 0)
+  {
+    total[c] += partial[0];
+  }
 }
 
 }
@@ -101,10 +132,16 @@ void LaunchScatteringGradient(const float* S, const float* dL, std::int64_t pixe
 }
 
 void LaunchBackward(const DeviceField& field, const PreparedSlice& s, double sigmaE, double cutoff,
-  bool nonNegative, const float* gS, FieldGradients out, Counters* counters, cudaStream_t stream)
+  bool nonNegative, const float* gS, FieldGradients out, const PoseShares& pose, Counters* counters,
+  cudaStream_t stream)
 {
   BackwardKernel<<<Blocks(field.Count * WarpSize, BackwardBlock), BackwardBlock, 0, stream>>>(
-    field, s, sigmaE, cutoff, nonNegative, gS, out, counters);
+    field, s, sigmaE, cutoff, nonNegative, gS, out, pose, counters);
+}
+
+void LaunchPoseShareSum(const double* shares, std::int64_t count, double* total, cudaStream_t stream)
+{
+  PoseShareSumKernel<<<6, PoseSumBlock, 0, stream>>>(shares, count, total);
 }
 
 } // namespace cuda

@@ -29,6 +29,7 @@ constexpr int SetupBlock = 256;
 constexpr int BackwardBlock = 256; // 8 warps: 8 Gaussians per block
 constexpr int WarpSize = 32;
 constexpr int RasterThreads = TileSize * TileSize;
+constexpr int PoseSumBlock = 256;
 
 /// The field on the device, structure of arrays as in FieldView.
 struct DeviceField
@@ -78,9 +79,20 @@ void LaunchRaster(int tiles, const Splat* splats, const std::uint32_t* values, c
 /// dL/dS of @p pixels pixels into @p gS: @p dL itself (@p withRespectToS) or dL/dI dI/dS.
 void LaunchScatteringGradient(const float* S, const float* dL, std::int64_t pixels, bool withRespectToS,
   double gamma, float* gS, cudaStream_t stream);
-/// Accumulates every Gaussian's gradients (and attribution, visible count) from @p gS of slice @p s.
+/// Where the backward pass puts each Gaussian's share of a slice's pose gradient (FieldGradients::SlicePoses).
+struct PoseShares
+{
+  double* Shares;   // [N, 6] dL/dxi of each Gaussian (zeroed before), or null: no pose gradient
+  double Pivot[3];  // the pivot of the correction, the slice's centre pixel in its plane (SliceCentre), mm
+};
+
+/// Accumulates every Gaussian's gradients (and attribution, visible count) from @p gS of slice @p s, and
+/// with @p pose.Shares its share of the slice's pose gradient.
 void LaunchBackward(const DeviceField& field, const PreparedSlice& s, double sigmaE, double cutoff,
-  bool nonNegative, const float* gS, FieldGradients out, Counters* counters, cudaStream_t stream);
+  bool nonNegative, const float* gS, FieldGradients out, const PoseShares& pose, Counters* counters,
+  cudaStream_t stream);
+/// Adds the sum over the @p count Gaussians of @p shares [N, 6] to @p total [6], in a fixed order.
+void LaunchPoseShareSum(const double* shares, std::int64_t count, double* total, cudaStream_t stream);
 
 } // namespace cuda
 } // namespace bigus

@@ -36,6 +36,7 @@ constexpr std::int64_t GradientBytes = 12 * sizeof(float) + sizeof(int);
 constexpr std::int64_t BinningBytes = sizeof(Splat) + 2 * sizeof(unsigned long long);
 constexpr std::int64_t EntryBytes = 4 * sizeof(std::uint32_t); // keys and values, unsorted and sorted
 constexpr std::int64_t PixelBytes = 3 * sizeof(float);          // forward S, I; backward S, dL, dL/dS
+constexpr std::int64_t PoseBytesPerGaussian = 6 * sizeof(double); // backward with pose gradients: shares
 
 // ------------------------------------------------------------------------------------------------
 // Host side.
@@ -156,22 +157,21 @@ public:
     const float* S, const float* dL, bool gradientIsWithRespectToS, FieldGradients& gradients, RenderStats* stats,
     std::string* error) override
   {
-    if (gradients.SlicePoses)
-    {
-      if (error)
-      {
-        *error = "the CUDA backend does not compute pose gradients (FieldGradients::SlicePoses) yet; pose refinement "
-                 "runs on the CPU backend";
-      }
-      return false;
-    }
     std::vector<PreparedSlice> prepared;
-    if (!PrepareSlices(slices, count, options, prepared, error) || !this->UploadField(field, true, prepared, error))
+    const bool poses = gradients.SlicePoses != nullptr;
+    if (!PrepareSlices(slices, count, options, prepared, error) ||
+      !this->UploadField(field, true, prepared, error, poses ? count : 0))
     {
       return false;
     }
     const double t0 = Now();
     const std::int64_t n = field.Count;
+    double* poseTotals = this->PoseTotalData.As<double>(); // [count, 6] the slices' pose gradients
+    if (poses &&
+      !Check(cudaMemsetAsync(poseTotals, 0, sizeof(double) * 6 * count, this->Stream), "clearing pose gradients", error))
+    {
+      return false;
+    }
     // The gradients accumulate (+=) into what the caller holds, in the same order as on the CPU.
     float* base = this->Gradients.As<float>();
     const GradientSlot slots[] = { { gradients.Means, 3, 0 }, { gradients.LogScales, 3, 3 },
@@ -218,10 +218,23 @@ public:
         return false;
       }
       LaunchScatteringGradient(dS, dG, pixels, gradientIsWithRespectToS, options.Gamma, dGS, this->Stream);
+      PoseShares pose = { poses ? this->PoseShareData.As<double>() : nullptr, { 0, 0, 0 } };
+      if (poses)
+      {
+        SliceCentre(s.PixelToPlane, s.Width, s.Height, pose.Pivot);
+        if (!Check(cudaMemsetAsync(pose.Shares, 0, sizeof(double) * 6 * n, this->Stream), "clearing pose shares", error))
+        {
+          return false;
+        }
+      }
       if (n > 0)
       {
-        LaunchBackward(this->Field(n), s, sigmaE, options.Cutoff, options.NonNegativeReflectivity, dGS, out,
+        LaunchBackward(this->Field(n), s, sigmaE, options.Cutoff, options.NonNegativeReflectivity, dGS, out, pose,
           this->Count.As<Counters>(), this->Stream);
+        if (poses)
+        {
+          LaunchPoseShareSum(pose.Shares, n, poseTotals + 6 * k, this->Stream);
+        }
       }
       if (!Check(cudaGetLastError(), "backward kernel", error))
       {
@@ -239,6 +252,14 @@ public:
         return false;
       }
     }
+    std::vector<double> poseGradients(poses ? 6 * std::size_t(count) : 0);
+    if (poses &&
+      !Check(cudaMemcpyAsync(poseGradients.data(), poseTotals, sizeof(double) * poseGradients.size(),
+               cudaMemcpyDeviceToHost, this->Stream),
+        "copying pose gradients to the host", error))
+    {
+      return false;
+    }
     Counters counters;
     if ((gradients.VisibleCount &&
           !Check(cudaMemcpyAsync(gradients.VisibleCount, out.VisibleCount, sizeof(int) * n, cudaMemcpyDeviceToHost,
@@ -247,6 +268,10 @@ public:
       !this->ReadCounters(counters, "backward", error))
     {
       return false;
+    }
+    for (std::size_t c = 0; c < poseGradients.size(); ++c)
+    {
+      gradients.SlicePoses[c] += poseGradients[c]; // after ReadCounters's synchronisation
     }
     if (stats)
     {
@@ -300,8 +325,10 @@ private:
     return false;
   }
 
-  /// Checks the memory a call needs, then uploads the field; the counters are reset.
-  bool UploadField(const FieldView& field, bool backward, const std::vector<PreparedSlice>& slices, std::string* error)
+  /// Checks the memory a call needs, then uploads the field; the counters are reset. A backward call with
+  /// @p poseSlices > 0 also holds the pose gradient's buffers (PoseBytesPerGaussian, 6 doubles per slice).
+  bool UploadField(const FieldView& field, bool backward, const std::vector<PreparedSlice>& slices, std::string* error,
+    int poseSlices = 0)
   {
     const std::int64_t n = field.Count;
     std::int64_t pixels = 1, tiles = 1;
@@ -310,7 +337,7 @@ private:
       pixels = std::max(pixels, std::int64_t(s.Width) * s.Height);
       tiles = std::max(tiles, std::int64_t(s.TilesX) * s.TilesY);
     }
-    const std::int64_t perGaussian = DeviceBytesPerGaussian(backward);
+    const std::int64_t perGaussian = DeviceBytesPerGaussian(backward) + (poseSlices > 0 ? PoseBytesPerGaussian : 0);
     const std::string what = "a field of " + std::to_string(n) + " Gaussians and slices of " + std::to_string(pixels) +
       " pixels";
     if (n >= (std::int64_t(1) << 31))
@@ -321,14 +348,20 @@ private:
       }
       return false;
     }
+    const std::int64_t poseTotalBytes = 6 * std::int64_t(sizeof(double)) * poseSlices;
     const std::int64_t held = this->FieldData.Bytes + this->Image.Bytes +
+      (poseSlices > 0 ? this->PoseShareData.Bytes + this->PoseTotalData.Bytes : 0) +
       (backward ? this->Gradients.Bytes
                 : this->Splats.Bytes + this->Touched.Bytes + this->TileStart.Bytes + this->TileEnd.Bytes);
-    if (!this->Fits(n * perGaussian + pixels * PixelBytes + 2 * tiles * std::int64_t(sizeof(int)), held, what, error) ||
+    if (!this->Fits(n * perGaussian + pixels * PixelBytes + 2 * tiles * std::int64_t(sizeof(int)) + poseTotalBytes,
+          held, what, error) ||
       !this->FieldData.Reserve(std::max<std::int64_t>(1, n) * FieldBytes, "allocating the field", error) ||
       !this->Image.Reserve(3 * pixels * std::int64_t(sizeof(float)), "allocating the image buffers", error) ||
       !this->Count.Reserve(sizeof(Counters), "allocating the counters", error) ||
       (backward && !this->Gradients.Reserve(std::max<std::int64_t>(1, n) * GradientBytes, "allocating gradients", error)) ||
+      (poseSlices > 0 &&
+        (!this->PoseShareData.Reserve(std::max<std::int64_t>(1, n) * PoseBytesPerGaussian, "allocating pose shares", error) ||
+          !this->PoseTotalData.Reserve(poseTotalBytes, "allocating pose gradients", error))) ||
       (!backward &&
         (!this->Splats.Reserve(std::max<std::int64_t>(1, n) * std::int64_t(sizeof(Splat)), "allocating footprints",
            error) ||
@@ -473,6 +506,8 @@ private:
   Buffer SortedValues; // [E]
   Buffer Temporary;    // CUB's scratch space
   Buffer Count;        // Counters
+  Buffer PoseShareData;  // [N, 6] doubles: each Gaussian's share of one slice's pose gradient
+  Buffer PoseTotalData;  // [count, 6] doubles: the slices' pose gradients
 };
 
 std::unique_ptr<Renderer> MakeCudaRenderer(std::string* error)

@@ -9,7 +9,9 @@
  * tile's footprints staged in shared memory; the backward pass runs one warp per Gaussian over the
  * pixels of its footprint's bounding box (those within the cutoff, the CPU's pixel set) and reduces the
  * warp's partial sums in a fixed order. RenderStats::PixelEvaluations of Backward counts the box's
- * pixels, not the CPU's row spans.
+ * pixels, not the CPU's row spans. Pose gradients (FieldGradients::SlicePoses, pose refinement): the
+ * warp's lane 0 writes its Gaussian's share ([N, 6] doubles, 48 more device bytes per Gaussian), and
+ * one block per component sums the shares in a fixed order.
  *
  * Deterministic by construction: every pixel sums its Gaussians in index order (as on the CPU) and
  * every Gaussian's gradient is summed by one warp in a fixed order; no float atomics are used, so
@@ -35,7 +37,7 @@ namespace cuda
 {
 
 /// Device bytes a call needs for each Gaussian of the field: Forward (field, footprints, binning
-/// counts) or Backward (field, gradients).
+/// counts) or Backward (field, gradients; 48 more with pose gradients).
 BIGUSCUDA_EXPORT std::int64_t DeviceBytesPerGaussian(bool backward = false);
 /// Device bytes a call needs for each pixel of the largest slice (S, I, dL, dL/dS, tile ranges).
 BIGUSCUDA_EXPORT std::int64_t DeviceBytesPerPixel();

@@ -1,6 +1,9 @@
 #include "bigusPlot.h"
 
-#include <opencv2/imgcodecs.hpp>
+#include "vtkImageData.h"
+#include "vtkNew.h"
+#include "vtkPNGWriter.h"
+
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
@@ -27,6 +30,44 @@ bool Publish(const std::string& temporary, const std::string& path)
     return false;
   }
   return true;
+}
+
+bool WritePng(const cv::Mat& image, const std::string& path)
+{
+  const int channels = image.channels();
+  if (image.depth() != CV_8U || (channels != 1 && channels != 3) || image.empty())
+  {
+    return false;
+  }
+  // VTK's image rows run bottom-up and its PNG writer puts the last row at the top: row r of the picture
+  // is VTK row rows - 1 - r. Colour goes from OpenCV's B, G, R to PNG's R, G, B.
+  vtkNew<vtkImageData> vtkImage;
+  vtkImage->SetDimensions(image.cols, image.rows, 1);
+  vtkImage->AllocateScalars(VTK_UNSIGNED_CHAR, channels);
+  auto* out = static_cast<unsigned char*>(vtkImage->GetScalarPointer());
+  for (int r = 0; r < image.rows; ++r)
+  {
+    const unsigned char* row = image.ptr<unsigned char>(r);
+    unsigned char* target = out + std::size_t(image.rows - 1 - r) * image.cols * channels;
+    for (int c = 0; c < image.cols; ++c)
+    {
+      for (int k = 0; k < channels; ++k)
+      {
+        target[c * channels + k] = row[c * channels + (channels == 3 ? 2 - k : k)];
+      }
+    }
+  }
+  const std::string temporary = TemporaryName(path);
+  vtkNew<vtkPNGWriter> writer;
+  writer->SetInputData(vtkImage);
+  writer->SetFileName(temporary.c_str());
+  writer->Write();
+  if (writer->GetErrorCode() != 0)
+  {
+    std::remove(temporary.c_str());
+    return false;
+  }
+  return Publish(temporary, path);
 }
 
 namespace
@@ -169,7 +210,6 @@ bool WritePlot(const PlotSpec& spec, const std::string& path)
     cv::line(plot, key, key + cv::Point(22, 0), colour, 2);
     cv::putText(plot, s.Name, key + cv::Point(30, 5), cv::FONT_HERSHEY_SIMPLEX, 0.42, colour);
   }
-  const std::string temporary = TemporaryName(path);
-  return cv::imwrite(temporary, plot) && Publish(temporary, path);
+  return WritePng(plot, path);
 }
 }

@@ -1,11 +1,16 @@
-// Line plots as PNG (OpenCV drawing) for the command line's reports, and the file helpers the
-// command-line tools share: write under a temporary name, then rename.
+// Line plots as PNG (OpenCV drawing, VTK's PNG writer) for the command line's reports, and the file
+// helpers the command-line tools share: write under a temporary name, then rename.
 #ifndef bigusPlot_h
 #define bigusPlot_h
 
 #include <string>
 #include <utility>
 #include <vector>
+
+namespace cv
+{
+class Mat;
+}
 
 namespace bigus
 {
@@ -31,6 +36,13 @@ bool WritePlot(const PlotSpec& spec, const std::string& path);
 std::string TemporaryName(const std::string& path);
 /// Renames @p temporary to @p path; removes the temporary and returns false on failure.
 bool Publish(const std::string& temporary, const std::string& path);
+
+/**
+ * Writes @p image (8-bit, 1 channel gray or 3 channels in OpenCV's B, G, R order; [rows, columns], row 0
+ * at the top of the picture) as PNG to @p path through a temporary file (vtkPNGWriter). False when
+ * the image is of another type or the file cannot be written; an existing @p path is then untouched.
+ */
+bool WritePng(const cv::Mat& image, const std::string& path);
 }
 
 #endif

@@ -58,9 +58,19 @@ inline double Reflectivity(double r, const RenderOptions& o)
   return o.NonNegativeReflectivity ? (r > 0 ? r : 0.0) : r;
 }
 
-/// S (and I if non-null), [H, W], double. Returns false for a bad pose.
+/**
+ * The cutoff of the reference: none (every Gaussian at every pixel) unless @p truncated, then the
+ * renderers' RenderOptions::Cutoff, so that it sums over the footprints' pixels as they do and differs
+ * from them by float rounding alone (bigusBackendCheck measures a backend's rounding against it).
+ */
+inline double ReferenceCutoff(const RenderOptions& o, bool truncated)
+{
+  return truncated ? o.Cutoff : std::numeric_limits<double>::infinity();
+}
+
+/// S (and I if non-null), [H, W], double. Returns false for a bad pose. @p truncated: ReferenceCutoff.
 inline bool Forward(const FieldD& field, const SliceGeometry& slice, const RenderOptions& o, std::vector<double>& S,
-  std::vector<double>* I = nullptr)
+  std::vector<double>* I = nullptr, bool truncated = false)
 {
   SliceFrameD frame;
   double pixel[3];
@@ -73,7 +83,7 @@ inline bool Forward(const FieldD& field, const SliceGeometry& slice, const Rende
   for (std::int64_t i = 0; i < field.Count(); ++i)
   {
     const GaussianParams g = field.Get(i);
-    const Footprint f = SetupFootprint(g, frame, sigmaE, std::numeric_limits<double>::infinity(), nullptr);
+    const Footprint f = SetupFootprint(g, frame, sigmaE, ReferenceCutoff(o, truncated), nullptr);
     if (!f.Visible)
     {
       continue;
@@ -85,6 +95,10 @@ inline bool Forward(const FieldD& field, const SliceGeometry& slice, const Rende
       {
         const double dx = k * pixel[0] + j * pixel[1] - f.Center[0];
         const double dy = j * pixel[2] - f.Center[1];
+        if (truncated && ConicForm(f.Conic[0], f.Conic[1], f.Conic[2], dx, dy) > f.CutoffSquared)
+        {
+          continue;
+        }
         S[std::size_t(j) * slice.Width + k] += r * PixelWeight(f.Amplitude, f.Conic[0], f.Conic[1], f.Conic[2], dx, dy);
       }
     }
@@ -101,8 +115,10 @@ inline bool Forward(const FieldD& field, const SliceGeometry& slice, const Rende
 }
 
 /// Gradients for dL/dS (or dL/dI with the forward S) on one slice, accumulated into @p grad.
+/// @p truncated: ReferenceCutoff.
 inline bool Backward(const FieldD& field, const SliceGeometry& slice, const RenderOptions& o,
-  const std::vector<double>& S, const std::vector<double>& dL, bool gradientIsWithRespectToS, GradD& grad)
+  const std::vector<double>& S, const std::vector<double>& dL, bool gradientIsWithRespectToS, GradD& grad,
+  bool truncated = false)
 {
   SliceFrameD frame;
   double pixel[3];
@@ -120,7 +136,7 @@ inline bool Backward(const FieldD& field, const SliceGeometry& slice, const Rend
   {
     const GaussianParams g = field.Get(i);
     SetupCache cache;
-    const Footprint f = SetupFootprint(g, frame, sigmaE, std::numeric_limits<double>::infinity(), &cache);
+    const Footprint f = SetupFootprint(g, frame, sigmaE, ReferenceCutoff(o, truncated), &cache);
     if (!f.Visible)
     {
       continue;
@@ -133,7 +149,12 @@ inline bool Backward(const FieldD& field, const SliceGeometry& slice, const Rend
       {
         const double dx = k * pixel[0] + j * pixel[1] - f.Center[0];
         const double dy = j * pixel[2] - f.Center[1];
-        const double e = std::exp(-0.5 * ConicForm(f.Conic[0], f.Conic[1], f.Conic[2], dx, dy));
+        const double form = ConicForm(f.Conic[0], f.Conic[1], f.Conic[2], dx, dy);
+        if (truncated && form > f.CutoffSquared)
+        {
+          continue;
+        }
+        const double e = std::exp(-0.5 * form);
         PixelWeightBackward(gS[std::size_t(j) * slice.Width + k], r * f.Amplitude, e, f.Conic[0], f.Conic[1],
           f.Conic[2], dx, dy, sums, 1);
       }

@@ -23,7 +23,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
-#include <opencv2/imgcodecs.hpp>
+#include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 #include <string>
 #include <vector>
@@ -211,7 +211,7 @@ int WriteImage(vtkImageData* image, const std::string& path)
           static_cast<unsigned char>(std::lround(std::min(255.0, std::max(0.0, values->GetDataType() == VTK_FLOAT ? 255 * v : v))));
       }
     }
-    ok = cv::imwrite(temporary, png);
+    return WritePng(png, path) ? 0 : Fail(path + ": cannot write the image");
   }
   else if (EndsWith(path, ".mha") || EndsWith(path, ".mhd"))
   {

@@ -24,7 +24,7 @@
 #include <fstream>
 #include <memory>
 #include <nlohmann/json.hpp>
-#include <opencv2/imgcodecs.hpp>
+#include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 #include <optional>
 #include <string>
@@ -383,8 +383,7 @@ int RunEvaluate(const EvaluateOptions& o)
         }
       }
       const std::string path = o.Report + "/frame_" + std::to_string(k) + "_truth_rendering_error.png";
-      const std::string temporary = TemporaryName(path);
-      if (!cv::imwrite(temporary, side) || !Publish(temporary, path))
+      if (!WritePng(side, path))
       {
         return Fail(path + ": cannot write");
       }

@@ -1,7 +1,7 @@
 // The CUDA renderer against the CPU renderer (itself checked against the naive double renderer, which
 // TestGaussianFootprint checks against quadrature): forward and gradients on the hard-case grid and on
 // a liver field, slice batches, bit-identical repeats, bad poses, a field too large for the device,
-// and the registry choosing it. Exits 125 (skipped) where no usable GPU exists.
+// pose gradients, and the registry choosing it. Exits 125 (skipped) where no usable GPU exists.
 #include "bigusBackend.h"
 #include "bigusBackendCheck.h"
 #include "bigusCudaDevice.h"
@@ -57,21 +57,33 @@ std::vector<float> RandomGradient(std::size_t pixels, unsigned seed)
 
 /**
  * As the backend self-check compares (bigus::CompareRenders): max |delta I| <= @p imageTolerance (the
- * issue's bound: 1e-5), every Gaussian's gradients within @p gradientTolerance (1e-4) of its own CPU
- * gradient (floor: 1e-3 of the largest), visible entries equal in total (a Gaussian at the cull's edge may
- * tie differently under fused multiply-adds), nothing NaN or Inf.
+ * issue's bound: 1e-5); against @p exact (RenderReference, the double reference cut at the same
+ * footprints), every Gaussian's gradient error relative to its own (floor: 1e-3 of the largest) at most
+ * max(@p gradientTolerance, twice the CPU's); without @p exact (fields too large for the naive reference),
+ * every Gaussian's gradients within @p gradientTolerance of the CPU's; visible entries equal in total (a
+ * Gaussian at the cull's edge may tie differently under fused multiply-adds), nothing NaN or Inf.
  */
 void ExpectSameAsCpu(const Rendered& gpu, const Rendered& cpu, const std::string& what, double imageTolerance = 1e-5,
-  double gradientTolerance = 1e-4)
+  double gradientTolerance = 1e-4, const Rendered* exact = nullptr)
 {
   ASSERT_EQ(gpu.I.size(), cpu.I.size()) << what;
   ASSERT_EQ(gpu.Reflectivities.size(), cpu.Reflectivities.size()) << what;
-  const BackendCheck c = CompareRenders(gpu, cpu, imageTolerance, gradientTolerance);
+  const BackendCheck c = CompareRenders(gpu, cpu, exact ? *exact : cpu, imageTolerance, gradientTolerance);
   EXPECT_TRUE(c.Passed) << what << ": " << c.Detail;
   std::printf("%s: %s; forward %.3f ms (CPU %.3f), backward %.3f ms (CPU %.3f)\n", what.c_str(), c.Detail.c_str(),
     1e3 * (gpu.Forward.SetupSeconds + gpu.Forward.RasterSeconds),
     1e3 * (cpu.Forward.SetupSeconds + cpu.Forward.RasterSeconds), 1e3 * gpu.Backward.RasterSeconds,
     1e3 * cpu.Backward.RasterSeconds);
+}
+
+/// The double reference renderer's S, I and gradients for the same inputs (RenderReference).
+Rendered Exact(const FieldView& field, const std::vector<SliceGeometry>& slices, const RenderOptions& o,
+  const std::vector<float>& dL)
+{
+  Rendered out;
+  std::string error;
+  EXPECT_TRUE(RenderReference(field, slices.data(), static_cast<int>(slices.size()), o, dL, out, &error)) << error;
+  return out;
 }
 
 std::unique_ptr<Renderer> Cuda()
@@ -113,7 +125,8 @@ TEST(CudaRenderer, MatchesTheCpuOnTheHardCaseGrid)
   // of its plane), to check the batch.
   const std::vector<SliceGeometry> slices = { HardCaseSlice(), HardCaseSlice(1.3) };
   const std::vector<float> dL = RandomGradient(2 * 160 * 112, 5);
-  // Scale ratios up to 100 at the bounds. At 1e3 and 1e4 the footprint's minor-axis term
+  // Images against the CPU's, gradients against the double reference as accurately as the CPU's (or
+  // within the family's bound). Scale ratios up to 100 at the bounds. At 1e3 and 1e4 the footprint's minor-axis term
   // (cos dy - sin dx) / sigma_minor subtracts two products of a few mm, so one float rounding moves it
   // by ~5e-7 mm / sigma_minor (2e-4 mm and less): a backend that fuses multiply-adds differently (nvcc
   // by default, GCC's AVX2 clone) moves I by up to ~1e-3 near the footprint's edge, as the CPU clones
@@ -138,7 +151,8 @@ TEST(CudaRenderer, MatchesTheCpuOnTheHardCaseGrid)
           std::to_string(sigmaE) + (beam ? "" : ", thin plane");
         const Rendered g = Render(*gpu, field.View(), slices, o, dL);
         const Rendered c = Render(*cpu, field.View(), slices, o, dL);
-        ExpectSameAsCpu(g, c, what, family.Image, family.Gradient);
+        const Rendered e = Exact(field.View(), slices, o, dL);
+        ExpectSameAsCpu(g, c, what, family.Image, family.Gradient, &e);
         EXPECT_TRUE(std::any_of(c.S.begin(), c.S.end(), [](float v) { return v != 0; })) << what;
       }
     }
@@ -248,7 +262,8 @@ TEST(CudaRenderer, AFieldTooLargeForTheDeviceIsRefusedBeforeAllocating)
   // The renderer still works afterwards.
   const Rendered g = Render(*gpu, small.View(), slices, o, dL);
   const Rendered c = Render(*CreateCpuRenderer(), small.View(), slices, o, dL);
-  ExpectSameAsCpu(g, c, "after a refused call");
+  const Rendered e = Exact(small.View(), slices, o, dL);
+  ExpectSameAsCpu(g, c, "after a refused call", 1e-5, 1e-4, &e);
 }
 
 TEST(CudaRenderer, TheRegistryChoosesItForAuto)
@@ -337,23 +352,95 @@ TEST(CudaRenderer, NoImageOutputGradientsWithRespectToSAndNullGradientOutputs)
     worst = std::max(worst, double(std::abs(S[p] - Sc[p])));
   }
   EXPECT_LE(worst, 1e-5) << "S without an image output";
-  // dL/dS given, and only the reflectivity gradient asked for (every other output null).
+  // dL/dS given, and only the reflectivity gradient asked for (every other output null): as accurate as
+  // the CPU's against the double reference (bigus::CompareRenders on that group alone).
   const std::vector<float> dS = RandomGradient(pixels, 13);
-  std::vector<float> gr(field.Reflectivities.size(), 0.f), grc(field.Reflectivities.size(), 0.f);
-  FieldGradients only, onlyCpu;
-  only.Reflectivities = gr.data();
-  onlyCpu.Reflectivities = grc.data();
-  ASSERT_TRUE(gpu->Backward(field.View(), &slice, 1, o, S.data(), dS.data(), true, only, nullptr, &error)) << error;
-  ASSERT_TRUE(cpu->Backward(field.View(), &slice, 1, o, Sc.data(), dS.data(), true, onlyCpu, nullptr, &error)) << error;
-  double largest = 0;
-  for (float v : grc)
+  Rendered only, onlyCpu, exact;
+  only.Reflectivities.assign(field.Reflectivities.size(), 0.f);
+  onlyCpu.Reflectivities.assign(field.Reflectivities.size(), 0.f);
+  FieldGradients r, rc;
+  r.Reflectivities = only.Reflectivities.data();
+  rc.Reflectivities = onlyCpu.Reflectivities.data();
+  ASSERT_TRUE(gpu->Backward(field.View(), &slice, 1, o, S.data(), dS.data(), true, r, nullptr, &error)) << error;
+  ASSERT_TRUE(cpu->Backward(field.View(), &slice, 1, o, Sc.data(), dS.data(), true, rc, nullptr, &error)) << error;
+  reference::FieldD d;
+  d.Means.assign(field.Means.begin(), field.Means.end());
+  d.LogScales.assign(field.LogScales.begin(), field.LogScales.end());
+  d.Quaternions.assign(field.Quaternions.begin(), field.Quaternions.end());
+  d.Reflectivities.assign(field.Reflectivities.begin(), field.Reflectivities.end());
+  reference::GradD g(d.Count());
+  const std::vector<double> dSd(dS.begin(), dS.end());
+  ASSERT_TRUE(reference::Backward(d, slice, o, {}, dSd, true, g, true));
+  exact.Reflectivities.assign(g.Reflectivities.begin(), g.Reflectivities.end());
+  ASSERT_TRUE(std::any_of(exact.Reflectivities.begin(), exact.Reflectivities.end(), [](float v) { return v != 0; }));
+  const BackendCheck c = CompareRenders(only, onlyCpu, exact, 1e-5, 1e-4);
+  EXPECT_TRUE(c.Passed) << c.Detail;
+  std::printf("dL/dS given, dL/dr alone: %s\n", c.Detail.c_str());
+}
+
+// Pose refinement: the gradient with respect to each slice's pose correction (FieldGradients::SlicePoses)
+// against the CPU backend's, which TestCpuRenderer checks against central differences of the double
+// reference renderer; two slices in one call (one partly off the field), added (+=) to what the caller
+// holds, the same on a repeat, and the field's gradients unchanged by asking for it.
+TEST(CudaRenderer, PoseGradientsMatchTheCpu)
+{
+  auto gpu = Cuda();
+  ASSERT_TRUE(gpu);
+  auto cpu = CreateCpuRenderer();
+  const std::vector<SliceGeometry> slices = { HardCaseSlice(), HardCaseSlice(1.3) };
+  const std::size_t pixels = 2 * std::size_t(slices[0].Width) * slices[0].Height;
+  const std::vector<float> dL = RandomGradient(pixels, 21);
+  for (double sigmaE : { 0.05, 0.5, 5.0 })
   {
-    largest = std::max(largest, double(std::abs(v)));
-  }
-  ASSERT_GT(largest, 0);
-  for (std::size_t i = 0; i < gr.size(); ++i)
-  {
-    EXPECT_LE(std::abs(gr[i] - grc[i]), 1e-4 * std::max(double(std::abs(grc[i])), 1e-3 * largest)) << "Gaussian " << i;
+    const HostField field = HardCaseField(sigmaE, { 1.0, 10.0, 100.0 });
+    RenderOptions o;
+    o.ElevationSigma = sigmaE;
+    std::string error;
+    std::vector<float> S(pixels), Sc(pixels);
+    ASSERT_TRUE(gpu->Forward(field.View(), slices.data(), 2, o, S.data(), nullptr, nullptr, &error)) << error;
+    ASSERT_TRUE(cpu->Forward(field.View(), slices.data(), 2, o, Sc.data(), nullptr, nullptr, &error)) << error;
+    const std::size_t n = field.Reflectivities.size();
+    std::vector<float> means(3 * n, 0.f), meansWithPoses(3 * n, 0.f);
+    // Start from 1 in every component: the backends add to what the caller holds.
+    double poses[12], again[12], cpuPoses[12];
+    std::fill(poses, poses + 12, 1.0);
+    std::fill(again, again + 12, 1.0);
+    std::fill(cpuPoses, cpuPoses + 12, 1.0);
+    FieldGradients plain, withPoses, repeat, onCpu;
+    plain.Means = means.data();
+    withPoses.Means = meansWithPoses.data();
+    withPoses.SlicePoses = poses;
+    repeat.SlicePoses = again;
+    onCpu.SlicePoses = cpuPoses;
+    ASSERT_TRUE(gpu->Backward(field.View(), slices.data(), 2, o, S.data(), dL.data(), false, plain, nullptr, &error))
+      << error;
+    ASSERT_TRUE(
+      gpu->Backward(field.View(), slices.data(), 2, o, S.data(), dL.data(), false, withPoses, nullptr, &error))
+      << error;
+    ASSERT_TRUE(gpu->Backward(field.View(), slices.data(), 2, o, S.data(), dL.data(), false, repeat, nullptr, &error))
+      << error;
+    ASSERT_TRUE(
+      cpu->Backward(field.View(), slices.data(), 2, o, Sc.data(), dL.data(), false, onCpu, nullptr, &error))
+      << error;
+    EXPECT_EQ(std::memcmp(means.data(), meansWithPoses.data(), sizeof(float) * means.size()), 0)
+      << "sigma_E " << sigmaE << ": the mean gradients change when pose gradients are asked for";
+    EXPECT_EQ(std::memcmp(poses, again, sizeof(poses)), 0) << "sigma_E " << sigmaE << ": a repeat differs";
+    for (int k = 0; k < 2; ++k)
+    {
+      double largest = 0;
+      for (int c = 0; c < 6; ++c)
+      {
+        largest = std::max(largest, std::abs(cpuPoses[6 * k + c] - 1));
+      }
+      ASSERT_GT(largest, 0) << "sigma_E " << sigmaE << ", slice " << k;
+      for (int c = 0; c < 6; ++c)
+      {
+        std::printf("sigma_E %g, slice %d, xi[%d]: CUDA %.9g, CPU %.9g\n", sigmaE, k, c, poses[6 * k + c] - 1,
+          cpuPoses[6 * k + c] - 1);
+        EXPECT_NEAR(poses[6 * k + c], cpuPoses[6 * k + c], 1e-4 * largest)
+          << "sigma_E " << sigmaE << ", slice " << k << ", component " << c;
+      }
+    }
   }
 }
 
@@ -389,21 +476,24 @@ TEST(CudaRenderer, AnEmptyFieldAndASliceThatCullsEverything)
 
 TEST(CudaRenderer, AWholeTrainingStepThroughTheCudaEngine)
 {
-  // One step through CreateTrainingEngine("cuda") against the same step through the CPU engine: the
-  // loss and every updated parameter agree to float rounding of the renders (Adam's first step moves each
-  // parameter by about its learning rate whatever the gradient's size, so parameters are compared by
-  // the sign of their move).
+  // One step through CreateTrainingEngine("cuda") against the same step through the CPU engine, with each
+  // training frame's pose refined from the first step: the loss and every updated parameter and pose
+  // correction agree to float rounding of the renders (Adam's first step moves each parameter by about
+  // its learning rate whatever the gradient's size, so parameters are compared by the sign of their move).
   TrainingData data = LiverData();
   data.TrainFrames = { 0, 4, 8 };
   TrainerSettings settings;
   settings.InitialGaussians = 3000;
   settings.Iterations = 1;
   settings.ElevationSigma = 0.3;
+  settings.RefinePoses = true;
+  settings.PoseRefinementStart = 0;
   std::string error;
   std::unique_ptr<TrainingEngine> engines[2] = { CreateTrainingEngine("cuda", &error), CreateTrainingEngine("cpu", &error) };
   ASSERT_TRUE(engines[0] && engines[1]) << error;
   EXPECT_STREQ(engines[0]->GetName(), "cuda");
   OptimizerState after[2];
+  std::vector<double> corrections[2];
   double loss[2] = { 0, 0 };
   for (int e = 0; e < 2; ++e)
   {
@@ -413,6 +503,10 @@ TEST(CudaRenderer, AWholeTrainingStepThroughTheCudaEngine)
     ASSERT_EQ(trainer.Step(&loss[e], &error), StepStatus::Done) << error;
     after[e] = trainer.GetState().Gaussians;
     ASSERT_EQ(after[e].Field.Count(), before.Field.Count());
+    for (const auto& c : trainer.GetState().PoseCorrections)
+    {
+      corrections[e].insert(corrections[e].end(), c.begin(), c.end());
+    }
   }
   EXPECT_NEAR(loss[0], loss[1], 1e-4 * std::abs(loss[1])) << "the batch loss";
   const std::vector<float>* params[2][2] = { { &after[0].Field.Reflectivities, &after[1].Field.Reflectivities },
@@ -426,6 +520,14 @@ TEST(CudaRenderer, AWholeTrainingStepThroughTheCudaEngine)
       differ += std::abs((*pair[0])[k] - (*pair[1])[k]) > 1e-3f;
     }
     EXPECT_LE(differ, pair[0]->size() / 1000) << "parameters that moved differently";
+  }
+  // The frames of the step's batch moved (the others keep 0), by the same Adam step on both engines.
+  ASSERT_EQ(corrections[0].size(), corrections[1].size());
+  const auto moved = std::count_if(corrections[1].begin(), corrections[1].end(), [](double v) { return v != 0; });
+  EXPECT_GE(moved, 6) << "the step refined no pose";
+  for (std::size_t k = 0; k < corrections[0].size(); ++k)
+  {
+    EXPECT_NEAR(corrections[0][k], corrections[1][k], 1e-3 * std::abs(corrections[1][k])) << "component " << k;
   }
 }
 

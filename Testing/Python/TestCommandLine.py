@@ -35,6 +35,31 @@ def masked_psnr(rendered, truth, mask):
     return min(100.0, 10 * math.log10(1.0 / mse)) if mse > 0 else 100.0
 
 
+def check_png_matches_the_image(field, out):
+    """A plane rendered to .png (8 bits, written by VTK's PNG writer) holds the same picture as the same
+    plane rendered to .mha (float intensities): round(255 I), row 0 of the image at the top of the PNG."""
+    fields = vtk.vtkXMLPolyDataReader()
+    fields.SetFileName(field)
+    fields.Update()
+    b = fields.GetOutput().GetBounds()
+    centre = ["%.6f" % (0.5 * (b[2 * k] + b[2 * k + 1])) for k in range(3)]
+    images = {}
+    for ext in ("png", "mha"):
+        path = os.path.join(out, "plane_centre." + ext)
+        code, _, err = run("render", field, "--plane", *centre, "0.3", "0.2", "1", "--size", "64", "48", "-o", path)
+        assert code == 0, err
+        reader = vtk.vtkPNGReader() if ext == "png" else vtk.vtkMetaImageReader()
+        reader.SetFileName(path)
+        reader.Update()
+        w, h, _ = reader.GetOutput().GetDimensions()
+        assert (w, h) == (64, 48), (ext, w, h)
+        images[ext] = vtk_to_numpy(reader.GetOutput().GetPointData().GetScalars()).reshape(h, w).astype(np.float64)
+    expected = np.clip(np.rint(255 * images["mha"]), 0, 255)
+    assert expected.max() > 20, "the plane through the field's centre shows it"
+    # vtkPNGReader puts the PNG's top row at the last VTK row.
+    assert np.abs(images["png"][::-1] - expected).max() <= 1, np.abs(images["png"][::-1] - expected).max()
+
+
 def check_evaluate_leaves_out_empty_masks(field, sweep, xml, out):
     """`bigus evaluate` with a per-frame mask whose frame 6 is empty: frame 6 is reported as left out and
     the mean PSNR is that of the other frames, computed here from the field's float renders (the sequence
@@ -431,6 +456,7 @@ def main():
 
     code, _, err = run("render", field, "--plane", "0", "0", "0", "0", "0", "0", "-o", os.path.join(out, "p.png"))
     assert code == 1 and "normal" in err, err
+    check_png_matches_the_image(field, out)
 
     # The backend is chosen in one place (the registry): every command takes --backend, says which it
     # used, refuses an unknown one by name, and writes nothing then.
