@@ -1417,6 +1417,77 @@ TEST(Trainer, ResidualSeedsLieWhereTheResidualIsAndCarryIt)
   EXPECT_NEAR(positive, 750, 70);
 }
 
+// Through the trainer (ResidualSeedShare > 0): a densification adds, after what it splits and clones, new
+// Gaussians on training frames' planes carrying the residual as their reflectivity, where the same run
+// without adds none; the run goes on from them.
+TEST(Trainer, ADensificationAddsResidualSeedsOnTrainingFrames)
+{
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(200, 7), 0.5, heldOut);
+  TrainerSettings s = ShortSettings();
+  s.Iterations = 100; // the one densification (DensifyStart 100) ends the first call of Train
+  std::int64_t counts[2] = { 0, 0 };
+  GaussianField fields[2];
+  std::string error;
+  for (int k = 0; k < 2; ++k)
+  {
+    TrainerSettings v = s;
+    v.ResidualSeedShare = k == 0 ? 0.0 : 0.5;
+    v.ResidualSeedFrames = 2;
+    Trainer trainer(data, v);
+    ASSERT_TRUE(trainer.Initialize(&error)) << error;
+    ASSERT_TRUE(trainer.Train(nullptr, nullptr, &error)) << error;
+    ASSERT_EQ(trainer.GetIteration(), 100);
+    fields[k] = trainer.GetField();
+    counts[k] = fields[k].Count();
+    if (k == 1)
+    {
+      // It trains on from the seeds.
+      for (int step = 0; step < 50; ++step)
+      {
+        double loss = 0;
+        ASSERT_EQ(trainer.Step(&loss, &error), StepStatus::Done) << error;
+        EXPECT_TRUE(std::isfinite(loss));
+      }
+      EXPECT_TRUE(AllFinite(trainer.GetField()));
+    }
+  }
+  const std::int64_t seeds = counts[1] - counts[0];
+  std::printf("after the densification: %lld Gaussians without residual seeds, %lld with\n",
+    static_cast<long long>(counts[0]), static_cast<long long>(counts[1]));
+  ASSERT_GT(seeds, 0) << "the densification added no residual seed";
+  EXPECT_LT(seeds, counts[0]) << "half of those split or cloned, at most";
+  // The seeds are the last Gaussians: each lies on the plane of a training frame, inside its image, with a
+  // non-zero reflectivity.
+  const GaussianField& f = fields[1];
+  for (std::int64_t i = counts[0]; i < counts[1]; ++i)
+  {
+    bool onAFrame = false;
+    for (int t : data.TrainFrames)
+    {
+      const std::array<double, 16>& m = data.Poses[t];
+      // Solve mean = m (pi, pj, 0, 1) for the pixel position in the frame's plane and its distance from it.
+      double u[3], v[3], d[3];
+      for (int r = 0; r < 3; ++r)
+      {
+        u[r] = m[4 * r];
+        v[r] = m[4 * r + 1];
+        d[r] = f.Means[3 * i + r] - m[4 * r + 3];
+      }
+      const double n[3] = { u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0] };
+      const double nn = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+      const double off = std::abs(n[0] * d[0] + n[1] * d[1] + n[2] * d[2]) / nn;
+      const double uu = u[0] * u[0] + u[1] * u[1] + u[2] * u[2], vv = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+      const double pi = (u[0] * d[0] + u[1] * d[1] + u[2] * d[2]) / uu;
+      const double pj = (v[0] * d[0] + v[1] * d[1] + v[2] * d[2]) / vv;
+      onAFrame = onAFrame ||
+        (off < 1e-3 && pi > -0.5 && pi < data.Width - 0.5 && pj > -0.5 && pj < data.Height - 0.5);
+    }
+    EXPECT_TRUE(onAFrame) << "seed " << i << " lies on no training frame";
+    EXPECT_NE(f.Reflectivities[i], 0.f) << "seed " << i;
+  }
+}
+
 TEST(Trainer, ADenseStartKeepsToItsCountAndSolvesTheReflectivities)
 {
   std::vector<int> heldOut;
