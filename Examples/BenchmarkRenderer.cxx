@@ -217,16 +217,6 @@ const Field& GetField(std::int64_t n)
   return *slot;
 }
 
-bigus::reference::FieldD ToDouble(const Field& f)
-{
-  bigus::reference::FieldD d;
-  d.Means.assign(f.Means.begin(), f.Means.end());
-  d.LogScales.assign(f.LogScales.begin(), f.LogScales.end());
-  d.Quaternions.assign(f.Quaternions.begin(), f.Quaternions.end());
-  d.Reflectivities.assign(f.Reflectivities.begin(), f.Reflectivities.end());
-  return d;
-}
-
 bigus::RenderOptions Options(double cutoff)
 {
   bigus::RenderOptions o; // sigma_E = 0.5 mm, gamma = 1
@@ -677,7 +667,7 @@ void PrintSummary()
   {
     std::printf("\nTiming the naive double renderer (bigus::reference::Forward) at 10k Gaussians, 256 x 256 ...\n");
     std::fflush(stdout);
-    const bigus::reference::FieldD field = ToDouble(GetField(10000));
+    const bigus::reference::FieldD field = bigus::reference::FromView(GetField(10000).View());
     std::vector<double> S, I;
     naive256 = TimeNaive(field, MakeSlice(256, 256), 4.0, S, I);
     std::printf("  naive: %.1f ms (%s Gaussian-pixel evaluations/s, one thread, double)\n", 1e3 * naive256,
@@ -759,7 +749,7 @@ void PrintSummary()
     std::printf("\nCutoff sweep: forward at 100k / 512; error at 10k / 128 against the naive double renderer\n");
     std::fflush(stdout);
     const Field& small = GetField(10000);
-    const bigus::reference::FieldD fieldD = ToDouble(small);
+    const bigus::reference::FieldD fieldD = bigus::reference::FromView(small.View());
     const bigus::SliceGeometry slice128 = MakeSlice(128, 128);
     std::vector<double> naiveS, naiveI;
     const double naive128 = TimeNaive(fieldD, slice128, 4.0, naiveS, naiveI);

@@ -186,11 +186,18 @@ BackendCheck CheckRenderer(Renderer& renderer)
 
 namespace
 {
-/// Largest error of @p mine's gradients against @p exact's over the Gaussians and groups, each relative
-/// to the Gaussian's own exact gradient in that group (floor: 1e-3 of the group's largest); NaN counts as
-/// infinite. @p group and @p gaussian receive where it is; @p finite is cleared by a non-finite value.
-double WorstGradientError(
-  const RenderedGradients& mine, const RenderedGradients& exact, const char*& group, std::size_t& gaussian, bool& finite)
+/// The largest error of a renderer's gradients against the reference's, and where it is.
+struct GradientError
+{
+  double Worst = 0;        ///< relative to the Gaussian's own exact gradient in its group (NaN counts as infinite)
+  const char* Group = "";  ///< "dL/dmean", ...
+  std::size_t Gaussian = 0;
+  bool Finite = true;      ///< every gradient of the renderer finite
+};
+
+/// @p mine's gradients against @p exact's over the Gaussians and groups, each relative to the Gaussian's
+/// own exact gradient in that group (floor: 1e-3 of the group's largest).
+GradientError WorstGradientError(const RenderedGradients& mine, const RenderedGradients& exact)
 {
   const struct
   {
@@ -202,9 +209,7 @@ double WorstGradientError(
     { "dL/dq", mine.Quaternions, exact.Quaternions, 4 },
     { "dL/dr", mine.Reflectivities, exact.Reflectivities, 1 },
     { "attribution", mine.Attribution, exact.Attribution, 1 } };
-  double worst = 0;
-  group = "";
-  gaussian = 0;
+  GradientError e;
   for (const auto& g : groups)
   {
     double largest = 0;
@@ -218,34 +223,29 @@ double WorstGradientError(
       for (int c = 0; c < g.Width; ++c)
       {
         const std::size_t k = i * g.Width + c;
-        finite = finite && std::isfinite(g.Mine[k]);
+        e.Finite = e.Finite && std::isfinite(g.Mine[k]);
         own = std::max(own, double(std::abs(g.Exact[k])));
         difference = std::max(difference, std::abs(double(g.Mine[k]) - g.Exact[k]));
       }
       const double scale = std::max(own, 1e-3 * largest);
       const double relative = scale > 0 ? difference / scale : (difference > 0 ? HUGE_VAL : 0.0);
-      if (!(relative <= worst))
+      if (!(relative <= e.Worst))
       {
-        worst = std::isnan(relative) ? HUGE_VAL : relative;
-        group = g.Name;
-        gaussian = i;
+        e.Worst = std::isnan(relative) ? HUGE_VAL : relative;
+        e.Group = g.Name;
+        e.Gaussian = i;
       }
     }
   }
-  return worst;
+  return e;
 }
 }
 
 bool RenderReference(const FieldView& field, const SliceGeometry* slices, int count, const RenderOptions& o,
   const std::vector<float>& dL, RenderedGradients& out, std::string* error)
 {
-  reference::FieldD d;
-  const std::int64_t n = field.Count;
-  d.Means.assign(field.Means, field.Means + 3 * n);
-  d.LogScales.assign(field.LogScales, field.LogScales + 3 * n);
-  d.Quaternions.assign(field.Quaternions, field.Quaternions + 4 * n);
-  d.Reflectivities.assign(field.Reflectivities, field.Reflectivities + n);
-  reference::GradD grad(n);
+  const reference::FieldD d = reference::FromView(field);
+  reference::GradD grad(field.Count);
   out.S.clear();
   out.I.clear();
   std::size_t offset = 0;
@@ -286,12 +286,10 @@ BackendCheck CompareRenders(const RenderedGradients& mine, const RenderedGradien
     finite = finite && std::isfinite(mine.S[p]) && std::isfinite(mine.I[p]);
     check.ImageDifference = std::max(check.ImageDifference, double(std::abs(mine.I[p] - cpu.I[p])));
   }
-  const char* worstGroup = "";
-  const char* cpuGroup = "";
-  std::size_t worstGaussian = 0, cpuGaussian = 0;
-  bool cpuFinite = true;
-  check.GradientDifference = WorstGradientError(mine, exact, worstGroup, worstGaussian, finite);
-  check.CpuGradientError = WorstGradientError(cpu, exact, cpuGroup, cpuGaussian, cpuFinite);
+  const GradientError error = WorstGradientError(mine, exact);
+  finite = finite && error.Finite;
+  check.GradientDifference = error.Worst;
+  check.CpuGradientError = WorstGradientError(cpu, exact).Worst;
   const double bound = std::max(gradientTolerance, GradientErrorRatio * check.CpuGradientError);
   long long visible = 0, visibleCpu = 0;
   for (std::size_t i = 0; i < cpu.Visible.size(); ++i)
@@ -305,8 +303,8 @@ BackendCheck CompareRenders(const RenderedGradients& mine, const RenderedGradien
   std::snprintf(text, sizeof(text),
     "max |delta I| %.3g (bound %.0e), max gradient error %.3g of the Gaussian's own against the double reference "
     "(the CPU's %.3g; bound %.3g; worst: %s of Gaussian %zu), visible %lld (CPU %lld)%s",
-    check.ImageDifference, imageTolerance, check.GradientDifference, check.CpuGradientError, bound, worstGroup,
-    worstGaussian, visible, visibleCpu, finite ? "" : ", non-finite values");
+    check.ImageDifference, imageTolerance, check.GradientDifference, check.CpuGradientError, bound, error.Group,
+    error.Gaussian, visible, visibleCpu, finite ? "" : ", non-finite values");
   check.Detail = text;
   return check;
 }

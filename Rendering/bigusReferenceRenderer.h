@@ -33,6 +33,17 @@ struct FieldD
   }
 };
 
+/// The double copy of a float field (FieldView), to render it with the reference.
+inline FieldD FromView(const FieldView& v)
+{
+  FieldD d;
+  d.Means.assign(v.Means, v.Means + 3 * v.Count);
+  d.LogScales.assign(v.LogScales, v.LogScales + 3 * v.Count);
+  d.Quaternions.assign(v.Quaternions, v.Quaternions + 4 * v.Count);
+  d.Reflectivities.assign(v.Reflectivities, v.Reflectivities + v.Count);
+  return d;
+}
+
 /// Gradients in double, same layout.
 struct GradD
 {

@@ -31,11 +31,7 @@ CropReference RenderReference(const GaussianField& field, const RenderOptions& o
   }
   ref.Slice.Width = crop;
   ref.Slice.Height = crop;
-  reference::FieldD d;
-  d.Means.assign(field.Means.begin(), field.Means.end());
-  d.LogScales.assign(field.LogScales.begin(), field.LogScales.end());
-  d.Quaternions.assign(field.Quaternions.begin(), field.Quaternions.end());
-  d.Reflectivities.assign(field.Reflectivities.begin(), field.Reflectivities.end());
+  const reference::FieldD d = reference::FromView(field.View());
   std::vector<double> S;
   reference::Forward(d, ref.Slice, o, S, &ref.I);
   return ref;

@@ -363,11 +363,7 @@ TEST(CudaRenderer, NoImageOutputGradientsWithRespectToSAndNullGradientOutputs)
   rc.Reflectivities = onlyCpu.Reflectivities.data();
   ASSERT_TRUE(gpu->Backward(field.View(), &slice, 1, o, S.data(), dS.data(), true, r, nullptr, &error)) << error;
   ASSERT_TRUE(cpu->Backward(field.View(), &slice, 1, o, Sc.data(), dS.data(), true, rc, nullptr, &error)) << error;
-  reference::FieldD d;
-  d.Means.assign(field.Means.begin(), field.Means.end());
-  d.LogScales.assign(field.LogScales.begin(), field.LogScales.end());
-  d.Quaternions.assign(field.Quaternions.begin(), field.Quaternions.end());
-  d.Reflectivities.assign(field.Reflectivities.begin(), field.Reflectivities.end());
+  const reference::FieldD d = reference::FromView(field.View());
   reference::GradD g(d.Count());
   const std::vector<double> dSd(dS.begin(), dS.end());
   ASSERT_TRUE(reference::Backward(d, slice, o, {}, dSd, true, g, true));

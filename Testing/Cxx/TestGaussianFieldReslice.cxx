@@ -87,10 +87,7 @@ vtkSmartPointer<vtkPolyData> RandomField(int n, unsigned seed, reference::FieldD
   FieldToPolyData(f, model, data);
   // What the filter reads back (scales through exp/log, quaternions normalised) is the exact field.
   FieldFromPolyData(data, f, model, nullptr);
-  exact.Means.assign(f.Means.begin(), f.Means.end());
-  exact.LogScales.assign(f.LogScales.begin(), f.LogScales.end());
-  exact.Quaternions.assign(f.Quaternions.begin(), f.Quaternions.end());
-  exact.Reflectivities.assign(f.Reflectivities.begin(), f.Reflectivities.end());
+  exact = reference::FromView(f.View());
   return data;
 }
 
