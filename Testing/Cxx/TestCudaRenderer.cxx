@@ -18,9 +18,11 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 #include <random>
 #include <string>
 #include <vector>
@@ -525,6 +527,281 @@ TEST(CudaRenderer, AWholeTrainingStepThroughTheCudaEngine)
   {
     EXPECT_NEAR(corrections[0][k], corrections[1][k], 1e-3 * std::abs(corrections[1][k])) << "component " << k;
   }
+}
+
+namespace
+{
+/// A liver training state (3,000 Harris seeds) with Adam moments and EA-D accumulators made non-zero, so that a
+/// round trip through a device copies every array; and the training request of one step on frames 0 and 8.
+struct EngineCase
+{
+  TrainingData Data = LiverData();
+  OptimizerState State;
+  StepRequest Request;
+  std::vector<int> Frames = { 0, 8 };
+  double Gamma = 1;
+
+  EngineCase()
+  {
+    TrainerSettings settings;
+    settings.InitialGaussians = 3000;
+    settings.ElevationSigma = 0.3;
+    Trainer trainer(this->Data, settings);
+    std::string error;
+    EXPECT_TRUE(trainer.Initialize(&error)) << error;
+    this->State = trainer.GetState().Gaussians;
+    this->Gamma = trainer.GetGamma();
+    EXPECT_GT(this->Gamma, 0);
+    this->State.ResizeToField();
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<float> u(0.f, 1e-3f);
+    for (GaussianField* f : { &this->State.FirstMoment, &this->State.SecondMoment })
+    {
+      for (std::vector<float>* a : { &f->Means, &f->LogScales, &f->Quaternions, &f->Reflectivities })
+      {
+        for (float& v : *a)
+        {
+          v = u(rng);
+        }
+      }
+    }
+    for (std::int64_t i = 0; i < this->State.Count(); ++i)
+    {
+      this->State.Attribution[i] = u(rng);
+      this->State.SeenCount[i] = static_cast<int>(i % 7);
+    }
+    this->Request.Frames = this->Frames.data();
+    this->Request.Count = static_cast<int>(this->Frames.size());
+    this->Request.MeanRate = 1e-3;
+    this->Request.LogScaleRate = 5e-3;
+    this->Request.QuaternionRate = 1e-3;
+    this->Request.ReflectivityRate = 1e-2;
+    this->Request.MinimumLogScale = std::log(0.01);
+    this->Request.MaximumLogScale = std::log(50.0);
+    this->Request.Options.ElevationSigma = 0.3;
+    this->Request.Options.Gamma = this->Gamma;
+  }
+
+  std::unique_ptr<TrainingEngine> Engine(const char* backend)
+  {
+    std::string error;
+    std::unique_ptr<TrainingEngine> engine = CreateTrainingEngine(backend, &error);
+    EXPECT_TRUE(engine) << error;
+    if (engine)
+    {
+      EXPECT_TRUE(engine->SetData(&this->Data, &error)) << error;
+      EXPECT_TRUE(engine->Push(this->State, &error)) << error;
+    }
+    return engine;
+  }
+};
+
+void ExpectSameField(const GaussianField& a, const GaussianField& b, const std::string& what)
+{
+  EXPECT_EQ(a.Means, b.Means) << what;
+  EXPECT_EQ(a.LogScales, b.LogScales) << what;
+  EXPECT_EQ(a.Quaternions, b.Quaternions) << what;
+  EXPECT_EQ(a.Reflectivities, b.Reflectivities) << what;
+}
+
+/// ||a - b|| / ||b||.
+double RelativeDifference(const std::vector<double>& a, const std::vector<double>& b)
+{
+  double d = 0, n = 0;
+  for (std::size_t k = 0; k < a.size(); ++k)
+  {
+    d += (a[k] - b[k]) * (a[k] - b[k]);
+    n += b[k] * b[k];
+  }
+  return std::sqrt(d / std::max(n, 1e-300));
+}
+}
+
+TEST(CudaTrainingEngine, IsTheCudaBackendsEngineAndKeepsTheStateOnTheDevice)
+{
+  // CreateTrainingEngine("cuda") is the device-resident engine (registered by the backend); Push then Pull
+  // returns every array bit for bit; Restore returns the field and moments of the last Push or Snapshot and keeps
+  // the accumulators of the steps since.
+  EngineCase c;
+  std::unique_ptr<TrainingEngine> engine = c.Engine("cuda");
+  ASSERT_TRUE(engine);
+  EXPECT_STREQ(engine->GetName(), "cuda");
+  std::string error;
+  OptimizerState back;
+  ASSERT_TRUE(engine->Pull(back, &error)) << error;
+  ExpectSameField(back.Field, c.State.Field, "field");
+  ExpectSameField(back.FirstMoment, c.State.FirstMoment, "Adam m");
+  ExpectSameField(back.SecondMoment, c.State.SecondMoment, "Adam v");
+  EXPECT_EQ(back.Attribution, c.State.Attribution);
+  EXPECT_EQ(back.SeenCount, c.State.SeenCount);
+  GaussianField field;
+  ASSERT_TRUE(engine->PullField(field, &error)) << error;
+  ExpectSameField(field, c.State.Field, "PullField");
+  double loss = 0;
+  ASSERT_EQ(engine->Step(c.Request, &loss, &error), StepStatus::Done) << error;
+  OptimizerState stepped;
+  ASSERT_TRUE(engine->Pull(stepped, &error)) << error;
+  EXPECT_NE(stepped.Field.Means, c.State.Field.Means) << "the step moved nothing";
+  engine->Restore();
+  OptimizerState restored;
+  ASSERT_TRUE(engine->Pull(restored, &error)) << error;
+  ExpectSameField(restored.Field, c.State.Field, "restored field");
+  ExpectSameField(restored.SecondMoment, c.State.SecondMoment, "restored Adam v");
+  EXPECT_EQ(restored.Attribution, stepped.Attribution) << "Restore keeps the accumulators";
+  EXPECT_EQ(restored.SeenCount, stepped.SeenCount);
+  EXPECT_NE(restored.SeenCount, c.State.SeenCount) << "the step counted no visible Gaussian";
+  // Snapshot after a step: Restore comes back to it.
+  ASSERT_EQ(engine->Step(c.Request, &loss, &error), StepStatus::Done) << error;
+  engine->Snapshot();
+  OptimizerState snapped;
+  ASSERT_TRUE(engine->Pull(snapped, &error)) << error;
+  ASSERT_EQ(engine->Step(c.Request, &loss, &error), StepStatus::Done) << error;
+  engine->Restore();
+  ASSERT_TRUE(engine->Pull(restored, &error)) << error;
+  ExpectSameField(restored.Field, snapped.Field, "field restored to the snapshot");
+  ExpectSameField(restored.FirstMoment, snapped.FirstMoment, "Adam m restored to the snapshot");
+}
+
+TEST(CudaTrainingEngine, StepsMatchTheCpuEngineAndRepeatBitForBit)
+{
+  // Five steps on frames 0 and 8 with pose gradients, and sparse Adam on the last two: the losses follow the CPU
+  // engine's to float rounding of the renders, the pose gradients agree, and the same steps again on the device
+  // give the same bits.
+  EngineCase c;
+  for (GaussianField* f : { &c.State.FirstMoment, &c.State.SecondMoment })
+  {
+    for (std::vector<float>* a : { &f->Means, &f->LogScales, &f->Quaternions, &f->Reflectivities })
+    {
+      std::fill(a->begin(), a->end(), 0.f); // a trainer's first step
+    }
+  }
+  std::vector<double> losses[3], poses[3];
+  OptimizerState after[3];
+  const char* backends[3] = { "cuda", "cpu", "cuda" };
+  for (int e = 0; e < 3; ++e)
+  {
+    std::unique_ptr<TrainingEngine> engine = c.Engine(backends[e]);
+    ASSERT_TRUE(engine);
+    std::string error;
+    for (int step = 0; step < 5; ++step)
+    {
+      StepRequest request = c.Request;
+      request.Iteration = step;
+      request.SparseAdam = step >= 3;
+      std::vector<double> pose(6 * request.Count, -1.0);
+      request.PoseGradients = pose.data();
+      double loss = 0;
+      ASSERT_EQ(engine->Step(request, &loss, &error), StepStatus::Done) << backends[e] << ": " << error;
+      losses[e].push_back(loss);
+      poses[e].insert(poses[e].end(), pose.begin(), pose.end());
+    }
+    ASSERT_TRUE(engine->Pull(after[e], &error)) << error;
+  }
+  // Step 0 renders the same field on both; later steps the fields the engines' own Adam steps made, where a
+  // gradient near 0 may change sign between float renderers and Adam moves it by its learning rate either way.
+  for (int step = 0; step < 5; ++step)
+  {
+    EXPECT_NEAR(losses[0][step], losses[1][step], (step == 0 ? 1e-4 : 2e-3) * losses[1][step]) << "step " << step;
+    std::printf("step %d: loss cuda %.9f, cpu %.9f\n", step, losses[0][step], losses[1][step]);
+  }
+  const std::size_t first = 6 * c.Frames.size();
+  EXPECT_GT(std::count_if(poses[1].begin(), poses[1].end(), [](double v) { return v != 0; }), 6 * 5)
+    << "pose gradients are zero";
+  EXPECT_LT(losses[1][4], losses[1][0]) << "five steps did not lower the loss";
+  EXPECT_LT(RelativeDifference(std::vector<double>(poses[0].begin(), poses[0].begin() + first),
+              std::vector<double>(poses[1].begin(), poses[1].begin() + first)),
+    1e-4)
+    << "pose gradients of step 0";
+  EXPECT_LT(RelativeDifference(poses[0], poses[1]), 1e-2) << "pose gradients of the five steps";
+  EXPECT_EQ(losses[0], losses[2]);
+  EXPECT_EQ(poses[0], poses[2]);
+  ExpectSameField(after[0].Field, after[2].Field, "a repeated run");
+  EXPECT_EQ(after[0].Attribution, after[2].Attribution);
+  std::size_t counted = 0;
+  for (std::size_t i = 0; i < after[0].SeenCount.size(); ++i)
+  {
+    counted += after[0].SeenCount[i] != after[1].SeenCount[i];
+  }
+  EXPECT_LE(counted, after[0].SeenCount.size() / 1000) << "visible counts unlike the CPU engine's";
+  std::vector<double> r[2];
+  for (int e = 0; e < 2; ++e)
+  {
+    r[e].assign(after[e].Field.Reflectivities.begin(), after[e].Field.Reflectivities.end());
+  }
+  EXPECT_LT(RelativeDifference(r[0], r[1]), 1e-2) << "reflectivities after five steps";
+}
+
+TEST(CudaTrainingEngine, ANonFiniteStepAndARefusedPoseAreReported)
+{
+  EngineCase c;
+  std::unique_ptr<TrainingEngine> engine = c.Engine("cuda");
+  ASSERT_TRUE(engine);
+  std::string error;
+  StepRequest request = c.Request;
+  request.MeanRate = std::numeric_limits<double>::quiet_NaN();
+  double loss = 0;
+  EXPECT_EQ(engine->Step(request, &loss, &error), StepStatus::NonFinite);
+  engine->Restore();
+  GaussianField field;
+  ASSERT_TRUE(engine->PullField(field, &error)) << error;
+  ExpectSameField(field, c.State.Field, "after Restore");
+  // A frame whose pose the renderer refuses: Failed, and the error names the training frame.
+  std::array<double, 16>& pose = c.Data.Poses[8];
+  std::fill(pose.begin(), pose.end(), 0.0);
+  error.clear();
+  EXPECT_EQ(engine->Step(c.Request, &loss, &error), StepStatus::Failed);
+  EXPECT_NE(error.find("training frame 8"), std::string::npos) << error;
+}
+
+TEST(CudaTrainingEngine, TheSolveOperatorsMatchTheCpuEngineAndAreAdjoint)
+{
+  // A r, A^T y and diag(A^T W A) on frames 2 and 70 (bigusReflectivitySolve.h): against the CPU engine's, and
+  // <A x, y> = <x, A^T y> on the device alone.
+  EngineCase c;
+  std::unique_ptr<TrainingEngine> engines[2] = { c.Engine("cuda"), c.Engine("cpu") };
+  ASSERT_TRUE(engines[0] && engines[1]);
+  const int frames[2] = { 2, 70 };
+  const std::size_t pixels = std::size_t(c.Data.Width) * c.Data.Height;
+  const std::int64_t n = c.State.Count();
+  std::mt19937 rng(11);
+  std::normal_distribution<float> normal(0.f, 1.f);
+  std::vector<float> x(n), y(2 * pixels), weights(2 * pixels);
+  for (float& v : x)
+  {
+    v = normal(rng);
+  }
+  for (std::size_t p = 0; p < y.size(); ++p)
+  {
+    y[p] = normal(rng);
+    weights[p] = std::abs(normal(rng));
+  }
+  std::vector<float> Ax[2];
+  std::vector<double> Aty[2], norms[2];
+  std::string error;
+  for (int e = 0; e < 2; ++e)
+  {
+    Ax[e].assign(2 * pixels, 0.f);
+    Aty[e].assign(n, 0.5); // += semantics
+    norms[e].assign(n, 0.0);
+    ASSERT_TRUE(engines[e]->ApplyBasis(x.data(), frames, 2, c.Request.Options, Ax[e].data(), &error)) << error;
+    ASSERT_TRUE(engines[e]->ApplyBasisTranspose(y.data(), frames, 2, c.Request.Options, Aty[e].data(), &error))
+      << error;
+    ASSERT_TRUE(engines[e]->BasisNorms(weights.data(), frames, 2, c.Request.Options, norms[e].data(), &error)) << error;
+  }
+  const std::vector<double> ax0(Ax[0].begin(), Ax[0].end()), ax1(Ax[1].begin(), Ax[1].end());
+  EXPECT_LT(RelativeDifference(ax0, ax1), 1e-5) << "A x";
+  EXPECT_LT(RelativeDifference(Aty[0], Aty[1]), 1e-4) << "A^T y";
+  EXPECT_LT(RelativeDifference(norms[0], norms[1]), 1e-12) << "the basis norms (the same host code)";
+  double left = 0, right = 0;
+  for (std::size_t p = 0; p < y.size(); ++p)
+  {
+    left += double(Ax[0][p]) * y[p];
+  }
+  for (std::int64_t i = 0; i < n; ++i)
+  {
+    right += double(x[i]) * (Aty[0][i] - 0.5);
+  }
+  EXPECT_NEAR(left, right, 1e-5 * std::abs(right)) << "<A x, y> against <x, A^T y>";
 }
 
 int main(int argc, char** argv)

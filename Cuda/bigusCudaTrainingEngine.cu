@@ -1,0 +1,716 @@
+// The device-resident training engine of the "cuda" backend (see bigusCudaTrainingEngine.h).
+#include "bigusCudaTrainingEngine.h"
+
+#include "bigusBasisNorms.h"
+#include "bigusCudaDevice.h"
+#include "bigusCudaDeviceRenderer.h"
+#include "bigusCudaRenderer.h"
+#include "bigusImageLoss.h"
+#include "bigusRasterGeometry.h"
+
+#include <cuda_runtime.h>
+
+#include <algorithm>
+#include <cmath>
+#include <utility>
+#include <vector>
+
+namespace bigus
+{
+namespace cuda
+{
+
+namespace
+{
+constexpr int Parameters = 11;                  // floats per Gaussian: mean 3, log-scale 3, quaternion 4, r 1
+/// Parameter group q (means, log-scales, quaternions, reflectivities): its first entry in units of N, and its
+/// floats per Gaussian (the field's layout, as GaussianField's arrays one after the other).
+__host__ __device__ inline int GroupFirst(int q)
+{
+  return q == 0 ? 0 : q == 1 ? 3 : q == 2 ? 6 : 10;
+}
+__host__ __device__ inline int GroupWidth(int q)
+{
+  return q == 2 ? 4 : q == 3 ? 1 : 3;
+}
+constexpr std::int64_t StateBytes = 6 * Parameters * sizeof(float); // field, m, v and their known-good copies
+constexpr std::int64_t StepBytes = Parameters * sizeof(float) + sizeof(float) + sizeof(int); // gradients, E, seen
+constexpr std::int64_t ImageBytes = 3 * sizeof(float); // per pixel: S, I (then dL/dI), dL/dS
+constexpr std::int64_t SolveBytes = 2 * sizeof(float) + sizeof(double); // r or dL/dr of one frame, their sum
+
+/// One Adam step's constants (StepRequest).
+struct AdamStep
+{
+  double C1, C2;  // bias corrections 1 - beta^t
+  double Rate[4]; // learning rate of each group: means, log-scales, quaternions, reflectivities
+  float MinimumLogScale, MaximumLogScale;
+  bool Sparse;
+};
+
+/// Entry c of group q of Gaussian i in an array laid out as the field.
+__device__ __forceinline__ std::int64_t Entry(std::int64_t n, std::int64_t i, int q, int c)
+{
+  return GroupFirst(q) * n + GroupWidth(q) * i + c;
+}
+
+/**
+ * Adam on Gaussian i (one thread each), as CpuTrainingEngine::Adam: the moments in double, stored as float,
+ * the parameters kept in range (unit quaternion, clamped log-scales); @p finite becomes 0 when a gradient or an
+ * updated parameter is not finite.
+ */
+__global__ void AdamKernel(float* field, float* m, float* v, const float* g, std::int64_t n, AdamStep a, int* finite)
+{
+  const std::int64_t i = std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= n)
+  {
+    return;
+  }
+  if (a.Sparse)
+  {
+    bool touched = false;
+    for (int q = 0; q < 4; ++q)
+    {
+      for (int c = 0; c < GroupWidth(q); ++c)
+      {
+        touched = touched || g[Entry(n, i, q, c)] != 0.f;
+      }
+    }
+    if (!touched)
+    {
+      return;
+    }
+  }
+  bool ok = true;
+  for (int q = 0; q < 4; ++q)
+  {
+    for (int c = 0; c < GroupWidth(q); ++c)
+    {
+      const std::int64_t k = Entry(n, i, q, c);
+      const double gk = g[k];
+      ok = ok && isfinite(g[k]);
+      m[k] = static_cast<float>(AdamBeta1 * m[k] + (1 - AdamBeta1) * gk);
+      v[k] = static_cast<float>(AdamBeta2 * v[k] + (1 - AdamBeta2) * gk * gk);
+      field[k] -= static_cast<float>(a.Rate[q] * (m[k] / a.C1) / (sqrt(v[k] / a.C2) + AdamEpsilon));
+    }
+  }
+  float* quaternion = field + 6 * n + 4 * i;
+  const float norm = sqrtf(quaternion[0] * quaternion[0] + quaternion[1] * quaternion[1] +
+    quaternion[2] * quaternion[2] + quaternion[3] * quaternion[3]);
+  if (norm > 1e-12f)
+  {
+    for (int c = 0; c < 4; ++c)
+    {
+      quaternion[c] /= norm;
+      ok = ok && isfinite(quaternion[c]);
+    }
+  }
+  for (int c = 0; c < 3; ++c)
+  {
+    float& l = field[3 * n + 3 * i + c];
+    l = fminf(a.MaximumLogScale, fmaxf(a.MinimumLogScale, l));
+    ok = ok && isfinite(field[3 * i + c]) && isfinite(l);
+  }
+  ok = ok && isfinite(quaternion[0]) && isfinite(quaternion[1]) && isfinite(quaternion[2]) &&
+    isfinite(quaternion[3]) && isfinite(field[10 * n + i]);
+  if (!ok)
+  {
+    *finite = 0;
+  }
+}
+
+/// @p sum [N] += @p values [N] (one frame's dL/dr into the solve's double sum).
+__global__ void AddToSumKernel(const float* values, std::int64_t n, double* sum)
+{
+  const std::int64_t i = std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i < n)
+  {
+    sum[i] += values[i];
+  }
+}
+
+/// A call's error for training frame @p frame: its message, prefixed with the frame. Returns false.
+bool FrameError(int frame, std::string* error)
+{
+  if (error)
+  {
+    *error = "training frame " + std::to_string(frame) + ": " + *error;
+  }
+  return false;
+}
+
+/// The options of the linear map S = A r: reflectivities used as given.
+RenderOptions Linear(RenderOptions options)
+{
+  options.NonNegativeReflectivity = false;
+  return options;
+}
+
+class CudaTrainingEngine : public TrainingEngine
+{
+public:
+  bool Initialize(std::string* error) { return this->Device.Initialize(error); }
+
+  const char* GetName() const override { return "cuda"; }
+
+  bool SetData(const TrainingData* data, std::string* error) override
+  {
+    this->Data = data;
+    return !this->Host || this->Host->SetData(data, error);
+  }
+
+  bool SetReduction(ProcessReduction* reduction, std::string* error) override
+  {
+    if (this->Host)
+    {
+      return this->Host->SetReduction(reduction, error);
+    }
+    if (!reduction || reduction->Size() <= 1)
+    {
+      return true;
+    }
+    // Several processes: the CPU engine's step over the CUDA renderer sums through the host.
+    std::unique_ptr<Renderer> renderer = CreateCudaRenderer(error);
+    if (!renderer)
+    {
+      return false;
+    }
+    std::unique_ptr<TrainingEngine> host = CreateCpuTrainingEngine(std::move(renderer));
+    OptimizerState state;
+    if ((this->Data && !host->SetData(this->Data, error)) || !host->SetReduction(reduction, error) ||
+      (this->N > 0 && (!this->Pull(state, error) || !host->Push(state, error))))
+    {
+      return false;
+    }
+    this->Host = std::move(host);
+    return true;
+  }
+
+  bool Push(const OptimizerState& input, std::string* error) override;
+  bool Pull(OptimizerState& state, std::string* error) override;
+  bool PullField(GaussianField& field, std::string* error) override;
+  void Snapshot() override;
+  void Restore() override;
+  StepStatus Step(const StepRequest& request, double* loss, std::string* error) override;
+  bool Render(const SliceGeometry* slices, int count, const RenderOptions& options, float* S, float* I,
+    std::string* error) override;
+  bool ApplyBasis(const float* r, const int* frames, int count, const RenderOptions& options, float* S,
+    std::string* error) override;
+  bool ApplyBasisTranspose(const float* y, const int* frames, int count, const RenderOptions& options, double* out,
+    std::string* error) override;
+  bool BasisNorms(const float* weights, const int* frames, int count, const RenderOptions& options, double* out,
+    std::string* error) override;
+
+private:
+  /// The device field, or with @p reflectivities those in place of the field's.
+  DeviceField Field(const float* reflectivities = nullptr) const
+  {
+    const float* base = this->State.As<float>();
+    const std::int64_t n = this->N;
+    return DeviceField{ base, base + 3 * n, base + 6 * n, reflectivities ? reflectivities : base + 10 * n, n };
+  }
+  float* Moment(int which) const { return this->State.As<float>() + which * Parameters * this->N; }
+
+  /// Checks the memory of calls on @p count slices (forward, or backward with or without pose gradients) and
+  /// reserves the image buffers and the renderer's work buffers; @p prepared receives the prepared slices.
+  bool PrepareCall(const SliceGeometry* slices, int count, const RenderOptions& options, bool backward, bool poses,
+    std::vector<PreparedSlice>& prepared, std::string* error);
+  /// Reserves the solve's buffers (SolveBytes per Gaussian) before allocating.
+  bool PrepareSolve(std::string* error);
+  /// Copies @p bytes from the device to the host and waits.
+  bool Download(void* host, const void* device, std::size_t bytes, const char* what, std::string* error)
+  {
+    return Check(cudaMemcpyAsync(host, device, bytes, cudaMemcpyDeviceToHost, this->Device.GetStream()), what,
+             error) &&
+      Check(cudaStreamSynchronize(this->Device.GetStream()), what, error);
+  }
+
+  DeviceRenderer Device;
+  std::unique_ptr<TrainingEngine> Host; // data-parallel runs: the CPU engine over the CUDA renderer
+  const TrainingData* Data = nullptr;
+  std::int64_t N = 0;
+  Buffer State;      // [3, N, 11] floats: field, Adam m, Adam v, each laid out as the field (Field)
+  Buffer Saved;      // [3, N, 11] floats: the last known-good State (Snapshot)
+  Buffer Gradients;  // [N, 11] floats: the step's gradients, laid out as the field
+  Buffer Attribution; // [N] float: the EA-D attribution since the last Push
+  Buffer Seen;       // [N] int: the visible counts since the last Push
+  Buffer Images;     // [3, H, W] floats: S, I (then dL/dI), dL/dS
+  Buffer PoseTotals; // [count, 6] doubles: a step's pose gradients
+  Buffer Finite;     // int: 0 when Adam met a non-finite value
+  Buffer SolveValues; // [N] float: the reflectivities of ApplyBasis, one frame's dL/dr in ApplyBasisTranspose
+  Buffer SolveSum;   // [N] double: ApplyBasisTranspose's sum over frames
+  // Host scratch, kept between steps
+  std::vector<float> I, LossGradient;
+  ImageLossWorkspace LossWorkspace;
+  GaussianField HostField; // BasisNorms's copy of the field
+};
+
+bool CudaTrainingEngine::Push(const OptimizerState& input, std::string* error)
+{
+  if (this->Host)
+  {
+    return this->Host->Push(input, error);
+  }
+  OptimizerState state = input;
+  state.ResizeToField();
+  const std::int64_t n = state.Count();
+  if (n >= (std::int64_t(1) << 31))
+  {
+    if (error)
+    {
+      *error = "CUDA training engine: " + std::to_string(n) + " Gaussians; at most 2^31 - 1 are supported";
+    }
+    return false;
+  }
+  const std::int64_t slots = std::max<std::int64_t>(1, n);
+  const std::int64_t held = this->State.Bytes + this->Saved.Bytes + this->Gradients.Bytes + this->Attribution.Bytes +
+    this->Seen.Bytes;
+  if (!this->Device.Fits(n * TrainingBytesPerGaussian(), held,
+        "the training state of " + std::to_string(n) + " Gaussians", error) ||
+    !this->State.Reserve(slots * 3 * Parameters * sizeof(float), "allocating the training state", error) ||
+    !this->Saved.Reserve(slots * 3 * Parameters * sizeof(float), "allocating the training state", error) ||
+    !this->Gradients.Reserve(slots * Parameters * sizeof(float), "allocating gradients", error) ||
+    !this->Attribution.Reserve(slots * sizeof(float), "allocating the attribution", error) ||
+    !this->Seen.Reserve(slots * sizeof(int), "allocating visible counts", error) ||
+    !this->Finite.Reserve(sizeof(int), "allocating a flag", error))
+  {
+    return false;
+  }
+  this->N = n;
+  const cudaStream_t stream = this->Device.GetStream();
+  const GaussianField* parts[3] = { &state.Field, &state.FirstMoment, &state.SecondMoment };
+  for (int which = 0; which < 3 && n > 0; ++which)
+  {
+    const GaussianField& f = *parts[which];
+    float* base = this->Moment(which);
+    const std::vector<float>* arrays[4] = { &f.Means, &f.LogScales, &f.Quaternions, &f.Reflectivities };
+    for (int q = 0; q < 4; ++q)
+    {
+      if (!Check(cudaMemcpyAsync(base + GroupFirst(q) * n, arrays[q]->data(), sizeof(float) * arrays[q]->size(),
+                   cudaMemcpyHostToDevice, stream),
+            "copying the training state to the device", error))
+      {
+        return false;
+      }
+    }
+  }
+  if (n > 0 &&
+    (!Check(cudaMemcpyAsync(this->Attribution.Data, state.Attribution.data(), sizeof(float) * n,
+              cudaMemcpyHostToDevice, stream),
+       "copying the attribution to the device", error) ||
+      !Check(cudaMemcpyAsync(this->Seen.Data, state.SeenCount.data(), sizeof(int) * n, cudaMemcpyHostToDevice, stream),
+        "copying visible counts to the device", error)))
+  {
+    return false;
+  }
+  this->Snapshot();
+  return Check(cudaStreamSynchronize(stream), "copying the training state to the device", error);
+}
+
+bool CudaTrainingEngine::Pull(OptimizerState& state, std::string* error)
+{
+  if (this->Host)
+  {
+    return this->Host->Pull(state, error);
+  }
+  const std::int64_t n = this->N;
+  state.Field.Resize(n);
+  state.ResizeToField();
+  GaussianField* parts[3] = { &state.Field, &state.FirstMoment, &state.SecondMoment };
+  const cudaStream_t stream = this->Device.GetStream();
+  for (int which = 0; which < 3 && n > 0; ++which)
+  {
+    GaussianField& f = *parts[which];
+    const float* base = this->Moment(which);
+    std::vector<float>* arrays[4] = { &f.Means, &f.LogScales, &f.Quaternions, &f.Reflectivities };
+    for (int q = 0; q < 4; ++q)
+    {
+      if (!Check(cudaMemcpyAsync(arrays[q]->data(), base + GroupFirst(q) * n, sizeof(float) * arrays[q]->size(),
+                   cudaMemcpyDeviceToHost, stream),
+            "copying the training state to the host", error))
+      {
+        return false;
+      }
+    }
+  }
+  return n == 0 ||
+    (Check(cudaMemcpyAsync(state.Attribution.data(), this->Attribution.Data, sizeof(float) * n,
+             cudaMemcpyDeviceToHost, stream),
+       "copying the attribution to the host", error) &&
+      this->Download(state.SeenCount.data(), this->Seen.Data, sizeof(int) * n, "copying visible counts to the host",
+        error));
+}
+
+bool CudaTrainingEngine::PullField(GaussianField& field, std::string* error)
+{
+  if (this->Host)
+  {
+    return this->Host->PullField(field, error);
+  }
+  const std::int64_t n = this->N;
+  field.Resize(n);
+  const cudaStream_t stream = this->Device.GetStream();
+  std::vector<float>* arrays[4] = { &field.Means, &field.LogScales, &field.Quaternions, &field.Reflectivities };
+  for (int q = 0; q < 4 && n > 0; ++q)
+  {
+    if (!Check(cudaMemcpyAsync(arrays[q]->data(), this->Moment(0) + GroupFirst(q) * n,
+                 sizeof(float) * arrays[q]->size(), cudaMemcpyDeviceToHost, stream),
+          "copying the field to the host", error))
+    {
+      return false;
+    }
+  }
+  return Check(cudaStreamSynchronize(stream), "copying the field to the host", error);
+}
+
+void CudaTrainingEngine::Snapshot()
+{
+  if (this->Host)
+  {
+    this->Host->Snapshot();
+    return;
+  }
+  // Stream-ordered after the work queued so far; a failure shows at the next call's check.
+  cudaMemcpyAsync(this->Saved.Data, this->State.Data, sizeof(float) * 3 * Parameters * this->N,
+    cudaMemcpyDeviceToDevice, this->Device.GetStream());
+}
+
+void CudaTrainingEngine::Restore()
+{
+  if (this->Host)
+  {
+    this->Host->Restore();
+    return;
+  }
+  cudaMemcpyAsync(this->State.Data, this->Saved.Data, sizeof(float) * 3 * Parameters * this->N,
+    cudaMemcpyDeviceToDevice, this->Device.GetStream());
+}
+
+bool CudaTrainingEngine::PrepareCall(const SliceGeometry* slices, int count, const RenderOptions& options,
+  bool backward, bool poses, std::vector<PreparedSlice>& prepared, std::string* error)
+{
+  if (!PrepareSlices(slices, count, options, prepared, error))
+  {
+    return false;
+  }
+  std::int64_t pixels = 1, tiles = 1;
+  for (const PreparedSlice& s : prepared)
+  {
+    pixels = std::max(pixels, std::int64_t(s.Width) * s.Height);
+    tiles = std::max(tiles, std::int64_t(s.TilesX) * s.TilesY);
+  }
+  const std::string what =
+    "a field of " + std::to_string(this->N) + " Gaussians and slices of " + std::to_string(pixels) + " pixels";
+  const std::int64_t poseBytes = poses ? 6 * std::int64_t(sizeof(double)) * count : 0;
+  const std::int64_t own = pixels * ImageBytes + poseBytes;
+  const std::int64_t held = this->Images.Bytes + (poses ? this->PoseTotals.Bytes : 0);
+  return this->Device.Reserve(false, false, this->N, tiles, own, held, what, error) &&
+    (!backward || this->Device.Reserve(true, poses, this->N, tiles, own, held, what, error)) &&
+    this->Images.Reserve(pixels * ImageBytes, "allocating the image buffers", error) &&
+    (!poses || this->PoseTotals.Reserve(poseBytes, "allocating pose gradients", error));
+}
+
+bool CudaTrainingEngine::PrepareSolve(std::string* error)
+{
+  const std::int64_t slots = std::max<std::int64_t>(1, this->N);
+  return this->Device.Fits(this->N * SolveBytes, this->SolveValues.Bytes + this->SolveSum.Bytes,
+           "the reflectivity solve's vectors for " + std::to_string(this->N) + " Gaussians", error) &&
+    this->SolveValues.Reserve(slots * sizeof(float), "allocating the solve's vectors", error) &&
+    this->SolveSum.Reserve(slots * sizeof(double), "allocating the solve's vectors", error);
+}
+
+StepStatus CudaTrainingEngine::Step(const StepRequest& request, double* loss, std::string* error)
+{
+  if (this->Host)
+  {
+    return this->Host->Step(request, loss, error);
+  }
+  const TrainingData& data = *this->Data;
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
+  const std::int64_t n = this->N;
+  const cudaStream_t stream = this->Device.GetStream();
+  const bool poses = request.PoseGradients != nullptr;
+  std::vector<SliceGeometry> slices(request.Count);
+  for (int b = 0; b < request.Count; ++b)
+  {
+    slices[b] = data.Slice(request.Frames[b]);
+  }
+  std::vector<PreparedSlice> prepared;
+  if (!this->PrepareCall(slices.data(), request.Count, request.Options, true, poses, prepared, error))
+  {
+    // The first frame the renderer refuses, named as the CPU engine names it.
+    for (int b = 0; b < request.Count; ++b)
+    {
+      std::vector<PreparedSlice> one;
+      if (!PrepareSlices(&slices[b], 1, request.Options, one, error))
+      {
+        FrameError(request.Frames[b], error);
+        break;
+      }
+    }
+    return StepStatus::Failed;
+  }
+  float* gradients = this->Gradients.As<float>();
+  FieldGradients out; // device pointers, laid out as the field
+  out.Means = gradients;
+  out.LogScales = gradients + 3 * n;
+  out.Quaternions = gradients + 6 * n;
+  out.Reflectivities = gradients + 10 * n;
+  out.Attribution = this->Attribution.As<float>();
+  out.VisibleCount = this->Seen.As<int>();
+  if (!Check(cudaMemsetAsync(gradients, 0, sizeof(float) * Parameters * n, stream), "clearing gradients", error) ||
+    (poses &&
+      !Check(cudaMemsetAsync(this->PoseTotals.Data, 0, sizeof(double) * 6 * request.Count, stream),
+        "clearing pose gradients", error)))
+  {
+    return StepStatus::Failed;
+  }
+  this->I.resize(pixels);
+  this->LossGradient.resize(pixels);
+  float* dS = this->Images.As<float>();
+  float* dI = dS + pixels; // I, then dL/dI
+  const DeviceField field = this->Field();
+  double total = 0;
+  for (int b = 0; b < request.Count; ++b)
+  {
+    const int f = request.Frames[b];
+    if (!this->Device.Forward(field, prepared[b], request.Options, dS, dI, nullptr, error) ||
+      !this->Download(this->I.data(), dI, sizeof(float) * pixels, "copying I to the host", error))
+    {
+      FrameError(f, error);
+      return StepStatus::Failed;
+    }
+    const ImageLossTerms terms = ComputeImageLoss(this->I.data(), &data.Frames[pixels * f], data.MaskOf(f),
+      data.Width, data.Height, request.Loss, this->LossGradient.data(), false, &this->LossWorkspace);
+    total += terms.Total;
+    if (request.Count > 1)
+    {
+      for (float& g : this->LossGradient)
+      {
+        g /= static_cast<float>(request.Count);
+      }
+    }
+    if (!Check(cudaMemcpyAsync(dI, this->LossGradient.data(), sizeof(float) * pixels, cudaMemcpyHostToDevice, stream),
+          "copying dL/dI to the device", error) ||
+      !this->Device.Backward(field, prepared[b], request.Options, dS, dI, false, dI + pixels, out,
+        poses ? this->PoseTotals.As<double>() + 6 * b : nullptr, error))
+    {
+      FrameError(f, error);
+      return StepStatus::Failed;
+    }
+    // The next frame's work follows on the same stream: its forward pass overwrites S after this backward pass.
+  }
+  if (!this->Device.Synchronize(nullptr, "backward", error))
+  {
+    return StepStatus::Failed;
+  }
+  if (poses &&
+    !this->Download(request.PoseGradients, this->PoseTotals.Data, sizeof(double) * 6 * request.Count,
+      "copying pose gradients to the host", error))
+  {
+    return StepStatus::Failed;
+  }
+  *loss = total / request.Count;
+  if (!std::isfinite(*loss))
+  {
+    return StepStatus::NonFinite;
+  }
+  const int t = request.Iteration + 1;
+  AdamStep a;
+  a.C1 = 1 - std::pow(AdamBeta1, t);
+  a.C2 = 1 - std::pow(AdamBeta2, t);
+  a.Rate[0] = request.MeanRate;
+  a.Rate[1] = request.LogScaleRate;
+  a.Rate[2] = request.QuaternionRate;
+  a.Rate[3] = request.ReflectivityRate;
+  a.MinimumLogScale = static_cast<float>(request.MinimumLogScale);
+  a.MaximumLogScale = static_cast<float>(request.MaximumLogScale);
+  a.Sparse = request.SparseAdam;
+  const int one = 1;
+  int finite = 1;
+  if (!Check(cudaMemcpyAsync(this->Finite.Data, &one, sizeof(int), cudaMemcpyHostToDevice, stream),
+        "setting a flag", error))
+  {
+    return StepStatus::Failed;
+  }
+  if (n > 0)
+  {
+    AdamKernel<<<Blocks(n, SetupBlock), SetupBlock, 0, stream>>>(
+      this->Moment(0), this->Moment(1), this->Moment(2), gradients, n, a, this->Finite.As<int>());
+  }
+  if (!Check(cudaGetLastError(), "Adam kernel", error) ||
+    !this->Download(&finite, this->Finite.Data, sizeof(int), "Adam", error))
+  {
+    return StepStatus::Failed;
+  }
+  return finite ? StepStatus::Done : StepStatus::NonFinite;
+}
+
+bool CudaTrainingEngine::Render(const SliceGeometry* slices, int count, const RenderOptions& options, float* S,
+  float* I, std::string* error)
+{
+  if (this->Host)
+  {
+    return this->Host->Render(slices, count, options, S, I, error);
+  }
+  std::vector<PreparedSlice> prepared;
+  if (!this->PrepareCall(slices, count, options, false, false, prepared, error))
+  {
+    return false;
+  }
+  float* dS = this->Images.As<float>();
+  std::int64_t offset = 0;
+  for (const PreparedSlice& s : prepared)
+  {
+    const std::int64_t pixels = std::int64_t(s.Width) * s.Height;
+    if (!this->Device.Forward(this->Field(), s, options, dS, I ? dS + pixels : nullptr, nullptr, error) ||
+      !this->Download(S + offset, dS, sizeof(float) * pixels, "copying S to the host", error) ||
+      (I && !this->Download(I + offset, dS + pixels, sizeof(float) * pixels, "copying I to the host", error)))
+    {
+      return false;
+    }
+    offset += pixels;
+  }
+  return true;
+}
+
+bool CudaTrainingEngine::ApplyBasis(const float* r, const int* frames, int count, const RenderOptions& options,
+  float* S, std::string* error)
+{
+  if (this->Host)
+  {
+    return this->Host->ApplyBasis(r, frames, count, options, S, error);
+  }
+  const std::size_t pixels = std::size_t(this->Data->Width) * this->Data->Height;
+  const RenderOptions linear = Linear(options);
+  if (!this->PrepareSolve(error) ||
+    (this->N > 0 &&
+      !Check(cudaMemcpyAsync(this->SolveValues.Data, r, sizeof(float) * this->N, cudaMemcpyHostToDevice,
+               this->Device.GetStream()),
+        "copying reflectivities to the device", error)))
+  {
+    return false;
+  }
+  const DeviceField field = this->Field(this->SolveValues.As<float>());
+  for (int k = 0; k < count; ++k)
+  {
+    const SliceGeometry slice = this->Data->Slice(frames[k]);
+    std::vector<PreparedSlice> prepared;
+    if (!this->PrepareCall(&slice, 1, linear, false, false, prepared, error) ||
+      !this->Device.Forward(field, prepared[0], linear, this->Images.As<float>(), nullptr, nullptr, error) ||
+      !this->Download(S + pixels * k, this->Images.Data, sizeof(float) * pixels, "copying S to the host", error))
+    {
+      return FrameError(frames[k], error);
+    }
+  }
+  return true;
+}
+
+bool CudaTrainingEngine::ApplyBasisTranspose(const float* y, const int* frames, int count,
+  const RenderOptions& options, double* out, std::string* error)
+{
+  if (this->Host)
+  {
+    return this->Host->ApplyBasisTranspose(y, frames, count, options, out, error);
+  }
+  const std::int64_t n = this->N;
+  const std::size_t pixels = std::size_t(this->Data->Width) * this->Data->Height;
+  const RenderOptions linear = Linear(options);
+  const cudaStream_t stream = this->Device.GetStream();
+  if (!this->PrepareSolve(error) ||
+    !Check(cudaMemsetAsync(this->SolveSum.Data, 0, sizeof(double) * n, stream), "clearing the solve's sum", error))
+  {
+    return false;
+  }
+  // One frame at a time into float, summed over frames in double (as the CPU engine).
+  FieldGradients gradient;
+  gradient.Reflectivities = this->SolveValues.As<float>();
+  for (int k = 0; k < count; ++k)
+  {
+    const SliceGeometry slice = this->Data->Slice(frames[k]);
+    std::vector<PreparedSlice> prepared;
+    float* dY = this->Images.As<float>();
+    // With the gradient taken with respect to S the forward S is not read; y stands in for it.
+    if (!this->PrepareCall(&slice, 1, linear, true, false, prepared, error) ||
+      !Check(cudaMemsetAsync(gradient.Reflectivities, 0, sizeof(float) * n, stream), "clearing dL/dr", error) ||
+      !Check(cudaMemcpyAsync(dY, y + pixels * k, sizeof(float) * pixels, cudaMemcpyHostToDevice, stream),
+        "copying y to the device", error) ||
+      !this->Device.Backward(this->Field(), prepared[0], linear, dY, dY, true, dY + 2 * pixels, gradient, nullptr,
+        error))
+    {
+      return FrameError(frames[k], error);
+    }
+    if (n > 0)
+    {
+      AddToSumKernel<<<Blocks(n, SetupBlock), SetupBlock, 0, stream>>>(gradient.Reflectivities, n,
+        this->SolveSum.As<double>());
+    }
+    if (!Check(cudaGetLastError(), "sum kernel", error) || !this->Device.Synchronize(nullptr, "backward", error))
+    {
+      return FrameError(frames[k], error);
+    }
+  }
+  std::vector<double> sum(n);
+  if (n > 0 && !this->Download(sum.data(), this->SolveSum.Data, sizeof(double) * n, "copying A^T y to the host", error))
+  {
+    return false;
+  }
+  for (std::int64_t i = 0; i < n; ++i)
+  {
+    out[i] += sum[i];
+  }
+  return true;
+}
+
+bool CudaTrainingEngine::BasisNorms(const float* weights, const int* frames, int count, const RenderOptions& options,
+  double* out, std::string* error)
+{
+  if (this->Host)
+  {
+    return this->Host->BasisNorms(weights, frames, count, options, out, error);
+  }
+  // Once per solve: on the host, over a copy of the field.
+  if (!this->PullField(this->HostField, error))
+  {
+    return false;
+  }
+  const std::size_t pixels = std::size_t(this->Data->Width) * this->Data->Height;
+  for (int k = 0; k < count; ++k)
+  {
+    const SliceGeometry slice = this->Data->Slice(frames[k]);
+    if (!AccumulateBasisNorms(this->HostField.View(), &slice, 1, options, weights + pixels * k, out, error))
+    {
+      return FrameError(frames[k], error);
+    }
+  }
+  return true;
+}
+
+} // namespace
+
+std::int64_t TrainingBytesPerGaussian()
+{
+  return StateBytes + StepBytes;
+}
+
+std::unique_ptr<TrainingEngine> CreateCudaTrainingEngine(std::string* error)
+{
+  DeviceInfo info;
+  std::string why;
+  if (!QueryDevice(info, why))
+  {
+    if (error)
+    {
+      *error = why;
+    }
+    return nullptr;
+  }
+  std::unique_ptr<CudaTrainingEngine> engine(new CudaTrainingEngine);
+  if (!engine->Initialize(error))
+  {
+    return nullptr;
+  }
+  return engine;
+}
+
+} // namespace cuda
+} // namespace bigus

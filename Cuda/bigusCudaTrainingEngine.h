@@ -1,0 +1,56 @@
+/**
+ * @file bigusCudaTrainingEngine.h
+ * @brief The device-resident training engine of the "cuda" backend (DESIGN section 5), registered with
+ *        bigus::RegisterTrainingEngine when the backend loads.
+ *
+ * The field, its Adam moments, the last known-good copy of both (Snapshot / Restore), the step's gradients
+ * and the EA-D accumulators live on the device between steps; a step moves images only. For each frame of
+ * the batch: the forward pass on the device, I ([H, W]) to the host, the image loss there (the same
+ * ComputeImageLoss as the CPU engine: L1, D-SSIM, FFL inside the frame's mask), dL/dI back to the device,
+ * the backward pass into the device's gradients; then Adam on the device (Kingma and Ba 2015, algorithm 1;
+ * the same double arithmetic per parameter as the CPU engine, unit quaternions and clamped log-scales after
+ * it, and a non-finite gradient or parameter reported as StepStatus::NonFinite). Pose gradients
+ * (StepRequest::PoseGradients) are 6 doubles per frame copied back.
+ *
+ * The reflectivity solve's operators: ApplyBasis and ApplyBasisTranspose run on the device with the
+ * reflectivities or images of the call uploaded; BasisNorms runs on the host over a copy of the field
+ * (bigus::AccumulateBasisNorms), once per solve.
+ *
+ * Data-parallel runs (SetReduction with more than one process) switch the engine to the CPU engine's
+ * host-side step over the CUDA renderer, which sums gradients through the host; call it before Push.
+ *
+ * Results differ from the CPU engine's by the renderers' float rounding only; repeated steps are
+ * bit-identical (no float atomics).
+ */
+#ifndef bigusCudaTrainingEngine_h
+#define bigusCudaTrainingEngine_h
+
+#include "bigusCudaModule.h" // For export macro
+#include "bigusTrainingEngine.h"
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+namespace bigus
+{
+namespace cuda
+{
+
+/**
+ * Device bytes the engine holds per Gaussian between steps: the field, Adam's two moments and their
+ * known-good copies (6 x 11 floats), the step's gradients (11 floats), the attribution (float) and the
+ * visible count (int). A step adds the renderer's work buffers (DeviceBytesPerGaussian, per tile entry).
+ */
+BIGUSCUDA_EXPORT std::int64_t TrainingBytesPerGaussian();
+
+/**
+ * The engine on device 0, or null with @p error when no usable device exists. Push refuses, before
+ * allocating, a state that does not fit in device memory, with an error that gives the bytes needed and free.
+ */
+BIGUSCUDA_EXPORT std::unique_ptr<TrainingEngine> CreateCudaTrainingEngine(std::string* error);
+
+} // namespace cuda
+} // namespace bigus
+
+#endif
