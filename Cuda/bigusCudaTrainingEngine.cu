@@ -424,7 +424,7 @@ StepStatus CudaTrainingEngine::Step(const StepRequest& request, double* loss, st
   {
     return this->Host->Step(request, loss, error);
   }
-  const TrainingData& data = *this->Data;
+  const TrainingData& data = request.Data ? *request.Data : *this->Data;
   const std::size_t pixels = std::size_t(data.Width) * data.Height;
   const std::int64_t n = this->N;
   const cudaStream_t stream = this->Device.GetStream();

@@ -223,6 +223,7 @@ vtkGaussianFieldTrainer::vtkGaussianFieldTrainer()
   this->DensifyInterval = d.DensifyInterval;
   this->DensifyPercentile = d.DensifyPercentile;
   this->ResidualSeedShare = d.ResidualSeedShare;
+  this->CoarseFraction = d.CoarseFraction;
   this->GrowthMargin = d.GrowthMargin;
   this->GrowthPatience = d.GrowthPatience;
   this->FillGaps = d.FillGaps;
@@ -330,6 +331,7 @@ int vtkGaussianFieldTrainer::RequestData(
   s.FillGaps = this->FillGaps;
   s.Seed = this->Seed;
   s.FramesPerStep = this->FramesPerStep;
+  s.CoarseFraction = this->CoarseFraction;
   s.CheckpointInterval = this->CheckpointInterval;
   s.CheckpointFile = this->CheckpointFile ? this->CheckpointFile : "";
 
@@ -605,6 +607,7 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
   this->Superclass::PrintSelf(os, indent);
   os << indent << "ElevationSigma: " << this->ElevationSigma << "\n";
   os << indent << "FramesPerStep: " << this->FramesPerStep << "\n";
+  os << indent << "CoarseFraction: " << this->CoarseFraction << "\n";
   os << indent << "Controller: " << this->Controller << "\n";
   os << indent << "BeamIntegration: " << this->BeamIntegration << "\n";
   os << indent << "NonNegativeReflectivity: " << this->NonNegativeReflectivity << "\n";

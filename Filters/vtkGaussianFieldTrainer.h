@@ -302,6 +302,11 @@ public:
   vtkSetClampMacro(FramesPerStep, int, 1, 4096);
   vtkGetMacro(FramesPerStep, int);
   ///@}
+  ///@{ The resolution schedule: the first CoarseFraction (0 to 1) of the schedule steps on every second pixel
+  /// and row of its frames (a quarter of the pixels; bigus::TrainerSettings::CoarseFraction). 0 = off.
+  vtkSetClampMacro(CoarseFraction, double, 0.0, 1.0);
+  vtkGetMacro(CoarseFraction, double);
+  ///@}
 
   ///@{ Checkpoints: written every CheckpointInterval steps (0 = never) to CheckpointFile;
   /// ResumeFile continues from one, schedule included: the seconds trained before it count towards
@@ -396,6 +401,7 @@ protected:
   std::string BackendInUse;
   vtkMultiProcessController* Controller = nullptr;
   int FramesPerStep = 1;
+  double CoarseFraction; // from bigus::TrainerSettings
   double ReductionSeconds = 0;
   double ReductionBytes = 0;
 

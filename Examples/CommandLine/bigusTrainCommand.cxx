@@ -45,7 +45,7 @@ struct TrainOptions
   std::vector<int> Frames; ///< explicit training frames (empty: the hold-out rule)
   double TimeBudget = 0, ElevationSigma = 0, EvaluationInterval = 0;
   long long MaxGaussians = 0, InitialGaussians = 0;
-  double GrowthMargin = 0, ResidualSeedShare = 0;
+  double GrowthMargin = 0, ResidualSeedShare = 0, CoarseFraction = 0;
   int GrowthPatience = 0, SolveIterations = 0;
   bool NoFillGaps = false, ReflectivitySolve = false, DenseStart = false, DenseAdam = false,
        NoPixelGridFit = false, RefinePoses = false, RefineTimeOffset = false, RefineImageToProbe = false;
@@ -67,6 +67,7 @@ struct TrainOptions
     this->SolveIterations = defaults->GetSolveIterations();
     this->Seed = defaults->GetSeed();
     this->FramesPerStep = defaults->GetFramesPerStep();
+    this->CoarseFraction = defaults->GetCoarseFraction();
   }
 };
 
@@ -227,6 +228,7 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
   trainer->SetElevationSigma(o.ElevationSigma);
   trainer->SetSeed(o.Seed);
   trainer->SetFramesPerStep(o.FramesPerStep);
+  trainer->SetCoarseFraction(o.CoarseFraction);
   trainer->SetController(processes.Controller);
   trainer->SetEvaluationInterval(o.EvaluationInterval);
   trainer->SetBackend(o.Backend.c_str());
@@ -512,6 +514,11 @@ Command AddTrainCommand(CLI::App& app)
     "Training frames rendered per step (per rank with --distributed); their losses are averaged")
     ->capture_default_str()
     ->check(CLI::Range(1, 4096));
+  trainCommand->add_option("--coarse-fraction", train.CoarseFraction,
+    "The resolution schedule: the first fraction (0 to 1) of the schedule steps on every second pixel and row of "
+    "its frames; 0: off")
+    ->capture_default_str()
+    ->check(CLI::Range(0.0, 1.0));
   trainCommand->add_flag("--distributed", train.Distributed,
     "Under mpirun -n P: data-parallel training, each rank renders its share of every step's frames and the "
     "gradients are summed every step (MPI_Allreduce through vtkMPIController); rank 0 writes the field and "

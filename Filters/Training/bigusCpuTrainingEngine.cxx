@@ -223,7 +223,7 @@ private:
 
 StepStatus CpuTrainingEngine::Step(const StepRequest& request, double* loss, std::string* error)
 {
-  const TrainingData& data = *this->Data;
+  const TrainingData& data = request.Data ? *request.Data : *this->Data;
   const std::size_t pixels = std::size_t(data.Width) * data.Height;
   const std::int64_t n = this->State.Count();
   this->S.resize(pixels);

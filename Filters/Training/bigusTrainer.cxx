@@ -147,8 +147,11 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
       : Format("ReflectivitySolve = on (CGLS, at most %d iterations, ridge %.3g, after seeding, after every "
                "densification", s.Solve.MaximumIterations, s.Solve.Ridge) +
         (s.SolveInterval > 0 ? Format(" and every %d steps)", s.SolveInterval) : std::string(")")));
-  this->Report.Settings.push_back(Format("Seed = %u, FramesPerStep = %d, Cutoff = %.3g, SparseAdam = %s", s.Seed,
-    s.FramesPerStep, s.Cutoff, s.SparseAdam ? "on" : "off"));
+  this->Report.Settings.push_back(Format("Seed = %u, FramesPerStep = %d, Cutoff = %.3g, SparseAdam = %s%s", s.Seed,
+    s.FramesPerStep, s.Cutoff, s.SparseAdam ? "on" : "off",
+    s.CoarseFraction > 0
+      ? Format(", CoarseFraction = %.3g (a quarter of the pixels per step until then)", s.CoarseFraction).c_str()
+      : ""));
   if (s.RefinePoses)
   {
     this->Report.Settings.push_back(Format("RefinePoses = on (from %.0f %% of the schedule; Adam %.3g rad and %.3g mm per "
@@ -596,6 +599,17 @@ StepStatus Trainer::Step(double* loss, std::string* error)
   request.Options = this->Options();
   request.Loss = this->Settings.Loss;
   request.SparseAdam = this->Settings.SparseAdam;
+  // The resolution schedule's coarse steps: the frames on every second pixel and row, at a random phase.
+  const bool coarse = this->ScheduleFraction() < this->Settings.CoarseFraction;
+  TrainingData decimated;
+  int phase = 0;
+  if (coarse)
+  {
+    phase = static_cast<int>(Uniform(state.Random) * 4);
+    decimated = DecimateFrames(*this->Data, frames.data(), request.Count, phase & 1, phase >> 1);
+    request.Data = &decimated;
+    request.Frames = decimated.TrainFrames.data();
+  }
   const bool refine = this->Settings.RefinesPoses() && this->ScheduleFraction() >= this->Settings.PoseRefinementStart;
   std::vector<double> poseGradients(refine ? 6 * frames.size() : 0);
   request.PoseGradients = refine ? poseGradients.data() : nullptr;
@@ -621,6 +635,10 @@ StepStatus Trainer::Step(double* loss, std::string* error)
   }
   if (refine)
   {
+    for (std::size_t k = 0; coarse && k < frames.size(); ++k)
+    {
+      DecimatedPoseGradientToSource(*this->Data, frames[k], phase & 1, phase >> 1, &poseGradients[6 * k]);
+    }
     this->UpdatePoses(frames, poseGradients);
   }
   state.LossHistory.push_back(*loss);

@@ -98,6 +98,13 @@ struct TrainerSettings
   /// checkpoint counts the seconds trained before it (TrainingState::TrainingSeconds).
   double TimeBudget = 0;
   int FramesPerStep = 1;             ///< training frames rendered per step (the batch); losses are averaged
+  /// The resolution schedule: steps in the first CoarseFraction of the schedule see their frames on every second
+  /// pixel and row, from a pixel drawn at random among the first 2 x 2 every step (DecimateFrames: a quarter of
+  /// the pixels, point samples as the renderer's pixels are), later steps the whole frames; 0 = off. After
+  /// DashGaussian's coarse-to-fine schedule (Chen et al. 2025), without its low-pass images: an average of 2 x 2
+  /// pixels is not what a point-sampled render can match. A coarse step's pose gradients are moved to the source
+  /// frame's pivot (DecimatedPoseGradientToSource).
+  double CoarseFraction = 0;
   /// Adam over the Gaussians a step touched only (StepRequest::SparseAdam): on. At 120 s it pays on the
   /// liver (+1.1 dB held out, 3 seeds each), the volume protocol (+1.0 dB) and the N-wire phantom (+0.2 dB,
   /// 60 s), within noise on the spine phantom (docs/FINDINGS.md, "Sparse Adam"). Off: every Gaussian's

@@ -2,6 +2,7 @@
 #include "bigusTrainingEngine.h"
 
 #include "bigusBackend.h"
+#include "bigusSliceFrame.h"
 
 #include <algorithm>
 #include <cmath>
@@ -76,6 +77,68 @@ SliceGeometry TrainingData::Slice(int frame) const
   g.Width = this->Width;
   g.Height = this->Height;
   return g;
+}
+
+TrainingData DecimateFrames(const TrainingData& data, const int* frames, int count, int offsetX, int offsetY)
+{
+  TrainingData out;
+  out.Width = (data.Width - offsetX + 1) / 2;
+  out.Height = (data.Height - offsetY + 1) / 2;
+  const std::size_t pixels = std::size_t(out.Width) * out.Height;
+  const std::size_t sourcePixels = std::size_t(data.Width) * data.Height;
+  out.Frames.resize(pixels * count);
+  out.Mask.resize(pixels * count);
+  out.Poses.resize(count);
+  for (int k = 0; k < count; ++k)
+  {
+    const int f = frames[k];
+    const float* image = data.Frames.data() + sourcePixels * f;
+    const unsigned char* mask = data.MaskOf(f);
+    for (int j = 0; j < out.Height; ++j)
+    {
+      for (int i = 0; i < out.Width; ++i)
+      {
+        const std::size_t from = std::size_t(offsetY + 2 * j) * data.Width + offsetX + 2 * i;
+        out.Frames[pixels * k + std::size_t(j) * out.Width + i] = image[from];
+        out.Mask[pixels * k + std::size_t(j) * out.Width + i] = mask[from];
+      }
+    }
+    // ImageToReference times the map (i, j) -> (offsetX + 2 i, offsetY + 2 j), row-major.
+    const std::array<double, 16>& P = data.Poses[f];
+    std::array<double, 16>& Q = out.Poses[k];
+    for (int r = 0; r < 4; ++r)
+    {
+      Q[4 * r + 0] = 2 * P[4 * r + 0];
+      Q[4 * r + 1] = 2 * P[4 * r + 1];
+      Q[4 * r + 2] = P[4 * r + 2];
+      Q[4 * r + 3] = P[4 * r + 0] * offsetX + P[4 * r + 1] * offsetY + P[4 * r + 3];
+    }
+    if (!data.Sweeps.empty())
+    {
+      out.Sweeps.push_back(data.Sweeps[f]);
+    }
+    out.TrainFrames.push_back(k);
+  }
+  return out;
+}
+
+void DecimatedPoseGradientToSource(const TrainingData& data, int frame, int offsetX, int offsetY, double gradient[6])
+{
+  double F[3][3], origin[3], pixelToPlane[3];
+  if (ComputeRenderingFrame(data.Poses[frame].data(), 90, F, origin, pixelToPlane) != PoseStatus::Ok)
+  {
+    return;
+  }
+  // The decimated frame's centre pixel in the source's pixel indices, then both centres in plane coordinates.
+  const int width = (data.Width - offsetX + 1) / 2, height = (data.Height - offsetY + 1) / 2;
+  const double i = offsetX + (width - 1.0), j = offsetY + (height - 1.0);
+  double centre[3];
+  SliceCentre(pixelToPlane, data.Width, data.Height, centre);
+  const double d[3] = { i * pixelToPlane[0] + j * pixelToPlane[1] - centre[0], j * pixelToPlane[2] - centre[1], 0 };
+  const double* t = gradient + 3;
+  gradient[0] += d[1] * t[2] - d[2] * t[1];
+  gradient[1] += d[2] * t[0] - d[0] * t[2];
+  gradient[2] += d[0] * t[1] - d[1] * t[0];
 }
 
 // ------------------------------------------------------------------------------------------------

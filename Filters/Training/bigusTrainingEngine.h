@@ -66,6 +66,28 @@ struct BIGUSTRAINING_EXPORT TrainingData
   SliceGeometry Slice(int frame) const;
 };
 
+/**
+ * Frames @p frames ([count] indices into @p data) on every second pixel and row from pixel (@p offsetX,
+ * @p offsetY), @p offsetX, @p offsetY in {0, 1}: a quarter of the pixels, as point samples of the frame (no
+ * averaging, which the renderer's point-sampled pixels could not match). Frame k of the result is
+ * @p frames[k]: its pixel (i, j) is the source's (offsetX + 2 i, offsetY + 2 j), its ImageToReference maps
+ * it to the same point (spacing doubled in plane), and its mask is the source's at those pixels (one per
+ * frame); sweeps carry over, TrainFrames lists every frame. The coarse steps of the resolution schedule
+ * (TrainerSettings::CoarseFraction).
+ */
+BIGUSTRAINING_EXPORT TrainingData DecimateFrames(
+  const TrainingData& data, const int* frames, int count, int offsetX, int offsetY);
+
+/**
+ * The pose gradient @p gradient (6 values, FieldGradients::SlicePoses) of a frame of DecimateFrames(@p data, ...,
+ * @p offsetX, @p offsetY), made the gradient with respect to the correction of the source frame @p frame: both
+ * are taken in the same axes, about the decimated and the source frame's centre pixel, so the translation part
+ * is the same and the rotation part gains d x dL/dt, d the decimated centre minus the source centre (mm, in
+ * plane). Unchanged when the source pose is not a valid frame.
+ */
+BIGUSTRAINING_EXPORT void DecimatedPoseGradientToSource(
+  const TrainingData& data, int frame, int offsetX, int offsetY, double gradient[6]);
+
 /// A Gaussian field's parameters (float, structure of arrays).
 struct BIGUSTRAINING_EXPORT GaussianField
 {
@@ -175,6 +197,9 @@ struct StepRequest
   /// rotation vector per rad, translation per mm, about the frame's centre pixel in its own axes). The
   /// trainer moves the poses (TrainingData::Poses) between steps; an engine reads them at every step.
   double* PoseGradients = nullptr;
+  /// When not null, the step's frames come from this data instead of the engine's (SetData), and Frames index
+  /// it: the trainer's decimated copies of the step's frames (DecimateFrames, TrainerSettings::CoarseFraction).
+  const TrainingData* Data = nullptr;
 };
 
 /// This machine's physical memory, bytes (sysconf); 0 when unknown. Sizes are checked against it
