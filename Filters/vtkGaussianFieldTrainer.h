@@ -303,7 +303,7 @@ public:
   vtkGetMacro(FramesPerStep, int);
   ///@}
   ///@{ The resolution schedule: the first CoarseFraction (0 to 1) of the schedule steps on every second pixel
-  /// and row of its frames (a quarter of the pixels; bigus::TrainerSettings::CoarseFraction). 0 = off.
+  /// and row of its frames (a quarter of the pixels; bigus::TrainerSettings::CoarseFraction). Default 0.5; 0 = off.
   vtkSetClampMacro(CoarseFraction, double, 0.0, 1.0);
   vtkGetMacro(CoarseFraction, double);
   ///@}

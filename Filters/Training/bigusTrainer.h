@@ -103,8 +103,11 @@ struct TrainerSettings
   /// the pixels, point samples as the renderer's pixels are), later steps the whole frames; 0 = off. After
   /// DashGaussian's coarse-to-fine schedule (Chen et al. 2025), without its low-pass images: an average of 2 x 2
   /// pixels is not what a point-sampled render can match. A coarse step's pose gradients are moved to the source
-  /// frame's pivot (DecimatedPoseGradientToSource).
-  double CoarseFraction = 0;
+  /// frame's pivot (DecimatedPoseGradientToSource). Default 0.5: the liver's held-out PSNR +0.7 dB at 120 s (2
+  /// seeds) and +0.24 at the main job's 300 s (38.46 against 38.22 dB), the spine phantom -0.05 dB at 120 s (2
+  /// seeds, within their spread), the N-wire phantom unchanged at 60 s (0.9 measured); docs/FINDINGS.md, "The
+  /// resolution schedule".
+  double CoarseFraction = 0.5;
   /// Adam over the Gaussians a step touched only (StepRequest::SparseAdam): on. At 120 s it pays on the
   /// liver (+1.1 dB held out, 3 seeds each), the volume protocol (+1.0 dB) and the N-wire phantom (+0.2 dB,
   /// 60 s), within noise on the spine phantom (docs/FINDINGS.md, "Sparse Adam"). Off: every Gaussian's

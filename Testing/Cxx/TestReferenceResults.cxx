@@ -344,6 +344,7 @@ TEST(ReferenceResults, TrainingReachesTheRecordedPsnr)
   trainer->SetInitialGaussians(training["initial_gaussians"].get<vtkIdType>());
   trainer->SetMaximumGaussians(training["max_gaussians"].get<vtkIdType>());
   trainer->SetElevationSigma(training["elevation_sigma"].get<double>());
+  trainer->SetCoarseFraction(training["coarse_fraction"].get<double>());
   trainer->SetSeed(training["seed"].get<unsigned>());
   trainer->Update();
   ASSERT_GT(trainer->GetNumberOfGaussians(), 0);

@@ -37,6 +37,7 @@ TRAINING = {
     "initial_gaussians": 2000,
     "max_gaussians": 4000,
     "elevation_sigma": 0.5,
+    "coarse_fraction": 0,
     "seed": 1,
     "threads": 1,
 }
@@ -63,7 +64,8 @@ def train(bigus_exe, field, seed):
     run(bigus_exe, "train", *SWEEP_ARGS, "-o", field, "--holdout-every", str(t["holdout_every"]),
         "--holdout-offset", str(t["holdout_offset"]), "--iterations", str(t["iterations"]),
         "--initial-gaussians", str(t["initial_gaussians"]), "--max-gaussians", str(t["max_gaussians"]),
-        "--elevation-sigma", str(t["elevation_sigma"]), "--seed", str(seed), "--threads", str(t["threads"]))
+        "--elevation-sigma", str(t["elevation_sigma"]), "--coarse-fraction", str(t["coarse_fraction"]),
+        "--seed", str(seed), "--threads", str(t["threads"]))
     reader = vtk.vtkXMLPolyDataReader()
     reader.SetFileName(field)
     reader.Update()
