@@ -2,6 +2,7 @@
 // the kernels of a slice's forward and backward pass, and the device memory checks.
 #include "bigusCudaDeviceRenderer.h"
 
+#include "bigusCudaDevice.h"
 #include "bigusRasterGeometry.h"
 
 #include <cub/device/device_radix_sort.cuh>
@@ -22,6 +23,21 @@ double Now()
 {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
+}
+
+bool DeviceUsable(std::string* error)
+{
+  DeviceInfo info;
+  std::string why;
+  if (QueryDevice(info, why))
+  {
+    return true;
+  }
+  if (error)
+  {
+    *error = why;
+  }
+  return false;
 }
 
 bool Check(cudaError_t status, const char* what, std::string* error)

@@ -32,6 +32,9 @@ constexpr std::int64_t BinningBytes = sizeof(Splat) + 2 * sizeof(unsigned long l
 constexpr std::int64_t PoseBytesPerGaussian = 6 * sizeof(double);
 constexpr std::int64_t EntryBytes = 4 * sizeof(std::uint32_t);
 
+/// True when a device can run the kernels (QueryDevice); otherwise false with @p error saying why.
+bool DeviceUsable(std::string* error);
+
 /// True for cudaSuccess; otherwise false with @p error "CUDA renderer: WHAT: the CUDA error".
 bool Check(cudaError_t status, const char* what, std::string* error);
 

@@ -4,8 +4,8 @@
  *        pointers and a stream (private to BIGUS::Cuda): binning (bigusCudaBinning.cu: phase 1's
  *        footprints, the (tile, Gaussian) entries, the tile ranges of the sorted entries), forward
  *        (bigusCudaForward.cu: phase 2, one block per tile) and backward (bigusCudaBackward.cu: dL/dS and
- *        one warp per Gaussian). bigusCudaRenderer.cu owns the buffers, the CUB scan and sort, and the
- *        order of the launches; a device-resident training engine can call the same launchers.
+ *        one warp per Gaussian). DeviceRenderer (bigusCudaDeviceRenderer.h) owns the work buffers, the CUB
+ *        scan and sort, and the order of the launches, for the renderer and the training engine alike.
  *
  * A launcher only enqueues its kernel on @p stream (the caller checks cudaGetLastError). Every pointer is
  * device memory; shapes as in bigusRenderer.h.

@@ -4,7 +4,6 @@
 #include "bigusCudaRenderer.h"
 
 #include "bigusBackend.h"
-#include "bigusCudaDevice.h"
 #include "bigusCudaDeviceRenderer.h"
 #include "bigusCudaKernels.h"
 #include "bigusCudaTrainingEngine.h"
@@ -274,14 +273,8 @@ std::int64_t DeviceBytesPerTileEntry()
 
 std::unique_ptr<Renderer> CreateCudaRenderer(std::string* error)
 {
-  DeviceInfo info;
-  std::string why;
-  if (!QueryDevice(info, why))
+  if (!DeviceUsable(error))
   {
-    if (error)
-    {
-      *error = why;
-    }
     return nullptr;
   }
   std::unique_ptr<CudaRenderer> renderer(new CudaRenderer);
@@ -301,9 +294,8 @@ std::unique_ptr<Renderer> CreateCudaRenderer(std::string* error)
  */
 extern "C" BIGUSCUDA_EXPORT void bigusCudaRegisterBackend()
 {
-  bigus::cuda::DeviceInfo info;
   std::string why;
-  if (bigus::cuda::QueryDevice(info, why))
+  if (bigus::cuda::DeviceUsable(&why))
   {
     bigus::RegisterBackend("cuda", &bigus::cuda::MakeCudaRenderer, 10);
     bigus::RegisterTrainingEngine("cuda", &bigus::cuda::CreateCudaTrainingEngine);

@@ -2,7 +2,6 @@
 #include "bigusCudaTrainingEngine.h"
 
 #include "bigusBasisNorms.h"
-#include "bigusCudaDevice.h"
 #include "bigusCudaDeviceRenderer.h"
 #include "bigusCudaRenderer.h"
 #include "bigusImageLoss.h"
@@ -694,14 +693,8 @@ std::int64_t TrainingBytesPerGaussian()
 
 std::unique_ptr<TrainingEngine> CreateCudaTrainingEngine(std::string* error)
 {
-  DeviceInfo info;
-  std::string why;
-  if (!QueryDevice(info, why))
+  if (!DeviceUsable(error))
   {
-    if (error)
-    {
-      *error = why;
-    }
     return nullptr;
   }
   std::unique_ptr<CudaTrainingEngine> engine(new CudaTrainingEngine);

@@ -17,7 +17,11 @@
  * (bigus::AccumulateBasisNorms), once per solve.
  *
  * Data-parallel runs (SetReduction with more than one process) switch the engine to the CPU engine's
- * host-side step over the CUDA renderer, which sums gradients through the host; call it before Push.
+ * host-side step over the CUDA renderer, which sums gradients through the host (a state pushed before moves
+ * with it).
+ *
+ * Coarse steps (StepRequest::Data, the resolution schedule) render the request's frames instead of the
+ * engine's own.
  *
  * Results differ from the CPU engine's by the renderers' float rounding only; repeated steps are
  * bit-identical (no float atomics).

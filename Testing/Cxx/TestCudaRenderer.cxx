@@ -753,6 +753,32 @@ TEST(CudaTrainingEngine, ANonFiniteStepAndARefusedPoseAreReported)
   EXPECT_NE(error.find("training frame 8"), std::string::npos) << error;
 }
 
+TEST(CudaTrainingEngine, ACoarseStepOfTheResolutionScheduleMatchesTheCpuEngine)
+{
+  // StepRequest::Data: a step on the decimated frames (DecimateFrames, TrainerSettings::CoarseFraction) instead of
+  // the engine's own, with pose gradients: the same loss and pose gradients as the CPU engine's.
+  EngineCase c;
+  const TrainingData coarse = DecimateFrames(c.Data, c.Frames.data(), 2, 1, 0);
+  double loss[2] = { 0, 0 };
+  std::vector<double> poses[2];
+  const char* backends[2] = { "cuda", "cpu" };
+  for (int e = 0; e < 2; ++e)
+  {
+    std::unique_ptr<TrainingEngine> engine = c.Engine(backends[e]);
+    ASSERT_TRUE(engine);
+    StepRequest request = c.Request;
+    request.Data = &coarse;
+    request.Frames = coarse.TrainFrames.data();
+    poses[e].assign(6 * request.Count, 0.0);
+    request.PoseGradients = poses[e].data();
+    std::string error;
+    ASSERT_EQ(engine->Step(request, &loss[e], &error), StepStatus::Done) << backends[e] << ": " << error;
+  }
+  EXPECT_NEAR(loss[0], loss[1], 1e-4 * loss[1]);
+  EXPECT_GT(std::count_if(poses[1].begin(), poses[1].end(), [](double v) { return v != 0; }), 6);
+  EXPECT_LT(RelativeDifference(poses[0], poses[1]), 1e-4) << "pose gradients";
+}
+
 TEST(CudaTrainingEngine, TheSolveOperatorsMatchTheCpuEngineAndAreAdjoint)
 {
   // A r, A^T y and diag(A^T W A) on frames 2 and 70 (bigusReflectivitySolve.h): against the CPU engine's, and
