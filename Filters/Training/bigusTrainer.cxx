@@ -599,8 +599,10 @@ StepStatus Trainer::Step(double* loss, std::string* error)
   request.Options = this->Options();
   request.Loss = this->Settings.Loss;
   request.SparseAdam = this->Settings.SparseAdam;
-  // The resolution schedule's coarse steps: the frames on every second pixel and row, at a random phase.
-  const bool coarse = this->ScheduleFraction() < this->Settings.CoarseFraction;
+  // The resolution schedule's coarse steps: the frames on every second pixel and row, at a random phase (frames
+  // narrower than 2 pixels keep every pixel).
+  const bool coarse = this->ScheduleFraction() < this->Settings.CoarseFraction && this->Data->Width >= 2 &&
+    this->Data->Height >= 2;
   TrainingData decimated;
   int phase = 0;
   if (coarse)
