@@ -40,6 +40,38 @@ bool DeviceUsable(std::string* error)
   return false;
 }
 
+CallExtent Extent(std::int64_t gaussians, const std::vector<PreparedSlice>& slices)
+{
+  CallExtent e;
+  for (const PreparedSlice& s : slices)
+  {
+    e.Pixels = std::max(e.Pixels, std::int64_t(s.Width) * s.Height);
+    e.Tiles = std::max(e.Tiles, std::int64_t(s.TilesX) * s.TilesY);
+  }
+  e.What = "a field of " + std::to_string(gaussians) + " Gaussians and slices of " + std::to_string(e.Pixels) +
+    " pixels";
+  return e;
+}
+
+bool UploadField(const FieldView& field, float* device, cudaStream_t stream, std::string* error)
+{
+  const std::int64_t n = field.Count;
+  const float* arrays[4] = { field.Means, field.LogScales, field.Quaternions, field.Reflectivities };
+  const std::int64_t widths[4] = { 3, 3, 4, 1 };
+  std::int64_t offset = 0;
+  for (int q = 0; q < 4 && n > 0; ++q)
+  {
+    if (!Check(cudaMemcpyAsync(device + offset, arrays[q], sizeof(float) * widths[q] * n, cudaMemcpyHostToDevice,
+                 stream),
+          "copying the field to the device", error))
+    {
+      return false;
+    }
+    offset += widths[q] * n;
+  }
+  return true;
+}
+
 bool Check(cudaError_t status, const char* what, std::string* error)
 {
   if (status == cudaSuccess)

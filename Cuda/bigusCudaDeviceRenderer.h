@@ -32,6 +32,25 @@ constexpr std::int64_t BinningBytes = sizeof(Splat) + 2 * sizeof(unsigned long l
 constexpr std::int64_t PoseBytesPerGaussian = 6 * sizeof(double);
 constexpr std::int64_t EntryBytes = 4 * sizeof(std::uint32_t);
 
+/// The field at @p base on the device: [N, 11] floats, means [N, 3], log-scales [N, 3], quaternions [N, 4] and
+/// reflectivities [N] one after the other.
+inline DeviceField FieldAt(const float* base, std::int64_t n)
+{
+  return DeviceField{ base, base + 3 * n, base + 6 * n, base + 10 * n, n };
+}
+
+/// The largest slice of a call, its tiles, and the call named for memory errors.
+struct CallExtent
+{
+  std::int64_t Pixels = 1, Tiles = 1;
+  std::string What; ///< "a field of N Gaussians and slices of P pixels"
+};
+CallExtent Extent(std::int64_t gaussians, const std::vector<PreparedSlice>& slices);
+
+/// Queues on @p stream the copy of @p field's four host arrays to @p device, laid out as FieldAt reads them; false
+/// with @p error when the copy cannot be queued.
+bool UploadField(const FieldView& field, float* device, cudaStream_t stream, std::string* error);
+
 /// True when a device can run the kernels (QueryDevice); otherwise false with @p error saying why.
 bool DeviceUsable(std::string* error);
 

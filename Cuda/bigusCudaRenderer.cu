@@ -181,11 +181,7 @@ private:
     int Offset; // in units of N floats inside Gradients
   };
 
-  DeviceField Field(std::int64_t n) const
-  {
-    const float* base = this->FieldData.As<float>();
-    return DeviceField{ base, base + 3 * n, base + 6 * n, base + 10 * n, n };
-  }
+  DeviceField Field(std::int64_t n) const { return FieldAt(this->FieldData.As<float>(), n); }
 
   /// Checks the memory a call needs (refused before allocating when it does not fit), then uploads the field. A
   /// backward call with @p poseSlices > 0 also holds the pose gradient's buffers (6 doubles per slice).
@@ -193,19 +189,13 @@ private:
     int poseSlices = 0)
   {
     const std::int64_t n = field.Count;
-    std::int64_t pixels = 1, tiles = 1;
-    for (const PreparedSlice& s : slices)
-    {
-      pixels = std::max(pixels, std::int64_t(s.Width) * s.Height);
-      tiles = std::max(tiles, std::int64_t(s.TilesX) * s.TilesY);
-    }
-    const std::string what = "a field of " + std::to_string(n) + " Gaussians and slices of " + std::to_string(pixels) +
-      " pixels";
+    const CallExtent extent = Extent(n, slices);
+    const std::int64_t pixels = extent.Pixels;
     if (n >= (std::int64_t(1) << 31))
     {
       if (error)
       {
-        *error = "CUDA renderer: " + what + ": at most 2^31 - 1 Gaussians are supported";
+        *error = "CUDA renderer: " + extent.What + ": at most 2^31 - 1 Gaussians are supported";
       }
       return false;
     }
@@ -214,7 +204,7 @@ private:
     const std::int64_t own = n * (FieldBytes + (backward ? GradientBytes : 0)) + pixels * PixelBytes + poseTotalBytes;
     const std::int64_t held = this->FieldData.Bytes + this->Image.Bytes + (backward ? this->Gradients.Bytes : 0) +
       (poseSlices > 0 ? this->PoseTotalData.Bytes : 0);
-    if (!this->Device.Reserve(backward, poseSlices > 0, n, tiles, own, held, what, error) ||
+    if (!this->Device.Reserve(backward, poseSlices > 0, n, extent.Tiles, own, held, extent.What, error) ||
       !this->FieldData.Reserve(slots * FieldBytes, "allocating the field", error) ||
       !this->Image.Reserve(pixels * PixelBytes, "allocating the image buffers", error) ||
       (backward && !this->Gradients.Reserve(slots * GradientBytes, "allocating gradients", error)) ||
@@ -222,25 +212,7 @@ private:
     {
       return false;
     }
-    float* base = this->FieldData.As<float>();
-    const struct
-    {
-      const float* Host;
-      std::int64_t Floats;
-      std::int64_t Offset;
-    } parts[] = { { field.Means, 3 * n, 0 }, { field.LogScales, 3 * n, 3 * n }, { field.Quaternions, 4 * n, 6 * n },
-      { field.Reflectivities, n, 10 * n } };
-    for (const auto& part : parts)
-    {
-      if (n > 0 &&
-        !Check(cudaMemcpyAsync(base + part.Offset, part.Host, sizeof(float) * part.Floats, cudaMemcpyHostToDevice,
-                 this->Device.GetStream()),
-          "copying the field to the device", error))
-      {
-        return false;
-      }
-    }
-    return true;
+    return cuda::UploadField(field, this->FieldData.As<float>(), this->Device.GetStream(), error);
   }
 
   DeviceRenderer Device;

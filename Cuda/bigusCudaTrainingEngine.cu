@@ -127,21 +127,20 @@ __global__ void AddToSumKernel(const float* values, std::int64_t n, double* sum)
   }
 }
 
-/// A call's error for training frame @p frame: its message, prefixed with the frame. Returns false.
-bool FrameError(int frame, std::string* error)
+/// The prepared slices of @p count frames of @p data, checked before anything is rendered; false with @p error
+/// naming the first frame the renderer refuses (TrainingFrameError).
+bool PrepareFrames(const TrainingData& data, const int* frames, int count, const RenderOptions& options,
+  std::vector<PreparedSlice>& prepared, std::string* error)
 {
-  if (error)
+  prepared.resize(count);
+  for (int k = 0; k < count; ++k)
   {
-    *error = "training frame " + std::to_string(frame) + ": " + *error;
+    if (!PrepareSlice(data.Slice(frames[k]), options, 0, prepared[k], error))
+    {
+      return TrainingFrameError(frames[k], error);
+    }
   }
-  return false;
-}
-
-/// The options of the linear map S = A r: reflectivities used as given.
-RenderOptions Linear(RenderOptions options)
-{
-  options.NonNegativeReflectivity = false;
-  return options;
+  return true;
 }
 
 class CudaTrainingEngine : public TrainingEngine
@@ -203,16 +202,17 @@ private:
   /// The device field, or with @p reflectivities those in place of the field's.
   DeviceField Field(const float* reflectivities = nullptr) const
   {
-    const float* base = this->State.As<float>();
-    const std::int64_t n = this->N;
-    return DeviceField{ base, base + 3 * n, base + 6 * n, reflectivities ? reflectivities : base + 10 * n, n };
+    DeviceField field = FieldAt(this->State.As<float>(), this->N);
+    field.Reflectivities = reflectivities ? reflectivities : field.Reflectivities;
+    return field;
   }
   float* Moment(int which) const { return this->State.As<float>() + which * Parameters * this->N; }
 
-  /// Checks the memory of calls on @p count slices (forward, or backward with or without pose gradients) and
-  /// reserves the image buffers and the renderer's work buffers; @p prepared receives the prepared slices.
-  bool PrepareCall(const SliceGeometry* slices, int count, const RenderOptions& options, bool backward, bool poses,
-    std::vector<PreparedSlice>& prepared, std::string* error);
+  /// Checks the memory of a call on the @p prepared slices (forward, or backward with or without pose gradients)
+  /// and reserves the image buffers and the renderer's work buffers.
+  bool Reserve(const std::vector<PreparedSlice>& prepared, bool backward, bool poses, std::string* error);
+  /// Queues the copy of the device field @p which (0 the field, 1 Adam m, 2 Adam v) into @p field, resized to N.
+  bool DownloadField(int which, GaussianField& field, std::string* error);
   /// Reserves the solve's buffers (SolveBytes per Gaussian) before allocating.
   bool PrepareSolve(std::string* error);
   /// Copies @p bytes from the device to the host and waits.
@@ -277,19 +277,11 @@ bool CudaTrainingEngine::Push(const OptimizerState& input, std::string* error)
   this->N = n;
   const cudaStream_t stream = this->Device.GetStream();
   const GaussianField* parts[3] = { &state.Field, &state.FirstMoment, &state.SecondMoment };
-  for (int which = 0; which < 3 && n > 0; ++which)
+  for (int which = 0; which < 3; ++which)
   {
-    const GaussianField& f = *parts[which];
-    float* base = this->Moment(which);
-    const std::vector<float>* arrays[4] = { &f.Means, &f.LogScales, &f.Quaternions, &f.Reflectivities };
-    for (int q = 0; q < 4; ++q)
+    if (!UploadField(parts[which]->View(), this->Moment(which), stream, error))
     {
-      if (!Check(cudaMemcpyAsync(base + GroupFirst(q) * n, arrays[q]->data(), sizeof(float) * arrays[q]->size(),
-                   cudaMemcpyHostToDevice, stream),
-            "copying the training state to the device", error))
-      {
-        return false;
-      }
+      return false;
     }
   }
   if (n > 0 &&
@@ -312,25 +304,16 @@ bool CudaTrainingEngine::Pull(OptimizerState& state, std::string* error)
     return this->Host->Pull(state, error);
   }
   const std::int64_t n = this->N;
-  state.Field.Resize(n);
-  state.ResizeToField();
   GaussianField* parts[3] = { &state.Field, &state.FirstMoment, &state.SecondMoment };
-  const cudaStream_t stream = this->Device.GetStream();
-  for (int which = 0; which < 3 && n > 0; ++which)
+  for (int which = 0; which < 3; ++which)
   {
-    GaussianField& f = *parts[which];
-    const float* base = this->Moment(which);
-    std::vector<float>* arrays[4] = { &f.Means, &f.LogScales, &f.Quaternions, &f.Reflectivities };
-    for (int q = 0; q < 4; ++q)
+    if (!this->DownloadField(which, *parts[which], error))
     {
-      if (!Check(cudaMemcpyAsync(arrays[q]->data(), base + GroupFirst(q) * n, sizeof(float) * arrays[q]->size(),
-                   cudaMemcpyDeviceToHost, stream),
-            "copying the training state to the host", error))
-      {
-        return false;
-      }
+      return false;
     }
   }
+  state.ResizeToField();
+  const cudaStream_t stream = this->Device.GetStream();
   return n == 0 ||
     (Check(cudaMemcpyAsync(state.Attribution.data(), this->Attribution.Data, sizeof(float) * n,
              cudaMemcpyDeviceToHost, stream),
@@ -345,20 +328,25 @@ bool CudaTrainingEngine::PullField(GaussianField& field, std::string* error)
   {
     return this->Host->PullField(field, error);
   }
+  return this->DownloadField(0, field, error) &&
+    Check(cudaStreamSynchronize(this->Device.GetStream()), "copying the field to the host", error);
+}
+
+bool CudaTrainingEngine::DownloadField(int which, GaussianField& field, std::string* error)
+{
   const std::int64_t n = this->N;
   field.Resize(n);
-  const cudaStream_t stream = this->Device.GetStream();
   std::vector<float>* arrays[4] = { &field.Means, &field.LogScales, &field.Quaternions, &field.Reflectivities };
   for (int q = 0; q < 4 && n > 0; ++q)
   {
-    if (!Check(cudaMemcpyAsync(arrays[q]->data(), this->Moment(0) + GroupFirst(q) * n,
-                 sizeof(float) * arrays[q]->size(), cudaMemcpyDeviceToHost, stream),
-          "copying the field to the host", error))
+    if (!Check(cudaMemcpyAsync(arrays[q]->data(), this->Moment(which) + GroupFirst(q) * n,
+                 sizeof(float) * arrays[q]->size(), cudaMemcpyDeviceToHost, this->Device.GetStream()),
+          "copying the training state to the host", error))
     {
       return false;
     }
   }
-  return Check(cudaStreamSynchronize(stream), "copying the field to the host", error);
+  return true;
 }
 
 void CudaTrainingEngine::Snapshot()
@@ -384,27 +372,16 @@ void CudaTrainingEngine::Restore()
     cudaMemcpyDeviceToDevice, this->Device.GetStream());
 }
 
-bool CudaTrainingEngine::PrepareCall(const SliceGeometry* slices, int count, const RenderOptions& options,
-  bool backward, bool poses, std::vector<PreparedSlice>& prepared, std::string* error)
+bool CudaTrainingEngine::Reserve(
+  const std::vector<PreparedSlice>& prepared, bool backward, bool poses, std::string* error)
 {
-  if (!PrepareSlices(slices, count, options, prepared, error))
-  {
-    return false;
-  }
-  std::int64_t pixels = 1, tiles = 1;
-  for (const PreparedSlice& s : prepared)
-  {
-    pixels = std::max(pixels, std::int64_t(s.Width) * s.Height);
-    tiles = std::max(tiles, std::int64_t(s.TilesX) * s.TilesY);
-  }
-  const std::string what =
-    "a field of " + std::to_string(this->N) + " Gaussians and slices of " + std::to_string(pixels) + " pixels";
-  const std::int64_t poseBytes = poses ? 6 * std::int64_t(sizeof(double)) * count : 0;
-  const std::int64_t own = pixels * ImageBytes + poseBytes;
+  const CallExtent extent = Extent(this->N, prepared);
+  const std::int64_t poseBytes = poses ? 6 * std::int64_t(sizeof(double)) * prepared.size() : 0;
+  const std::int64_t own = extent.Pixels * ImageBytes + poseBytes;
   const std::int64_t held = this->Images.Bytes + (poses ? this->PoseTotals.Bytes : 0);
-  return this->Device.Reserve(false, false, this->N, tiles, own, held, what, error) &&
-    (!backward || this->Device.Reserve(true, poses, this->N, tiles, own, held, what, error)) &&
-    this->Images.Reserve(pixels * ImageBytes, "allocating the image buffers", error) &&
+  return this->Device.Reserve(false, false, this->N, extent.Tiles, own, held, extent.What, error) &&
+    (!backward || this->Device.Reserve(true, poses, this->N, extent.Tiles, own, held, extent.What, error)) &&
+    this->Images.Reserve(extent.Pixels * ImageBytes, "allocating the image buffers", error) &&
     (!poses || this->PoseTotals.Reserve(poseBytes, "allocating pose gradients", error));
 }
 
@@ -428,24 +405,10 @@ StepStatus CudaTrainingEngine::Step(const StepRequest& request, double* loss, st
   const std::int64_t n = this->N;
   const cudaStream_t stream = this->Device.GetStream();
   const bool poses = request.PoseGradients != nullptr;
-  std::vector<SliceGeometry> slices(request.Count);
-  for (int b = 0; b < request.Count; ++b)
-  {
-    slices[b] = data.Slice(request.Frames[b]);
-  }
   std::vector<PreparedSlice> prepared;
-  if (!this->PrepareCall(slices.data(), request.Count, request.Options, true, poses, prepared, error))
+  if (!PrepareFrames(data, request.Frames, request.Count, request.Options, prepared, error) ||
+    !this->Reserve(prepared, true, poses, error))
   {
-    // The first frame the renderer refuses, named as the CPU engine names it.
-    for (int b = 0; b < request.Count; ++b)
-    {
-      std::vector<PreparedSlice> one;
-      if (!PrepareSlices(&slices[b], 1, request.Options, one, error))
-      {
-        FrameError(request.Frames[b], error);
-        break;
-      }
-    }
     return StepStatus::Failed;
   }
   float* gradients = this->Gradients.As<float>();
@@ -475,7 +438,7 @@ StepStatus CudaTrainingEngine::Step(const StepRequest& request, double* loss, st
     if (!this->Device.Forward(field, prepared[b], request.Options, dS, dI, nullptr, error) ||
       !this->Download(this->I.data(), dI, sizeof(float) * pixels, "copying I to the host", error))
     {
-      FrameError(f, error);
+      TrainingFrameError(f, error);
       return StepStatus::Failed;
     }
     const ImageLossTerms terms = ComputeImageLoss(this->I.data(), &data.Frames[pixels * f], data.MaskOf(f),
@@ -493,7 +456,7 @@ StepStatus CudaTrainingEngine::Step(const StepRequest& request, double* loss, st
       !this->Device.Backward(field, prepared[b], request.Options, dS, dI, false, dI + pixels, out,
         poses ? this->PoseTotals.As<double>() + 6 * b : nullptr, error))
     {
-      FrameError(f, error);
+      TrainingFrameError(f, error);
       return StepStatus::Failed;
     }
     // The next frame's work follows on the same stream: its forward pass overwrites S after this backward pass.
@@ -552,7 +515,7 @@ bool CudaTrainingEngine::Render(const SliceGeometry* slices, int count, const Re
     return this->Host->Render(slices, count, options, S, I, error);
   }
   std::vector<PreparedSlice> prepared;
-  if (!this->PrepareCall(slices, count, options, false, false, prepared, error))
+  if (!PrepareSlices(slices, count, options, prepared, error) || !this->Reserve(prepared, false, false, error))
   {
     return false;
   }
@@ -580,8 +543,10 @@ bool CudaTrainingEngine::ApplyBasis(const float* r, const int* frames, int count
     return this->Host->ApplyBasis(r, frames, count, options, S, error);
   }
   const std::size_t pixels = std::size_t(this->Data->Width) * this->Data->Height;
-  const RenderOptions linear = Linear(options);
-  if (!this->PrepareSolve(error) ||
+  const RenderOptions linear = LinearBasisOptions(options);
+  std::vector<PreparedSlice> prepared;
+  if (!PrepareFrames(*this->Data, frames, count, linear, prepared, error) ||
+    !this->Reserve(prepared, false, false, error) || !this->PrepareSolve(error) ||
     (this->N > 0 &&
       !Check(cudaMemcpyAsync(this->SolveValues.Data, r, sizeof(float) * this->N, cudaMemcpyHostToDevice,
                this->Device.GetStream()),
@@ -592,13 +557,10 @@ bool CudaTrainingEngine::ApplyBasis(const float* r, const int* frames, int count
   const DeviceField field = this->Field(this->SolveValues.As<float>());
   for (int k = 0; k < count; ++k)
   {
-    const SliceGeometry slice = this->Data->Slice(frames[k]);
-    std::vector<PreparedSlice> prepared;
-    if (!this->PrepareCall(&slice, 1, linear, false, false, prepared, error) ||
-      !this->Device.Forward(field, prepared[0], linear, this->Images.As<float>(), nullptr, nullptr, error) ||
+    if (!this->Device.Forward(field, prepared[k], linear, this->Images.As<float>(), nullptr, nullptr, error) ||
       !this->Download(S + pixels * k, this->Images.Data, sizeof(float) * pixels, "copying S to the host", error))
     {
-      return FrameError(frames[k], error);
+      return TrainingFrameError(frames[k], error);
     }
   }
   return true;
@@ -613,9 +575,11 @@ bool CudaTrainingEngine::ApplyBasisTranspose(const float* y, const int* frames, 
   }
   const std::int64_t n = this->N;
   const std::size_t pixels = std::size_t(this->Data->Width) * this->Data->Height;
-  const RenderOptions linear = Linear(options);
+  const RenderOptions linear = LinearBasisOptions(options);
   const cudaStream_t stream = this->Device.GetStream();
-  if (!this->PrepareSolve(error) ||
+  std::vector<PreparedSlice> prepared;
+  if (!PrepareFrames(*this->Data, frames, count, linear, prepared, error) ||
+    !this->Reserve(prepared, true, false, error) || !this->PrepareSolve(error) ||
     !Check(cudaMemsetAsync(this->SolveSum.Data, 0, sizeof(double) * n, stream), "clearing the solve's sum", error))
   {
     return false;
@@ -623,20 +587,17 @@ bool CudaTrainingEngine::ApplyBasisTranspose(const float* y, const int* frames, 
   // One frame at a time into float, summed over frames in double (as the CPU engine).
   FieldGradients gradient;
   gradient.Reflectivities = this->SolveValues.As<float>();
+  float* dY = this->Images.As<float>();
   for (int k = 0; k < count; ++k)
   {
-    const SliceGeometry slice = this->Data->Slice(frames[k]);
-    std::vector<PreparedSlice> prepared;
-    float* dY = this->Images.As<float>();
     // With the gradient taken with respect to S the forward S is not read; y stands in for it.
-    if (!this->PrepareCall(&slice, 1, linear, true, false, prepared, error) ||
-      !Check(cudaMemsetAsync(gradient.Reflectivities, 0, sizeof(float) * n, stream), "clearing dL/dr", error) ||
+    if (!Check(cudaMemsetAsync(gradient.Reflectivities, 0, sizeof(float) * n, stream), "clearing dL/dr", error) ||
       !Check(cudaMemcpyAsync(dY, y + pixels * k, sizeof(float) * pixels, cudaMemcpyHostToDevice, stream),
         "copying y to the device", error) ||
-      !this->Device.Backward(this->Field(), prepared[0], linear, dY, dY, true, dY + 2 * pixels, gradient, nullptr,
+      !this->Device.Backward(this->Field(), prepared[k], linear, dY, dY, true, dY + 2 * pixels, gradient, nullptr,
         error))
     {
-      return FrameError(frames[k], error);
+      return TrainingFrameError(frames[k], error);
     }
     if (n > 0)
     {
@@ -645,7 +606,7 @@ bool CudaTrainingEngine::ApplyBasisTranspose(const float* y, const int* frames, 
     }
     if (!Check(cudaGetLastError(), "sum kernel", error) || !this->Device.Synchronize(nullptr, "backward", error))
     {
-      return FrameError(frames[k], error);
+      return TrainingFrameError(frames[k], error);
     }
   }
   std::vector<double> sum(n);
@@ -678,7 +639,7 @@ bool CudaTrainingEngine::BasisNorms(const float* weights, const int* frames, int
     const SliceGeometry slice = this->Data->Slice(frames[k]);
     if (!AccumulateBasisNorms(this->HostField.View(), &slice, 1, options, weights + pixels * k, out, error))
     {
-      return FrameError(frames[k], error);
+      return TrainingFrameError(frames[k], error);
     }
   }
   return true;

@@ -19,30 +19,6 @@ namespace bigus
 namespace
 {
 
-/// The options of the linear map S = A r: reflectivities used as given.
-RenderOptions Linear(RenderOptions options)
-{
-  options.NonNegativeReflectivity = false;
-  return options;
-}
-
-/// A call that the renderer refused: its message, prefixed with the training frame. Returns false.
-bool FrameError(int frame, std::string* error)
-{
-  if (error)
-  {
-    *error = "training frame " + std::to_string(frame) + ": " + *error;
-  }
-  return false;
-}
-
-/// A step that the renderer refused (FrameError).
-StepStatus Failed(int frame, std::string* error)
-{
-  FrameError(frame, error);
-  return StepStatus::Failed;
-}
-
 class CpuTrainingEngine : public TrainingEngine
 {
 public:
@@ -113,7 +89,7 @@ public:
   {
     FieldView view = this->State.Field.View();
     view.Reflectivities = r;
-    const RenderOptions linear = Linear(options);
+    const RenderOptions linear = LinearBasisOptions(options);
     const std::size_t pixels = std::size_t(this->Data->Width) * this->Data->Height;
     bool ok = true;
     for (int k = 0; k < count && ok; ++k)
@@ -121,7 +97,7 @@ public:
       const SliceGeometry slice = this->Data->Slice(frames[k]);
       if (!this->Backend->Forward(view, &slice, 1, linear, S + pixels * k, nullptr, nullptr, error))
       {
-        ok = FrameError(frames[k], error);
+        ok = TrainingFrameError(frames[k], error);
       }
     }
     return this->Agree(ok, error); // data-parallel: this process's frames' images stay here
@@ -133,7 +109,7 @@ public:
     // One frame at a time into float, summed over frames in double.
     const std::int64_t n = this->State.Count();
     const std::size_t pixels = std::size_t(this->Data->Width) * this->Data->Height;
-    const RenderOptions linear = Linear(options);
+    const RenderOptions linear = LinearBasisOptions(options);
     FieldGradients grads;
     // With several processes each sums its own frames into a vector of its own, then the vectors are summed.
     std::vector<double> own(this->Reduction ? n : 0, 0.0);
@@ -148,7 +124,7 @@ public:
       if (!this->Backend->Backward(this->State.Field.View(), &slice, 1, linear, y + pixels * k, y + pixels * k, true,
             grads, nullptr, error))
       {
-        ok = FrameError(frames[k], error);
+        ok = TrainingFrameError(frames[k], error);
         break;
       }
       vtkSMPTools::For(0, n, 8192, [&](std::int64_t b, std::int64_t e) {
@@ -173,7 +149,7 @@ public:
       const SliceGeometry slice = this->Data->Slice(frames[k]);
       if (!AccumulateBasisNorms(this->State.Field.View(), &slice, 1, options, weights + pixels * k, sum, error))
       {
-        ok = FrameError(frames[k], error);
+        ok = TrainingFrameError(frames[k], error);
       }
     }
     return this->Agree(ok, error) && this->AddSum(own, out, error);
@@ -256,7 +232,7 @@ StepStatus CpuTrainingEngine::Step(const StepRequest& request, double* loss, std
     if (!this->Backend->Forward(this->State.Field.View(), &slice, 1, request.Options, this->S.data(), this->I.data(),
           nullptr, error))
     {
-      FrameError(f, error);
+      TrainingFrameError(f, error);
       return this->Reduction ? this->Reduce(request, total, false, error) : StepStatus::Failed;
     }
     const ImageLossTerms terms = ComputeImageLoss(this->I.data(), &data.Frames[pixels * f], data.MaskOf(f), data.Width,
@@ -276,7 +252,7 @@ StepStatus CpuTrainingEngine::Step(const StepRequest& request, double* loss, std
     if (!this->Backend->Backward(this->State.Field.View(), &slice, 1, request.Options, this->S.data(),
           this->LossGradient.data(), false, grads, nullptr, error))
     {
-      FrameError(f, error);
+      TrainingFrameError(f, error);
       return this->Reduction ? this->Reduce(request, total, false, error) : StepStatus::Failed;
     }
   }

@@ -590,7 +590,8 @@ StepStatus Trainer::Step(double* loss, std::string* error)
   request.Count = static_cast<int>(frames.size());
   request.Iteration = state.Iteration;
   const double scale = state.LearningRateScale;
-  request.MeanRate = scale * this->MeanLearningRateAt(this->ScheduleFraction());
+  const double fraction = this->ScheduleFraction();
+  request.MeanRate = scale * this->MeanLearningRateAt(fraction);
   request.LogScaleRate = scale * this->Settings.LogScaleLearningRate;
   request.QuaternionRate = scale * this->Settings.QuaternionLearningRate;
   request.ReflectivityRate = scale * this->Settings.ReflectivityLearningRate;
@@ -601,7 +602,7 @@ StepStatus Trainer::Step(double* loss, std::string* error)
   request.SparseAdam = this->Settings.SparseAdam;
   // The resolution schedule's coarse steps: the frames on every second pixel and row, at a random phase (frames
   // narrower than 2 pixels keep every pixel).
-  const bool coarse = this->ScheduleFraction() < this->Settings.CoarseFraction && this->Data->Width >= 2 &&
+  const bool coarse = fraction < this->Settings.CoarseFraction && this->Data->Width >= 2 &&
     this->Data->Height >= 2;
   TrainingData decimated;
   int phase = 0;
@@ -612,7 +613,7 @@ StepStatus Trainer::Step(double* loss, std::string* error)
     request.Data = &decimated;
     request.Frames = decimated.TrainFrames.data();
   }
-  const bool refine = this->Settings.RefinesPoses() && this->ScheduleFraction() >= this->Settings.PoseRefinementStart;
+  const bool refine = this->Settings.RefinesPoses() && fraction >= this->Settings.PoseRefinementStart;
   std::vector<double> poseGradients(refine ? 6 * frames.size() : 0);
   request.PoseGradients = refine ? poseGradients.data() : nullptr;
   this->HostCurrent = false;

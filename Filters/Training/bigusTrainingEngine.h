@@ -202,6 +202,25 @@ struct StepRequest
   const TrainingData* Data = nullptr;
 };
 
+/// For engines: the options of the reflectivity solve's linear map S = A r (reflectivities used as given,
+/// NonNegativeReflectivity off).
+inline RenderOptions LinearBasisOptions(RenderOptions options)
+{
+  options.NonNegativeReflectivity = false;
+  return options;
+}
+
+/// For engines: @p error (the renderer's message for a call it refused) prefixed with "training frame F: ".
+/// Returns false.
+inline bool TrainingFrameError(int frame, std::string* error)
+{
+  if (error)
+  {
+    *error = "training frame " + std::to_string(frame) + ": " + *error;
+  }
+  return false;
+}
+
 /// This machine's physical memory, bytes (sysconf); 0 when unknown. Sizes are checked against it
 /// before large allocations (the reflectivity solve, a trainer's MaximumGaussians).
 BIGUSTRAINING_EXPORT double PhysicalMemoryBytes();

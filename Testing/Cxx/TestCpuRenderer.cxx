@@ -507,11 +507,7 @@ TEST(CpuRenderer, ThePoseGradientMatchesCentralDifferencesOverCorrectedPoses)
     ASSERT_GT(largest, 0);
     for (int k = 0; k < 6; ++k)
     {
-      const double h = k < 3 ? 1e-5 : 1e-4; // rad, mm
-      double plus[6] = { 0 }, minus[6] = { 0 };
-      plus[k] = h;
-      minus[k] = -h;
-      const double fd = (loss(plus) - loss(minus)) / (2 * h);
+      const double fd = test::PoseCentralDifference(loss, k);
       std::printf("slice %d, xi[%d]: finite difference %.6g, CPU backend %.6g\n", s, k, fd, poses[6 * s + k]);
       EXPECT_NEAR(poses[6 * s + k], fd, 1e-3 * largest) << "slice " << s << ", component " << k;
     }

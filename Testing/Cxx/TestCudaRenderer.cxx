@@ -809,9 +809,10 @@ TEST(CudaTrainingEngine, TheSolveOperatorsMatchTheCpuEngineAndAreAdjoint)
     Ax[e].assign(2 * pixels, 0.f);
     Aty[e].assign(n, 0.5); // += semantics
     norms[e].assign(n, 0.0);
-    ASSERT_TRUE(engines[e]->ApplyBasis(x.data(), frames, 2, c.Request.Options, Ax[e].data(), &error)) << error;
+    // A^T y first, on an engine that has rendered nothing yet (its image buffers not yet allocated).
     ASSERT_TRUE(engines[e]->ApplyBasisTranspose(y.data(), frames, 2, c.Request.Options, Aty[e].data(), &error))
       << error;
+    ASSERT_TRUE(engines[e]->ApplyBasis(x.data(), frames, 2, c.Request.Options, Ax[e].data(), &error)) << error;
     ASSERT_TRUE(engines[e]->BasisNorms(weights.data(), frames, 2, c.Request.Options, norms[e].data(), &error)) << error;
   }
   const std::vector<double> ax0(Ax[0].begin(), Ax[0].end()), ax1(Ax[1].begin(), Ax[1].end());

@@ -4,7 +4,7 @@
 #include "bigusBackend.h"
 #include "bigusElevationSigma.h"
 #include "bigusSliceFrame.h"
-#include "bigusReferenceRenderer.h"
+#include "bigusRendererTestUtilities.h"
 #include "bigusTrainer.h"
 #include "bigusTrainingTestUtilities.h"
 
@@ -939,11 +939,7 @@ TEST(Trainer, ADecimatedFramesPoseGradientMovedToTheSourcePivotMatchesCentralDif
     ASSERT_GT(largest, 0);
     for (int k = 0; k < 6; ++k)
     {
-      const double h = k < 3 ? 1e-5 : 1e-4; // rad, mm
-      double plus[6] = { 0 }, minus[6] = { 0 };
-      plus[k] = h;
-      minus[k] = -h;
-      const double fd = (loss(plus) - loss(minus)) / (2 * h);
+      const double fd = test::PoseCentralDifference(loss, k);
       std::printf("offset %d %d, xi[%d]: central difference %.6g, moved %.6g (about the decimated centre %.6g)\n", ox,
         oy, k, fd, moved[k], pose[k]);
       EXPECT_NEAR(moved[k], fd, 2e-3 * largest) << "offset " << ox << ", " << oy << ", component " << k;

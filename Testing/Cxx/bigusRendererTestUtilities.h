@@ -1,5 +1,5 @@
-// Test helpers of the renderer tests (TestCpuRenderer, TestCudaRenderer): slice poses, random fields
-// and their float copies. Header only.
+// Test helpers of the renderer tests (TestCpuRenderer, TestCudaRenderer; TestTrainer for pose gradients): slice
+// poses, central differences of a pose correction, random fields and their float copies. Header only.
 #ifndef bigusRendererTestUtilities_h
 #define bigusRendererTestUtilities_h
 
@@ -19,6 +19,18 @@ namespace test
 inline SliceGeometry MakeSlice(int w, int h, double spacing, double degrees, const double axis[3], const double origin[3])
 {
   return RotatedSlice(w, h, spacing, degrees, axis, origin);
+}
+
+/// Central difference of @p loss (a function of a pose correction xi[6], as CorrectPose takes it) along component
+/// @p k: steps of 1e-5 rad for the rotation, 1e-4 mm for the translation.
+template <typename Loss>
+double PoseCentralDifference(const Loss& loss, int k)
+{
+  const double h = k < 3 ? 1e-5 : 1e-4;
+  double plus[6] = { 0, 0, 0, 0, 0, 0 }, minus[6] = { 0, 0, 0, 0, 0, 0 };
+  plus[k] = h;
+  minus[k] = -h;
+  return (loss(plus) - loss(minus)) / (2 * h);
 }
 
 /// Random field around the slice centre: means in a cube of side `extent` mm, scales 0.3..2 mm,
