@@ -227,6 +227,7 @@ vtkGaussianFieldTrainer::vtkGaussianFieldTrainer()
   this->GrowthMargin = d.GrowthMargin;
   this->GrowthPatience = d.GrowthPatience;
   this->FillGaps = d.FillGaps;
+  this->MergeTolerance = d.Merge.Tolerance;
   this->Seed = d.Seed;
 }
 
@@ -329,6 +330,7 @@ int vtkGaussianFieldTrainer::RequestData(
   s.GrowthMargin = this->GrowthMargin;
   s.GrowthPatience = this->GrowthPatience;
   s.FillGaps = this->FillGaps;
+  s.Merge.Tolerance = this->MergeTolerance;
   s.Seed = this->Seed;
   s.FramesPerStep = this->FramesPerStep;
   s.CoarseFraction = this->CoarseFraction;
@@ -475,6 +477,9 @@ int vtkGaussianFieldTrainer::RequestData(
   bigus::GapFillingSettings gaps;
   gaps.MaximumGaussians = this->MaximumGaussians;
   addText("GapFilling", this->FillGaps ? bigus::DescribeGapFilling(report.GapFilling, gaps) : std::string("off"));
+  bigus::GaussianMergeSettings merge;
+  merge.Tolerance = this->MergeTolerance;
+  addText("GaussianMerge", merge.Tolerance > 0 ? bigus::DescribeGaussianMerge(report.Merge, merge) : std::string("off"));
   if (report.Solves > 0)
   {
     const bigus::ReflectivitySolveReport& last = report.LastSolve;
@@ -634,6 +639,7 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
      << ", residual seeds " << this->ResidualSeedShare << "\n";
   os << indent << "GrowthMargin: " << this->GrowthMargin << ", GrowthPatience: " << this->GrowthPatience << "\n";
   os << indent << "FillGaps: " << this->FillGaps << "\n";
+  os << indent << "MergeTolerance: " << this->MergeTolerance << "\n";
   os << indent << "HoldOutEvery: " << this->HoldOutEvery << ", HoldOutOffset: " << this->HoldOutOffset
      << ", HoldOutSweep: " << this->HoldOutSweep << "\n";
   os << indent << "TrainingFrameList: " << (this->TrainingFrameList ? this->TrainingFrameList->GetNumberOfIds() : 0)

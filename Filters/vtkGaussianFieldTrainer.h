@@ -19,7 +19,7 @@
  * `StopReason`, `GrowthStopReason`, with several sweeps `TrainingSweeps` (2 components per training frame:
  * Sweep, Frame within it), early stopping's `BestIteration`, `BestValidationLoss` and
  * `LastValidationLoss`, `ValidationHistory` (3 components per validation: Iteration, Loss, Gaussians),
- * `GapFilling` (string: what FillGaps added, or "off"), `ReflectivitySolves` (string, when the reflectivities were
+ * `GapFilling` (string: what FillGaps added, or "off"), `GaussianMerge` (string: what the merge did, or "off"), `ReflectivitySolves` (string, when the reflectivities were
  * solved: how many solves, their seconds, the last one's CGLS iterations and objective)
  * (bigus::TrainerReport), the training geometry `TrainingPoses`, `TrainingFrameSize`,
  * `TrainingFanMask` (what the render filters' Coverage array is computed from), `TrainingSettings` (strings: every setting the run chose or was
@@ -244,6 +244,12 @@ public:
   vtkGetMacro(FillGaps, bool);
   vtkBooleanMacro(FillGaps, bool);
   ///@}
+  ///@{ Last, merge neighbouring Gaussians that one Gaussian represents: moment-matched pairs whose relative
+  /// integrated squared error ||a + b - merged||^2 / ||a + b||^2 (over 3D) stays below MergeTolerance
+  /// (bigus::MergeGaussians; default 0.001, 0 = off). Field data `GaussianMerge` says what was merged.
+  vtkSetClampMacro(MergeTolerance, double, 0.0, 1.0);
+  vtkGetMacro(MergeTolerance, double);
+  ///@}
   ///@{ Which frames to train on: all valid frames except those with index % HoldOutEvery ==
   /// HoldOutOffset (HoldOutEvery 0 = none; the index within the frame's own sweep), or the explicit list
   /// when one is set (an index outside the input fails the request); with HoldOutSweep >= 0 (default -1,
@@ -388,6 +394,7 @@ protected:
   double GrowthMargin;
   int GrowthPatience;
   bool FillGaps;
+  double MergeTolerance; // from bigus::TrainerSettings::Merge
   int HoldOutEvery = 0;
   int HoldOutOffset = 0;
   int HoldOutSweep = -1;

@@ -14,6 +14,7 @@
 #include "vtkUltrasoundSequenceReader.h"
 #include "vtkXMLImageDataWriter.h"
 #include "vtkXMLPolyDataReader.h"
+#include "vtkXMLPolyDataWriter.h"
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -190,6 +191,21 @@ int ThreadsPerRank()
   MPI_Comm_size(node, &local);
   MPI_Comm_free(&node);
   return std::max(1, static_cast<int>(std::thread::hardware_concurrency()) / local);
+}
+
+int WriteField(vtkPolyData* field, const std::string& path)
+{
+  const std::string temporary = TemporaryName(path);
+  vtkNew<vtkXMLPolyDataWriter> writer;
+  writer->SetInputData(field);
+  writer->SetFileName(temporary.c_str());
+  writer->SetDataModeToAppended();
+  if (!writer->Write() || !Publish(temporary, path))
+  {
+    std::remove(temporary.c_str());
+    return Fail(path + ": cannot write the field");
+  }
+  return 0;
 }
 
 int WriteImage(vtkImageData* image, const std::string& path)

@@ -42,6 +42,8 @@ Command AddRenderCommand(CLI::App& app);
 Command AddEvaluateCommand(CLI::App& app);
 Command AddSweepCommand(CLI::App& app);
 Command AddFillGapsCommand(CLI::App& app);
+/// `bigus merge`: merge neighbouring Gaussians of a trained field (bigusMergeCommand.cxx).
+Command AddMergeCommand(CLI::App& app);
 /// `bigus batch`: the jobs of a manifest, in one process or on MPI ranks (bigusBatchCommand.cxx).
 Command AddBatchCommand(CLI::App& app);
 /// @p sourceDirectory: where `bigus benchmark` finds Examples/Data and Testing/Data unless --data says.
@@ -87,6 +89,10 @@ vtkSmartPointer<vtkUltrasoundSequenceReader> ReadSweep(const SweepOptions& o);
 
 /// Reads a Gaussian field (.vtp with point data Scale, Rotation, Reflectivity); null after a message.
 vtkSmartPointer<vtkPolyData> ReadField(const std::string& file);
+
+/// Writes @p field (.vtp, appended data) under a temporary name, then renames it to @p path (Publish); 0, or 1
+/// after a message (the temporary file removed, an existing @p path untouched).
+int WriteField(vtkPolyData* field, const std::string& path);
 
 /// A copy of @p sweep that shares its frames and owns its field data, so that its ImageToReference can be
 /// changed (refined poses) without touching @p sweep.

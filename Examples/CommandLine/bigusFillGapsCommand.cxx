@@ -7,7 +7,6 @@
 #include "vtkNew.h"
 #include "vtkPolyData.h"
 #include "vtkStringArray.h"
-#include "vtkXMLPolyDataWriter.h"
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -63,15 +62,9 @@ int RunFillGaps(const FillGapsOptions& o)
   const std::string text = bigus::DescribeGapFilling(report, o.Settings);
   note->InsertNextValue(text);
   output->GetFieldData()->AddArray(note);
-  const std::string temporary = TemporaryName(o.Output);
-  vtkNew<vtkXMLPolyDataWriter> writer;
-  writer->SetInputData(output);
-  writer->SetFileName(temporary.c_str());
-  writer->SetDataModeToAppended();
-  if (!writer->Write() || !Publish(temporary, o.Output))
+  if (WriteField(output, o.Output) != 0)
   {
-    std::remove(temporary.c_str());
-    return Fail(o.Output + ": cannot write the field");
+    return 1;
   }
   std::printf("%s: %lld Gaussians, %s\n", o.Output.c_str(), static_cast<long long>(before + report.Added), text.c_str());
   return 0;

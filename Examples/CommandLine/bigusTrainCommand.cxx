@@ -17,7 +17,6 @@
 #include "vtkSMPTools.h"
 #include "vtkUltrasoundSequenceReader.h"
 #include "vtkUltrasoundSequenceWriter.h"
-#include "vtkXMLPolyDataWriter.h"
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -45,7 +44,7 @@ struct TrainOptions
   std::vector<int> Frames; ///< explicit training frames (empty: the hold-out rule)
   double TimeBudget = 0, ElevationSigma = 0, EvaluationInterval = 0;
   long long MaxGaussians = 0, InitialGaussians = 0;
-  double GrowthMargin = 0, ResidualSeedShare = 0, CoarseFraction = 0;
+  double GrowthMargin = 0, ResidualSeedShare = 0, CoarseFraction = 0, MergeTolerance = 0;
   int GrowthPatience = 0, SolveIterations = 0;
   bool NoFillGaps = false, ReflectivitySolve = false, DenseStart = false, DenseAdam = false,
        NoPixelGridFit = false, RefinePoses = false, RefineTimeOffset = false, RefineImageToProbe = false;
@@ -68,6 +67,7 @@ struct TrainOptions
     this->Seed = defaults->GetSeed();
     this->FramesPerStep = defaults->GetFramesPerStep();
     this->CoarseFraction = defaults->GetCoarseFraction();
+    this->MergeTolerance = defaults->GetMergeTolerance();
   }
 };
 
@@ -216,6 +216,7 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
   trainer->SetGrowthPatience(o.GrowthPatience);
   trainer->SetResidualSeedShare(o.ResidualSeedShare);
   trainer->SetFillGaps(!o.NoFillGaps);
+  trainer->SetMergeTolerance(o.MergeTolerance);
   trainer->SetReflectivitySolve(o.ReflectivitySolve);
   trainer->SetSolveIterations(o.SolveIterations);
   trainer->SetDenseInitialisation(o.DenseStart);
@@ -307,15 +308,9 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
   {
     return 0; // every rank holds the same field; rank 0 writes it
   }
-  const std::string temporary = TemporaryName(o.Output);
-  vtkNew<vtkXMLPolyDataWriter> writer;
-  writer->SetInputConnection(trainer->GetOutputPort());
-  writer->SetFileName(temporary.c_str());
-  writer->SetDataModeToAppended();
-  if (!writer->Write() || !Publish(temporary, o.Output))
+  if (WriteField(trainer->GetOutput(), o.Output) != 0)
   {
-    std::remove(temporary.c_str());
-    return Fail(o.Output + ": cannot write the field");
+    return 1;
   }
   vtkDataArray* seeds = trainer->GetOutput()->GetFieldData()->GetArray("InitialGaussians");
   std::printf("field          %s: %lld Gaussians (from %lld seeds) after %d iterations in %.1f s (stop: %s; growth: %s)\n",
@@ -334,6 +329,10 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
   if (vtkAbstractArray* gaps = fd->GetAbstractArray("GapFilling"))
   {
     std::printf("gap filling    %s\n", gaps->GetVariantValue(0).ToString().c_str());
+  }
+  if (vtkAbstractArray* merge = fd->GetAbstractArray("GaussianMerge"))
+  {
+    std::printf("merge          %s\n", merge->GetVariantValue(0).ToString().c_str());
   }
   if (vtkAbstractArray* solves = fd->GetAbstractArray("ReflectivitySolves"))
   {
@@ -504,6 +503,12 @@ Command AddTrainCommand(CLI::App& app)
     ->check(CLI::NonNegativeNumber);
   trainCommand->add_flag("--no-fill-gaps", train.NoFillGaps,
     "Leave gaps between training frames wider than the beam empty (default: bridged, as bigus fill-gaps does)");
+  trainCommand
+    ->add_option("--merge-tolerance", train.MergeTolerance,
+      "Last, merge neighbouring Gaussians whose moment-matched merge has a relative integrated squared error "
+      "below this (as bigus merge does); 0: off")
+    ->capture_default_str()
+    ->check(CLI::Range(0.0, 1.0));
   trainCommand->add_option("--elevation-sigma", train.ElevationSigma, "Elevation beam sigma, mm (FWHM / 2.355); 0: chosen from the sweep (frame spacing, speckle decorrelation)")
     ->capture_default_str();
   trainCommand->add_option("--backend", train.Backend, "Training backend: auto, cpu or cuda (as registered)")

@@ -1177,6 +1177,26 @@ bool Trainer::Finish(std::string* error)
       }
     }
   }
+  if (s.Merge.Tolerance > 0)
+  {
+    if (!this->PullState(error))
+    {
+      return false;
+    }
+    GaussianField field = this->State.Gaussians.Field;
+    this->Report.Merge = MergeGaussians(field, s.Merge);
+    if (this->Report.Merge.Merged > 0)
+    {
+      // Fresh optimiser moments, as after SetField: a merged Gaussian is a new one.
+      this->State.Gaussians = OptimizerState();
+      this->State.Gaussians.Field = std::move(field);
+      this->State.Gaussians.ResizeToField();
+      if (!this->PushState(error))
+      {
+        return false;
+      }
+    }
+  }
   this->Report.Gaussians = this->GetField().Count();
   this->Report.Seconds += Seconds() - start;
   return true;

@@ -577,7 +577,8 @@ TEST(Trainer, TrainingInStagesEqualsOneRunAndOnlyFinishPrunes)
   const std::int64_t before = staged.GetField().Count();
   ASSERT_TRUE(staged.Finish(&error)) << error;
   EXPECT_GT(staged.GetReport().PrunedAtEnd, 0);
-  EXPECT_EQ(staged.GetField().Count(), before - staged.GetReport().PrunedAtEnd);
+  const TrainerReport& r = staged.GetReport();
+  EXPECT_EQ(staged.GetField().Count(), before - r.PrunedAtEnd + r.GapFilling.Added - r.Merge.Merged);
 }
 
 TEST(Trainer, ATimeBudgetAloneIsTheSchedule)
@@ -678,6 +679,39 @@ TEST(Trainer, FillingAGapBetweenTrainingFramesRendersTheFramesInsideItBetter)
     EXPECT_EQ(trainer.GetField().Count(), trainer.GetReport().Gaussians);
   }
   EXPECT_GT(psnr[1], psnr[0] + 0.5); // measured: 20.24 -> 21.76 dB
+}
+
+TEST(Trainer, TheMergeAtTheEndIsMergeGaussiansOnTheTrainedFieldAndKeepsItsRender)
+{
+  // The same deterministic run with the merge off and on: the merged run's field is MergeGaussians on the
+  // other's, it is smaller, and it renders the held-out frames within 0.05 dB of it.
+  std::vector<int> heldOut;
+  TrainingData data = SyntheticSweep(KnownField(400, 3), 0.5, heldOut);
+  GaussianField fields[2];
+  double psnr[2];
+  for (int merge = 0; merge < 2; ++merge)
+  {
+    TrainerSettings s = ShortSettings();
+    s.Merge.Tolerance = merge ? 1e-3 : 0;
+    Trainer trainer(data, s);
+    std::string error;
+    ASSERT_TRUE(trainer.Initialize(&error)) << error;
+    ASSERT_TRUE(trainer.Run(nullptr, nullptr, &error)) << error;
+    fields[merge] = trainer.GetField();
+    psnr[merge] = HeldOutPsnr(trainer, heldOut);
+    const GaussianMergeReport& r = trainer.GetReport().Merge;
+    std::printf("merge %s: %lld Gaussians, held out %.3f dB; %s\n", merge ? "on" : "off",
+      static_cast<long long>(fields[merge].Count()), psnr[merge], DescribeGaussianMerge(r, s.Merge).c_str());
+    EXPECT_EQ(r.Merged > 0, merge == 1);
+    EXPECT_EQ(trainer.GetReport().Gaussians, fields[merge].Count());
+  }
+  GaussianField expected = fields[0];
+  GaussianMergeSettings settings;
+  settings.Tolerance = 1e-3;
+  MergeGaussians(expected, settings);
+  ExpectSameField(fields[1], expected);
+  EXPECT_LT(fields[1].Count(), fields[0].Count());
+  EXPECT_NEAR(psnr[1], psnr[0], 0.05);
 }
 
 TEST(Trainer, APoseTheRendererRejectsFailsTheRunWithItsMessage)
@@ -1364,7 +1398,15 @@ TEST(GaussianFieldTrainer, PipelineOutputsTheFieldOfTheDataModel)
   vtkPolyData* field = trainer->GetOutput();
   const vtkIdType n = field->GetNumberOfPoints();
   EXPECT_EQ(n, trainer->GetNumberOfGaussians());
-  EXPECT_GT(n, 400);
+  // The merge (on by default) says what it took: "M pairs merged of N Gaussians ...", N - M = n.
+  auto* merge = vtkStringArray::SafeDownCast(field->GetFieldData()->GetAbstractArray("GaussianMerge"));
+  ASSERT_NE(merge, nullptr);
+  long long merged = -1, before = -1;
+  ASSERT_EQ(std::sscanf(merge->GetValue(0).c_str(), "%lld pairs merged of %lld Gaussians", &merged, &before), 2)
+    << merge->GetValue(0);
+  EXPECT_EQ(before - merged, n);
+  EXPECT_GT(before, 400);
+  EXPECT_GT(n, 200);
   EXPECT_EQ(field->GetNumberOfVerts(), n) << "one vertex per Gaussian, so it shows as a point cloud";
   for (const char* name : { "Scale", "Rotation", "Reflectivity" })
   {

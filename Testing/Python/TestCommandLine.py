@@ -166,11 +166,13 @@ def read_field(path):
 
 def check_fill_gaps(sweep, xml, out):
     """Frames 6 to 13 left out of training: bigus train --no-fill-gaps leaves the gap empty, bigus fill-gaps
-    bridges it (and only adds Gaussians); train bridges it by default; bad inputs are refused by name."""
+    bridges it (and only adds Gaussians); train bridges it by default (both trained without the merge, which
+    comes last); bad inputs are refused by name."""
     frames = [str(k) for k in range(20) if not 6 <= k <= 13]
     empty = os.path.join(out, "nwire_gap.vtp")
     code, out_text, err = run("train", sweep, "--calibration", xml, "-o", empty, "--frames", *frames,
-                              "--iterations", "20", "--elevation-sigma", "0.1", "--no-fill-gaps")
+                              "--iterations", "20", "--elevation-sigma", "0.1", "--no-fill-gaps",
+                              "--merge-tolerance", "0")
     assert code == 0 and "FillGaps = off" in out_text and "gap filling    off" in out_text, (out_text, err)
     filled = os.path.join(out, "nwire_gap_filled.vtp")
     code, out_text, err = run("fill-gaps", empty, "-o", filled)
@@ -185,7 +187,7 @@ def check_fill_gaps(sweep, xml, out):
         assert after.GetPoint(i) == before.GetPoint(i), i
     trained = os.path.join(out, "nwire_gap_trained.vtp")
     code, out_text, err = run("train", sweep, "--calibration", xml, "-o", trained, "--frames", *frames,
-                              "--iterations", "20", "--elevation-sigma", "0.1")
+                              "--iterations", "20", "--elevation-sigma", "0.1", "--merge-tolerance", "0")
     assert code == 0 and "FillGaps = on" in out_text and "gap filling    1 gaps bridged" in out_text, out_text
     assert read_field(trained).GetNumberOfPoints() == after.GetNumberOfPoints()
 
@@ -204,6 +206,32 @@ def check_fill_gaps(sweep, xml, out):
     code, _, err = run("fill-gaps", bare, "-o", os.path.join(out, "bare_filled.vtp"))
     assert code == 1 and err.count("\n") == 1 and "no field data TrainingPoses" in err, err
     assert not os.path.exists(os.path.join(out, "bare_filled.vtp"))
+
+
+def check_merge(sweep, xml, out):
+    """bigus train merges its field last by default and says so; bigus merge makes a smaller field that keeps
+    the field data and says what it merged; the input is never overwritten."""
+    trained = os.path.join(out, "nwire_merged_trained.vtp")
+    code, out_text, err = run("train", sweep, "--calibration", xml, "-o", trained, "--iterations", "20",
+                              "--elevation-sigma", "0.5")
+    assert code == 0 and "merge          " in out_text and "below 0.001" in out_text, (out_text, err)
+    before = read_field(trained)
+    assert "below 0.001" in before.GetFieldData().GetAbstractArray("GaussianMerge").GetValue(0)
+    merged = os.path.join(out, "nwire_merged.vtp")
+    code, out_text, err = run("merge", trained, "-o", merged, "--tolerance", "0.05")
+    assert code == 0 and "pairs merged" in out_text, (out_text, err)
+    after = read_field(merged)
+    assert 0 < after.GetNumberOfPoints() < before.GetNumberOfPoints()
+    note = after.GetFieldData().GetAbstractArray("GaussianMerge").GetValue(0)
+    pairs = before.GetNumberOfPoints() - after.GetNumberOfPoints()
+    assert note.startswith("%d pairs merged of %d Gaussians" % (pairs, before.GetNumberOfPoints())), note
+    for name in ("TrainingPoses", "ElevationSigma", "Gamma"):
+        assert after.GetFieldData().GetArray(name) is not None, name
+    kept = open(trained, "rb").read()
+    code, _, err = run("merge", trained, "-o", trained)
+    assert code == 1 and "overwrite" in err and open(trained, "rb").read() == kept, err
+    code, _, err = run("merge", trained, "-o", merged, "--tolerance", "0")
+    assert code == 2, (code, err)
 
 
 def check_refine_poses(sweep, xml, out):
@@ -435,6 +463,7 @@ def main():
     assert sorted(int(frames.GetTuple1(k)) for k in range(frames.GetNumberOfTuples())) == [0, 1, 3]
 
     check_fill_gaps(sweep, xml, out)
+    check_merge(sweep, xml, out)
     check_refine_poses(sweep, xml, out)
     check_several_sweeps(data, sweep, xml, out)
 

@@ -1,0 +1,260 @@
+// Merging of neighbouring Gaussians (see bigusGaussianMerging.h).
+#include "bigusGaussianMerging.h"
+
+#include "vtkIdList.h"
+#include "vtkNew.h"
+#include "vtkPoints.h"
+#include "vtkPolyData.h"
+#include "vtkSMPThreadLocalObject.h"
+#include "vtkSMPTools.h"
+#include "vtkStaticPointLocator.h"
+
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+#include <Eigen/Eigenvalues>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <numeric>
+#include <tuple>
+#include <vector>
+
+namespace bigus
+{
+namespace
+{
+using Matrix3 = Eigen::Matrix3d;
+using Vector3 = Eigen::Vector3d;
+
+constexpr double MinimumScale = 1e-6; // mm: a merged covariance's degenerate axis
+
+/// A Gaussian as its reflectivity, mean and covariance (mm^2).
+struct Moments
+{
+  double R = 0;
+  Vector3 Mu;
+  Matrix3 Sigma;
+  double Det = 0; ///< det Sigma
+};
+
+Moments ToMoments(const GaussianParams& g)
+{
+  double q[4] = { g.Quaternion[0], g.Quaternion[1], g.Quaternion[2], g.Quaternion[3] };
+  const double n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+  for (double& v : q)
+  {
+    v = n > 0 ? v / n : 0;
+  }
+  if (!(n > 0))
+  {
+    q[0] = 1;
+  }
+  double R[3][3];
+  QuaternionToMatrix(q, R);
+  Matrix3 rotation;
+  Vector3 variance;
+  for (int i = 0; i < 3; ++i)
+  {
+    for (int j = 0; j < 3; ++j)
+    {
+      rotation(i, j) = R[i][j];
+    }
+    variance(i) = std::exp(2 * g.LogScale[i]);
+  }
+  Moments m;
+  m.R = g.Reflectivity;
+  m.Mu = Vector3(g.Mean[0], g.Mean[1], g.Mean[2]);
+  m.Sigma = rotation * variance.asDiagonal() * rotation.transpose();
+  m.Det = variance.prod();
+  return m;
+}
+
+/// <g_a, g_b> / (2 pi)^(3/2) (the header's formula); false when Sigma_a + Sigma_b is not positive definite.
+bool Overlap(const Moments& a, const Moments& b, double& value)
+{
+  const Eigen::LLT<Matrix3> llt(a.Sigma + b.Sigma);
+  if (llt.info() != Eigen::Success)
+  {
+    return false;
+  }
+  const Matrix3& L = llt.matrixL();
+  const double det = std::pow(L(0, 0) * L(1, 1) * L(2, 2), 2);
+  const Vector3 d = a.Mu - b.Mu;
+  const double mahalanobis = d.dot(llt.solve(d));
+  value = a.R * b.R * std::sqrt(a.Det * b.Det / det) * std::exp(-0.5 * mahalanobis);
+  return std::isfinite(value);
+}
+}
+
+GaussianPairMerge MergeGaussianPair(const GaussianParams& ga, const GaussianParams& gb)
+{
+  GaussianPairMerge result;
+  if (!(ga.Reflectivity * gb.Reflectivity > 0))
+  {
+    return result;
+  }
+  const Moments a = ToMoments(ga), b = ToMoments(gb);
+  const double massA = a.R * std::sqrt(a.Det), massB = b.R * std::sqrt(b.Det), mass = massA + massB;
+  const double wa = massA / mass, wb = massB / mass; // both positive: same sign
+  Moments m;
+  m.Mu = wa * a.Mu + wb * b.Mu;
+  const Vector3 da = a.Mu - m.Mu, db = b.Mu - m.Mu;
+  m.Sigma = wa * (a.Sigma + da * da.transpose()) + wb * (b.Sigma + db * db.transpose());
+  m.Sigma = 0.5 * (m.Sigma + m.Sigma.transpose());
+  const Eigen::SelfAdjointEigenSolver<Matrix3> eigen(m.Sigma);
+  if (eigen.info() != Eigen::Success)
+  {
+    return result;
+  }
+  Vector3 variance = eigen.eigenvalues().cwiseMax(MinimumScale * MinimumScale);
+  Matrix3 axes = eigen.eigenvectors();
+  if (axes.determinant() < 0)
+  {
+    axes.col(2) = -axes.col(2);
+  }
+  // The merged Gaussian as stored (its covariance rebuilt from the clamped scales), so that the error is that
+  // of the Gaussian the field will hold.
+  m.Sigma = axes * variance.asDiagonal() * axes.transpose();
+  m.Det = variance.prod();
+  m.R = mass / std::sqrt(m.Det);
+  double aa, bb, ab, mm, am, bm;
+  if (!Overlap(a, a, aa) || !Overlap(b, b, bb) || !Overlap(a, b, ab) || !Overlap(m, m, mm) || !Overlap(a, m, am) ||
+    !Overlap(b, m, bm))
+  {
+    return result;
+  }
+  const double norm = aa + bb + 2 * ab;
+  const double error = (norm + mm - 2 * am - 2 * bm) / norm;
+  if (!(norm > 0) || !std::isfinite(error))
+  {
+    return result;
+  }
+  GaussianParams& g = result.Merged;
+  for (int k = 0; k < 3; ++k)
+  {
+    g.Mean[k] = m.Mu(k);
+    g.LogScale[k] = 0.5 * std::log(variance(k));
+  }
+  const double u[3] = { axes(0, 0), axes(1, 0), axes(2, 0) };
+  const double v[3] = { axes(0, 1), axes(1, 1), axes(2, 1) };
+  const double n[3] = { axes(0, 2), axes(1, 2), axes(2, 2) };
+  QuaternionFromAxes(u, v, n, g.Quaternion);
+  g.Reflectivity = m.R;
+  result.Error = std::max(error, 0.0);
+  return result;
+}
+
+GaussianMergeReport MergeGaussians(GaussianField& field, const GaussianMergeSettings& settings)
+{
+  const auto start = std::chrono::steady_clock::now();
+  GaussianMergeReport report;
+  report.Before = field.Count();
+  while (settings.Tolerance > 0 && report.Passes < settings.MaximumPasses && field.Count() > 1)
+  {
+    const std::int64_t n = field.Count();
+    vtkNew<vtkPoints> points;
+    points->SetDataTypeToDouble();
+    points->SetNumberOfPoints(n);
+    for (std::int64_t i = 0; i < n; ++i)
+    {
+      points->SetPoint(i, field.Means[3 * i], field.Means[3 * i + 1], field.Means[3 * i + 2]);
+    }
+    vtkNew<vtkPolyData> cloud;
+    cloud->SetPoints(points);
+    vtkNew<vtkStaticPointLocator> locator;
+    locator->SetDataSet(cloud);
+    locator->BuildLocator();
+    // Each Gaussian's best partner among its nearest neighbours (both of a pair find it: kept once, i < j).
+    std::vector<std::int64_t> partner(n, -1);
+    std::vector<GaussianPairMerge> best(n);
+    vtkSMPThreadLocalObject<vtkIdList> neighbours;
+    const int wanted = static_cast<int>(std::min<std::int64_t>(settings.Neighbours + 1, n));
+    vtkSMPTools::For(0, n, 1024, [&](std::int64_t begin, std::int64_t end) {
+      vtkIdList* ids = neighbours.Local();
+      for (std::int64_t i = begin; i < end; ++i)
+      {
+        const GaussianParams gi = LoadGaussian(
+          field.Means.data(), field.LogScales.data(), field.Quaternions.data(), field.Reflectivities.data(), i);
+        locator->FindClosestNPoints(wanted, gi.Mean, ids);
+        for (vtkIdType k = 0; k < ids->GetNumberOfIds(); ++k)
+        {
+          const std::int64_t j = ids->GetId(k);
+          if (j == i)
+          {
+            continue;
+          }
+          const GaussianParams gj = LoadGaussian(
+            field.Means.data(), field.LogScales.data(), field.Quaternions.data(), field.Reflectivities.data(), j);
+          const GaussianPairMerge merge = i < j ? MergeGaussianPair(gi, gj) : MergeGaussianPair(gj, gi);
+          if (merge.Error < settings.Tolerance && merge.Error < best[i].Error)
+          {
+            best[i] = merge;
+            partner[i] = j;
+          }
+        }
+      }
+    });
+    std::vector<std::int64_t> order;
+    for (std::int64_t i = 0; i < n; ++i)
+    {
+      if (partner[i] >= 0 && (i < partner[i] || partner[partner[i]] != i))
+      {
+        order.push_back(i);
+      }
+    }
+    std::sort(order.begin(), order.end(), [&](std::int64_t a, std::int64_t b) {
+      return std::tie(best[a].Error, a) < std::tie(best[b].Error, b);
+    });
+    std::vector<unsigned char> used(n, 0), keep(n, 1);
+    std::int64_t merged = 0;
+    for (std::int64_t i : order)
+    {
+      const std::int64_t j = partner[i];
+      if (used[i] || used[j])
+      {
+        continue;
+      }
+      used[i] = used[j] = 1;
+      const std::int64_t to = std::min(i, j);
+      const GaussianParams& g = best[i].Merged;
+      for (int k = 0; k < 3; ++k)
+      {
+        field.Means[3 * to + k] = static_cast<float>(g.Mean[k]);
+        field.LogScales[3 * to + k] = static_cast<float>(g.LogScale[k]);
+      }
+      for (int k = 0; k < 4; ++k)
+      {
+        field.Quaternions[4 * to + k] = static_cast<float>(g.Quaternion[k]);
+      }
+      field.Reflectivities[to] = static_cast<float>(g.Reflectivity);
+      keep[std::max(i, j)] = 0;
+      ++merged;
+    }
+    if (merged > 0)
+    {
+      field.Compact(keep);
+    }
+    report.Merged += merged;
+    ++report.Passes;
+    if (merged < n / 100 + 1)
+    {
+      break;
+    }
+  }
+  report.Seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return report;
+}
+
+std::string DescribeGaussianMerge(const GaussianMergeReport& report, const GaussianMergeSettings& settings)
+{
+  char text[300];
+  std::snprintf(text, sizeof(text),
+    "%lld pairs merged of %lld Gaussians in %d passes (relative error of a merge below %.3g; %d neighbours), %.2f s",
+    static_cast<long long>(report.Merged), static_cast<long long>(report.Before), report.Passes, settings.Tolerance,
+    settings.Neighbours, report.Seconds);
+  return text;
+}
+
+} // namespace bigus
