@@ -266,10 +266,15 @@ TEST(SeveralSweeps, WhatDependsOnTheFrameSpacingIsMeasuredWithinEachSweep)
 TEST(SeveralSweeps, AFieldTrainedOnTwoSweepsRendersTheHeldOutFramesOfBoth)
 {
   // Every 4th frame of each sweep held out (k mod 4 == 2, the index within the sweep): the field of both
-  // sweeps renders the held-out frames of each about as well as that sweep's own field, and far better than
-  // the field of the other sweep, which never saw along that path.
+  // sweeps renders the held-out frames of each about as well as that sweep's own field or better, far better
+  // than the field of the other sweep, which never saw along that path, and oblique slices better than either.
+  // Each field with the elevation sigma that suits it (measured, docs/FINDINGS.md "Two crossing sweeps and the
+  // beam"): the frames are thin reslices of the volume, so the two sweeps together, which see each other's
+  // elevation, want a narrow beam (0.5 mm); a sweep alone, 1 mm apart, a wide one (1 mm) to fill between its
+  // planes. With 1 mm for both sweeps too, the joint field was 2 to 3 dB below each sweep's own.
   Sweeps s;
   auto both = MakeTrainer({ s.Parallel, s.Orthogonal });
+  both->SetElevationSigma(0.5);
   auto parallel = MakeTrainer({ s.Parallel });
   auto orthogonal = MakeTrainer({ s.Orthogonal });
   for (vtkGaussianFieldTrainer* t : { both.Get(), parallel.Get(), orthogonal.Get() })
@@ -304,17 +309,20 @@ TEST(SeveralSweeps, AFieldTrainedOnTwoSweepsRendersTheHeldOutFramesOfBoth)
     Psnr(parallel->GetOutput(), s.Parallel, true), Psnr(orthogonal->GetOutput(), s.Parallel, true) };
   const double onOrthogonal[3] = { Psnr(both->GetOutput(), s.Orthogonal, true),
     Psnr(parallel->GetOutput(), s.Orthogonal, true), Psnr(orthogonal->GetOutput(), s.Orthogonal, true) };
+  const double onOblique[3] = { Psnr(both->GetOutput(), s.Oblique, false), Psnr(parallel->GetOutput(), s.Oblique, false),
+    Psnr(orthogonal->GetOutput(), s.Oblique, false) };
   std::printf("held-out frames of the parallel sweep: both sweeps' field %.2f dB, parallel's %.2f, orthogonal's %.2f\n",
     onParallel[0], onParallel[1], onParallel[2]);
   std::printf("held-out frames of the orthogonal sweep: both %.2f dB, parallel's %.2f, orthogonal's %.2f\n",
     onOrthogonal[0], onOrthogonal[1], onOrthogonal[2]);
-  std::printf("oblique slices: both %.2f dB, parallel's %.2f, orthogonal's %.2f (measured, not asserted)\n",
-    Psnr(both->GetOutput(), s.Oblique, false), Psnr(parallel->GetOutput(), s.Oblique, false),
-    Psnr(orthogonal->GetOutput(), s.Oblique, false));
+  std::printf("oblique slices: both %.2f dB, parallel's %.2f, orthogonal's %.2f\n", onOblique[0], onOblique[1],
+    onOblique[2]);
+  // Measured: 30.85 / 28.00 / 18.97, 30.76 / 16.86 / 31.05, 33.03 / 30.00 / 18.98 dB.
   EXPECT_GT(onParallel[0], onParallel[2] + 3);
   EXPECT_GT(onOrthogonal[0], onOrthogonal[1] + 3);
-  EXPECT_GT(onParallel[0], onParallel[1] - 3);
-  EXPECT_GT(onOrthogonal[0], onOrthogonal[2] - 3);
+  EXPECT_GT(onParallel[0], onParallel[1] - 1);
+  EXPECT_GT(onOrthogonal[0], onOrthogonal[2] - 1);
+  EXPECT_GT(onOblique[0], std::max(onOblique[1], onOblique[2]) + 1);
 }
 
 TEST(SeveralSweeps, LeaveOneSweepOutTrainsOnTheOtherSweepsOnly)
@@ -495,3 +503,4 @@ TEST(SeveralSweeps, CompoundingTwoSweepsIsTheMeanOfEveryPixelEitherSweepInserted
   EXPECT_NE(messages->Errors.front().find("frame " + std::to_string(NP + NO)), std::string::npos) << messages->Errors.front();
   messages->Delete();
 }
+
