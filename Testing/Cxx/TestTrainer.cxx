@@ -1876,10 +1876,22 @@ TEST(Trainer, RefiningPosesBringsPerturbedTrainingPosesTowardsTheTruth)
               "tracked poses, %.2f dB on the true poses\n", before, after, HeldOutPsnr(trainer, heldOut),
     HeldOutPsnr(trusting, heldOut), HeldOutPsnr(onTruth, heldOut));
   ASSERT_EQ(trainer.GetReport().PoseCorrections.size(), truth.TrainFrames.size());
-  // Measured: 0.505 -> 0.192 mm; held-out 38.42 dB refined, 33.63 trusting the tracked poses, 55.61 on the
-  // true poses (the aim of 0.5 dB from the true poses is not reached here).
+  // Measured: 0.505 -> 0.187 mm; held-out 38.80 dB refined, 34.89 trusting the tracked poses, 52.25 on the
+  // true poses (scored at the true poses the aim of 0.5 dB from the true poses is far; fairly, below).
   EXPECT_LT(after, 0.5 * before) << "the pose error falls by at least half";
   EXPECT_GT(HeldOutPsnr(trainer, heldOut), HeldOutPsnr(trusting, heldOut) + 2.0);
+  // The fair score: a field trained on refined poses lives in the sweep's refined frame, which one sweep fixes
+  // only up to a motion of the whole sweep (and smooth warps along it), so its held-out frames are scored at
+  // their true poses refined with the field frozen, as view-synthesis papers score test views.
+  const double aligned = AlignedCornerError(trainer.GetData(), truth, truth.TrainFrames, W, H);
+  const double fairRefined = FairPsnr(trainer.GetField(), trainer.Options(), truth, heldOut, s);
+  const double fairTrusting = FairPsnr(trusting.GetField(), trusting.Options(), truth, heldOut, s);
+  const double fairTruth = FairPsnr(onTruth.GetField(), onTruth.Options(), truth, heldOut, s);
+  std::printf("aligned corner error %.3f mm; fair held-out PSNR %.2f dB refined, %.2f trusting, %.2f on the true "
+              "poses\n", aligned, fairRefined, fairTrusting, fairTruth);
+  // Measured: 0.161 mm; 48.00, 38.49, 52.44 dB (4,000 steps: 0.109 mm; 53.49 against 54.81).
+  EXPECT_LT(aligned, 0.4 * before);
+  EXPECT_GT(fairRefined, fairTrusting + 5.0);
 
   // The smoothness prior: the corrections of consecutive training frames differ less.
   auto roughness = [](const TrainerReport& report) {

@@ -5,7 +5,10 @@
 
 #include "bigusRenderer.h"
 #include "bigusSliceFrame.h"
+#include "bigusTrainer.h"
 #include "bigusTrainingEngine.h"
+
+#include <Eigen/Geometry>
 
 #include <gtest/gtest.h>
 
@@ -135,6 +138,69 @@ inline double CornerError(
     }
   }
   return total / (4.0 * frames.size());
+}
+
+/// CornerError after the rigid motion that best maps @p d's corners of @p frames onto @p truth's (Umeyama 1991,
+/// no scaling): the part of the pose error that is not one motion of the whole sweep, which the frames of one
+/// sweep cannot tell from a moved scene.
+inline double AlignedCornerError(
+  const TrainingData& d, const TrainingData& truth, const std::vector<int>& frames, int width, int height)
+{
+  Eigen::Matrix3Xd a(3, 4 * frames.size()), b(3, 4 * frames.size());
+  Eigen::Index c = 0;
+  for (int f : frames)
+  {
+    for (double i : { 0.0, width - 1.0 })
+    {
+      for (double j : { 0.0, height - 1.0 })
+      {
+        for (int k = 0; k < 3; ++k)
+        {
+          const double* p = d.Poses[f].data();
+          const double* q = truth.Poses[f].data();
+          a(k, c) = p[4 * k] * i + p[4 * k + 1] * j + p[4 * k + 3];
+          b(k, c) = q[4 * k] * i + q[4 * k + 1] * j + q[4 * k + 3];
+        }
+        ++c;
+      }
+    }
+  }
+  const Eigen::Matrix4d T = Eigen::umeyama(a, b, false);
+  const Eigen::Matrix3Xd moved = (T.topLeftCorner<3, 3>() * a).colwise() + T.topRightCorner<3, 1>();
+  return (moved - b).colwise().norm().mean();
+}
+
+/// Mean PSNR (dB) of @p field rendered with @p options at @p data's poses of @p frames against @p data's frames.
+inline double PsnrAt(
+  const GaussianField& field, const RenderOptions& options, const TrainingData& data, const std::vector<int>& frames)
+{
+  auto renderer = CreateCpuRenderer();
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
+  std::vector<float> S(pixels), I(pixels);
+  double total = 0;
+  for (int f : frames)
+  {
+    const SliceGeometry g = data.Slice(f);
+    EXPECT_TRUE(renderer->Forward(field.View(), &g, 1, options, S.data(), I.data(), nullptr, nullptr));
+    total += Psnr(I.data(), &data.Frames[pixels * f], pixels);
+  }
+  return total / frames.size();
+}
+
+/**
+ * The fair held-out score of a field trained on refined poses (docs/FINDINGS.md): PsnrAt with each of @p frames'
+ * pose first refined from @p truth's with the field frozen (bigus::RefinePosesWithFieldFrozen, @p steps steps,
+ * @p settings' pose rates and prior), as view-synthesis papers score test views.
+ */
+inline double FairPsnr(const GaussianField& field, const RenderOptions& options, const TrainingData& truth,
+  const std::vector<int>& frames, const TrainerSettings& settings, int steps = 100)
+{
+  TrainingData scored = truth;
+  std::vector<std::array<double, 6>> corrections;
+  std::string error;
+  EXPECT_TRUE(RefinePosesWithFieldFrozen(field, scored, frames, options, settings, steps, "cpu", corrections, &error))
+    << error;
+  return PsnrAt(field, options, scored, frames);
 }
 }
 
