@@ -34,14 +34,20 @@ GaussianParams MakeGaussian(const std::array<double, 3>& mean, const std::array<
   return g;
 }
 
-/// g(x) = r exp(-1/2 (x - mu)^T Sigma^-1 (x - mu)), evaluated through its own axes.
-double Evaluate(const GaussianParams& g, const double x[3])
+/// The rotation of @p g (its quaternion normalised).
+void Rotation(const GaussianParams& g, double R[3][3])
 {
   const double n = std::sqrt(g.Quaternion[0] * g.Quaternion[0] + g.Quaternion[1] * g.Quaternion[1] +
     g.Quaternion[2] * g.Quaternion[2] + g.Quaternion[3] * g.Quaternion[3]);
   const double q[4] = { g.Quaternion[0] / n, g.Quaternion[1] / n, g.Quaternion[2] / n, g.Quaternion[3] / n };
-  double R[3][3];
   QuaternionToMatrix(q, R);
+}
+
+/// g(x) = r exp(-1/2 (x - mu)^T Sigma^-1 (x - mu)), evaluated through its own axes.
+double Evaluate(const GaussianParams& g, const double x[3])
+{
+  double R[3][3];
+  Rotation(g, R);
   double e = 0;
   for (int k = 0; k < 3; ++k)
   {
@@ -113,11 +119,8 @@ Quadrature Integrate(const GaussianParams& a, const GaussianParams& b, const Gau
 /// Mass, mean and covariance of one Gaussian in closed form (to compare with the pair's quadrature).
 void Moments(const GaussianParams& g, double& mass, double covariance[3][3])
 {
-  const double n = std::sqrt(g.Quaternion[0] * g.Quaternion[0] + g.Quaternion[1] * g.Quaternion[1] +
-    g.Quaternion[2] * g.Quaternion[2] + g.Quaternion[3] * g.Quaternion[3]);
-  const double q[4] = { g.Quaternion[0] / n, g.Quaternion[1] / n, g.Quaternion[2] / n, g.Quaternion[3] / n };
   double R[3][3];
-  QuaternionToMatrix(q, R);
+  Rotation(g, R);
   double det = 1;
   for (int k = 0; k < 3; ++k)
   {
