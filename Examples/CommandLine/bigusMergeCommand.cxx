@@ -1,11 +1,11 @@
-// `bigus merge`: merge neighbouring Gaussians of a trained field (bigus::MergeGaussians).
+// `bigus merge`: merge neighbouring Gaussians of a trained field (vtkGaussianFieldMerge).
 #include "bigusCommandLine.h"
-#include "bigusGaussianFieldData.h"
 #include "bigusGaussianMerging.h"
+#include "vtkAbstractArray.h"
 #include "vtkFieldData.h"
+#include "vtkGaussianFieldMerge.h"
 #include "vtkNew.h"
 #include "vtkPolyData.h"
-#include "vtkStringArray.h"
 
 #include <CLI/CLI.hpp>
 #include <cstdio>
@@ -29,27 +29,26 @@ int RunMerge(const MergeOptions& o)
   {
     return 1;
   }
-  bigus::GaussianField field;
-  bigus::FieldModel model;
-  std::string error;
-  if (!bigus::FieldFromPolyData(input, field, model, &error))
+  vtkNew<vtkGaussianFieldMerge> merge;
+  FilterError error;
+  error.Watch(merge);
+  merge->SetInputData(input);
+  merge->SetTolerance(o.Settings.Tolerance);
+  merge->SetNeighbours(o.Settings.Neighbours);
+  merge->SetMaximumPasses(o.Settings.MaximumPasses);
+  merge->Update();
+  vtkPolyData* output = merge->GetOutput();
+  vtkAbstractArray* note = output->GetFieldData()->GetAbstractArray("GaussianMerge");
+  if (!note || output->GetNumberOfPoints() == 0)
   {
-    return Fail(o.Field + ": " + error);
+    return Fail(o.Field + ": " + error.Or("the merge failed"));
   }
-  const bigus::GaussianMergeReport report = bigus::MergeGaussians(field, o.Settings);
-  vtkNew<vtkPolyData> output;
-  bigus::FieldToPolyData(field, model, output);
-  output->GetFieldData()->PassData(input->GetFieldData());
-  vtkNew<vtkStringArray> note;
-  note->SetName("GaussianMerge");
-  const std::string text = bigus::DescribeGaussianMerge(report, o.Settings);
-  note->InsertNextValue(text);
-  output->GetFieldData()->AddArray(note);
   if (WriteField(output, o.Output) != 0)
   {
     return 1;
   }
-  std::printf("%s: %lld Gaussians, %s\n", o.Output.c_str(), static_cast<long long>(field.Count()), text.c_str());
+  std::printf("%s: %lld Gaussians, %s\n", o.Output.c_str(), static_cast<long long>(output->GetNumberOfPoints()),
+    note->GetVariantValue(0).ToString().c_str());
   return 0;
 }
 }
@@ -68,17 +67,17 @@ Command AddMergeCommand(CLI::App& app)
     ->add_option("--tolerance", merge.Settings.Tolerance,
       "Largest relative integrated squared error of a merge, ||a + b - merged||^2 / ||a + b||^2 over 3D")
     ->capture_default_str()
-    ->check(CLI::PositiveNumber);
+    ->check(CLI::Range(1e-12, 1.0));
   mergeCommand
     ->add_option("--neighbours", merge.Settings.Neighbours,
       "Candidates of each Gaussian: the Gaussians with the nearest centres")
     ->capture_default_str()
-    ->check(CLI::PositiveNumber);
+    ->check(CLI::Range(1, 64));
   mergeCommand
     ->add_option("--passes", merge.Settings.MaximumPasses,
       "Most passes over the field (each merges a Gaussian once); errors add up over passes")
     ->capture_default_str()
-    ->check(CLI::PositiveNumber);
+    ->check(CLI::Range(1, 100));
   return { mergeCommand, [options] {
     MergeOptions& merge = *options;
     if (merge.Output == merge.Field)

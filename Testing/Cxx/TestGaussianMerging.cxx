@@ -1,10 +1,20 @@
 // The merge of neighbouring Gaussians (bigusGaussianMerging.h) against independent truth: the pair's mass,
 // centre and second moment and the merge's integrated squared error by quadrature on a 3D grid; a field of
 // twins merged to the field they came from, rendered by the CPU renderer; pairs that must not merge.
+#include "bigusGaussianFieldData.h"
 #include "bigusGaussianMerging.h"
 #include "bigusRenderer.h"
+#include "bigusTestUtilities.h"
 #include "bigusTrainingEngine.h"
 #include "bigusTrainingTestUtilities.h"
+
+#include "vtkDataArray.h"
+#include "vtkFieldData.h"
+#include "vtkGaussianFieldMerge.h"
+#include "vtkIntArray.h"
+#include "vtkNew.h"
+#include "vtkPolyData.h"
+#include "vtkStringArray.h"
 
 #include <gtest/gtest.h>
 
@@ -139,6 +149,45 @@ void Moments(const GaussianParams& g, double& mass, double covariance[3][3])
     }
   }
 }
+
+/// 150 Gaussians 2 mm apart (scales 0.2 to 0.5 mm: far from each other) in @p field, and in @p twins each cut in
+/// two halves 1 % of its smallest scale apart along a random direction.
+void FieldAndTwins(GaussianField& field, GaussianField& twins)
+{
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> uniform(0, 1);
+  std::normal_distribution<double> normal(0, 1);
+  for (int i = 0; i < 150; ++i)
+  {
+    const double mean[3] = { 2.0 * (i % 10), 2.0 * ((i / 10) % 5), 2.0 * (i / 50) };
+    double scales[3], smallest = 1;
+    for (double& s : scales)
+    {
+      s = 0.2 + 0.3 * uniform(rng);
+      smallest = std::min(smallest, s);
+    }
+    const double r = (i % 3 == 0 ? -1 : 1) * (0.2 + uniform(rng));
+    AppendRandomRotation(field, rng, normal);
+    double d[3] = { normal(rng), normal(rng), normal(rng) };
+    const double dn = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    for (int copy = 0; copy < 2; ++copy)
+    {
+      for (int k = 0; k < 3; ++k)
+      {
+        twins.Means.push_back(static_cast<float>(mean[k] + (copy ? 0.005 : -0.005) * smallest * d[k] / dn));
+        twins.LogScales.push_back(static_cast<float>(std::log(scales[k])));
+      }
+      twins.Quaternions.insert(twins.Quaternions.end(), field.Quaternions.end() - 4, field.Quaternions.end());
+      twins.Reflectivities.push_back(static_cast<float>(0.5 * r));
+    }
+    for (int k = 0; k < 3; ++k)
+    {
+      field.Means.push_back(static_cast<float>(mean[k]));
+      field.LogScales.push_back(static_cast<float>(std::log(scales[k])));
+    }
+    field.Reflectivities.push_back(static_cast<float>(r));
+  }
+}
 }
 
 TEST(GaussianMerging, PairKeepsMassCentreAndSecondMomentAndItsErrorMatchesQuadrature)
@@ -207,43 +256,10 @@ TEST(GaussianMerging, IdenticalTwinsMergeExactlyAndOppositeSignsNever)
 
 TEST(GaussianMerging, FieldOfTwinsMergesBackToTheFieldItCameFrom)
 {
-  // 150 Gaussians 2 mm apart (scales 0.2 to 0.5 mm: far from each other), each cut into two halves 1 % of its
-  // smallest scale apart along a random direction: merging must undo exactly the cuts, and the field must
-  // render as the uncut one.
-  std::mt19937_64 rng(7);
-  std::uniform_real_distribution<double> uniform(0, 1);
-  std::normal_distribution<double> normal(0, 1);
+  // Each Gaussian of a field cut into two halves (FieldAndTwins): merging must undo exactly the cuts, and the
+  // field must render as the uncut one.
   GaussianField field, twins;
-  for (int i = 0; i < 150; ++i)
-  {
-    const double mean[3] = { 2.0 * (i % 10), 2.0 * ((i / 10) % 5), 2.0 * (i / 50) };
-    double scales[3], smallest = 1;
-    for (double& s : scales)
-    {
-      s = 0.2 + 0.3 * uniform(rng);
-      smallest = std::min(smallest, s);
-    }
-    const double r = (i % 3 == 0 ? -1 : 1) * (0.2 + uniform(rng));
-    AppendRandomRotation(field, rng, normal);
-    double d[3] = { normal(rng), normal(rng), normal(rng) };
-    const double dn = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-    for (int copy = 0; copy < 2; ++copy)
-    {
-      for (int k = 0; k < 3; ++k)
-      {
-        twins.Means.push_back(static_cast<float>(mean[k] + (copy ? 0.005 : -0.005) * smallest * d[k] / dn));
-        twins.LogScales.push_back(static_cast<float>(std::log(scales[k])));
-      }
-      twins.Quaternions.insert(twins.Quaternions.end(), field.Quaternions.end() - 4, field.Quaternions.end());
-      twins.Reflectivities.push_back(static_cast<float>(0.5 * r));
-    }
-    for (int k = 0; k < 3; ++k)
-    {
-      field.Means.push_back(static_cast<float>(mean[k]));
-      field.LogScales.push_back(static_cast<float>(std::log(scales[k])));
-    }
-    field.Reflectivities.push_back(static_cast<float>(r));
-  }
+  FieldAndTwins(field, twins);
   GaussianField merged = twins;
   GaussianMergeSettings settings;
   settings.Tolerance = 1e-3;
@@ -329,4 +345,55 @@ TEST(GaussianMerging, ChainsMergeOverPassesKeepingTheTotalMomentsAndTheResultIsD
   EXPECT_NEAR(covariance[0][0], 0.25 + positions, 1e-5);
   EXPECT_NEAR(covariance[1][1], 0.09, 1e-5);
   EXPECT_NEAR(covariance[0][1], 0, 1e-6);
+}
+
+TEST(GaussianMerging, TheFilterMergesAFieldAndPassesItsFieldData)
+{
+  // vtkGaussianFieldMerge in a pipeline: the twins merged back, the field data passed with GaussianMerge added;
+  // an input that is no field fails the request with the missing array's name and leaves the output empty.
+  GaussianField field, twins;
+  FieldAndTwins(field, twins);
+  FieldModel model;
+  model.ElevationSigma = 0.4;
+  vtkNew<vtkPolyData> input;
+  FieldToPolyData(twins, model, input);
+  vtkNew<vtkIntArray> frames;
+  frames->SetName("TrainingFrames");
+  frames->InsertNextValue(3);
+  input->GetFieldData()->AddArray(frames);
+  vtkNew<vtkGaussianFieldMerge> merge;
+  merge->SetInputData(input);
+  merge->SetTolerance(1e-3);
+  merge->Update();
+  vtkPolyData* output = merge->GetOutput();
+  EXPECT_EQ(merge->GetMergedPairs(), 150);
+  EXPECT_EQ(output->GetNumberOfPoints(), 150);
+  EXPECT_EQ(output->GetNumberOfVerts(), 150);
+  ASSERT_NE(output->GetFieldData()->GetArray("TrainingFrames"), nullptr);
+  EXPECT_EQ(output->GetFieldData()->GetArray("TrainingFrames")->GetTuple1(0), 3);
+  ASSERT_NE(output->GetFieldData()->GetArray("ElevationSigma"), nullptr);
+  EXPECT_NEAR(output->GetFieldData()->GetArray("ElevationSigma")->GetTuple1(0), 0.4, 1e-12);
+  auto* note = vtkStringArray::SafeDownCast(output->GetFieldData()->GetAbstractArray("GaussianMerge"));
+  ASSERT_NE(note, nullptr);
+  EXPECT_EQ(note->GetValue(0).rfind("150 pairs merged of 300 Gaussians", 0), 0u) << note->GetValue(0);
+  GaussianField back;
+  FieldModel backModel;
+  std::string error;
+  ASSERT_TRUE(FieldFromPolyData(output, back, backModel, &error)) << error;
+  for (std::int64_t i = 0; i < 150; ++i)
+  {
+    EXPECT_NEAR(back.Reflectivities[i], field.Reflectivities[i], 1e-4 * std::abs(field.Reflectivities[i]));
+  }
+
+  vtkNew<vtkPolyData> bare;
+  bare->SetPoints(input->GetPoints());
+  vtkNew<vtkGaussianFieldMerge> failing;
+  bigus_test::MessageCollector* messages = bigus_test::MessageCollector::New();
+  messages->Watch(failing);
+  failing->SetInputData(bare);
+  failing->Update();
+  ASSERT_EQ(messages->Errors.size(), 1u);
+  EXPECT_NE(messages->Errors.front().find("Scale"), std::string::npos) << messages->Errors.front();
+  messages->Delete();
+  EXPECT_EQ(failing->GetOutput()->GetNumberOfPoints(), 0);
 }

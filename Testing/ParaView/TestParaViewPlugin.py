@@ -29,7 +29,7 @@ def main():
     plugin, data, output = sys.argv[1:4]
     os.makedirs(output, exist_ok=True)
     pvs.LoadPlugin(plugin)  # adds the plugin's readers and filters to paraview.simple
-    for name in ("TrackedUltrasoundSequenceReader", "TrainGaussianField", "GaussianFieldSlice"):
+    for name in ("TrackedUltrasoundSequenceReader", "TrainGaussianField", "GaussianFieldSlice", "GaussianFieldMerge"):
         if not hasattr(pvs, name):
             fail("the plugin did not register " + name)
 
@@ -61,6 +61,18 @@ def main():
                                                                     len(progress)))
     field_file = os.path.join(output, "paraview_field.vtp")
     pvs.SaveData(field_file, proxy=trainer)
+
+    # The merge filter: a smaller field with the trainer's field data and what it merged.
+    merged = pvs.GaussianFieldMerge(Input=trainer, Tolerance=0.05)
+    merged.UpdatePipeline()
+    reduced = merged.GetClientSideObject().GetOutputDataObject(0)
+    note = reduced.GetFieldData().GetAbstractArray("GaussianMerge")
+    if not 0 < reduced.GetNumberOfPoints() < field.GetNumberOfPoints() or note is None or \
+            reduced.GetFieldData().GetArray("TrainingPoses") is None:
+        fail("merge: %d of %d Gaussians, note %s" % (reduced.GetNumberOfPoints(), field.GetNumberOfPoints(),
+                                                    note.GetValue(0) if note else None))
+    print("merged %d Gaussians to %d (%s)" % (field.GetNumberOfPoints(), reduced.GetNumberOfPoints(),
+                                              note.GetValue(0)))
 
     # The slice at an oblique plane through the middle of the sweep, written with ParaView's writer.
     bounds = trainer.GetDataInformation().GetBounds()
