@@ -15,7 +15,12 @@
 
 vtkStandardNewMacro(vtkGaussianFieldMerge);
 
-vtkGaussianFieldMerge::vtkGaussianFieldMerge() = default;
+vtkGaussianFieldMerge::vtkGaussianFieldMerge()
+{
+  const bigus::GaussianMergeSettings defaults;
+  this->Neighbours = defaults.Neighbours;
+  this->MaximumPasses = defaults.MaximumPasses;
+}
 
 int vtkGaussianFieldMerge::RequestData(
   vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector* outputVector)

@@ -58,8 +58,8 @@ private:
   void operator=(const vtkGaussianFieldMerge&) = delete;
 
   double Tolerance = 0.01;
-  int Neighbours = 8;
-  int MaximumPasses = 4;
+  int Neighbours;    // from bigus::GaussianMergeSettings
+  int MaximumPasses; // from bigus::GaussianMergeSettings
   vtkIdType MergedPairs = 0;
 };
 

@@ -1,6 +1,5 @@
 // `bigus merge`: merge neighbouring Gaussians of a trained field (vtkGaussianFieldMerge).
 #include "bigusCommandLine.h"
-#include "bigusGaussianMerging.h"
 #include "vtkAbstractArray.h"
 #include "vtkFieldData.h"
 #include "vtkGaussianFieldMerge.h"
@@ -19,7 +18,17 @@ namespace
 struct MergeOptions
 {
   std::string Field, Output;
-  bigus::GaussianMergeSettings Settings;
+  double Tolerance = 0;
+  int Neighbours = 0, Passes = 0;
+
+  /// The filter's own defaults, so that `bigus merge` and vtkGaussianFieldMerge agree.
+  MergeOptions()
+  {
+    vtkNew<vtkGaussianFieldMerge> defaults;
+    this->Tolerance = defaults->GetTolerance();
+    this->Neighbours = defaults->GetNeighbours();
+    this->Passes = defaults->GetMaximumPasses();
+  }
 };
 
 int RunMerge(const MergeOptions& o)
@@ -33,9 +42,9 @@ int RunMerge(const MergeOptions& o)
   FilterError error;
   error.Watch(merge);
   merge->SetInputData(input);
-  merge->SetTolerance(o.Settings.Tolerance);
-  merge->SetNeighbours(o.Settings.Neighbours);
-  merge->SetMaximumPasses(o.Settings.MaximumPasses);
+  merge->SetTolerance(o.Tolerance);
+  merge->SetNeighbours(o.Neighbours);
+  merge->SetMaximumPasses(o.Passes);
   merge->Update();
   vtkPolyData* output = merge->GetOutput();
   vtkAbstractArray* note = output->GetFieldData()->GetAbstractArray("GaussianMerge");
@@ -57,24 +66,23 @@ Command AddMergeCommand(CLI::App& app)
 {
   auto options = std::make_shared<MergeOptions>();
   MergeOptions& merge = *options;
-  merge.Settings.Tolerance = 0.01;
   CLI::App* mergeCommand = app.add_subcommand("merge",
     "Merge neighbouring Gaussians of a field that one Gaussian represents (moment-matched pairs whose relative "
     "integrated squared error stays below the tolerance): a smaller field that renders nearly as before");
   mergeCommand->add_option("FIELD", merge.Field, "Gaussian field (.vtp)")->required()->check(CLI::ExistingFile);
   mergeCommand->add_option("-o,--output", merge.Output, "Field to write (.vtp)")->required();
   mergeCommand
-    ->add_option("--tolerance", merge.Settings.Tolerance,
+    ->add_option("--tolerance", merge.Tolerance,
       "Largest relative integrated squared error of a merge, ||a + b - merged||^2 / ||a + b||^2 over 3D")
     ->capture_default_str()
     ->check(CLI::Range(1e-12, 1.0));
   mergeCommand
-    ->add_option("--neighbours", merge.Settings.Neighbours,
+    ->add_option("--neighbours", merge.Neighbours,
       "Candidates of each Gaussian: the Gaussians with the nearest centres")
     ->capture_default_str()
     ->check(CLI::Range(1, 64));
   mergeCommand
-    ->add_option("--passes", merge.Settings.MaximumPasses,
+    ->add_option("--passes", merge.Passes,
       "Most passes over the field (each merges a Gaussian once); errors add up over passes")
     ->capture_default_str()
     ->check(CLI::Range(1, 100));

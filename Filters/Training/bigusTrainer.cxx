@@ -1183,11 +1183,11 @@ bool Trainer::Finish(std::string* error)
     {
       return false;
     }
-    GaussianField field = this->State.Gaussians.Field;
-    this->Report.Merge = MergeGaussians(field, s.Merge);
+    this->Report.Merge = MergeGaussians(this->State.Gaussians.Field, s.Merge);
     if (this->Report.Merge.Merged > 0)
     {
       // Fresh optimiser moments, as after SetField: a merged Gaussian is a new one.
+      GaussianField field = std::move(this->State.Gaussians.Field);
       this->State.Gaussians = OptimizerState();
       this->State.Gaussians.Field = std::move(field);
       this->State.Gaussians.ResizeToField();

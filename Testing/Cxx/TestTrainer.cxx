@@ -86,18 +86,7 @@ TrainingData SyntheticSweep(const GaussianField& truth, double sigmaE, std::vect
 
 double HeldOutPsnr(const Trainer& trainer, const std::vector<int>& heldOut)
 {
-  auto renderer = CreateCpuRenderer();
-  std::vector<float> S(W * H), I(W * H);
-  double total = 0;
-  for (int k : heldOut)
-  {
-    const SliceGeometry g = trainer.Slice(k);
-    std::string error;
-    EXPECT_TRUE(renderer->Forward(trainer.GetField().View(), &g, 1, trainer.Options(), S.data(), I.data(), nullptr, &error))
-      << error;
-    total += Psnr(I.data(), &trainer.GetData().Frames[std::size_t(W) * H * k], W * H);
-  }
-  return total / heldOut.size();
+  return PsnrAt(trainer.GetField(), trainer.Options(), trainer.GetData(), heldOut);
 }
 }
 
