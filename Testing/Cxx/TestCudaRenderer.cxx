@@ -8,6 +8,7 @@
 #include "bigusCudaRenderer.h"
 #include "bigusGaussianFieldData.h"
 #include "bigusRendererTestUtilities.h"
+#include "bigusThreadReduction.h"
 #include "bigusTrainer.h"
 
 #include "vtkImageData.h"
@@ -829,6 +830,80 @@ TEST(CudaTrainingEngine, TheSolveOperatorsMatchTheCpuEngineAndAreAdjoint)
     right += double(x[i]) * (Aty[0][i] - 0.5);
   }
   EXPECT_NEAR(left, right, 1e-5 * std::abs(right)) << "<A x, y> against <x, A^T y>";
+}
+
+TEST(CudaTrainingEngine, DataParallelStepsOnTwoProcessesAreTheStepsOfOne)
+{
+  // Two processes on this GPU (threads with a ThreadReduction, as the ranks of mpirun): SetReduction switches the
+  // CUDA engine to the CPU engine's step over the CUDA renderer, which sums the halves of each step's frames
+  // through the host. Three steps with pose gradients give both processes the same state, and that state is the
+  // device-resident engine's steps on all the frames in one process, to float rounding; A^T y summed over the
+  // processes' frames is one process's A^T y on all of them.
+  EngineCase c;
+  c.State.FirstMoment = GaussianField();
+  c.State.SecondMoment = GaussianField();
+  c.State.ResizeToField(); // zero moments: a trainer's first step
+  const std::size_t pixels = std::size_t(c.Data.Width) * c.Data.Height;
+  std::mt19937 rng(5);
+  std::normal_distribution<float> normal(0.f, 1.f);
+  std::vector<float> y(2 * pixels);
+  for (float& v : y)
+  {
+    v = normal(rng);
+  }
+  std::vector<double> losses[3], poses[3], Aty[3];
+  OptimizerState after[3];
+  auto train = [&](ProcessReduction* reduction, int e) {
+    std::string error;
+    std::unique_ptr<TrainingEngine> engine = CreateTrainingEngine("cuda", &error);
+    ASSERT_TRUE(engine) << error;
+    ASSERT_TRUE(engine->SetData(&c.Data, &error) && engine->SetReduction(reduction, &error) &&
+      engine->Push(c.State, &error))
+      << error;
+    for (int step = 0; step < 3; ++step)
+    {
+      StepRequest request = c.Request;
+      request.Iteration = step;
+      std::vector<double> pose(6 * request.Count, 0.0);
+      request.PoseGradients = pose.data();
+      double loss = 0;
+      EXPECT_EQ(engine->Step(request, &loss, &error), StepStatus::Done) << error;
+      losses[e].push_back(loss);
+      poses[e].insert(poses[e].end(), pose.begin(), pose.end());
+    }
+    EXPECT_TRUE(engine->Pull(after[e], &error)) << error;
+    // The solve's split: each process applies A^T to its own frames' images.
+    const int rank = reduction ? reduction->Rank() : 0, count = reduction ? 1 : 2;
+    Aty[e].assign(c.State.Count(), 0.0);
+    EXPECT_TRUE(engine->ApplyBasisTranspose(y.data() + rank * pixels, c.Frames.data() + rank, count,
+      c.Request.Options, Aty[e].data(), &error))
+      << error;
+  };
+  train(nullptr, 2);
+  test::RunOnThreads(2, [&](int rank, ProcessReduction& reduction) { train(&reduction, rank); });
+  EXPECT_EQ(losses[0], losses[1]);
+  EXPECT_EQ(poses[0], poses[1]);
+  ExpectSameField(after[0].Field, after[1].Field, "the two processes' fields");
+  ExpectSameField(after[0].SecondMoment, after[1].SecondMoment, "the two processes' Adam v");
+  EXPECT_EQ(after[0].Attribution, after[1].Attribution);
+  EXPECT_EQ(Aty[0], Aty[1]);
+  for (int step = 0; step < 3; ++step)
+  {
+    EXPECT_NEAR(losses[0][step], losses[2][step], (step == 0 ? 1e-6 : 2e-3) * losses[2][step]) << "step " << step;
+    std::printf("step %d: loss of two processes %.9f, of one %.9f\n", step, losses[0][step], losses[2][step]);
+  }
+  const std::size_t first = 6 * c.Frames.size();
+  EXPECT_LT(RelativeDifference(std::vector<double>(poses[0].begin(), poses[0].begin() + first),
+              std::vector<double>(poses[2].begin(), poses[2].begin() + first)),
+    1e-4)
+    << "pose gradients of step 0";
+  std::vector<double> r[2];
+  for (int e = 0; e < 2; ++e)
+  {
+    r[e].assign(after[2 * e].Field.Reflectivities.begin(), after[2 * e].Field.Reflectivities.end());
+  }
+  EXPECT_LT(RelativeDifference(r[0], r[1]), 1e-2) << "reflectivities after three steps";
+  EXPECT_LT(RelativeDifference(Aty[0], Aty[2]), 1e-5) << "A^T y";
 }
 
 int main(int argc, char** argv)
