@@ -152,6 +152,29 @@ BIGUS_HD void QuaternionToMatrix(const double q[4], double R[3][3])
 }
 
 /**
+ * @p q (w, x, y, z; any length) scaled to the unit quaternion @p qn; one of squared length below
+ * MinimumQuaternionNorm2, or not finite, becomes the identity (1, 0, 0, 0): the rotation every part of BIGUS
+ * (renderer, densification, merge) gives a Gaussian whose quaternion has collapsed. Returns |q|, 0 for those.
+ * @p qn may be @p q.
+ */
+BIGUS_HD double NormalizeQuaternion(const double q[4], double qn[4])
+{
+  const double n2 = q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3];
+  if (n2 >= MinimumQuaternionNorm2 && n2 < 1e300)
+  {
+    const double n = std::sqrt(n2);
+    for (int k = 0; k < 4; ++k)
+    {
+      qn[k] = q[k] / n;
+    }
+    return n;
+  }
+  qn[0] = 1;
+  qn[1] = qn[2] = qn[3] = 0;
+  return 0;
+}
+
+/**
  * The unit quaternion (w, x, y, z) of the rotation whose columns are the orthonormal vectors u, v, n: the
  * inverse of QuaternionToMatrix. Shepperd's method: the largest of the four pivots keeps it stable
  * (S. W. Shepperd, "Quaternion from rotation matrix", J. Guidance and Control 1(3), 1978). Host only.
@@ -306,22 +329,7 @@ BIGUS_HD Footprint SetupFootprint(
     c.ScaleClamped[k] = !finite || l < MinimumLogScale || l > MaximumLogScale;
     c.Scale[k] = std::exp(lc);
   }
-  const double n2 = g.Quaternion[0] * g.Quaternion[0] + g.Quaternion[1] * g.Quaternion[1] +
-    g.Quaternion[2] * g.Quaternion[2] + g.Quaternion[3] * g.Quaternion[3];
-  if (n2 >= MinimumQuaternionNorm2 && n2 < 1e300)
-  {
-    c.QNorm = std::sqrt(n2);
-    for (int k = 0; k < 4; ++k)
-    {
-      c.Qn[k] = g.Quaternion[k] / c.QNorm;
-    }
-  }
-  else
-  {
-    c.QNorm = 0;
-    c.Qn[0] = 1;
-    c.Qn[1] = c.Qn[2] = c.Qn[3] = 0;
-  }
+  c.QNorm = NormalizeQuaternion(g.Quaternion, c.Qn);
   double R[3][3];
   QuaternionToMatrix(c.Qn, R);
   for (int i = 0; i < 3; ++i)

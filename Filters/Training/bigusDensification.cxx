@@ -26,11 +26,7 @@ std::int64_t DensifyGaussian(GaussianField& field, std::int64_t i, double splitS
   const bool large = s > splitScale;
   double q[4] = { field.Quaternions[4 * i], field.Quaternions[4 * i + 1], field.Quaternions[4 * i + 2],
     field.Quaternions[4 * i + 3] };
-  const double qn = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
-  for (double& v : q)
-  {
-    v /= qn > 0 ? qn : 1;
-  }
+  NormalizeQuaternion(q, q);
   double R[3][3];
   QuaternionToMatrix(q, R);
   // Split: children at +-s/2, every scale divided by 1.6 (as in 3D Gaussian splatting, Kerbl et al.

@@ -41,16 +41,8 @@ struct Moments
 
 Moments ToMoments(const GaussianParams& g)
 {
-  double q[4] = { g.Quaternion[0], g.Quaternion[1], g.Quaternion[2], g.Quaternion[3] };
-  const double n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
-  for (double& v : q)
-  {
-    v = n > 0 ? v / n : 0;
-  }
-  if (!(n > 0))
-  {
-    q[0] = 1;
-  }
+  double q[4];
+  NormalizeQuaternion(g.Quaternion, q);
   double R[3][3];
   QuaternionToMatrix(q, R);
   Matrix3 rotation;

@@ -944,6 +944,30 @@ TEST(GaussianFootprint, NoNaNOrInfOnExtremeParameters)
 // to double stops being positive definite near aspect 1 / sqrt(eps) ~ 1e8 (gap ~ 19), and its adjugate,
 // the conic, turns indefinite. No three doubles hold such an ellipse exactly; what is asked here is only
 // that the weight stays finite and at most the peak.
+TEST(GaussianFootprint, AQuaternionIsNormalisedAndACollapsedOneIsTheIdentity)
+{
+  // (0, 3, 0, 4) has length 5; a zero, denormal-small or non-finite quaternion is the identity rotation, so the
+  // renderer, densification and the merge turn such a Gaussian alike.
+  const double q[4] = { 0, 3, 0, 4 };
+  double qn[4];
+  EXPECT_DOUBLE_EQ(bigus::NormalizeQuaternion(q, qn), 5.0);
+  EXPECT_DOUBLE_EQ(qn[0], 0.0);
+  EXPECT_DOUBLE_EQ(qn[1], 0.6);
+  EXPECT_DOUBLE_EQ(qn[2], 0.0);
+  EXPECT_DOUBLE_EQ(qn[3], 0.8);
+  const double nan = std::numeric_limits<double>::quiet_NaN(), inf = std::numeric_limits<double>::infinity();
+  const double collapsed[4][4] = { { 0, 0, 0, 0 }, { 1e-20, 0, 0, 0 }, { nan, 0, 0, 1 }, { inf, 1, 0, 0 } };
+  for (const auto& c : collapsed)
+  {
+    double in[4] = { c[0], c[1], c[2], c[3] };
+    EXPECT_EQ(bigus::NormalizeQuaternion(in, in), 0.0);
+    EXPECT_EQ(in[0], 1.0);
+    EXPECT_EQ(in[1], 0.0);
+    EXPECT_EQ(in[2], 0.0);
+    EXPECT_EQ(in[3], 0.0);
+  }
+}
+
 TEST(GaussianFootprint, ExtremeAnisotropyKeepsTheWeightBounded)
 {
   int bad = 0;

@@ -133,6 +133,12 @@ BIGUS_HD void Evaluate(const Case& k, Outputs& out)
   {
     out.Put("QuaternionToMatrixBackward", dq[q]);
   }
+  double qn[4];
+  out.Put("NormalizeQuaternion |q|", NormalizeQuaternion(g.Quaternion, qn));
+  for (int q = 0; q < 4; ++q)
+  {
+    out.Put("NormalizeQuaternion", qn[q]);
+  }
 
   SetupCache cache;
   const Footprint f = SetupFootprint(g, k.Frame, k.SigmaE, k.Cutoff, &cache);
