@@ -540,6 +540,22 @@ int vtkGaussianFieldTrainer::RequestData(
     }
     output->GetFieldData()->AddArray(corrections);
   }
+  if (s.RefinePoses)
+  {
+    const bigus::UntrainedCorrection& u = report.UntrainedCorrections;
+    vtkNew<vtkDoubleArray> untrained;
+    untrained->SetName("UntrainedPoseCorrection");
+    untrained->SetNumberOfComponents(4);
+    const char* names[4] = { "Frames", "Bandwidth (training-frame intervals)", "LeaveOneOutErrorNone (mm)",
+      "LeaveOneOutErrorChosen (mm)" };
+    for (int k = 0; k < 4; ++k)
+    {
+      untrained->SetComponentName(k, names[k]);
+    }
+    const double tuple[4] = { double(u.Frames), u.Bandwidth, u.ErrorNone, u.ErrorChosen };
+    untrained->InsertNextTuple(tuple);
+    output->GetFieldData()->AddArray(untrained);
+  }
   if (s.RefinesPoses())
   {
     // Every input frame's pose as refined, for a sequence written with them (bigus train --refined-poses).

@@ -262,8 +262,8 @@ int RunEvaluate(const EvaluateOptions& o)
   int dims[3];
   truth->GetDimensions(dims);
   // A field trained with pose refinement: the frames at the poses it was trained with (RefinedPoses: the
-  // training frames' own corrections, and the shared time offset and ImageToProbe correction on every frame,
-  // held out or not), unless --tracked-poses.
+  // training frames' own corrections, the smooth part of them on held-out frames (bigus::CorrectUntrainedFrames),
+  // and the shared time offset and ImageToProbe correction on every frame), unless --tracked-poses.
   vtkSmartPointer<vtkImageData> atRefinedPoses;
   std::string posesUsed = "tracked";
   if (vtkDataArray* refined = field->GetFieldData()->GetArray("RefinedPoses"))
@@ -282,8 +282,9 @@ int RunEvaluate(const EvaluateOptions& o)
       }
       truth = atRefinedPoses;
       posesUsed = "refined";
-      std::printf("poses          the field's RefinedPoses (its training frames' corrections; its shared time offset "
-                  "and ImageToProbe correction on every frame); --tracked-poses: the sweep's own\n");
+      std::printf("poses          the field's RefinedPoses (its training frames' corrections, their smooth part on "
+                  "the frames it did not train; its shared time offset and ImageToProbe correction on every frame); "
+                  "--tracked-poses: the sweep's own\n");
     }
     else
     {
@@ -501,7 +502,8 @@ Command AddEvaluateCommand(CLI::App& app)
     "poses are imperfect, as view-synthesis papers report it); both scores are printed and in metrics.json");
   evaluateCommand->add_flag("--tracked-poses", evaluate.TrackedPoses,
     "Score at the sweep's own poses even when the field holds RefinedPoses (default: a field trained with pose "
-    "refinement is scored at the poses it refined, held-out frames with its shared corrections)");
+    "refinement is scored at the poses it refined, held-out frames with its shared corrections and the smooth part of "
+    "their sweep's)");
   evaluateCommand->add_option("--refine-steps", evaluate.RefineSteps, "Adam steps per frame of --refine-poses")
     ->check(CLI::PositiveNumber)
     ->capture_default_str();

@@ -368,6 +368,24 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
       static_cast<long long>(n), sum[0] / std::max<vtkIdType>(1, n), largest[0], sum[1] / std::max<vtkIdType>(1, n),
       largest[1]);
   }
+  if (vtkDataArray* untrained = fd->GetArray("UntrainedPoseCorrection"))
+  {
+    const double* u = untrained->GetTuple(0); // frames, bandwidth, leave-one-out error of none, of the chosen
+    char smoothing[64];
+    std::snprintf(smoothing, sizeof(smoothing), std::isinf(u[1]) ? "the whole sweep" : "%g training-frame intervals", u[1]);
+    if (u[1] == 0)
+    {
+      std::printf("               frames not trained keep their tracked poses: no smoothing of the corrections predicts "
+                  "a training frame's better than none (leave-one-out error %.3f mm at the corners)\n",
+        u[2]);
+    }
+    else if (u[0] > 0)
+    {
+      std::printf("               %.0f frames not trained take their sweep's corrections smoothed over %s (leave-one-out "
+                  "error %.3f mm at the corners against %.3f for none)\n",
+        u[0], smoothing, u[3], u[2]);
+    }
+  }
   if (vtkDataArray* offset = fd->GetArray("TimeOffset"))
   {
     std::printf("time offset    %.1f ms (added to every frame's timestamp to find its tracked pose)\n",
@@ -495,7 +513,8 @@ Command AddTrainCommand(CLI::App& app)
   trainCommand
     ->add_option("--refined-poses", train.RefinedPoses,
       "With a --refine-* option: write the sweep with its frames' ImageToReference as refined (.igs.mha; held-out "
-      "frames take the shared corrections only); one per sweep, in their order (repeat the option)")
+      "frames take the shared corrections and the smooth part of their sweep's); one per sweep, in their order (repeat "
+      "the option)")
     ->allow_extra_args(false);
   trainCommand->add_option("--pose-smoothness", train.PoseSmoothness,
     "With --refine-poses: weight of the prior that keeps the corrections smooth along the sweep (0: none)")

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <utility>
 
 namespace bigus
@@ -45,6 +46,160 @@ PoseStatus PoseCorrectionBetween(const double from[16], const double to[16], int
     xi[3 + k] = t[k];
   }
   return PoseStatus::Ok;
+}
+
+namespace
+{
+/// The kernel-weighted mean of @p frames' corrections at time @p t (bandwidth @p h; infinity: the plain mean),
+/// leaving out frame @p skip; false when no frame is left.
+bool KernelMean(const std::vector<int>& frames, const std::vector<double>& times, double t, double h, int skip,
+  const std::vector<std::array<double, 6>>& corrections, double out[6])
+{
+  double sum[6] = {}, weights = 0;
+  int nearest = -1;
+  double nearestDistance = std::numeric_limits<double>::infinity();
+  for (std::size_t k = 0; k < frames.size(); ++k)
+  {
+    if (frames[k] == skip)
+    {
+      continue;
+    }
+    const double d = std::abs(times[k] - t);
+    const double w = std::isinf(h) ? 1.0 : std::exp(-0.5 * (d / h) * (d / h));
+    for (int c = 0; c < 6; ++c)
+    {
+      sum[c] += w * corrections[frames[k]][c];
+    }
+    weights += w;
+    if (d < nearestDistance)
+    {
+      nearestDistance = d;
+      nearest = frames[k];
+    }
+  }
+  if (nearest < 0)
+  {
+    return false;
+  }
+  for (int c = 0; c < 6; ++c)
+  {
+    out[c] = weights > 1e-300 ? sum[c] / weights : corrections[nearest][c]; // all far: the nearest frame's
+  }
+  return true;
+}
+}
+
+UntrainedCorrection CorrectUntrainedFrames(const TrainingData& data, std::vector<std::array<double, 6>>& corrections)
+{
+  const int n = data.Count();
+  const bool timed = static_cast<int>(data.Timestamps.size()) == n;
+  std::vector<char> trained(n, 0);
+  for (int f : data.TrainFrames)
+  {
+    trained[f] = data.IsValid(f);
+  }
+  // Each sweep's training frames and their times, in time order; the sweep's median interval between them.
+  struct Sweep
+  {
+    std::vector<int> Frames;
+    std::vector<double> Times;
+    double Interval = 1;
+  };
+  std::vector<Sweep> sweeps;
+  auto when = [&](int f) { return timed ? data.Timestamps[f] : static_cast<double>(f); };
+  for (int f = 0; f < n; ++f)
+  {
+    const int sweep = data.SweepOf(f);
+    if (sweep >= static_cast<int>(sweeps.size()))
+    {
+      sweeps.resize(sweep + 1);
+    }
+    if (trained[f])
+    {
+      sweeps[sweep].Frames.push_back(f);
+    }
+  }
+  for (Sweep& sweep : sweeps)
+  {
+    std::stable_sort(sweep.Frames.begin(), sweep.Frames.end(), [&](int a, int b) { return when(a) < when(b); });
+    std::vector<double> gaps;
+    for (int f : sweep.Frames)
+    {
+      sweep.Times.push_back(when(f));
+      if (sweep.Times.size() > 1 && sweep.Times.back() > sweep.Times[sweep.Times.size() - 2])
+      {
+        gaps.push_back(sweep.Times.back() - sweep.Times[sweep.Times.size() - 2]);
+      }
+    }
+    if (!gaps.empty())
+    {
+      std::nth_element(gaps.begin(), gaps.begin() + gaps.size() / 2, gaps.end());
+      sweep.Interval = gaps[gaps.size() / 2];
+    }
+  }
+  // A correction's displacement at the slice's corners, squared.
+  auto displacement = [&](int f, const double* delta) {
+    const double* m = data.Poses[f].data();
+    const double su = std::sqrt(m[0] * m[0] + m[4] * m[4] + m[8] * m[8]);
+    const double sv = std::sqrt(m[1] * m[1] + m[5] * m[5] + m[9] * m[9]);
+    const double r2 = 0.25 * ((data.Width * su) * (data.Width * su) + (data.Height * sv) * (data.Height * sv));
+    return r2 * (delta[0] * delta[0] + delta[1] * delta[1] + delta[2] * delta[2]) + delta[3] * delta[3] +
+      delta[4] * delta[4] + delta[5] * delta[5];
+  };
+  const double inf = std::numeric_limits<double>::infinity();
+  const double bandwidths[] = { 0.5, 1, 2, 4, 8, 16, inf };
+  double none = 0, best = inf, chosen = 0;
+  int predicted = 0;
+  for (const double h : bandwidths)
+  {
+    double error = 0;
+    predicted = 0;
+    none = 0;
+    for (const Sweep& sweep : sweeps)
+    {
+      for (std::size_t k = 0; k < sweep.Frames.size(); ++k)
+      {
+        const int f = sweep.Frames[k];
+        double prediction[6];
+        if (!KernelMean(sweep.Frames, sweep.Times, sweep.Times[k], h * sweep.Interval, f, corrections, prediction))
+        {
+          continue; // the sweep's only training frame
+        }
+        double delta[6];
+        for (int c = 0; c < 6; ++c)
+        {
+          delta[c] = prediction[c] - corrections[f][c];
+        }
+        error += displacement(f, delta);
+        none += displacement(f, corrections[f].data());
+        ++predicted;
+      }
+    }
+    if (predicted > 0 && error < best)
+    {
+      best = error;
+      chosen = h;
+    }
+  }
+  UntrainedCorrection result;
+  result.ErrorNone = predicted > 0 ? std::sqrt(none / predicted) : 0;
+  result.ErrorChosen = result.ErrorNone;
+  if (predicted == 0 || !(best < none))
+  {
+    return result; // nothing predicts a training frame's correction better than none
+  }
+  result.Bandwidth = chosen;
+  result.ErrorChosen = std::sqrt(best / predicted);
+  for (int f = 0; f < n; ++f)
+  {
+    const Sweep& sweep = sweeps[data.SweepOf(f)];
+    if (!trained[f] && data.IsValid(f) &&
+      KernelMean(sweep.Frames, sweep.Times, when(f), chosen * sweep.Interval, -1, corrections, corrections[f].data()))
+    {
+      ++result.Frames;
+    }
+  }
+  return result;
 }
 
 bool PoseTimeline::Build(const TrainingData& data, double window, std::string* error)

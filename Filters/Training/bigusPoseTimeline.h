@@ -44,6 +44,35 @@ namespace bigus
 BIGUSTRAINING_EXPORT PoseStatus PoseCorrectionBetween(
   const double from[16], const double to[16], int width, int height, double xi[6]);
 
+/// What bigus::CorrectUntrainedFrames chose (TrainerReport; field data UntrainedPoseCorrection).
+struct BIGUSTRAINING_EXPORT UntrainedCorrection
+{
+  int Frames = 0;       ///< the frames given a correction
+  double Bandwidth = 0; ///< the kernel's standard deviation in training-frame intervals; 0: none; infinity: the mean
+  double ErrorNone = 0; ///< leave-one-out rms error (mm at the slice's corners) of a zero correction
+  double ErrorChosen = 0; ///< the same of the chosen kernel (ErrorNone when none)
+};
+
+/**
+ * The pose corrections of the frames that were not trained (held out), from those of their sweep's training
+ * frames: each valid frame of @p data outside TrainFrames takes the mean of its sweep's training frames'
+ * corrections weighted by a Gaussian kernel in time (Nadaraya-Watson regression; time is the timestamp where @p data
+ * has one per frame, else the frame index). The kernel's standard deviation is chosen by leave-one-out
+ * prediction of the training frames' own corrections (each from the others of its sweep) among 0.5, 1, 2, 4, 8
+ * and 16 times the sweep's median interval between training frames and the sweep's plain mean; where none
+ * predicts better than no correction at all, none is applied (the frames keep @p corrections as given). The
+ * error of a prediction is its displacement at the slice's corners: |translation|^2 + r^2 |rotation|^2, r half
+ * the slice's diagonal (mm). @p corrections ([N]; rotation vector, rad, and translation, mm, each in its frame's
+ * rendering axes as bigus::CorrectPose takes them; averaged as 6-vectors: neighbouring frames' axes nearly agree)
+ * holds the training frames' on input. Frames marked invalid, and sweeps without a training frame, keep theirs.
+ * Why: what refinement corrects along a tracked sweep (tracker drift, latency, the field's slow motion against
+ * the tracked poses) varies smoothly, so a held-out frame is better placed with the smooth part of its
+ * neighbours' corrections than at its tracked pose, while errors independent from frame to frame are left alone
+ * because they predict nothing (docs/FINDINGS.md, "Held-out frames between refined ones").
+ */
+BIGUSTRAINING_EXPORT UntrainedCorrection CorrectUntrainedFrames(
+  const TrainingData& data, std::vector<std::array<double, 6>>& corrections);
+
 class BIGUSTRAINING_EXPORT PoseTimeline
 {
 public:

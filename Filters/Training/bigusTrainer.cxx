@@ -755,10 +755,10 @@ void Trainer::ComposePose(int frame)
   {
     this->Timeline.PoseAt(frame, shared[6], pose.data());
   }
-  if (s.RefinePoses && this->State.PoseSteps[frame] > 0)
+  const std::array<double, 6>& xi = this->State.PoseCorrections[frame];
+  if (s.RefinePoses && (this->State.PoseSteps[frame] > 0 || std::any_of(xi.begin(), xi.end(), [](double v) { return v != 0; })))
   {
-    CorrectPose(pose.data(), this->Data->Width, this->Data->Height, this->State.PoseCorrections[frame].data(),
-      pose.data());
+    CorrectPose(pose.data(), this->Data->Width, this->Data->Height, xi.data(), pose.data());
   }
   if (s.RefineImageToProbe)
   {
@@ -1145,6 +1145,9 @@ bool Trainer::Finish(std::string* error)
   this->Report.PoseCorrections.clear();
   if (s.RefinePoses)
   {
+    // The frames not trained (held out) take the smooth part of their neighbours' corrections, if any.
+    this->Report.UntrainedCorrections = CorrectUntrainedFrames(*this->Data, this->State.PoseCorrections);
+    this->ComposePoses();
     for (int f : this->Data->TrainFrames)
     {
       this->Report.PoseCorrections.push_back({ f, this->State.PoseCorrections[f] });

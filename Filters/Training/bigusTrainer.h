@@ -260,6 +260,9 @@ struct TrainerReport
     std::array<double, 6> Xi{};
   };
   std::vector<PoseCorrection> PoseCorrections;
+  /// RefinePoses: how the frames not trained (held out) were placed among the refined ones
+  /// (bigus::CorrectUntrainedFrames).
+  UntrainedCorrection UntrainedCorrections;
   /// RefineTimeOffset: the offset (s) added to every frame's timestamp to find its tracked pose.
   double TimeOffset = 0;
   /// RefineImageToProbe: the correction of every frame (rotation vector, rad; translation, mm; CorrectPose).

@@ -64,6 +64,106 @@ TEST(PoseTimeline, ThePoseCorrectionBetweenTwoPosesIsTheInverseOfCorrectPose)
   EXPECT_EQ(PoseCorrectionBetween(from.data(), singular, W, H, back), PoseStatus::Singular);
 }
 
+namespace
+{
+/// 60 frames in two sweeps (0 to 39, 40 to 59; 0.3 mm pixels of a W x H slice, timestamps 0.05 s apart with a
+/// jitter), every 4th held out, frame 18 (held out) marked invalid.
+TrainingData UntrainedCase()
+{
+  TrainingData d;
+  d.Width = W;
+  d.Height = H;
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> jitter(-0.01, 0.01);
+  for (int f = 0; f < 60; ++f)
+  {
+    d.Poses.push_back({ 0.3, 0, 0, 0, 0, 0.3, 0, 0, 0, 0, 0, 0.5 * f, 0, 0, 0, 1 });
+    d.Timestamps.push_back(0.05 * (f % 40) + jitter(rng));
+    d.Sweeps.push_back(f < 40 ? 0 : 1);
+    d.Valid.push_back(f != 18);
+    if (f % 4 != 2)
+    {
+      d.TrainFrames.push_back(f);
+    }
+  }
+  return d;
+}
+}
+
+TEST(PoseTimeline, UntrainedFramesTakeTheSmoothPartOfTheirSweepsCorrections)
+{
+  // Corrections that vary smoothly in time (a slow sine in the first sweep, a constant in the second), plus a
+  // little noise: leave-one-out prediction chooses a kernel, and each held-out frame gets its sweep's smooth
+  // correction at its time; the invalid frame and the training frames keep theirs.
+  const TrainingData d = UntrainedCase();
+  auto smooth = [&](int f) {
+    const double t = d.Timestamps[f];
+    return d.Sweeps[f] == 0
+      ? std::array<double, 6>{ 0.004 * std::sin(2.0 * t), -0.002 * std::cos(1.5 * t), 0.001, 0.3 * std::sin(t), 0.1, -0.2 * t }
+      : std::array<double, 6>{ -0.003, 0.002, 0.004, 0.2, -0.1, 0.05 };
+  };
+  std::mt19937_64 rng(9);
+  std::normal_distribution<double> noise(0, 1);
+  const std::array<double, 6> unset = { 7, 7, 7, 7, 7, 7 };
+  std::vector<std::array<double, 6>> xi(60, unset);
+  for (int f : d.TrainFrames)
+  {
+    xi[f] = smooth(f);
+    for (int c = 0; c < 6; ++c)
+    {
+      xi[f][c] += (c < 3 ? 1e-5 : 1e-3) * noise(rng);
+    }
+  }
+  const std::vector<std::array<double, 6>> trained = xi;
+  const UntrainedCorrection u = CorrectUntrainedFrames(d, xi);
+  std::printf("smooth corrections: bandwidth %g intervals, leave-one-out %.4f mm against %.4f for none, %d frames\n",
+    u.Bandwidth, u.ErrorChosen, u.ErrorNone, u.Frames);
+  EXPECT_GT(u.Bandwidth, 0);
+  EXPECT_LT(u.ErrorChosen, 0.1 * u.ErrorNone);
+  EXPECT_EQ(u.Frames, 14) << "15 held-out frames but frame 18, which is invalid";
+  for (int f = 0; f < 60; ++f)
+  {
+    const bool heldOut = f % 4 == 2 && f != 18;
+    const std::array<double, 6>& expected = heldOut ? smooth(f) : (f == 18 ? unset : trained[f]);
+    for (int c = 0; c < 6; ++c)
+    {
+      EXPECT_NEAR(xi[f][c], expected[c], heldOut ? (c < 3 ? 2e-4 : 0.02) : 0.0) << "frame " << f << ", component " << c;
+    }
+  }
+}
+
+TEST(PoseTimeline, UntrainedFramesKeepTheirPosesWhenTheCorrectionsAreIndependent)
+{
+  // Corrections drawn independently for every frame (a tracker's jitter): no kernel predicts a training frame's from
+  // the others', so the held-out frames keep their tracked poses (their corrections as given), with or without
+  // timestamps.
+  for (bool timed : { true, false })
+  {
+    TrainingData d = UntrainedCase();
+    if (!timed)
+    {
+      d.Timestamps.clear();
+    }
+    std::mt19937_64 rng(13);
+    std::normal_distribution<double> normal(0, 1);
+    std::vector<std::array<double, 6>> xi(60);
+    for (int f : d.TrainFrames)
+    {
+      for (int c = 0; c < 6; ++c)
+      {
+        xi[f][c] = (c < 3 ? 0.008 : 0.5) * normal(rng);
+      }
+    }
+    const std::vector<std::array<double, 6>> before = xi;
+    const UntrainedCorrection u = CorrectUntrainedFrames(d, xi);
+    EXPECT_EQ(u.Bandwidth, 0) << (timed ? "by time" : "by index");
+    EXPECT_EQ(u.Frames, 0);
+    EXPECT_EQ(u.ErrorChosen, u.ErrorNone);
+    EXPECT_GT(u.ErrorNone, 0.5);
+    EXPECT_EQ(xi, before);
+  }
+}
+
 TEST(PoseTimeline, AFramesPoseMovesAlongThePathsVelocityOverTheWindow)
 {
   // A constant motion in time: frame k at time t_k (unevenly spaced) has the pose CorrectPose(P0, t_k xi), a

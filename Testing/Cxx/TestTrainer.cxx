@@ -1971,4 +1971,11 @@ TEST(Trainer, RefiningPosesBringsPerturbedTrainingPosesTowardsTheTruth)
   std::printf("roughness of the corrections along the sweep: %.4f without the smoothness prior, %.4f with\n",
     roughness(trainer.GetReport()), roughness(smooth.GetReport()));
   EXPECT_LT(roughness(smooth.GetReport()), 0.5 * roughness(trainer.GetReport()));
+  // The held-out frames (at their true poses here): the training frames' corrections, independent from frame to
+  // frame, predict none of them, so they stay (bigus::CorrectUntrainedFrames); the smoothed ones do, and move them
+  // by little (measured: 0.049 mm at the corners, held out 34.97 dB at the moved poses, 34.87 at the true ones).
+  EXPECT_EQ(trainer.GetReport().UntrainedCorrections.Bandwidth, 0);
+  EXPECT_EQ(CornerError(trainer.GetData(), truth, heldOut, W, H), 0);
+  EXPECT_GT(smooth.GetReport().UntrainedCorrections.Bandwidth, 0);
+  EXPECT_EQ(smooth.GetReport().UntrainedCorrections.Frames, static_cast<int>(heldOut.size()));
 }

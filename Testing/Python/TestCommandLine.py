@@ -236,7 +236,8 @@ def check_merge(sweep, xml, out):
 
 def check_refine_poses(sweep, xml, out):
     """--refine-poses: the summary line, PoseCorrections in the field data, and --refined-poses writes the sweep
-    with the training frames' ImageToReference corrected and the held-out frames' as tracked."""
+    with the training frames' ImageToReference corrected and the held-out frames' as tracked, or moved by the
+    smooth part of the training frames' corrections where UntrainedPoseCorrection says one was chosen."""
     field = os.path.join(out, "nwire_refined.vtp")
     refined = os.path.join(out, "nwire_refined.igs.mha")
     code, _, err = run("train", sweep, "--calibration", xml, "-o", field, "--refined-poses", refined)
@@ -263,11 +264,20 @@ def check_refine_poses(sweep, xml, out):
     a = tracked.GetOutput().GetFieldData().GetArray("ImageToReference")
     b = back.GetOutput().GetFieldData().GetArray("ImageToReference")
     assert b.GetNumberOfTuples() == 20
+    untrained = reader.GetOutput().GetFieldData().GetArray("UntrainedPoseCorrection")
+    frames, bandwidth, error_none, error_chosen = (untrained.GetComponent(0, c) for c in range(4))
+    assert error_chosen <= error_none, (error_chosen, error_none)
+    if bandwidth == 0:
+        assert frames == 0 and "frames not trained keep their tracked poses" in out_text, out_text
+    else:
+        assert frames == 5 and "5 frames not trained take their sweep's corrections smoothed" in out_text, out_text
     moved = 0
     for k in range(20):
         difference = max(abs(a.GetComponent(k, c) - b.GetComponent(k, c)) for c in range(16))
-        if k % 4 == 2:
+        if k % 4 == 2 and bandwidth == 0:
             assert difference < 1e-9, (k, difference)  # held out: as tracked
+        elif k % 4 == 2:
+            assert difference > 1e-9, k  # held out: moved with its neighbours
         else:
             moved += difference > 1e-6
     assert moved > 0, "no training frame's pose moved"
