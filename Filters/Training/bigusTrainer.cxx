@@ -755,10 +755,14 @@ void Trainer::ComposePose(int frame)
   {
     this->Timeline.PoseAt(frame, shared[6], pose.data());
   }
-  const std::array<double, 6>& xi = this->State.PoseCorrections[frame];
-  if (s.RefinePoses && (this->State.PoseSteps[frame] > 0 || std::any_of(xi.begin(), xi.end(), [](double v) { return v != 0; })))
+  if (s.RefinePoses)
   {
-    CorrectPose(pose.data(), this->Data->Width, this->Data->Height, xi.data(), pose.data());
+    // The frame's own correction: stepped (a training frame) or set (a held-out one, CorrectUntrainedFrames).
+    const std::array<double, 6>& xi = this->State.PoseCorrections[frame];
+    if (this->State.PoseSteps[frame] > 0 || std::any_of(xi.begin(), xi.end(), [](double v) { return v != 0; }))
+    {
+      CorrectPose(pose.data(), this->Data->Width, this->Data->Height, xi.data(), pose.data());
+    }
   }
   if (s.RefineImageToProbe)
   {
