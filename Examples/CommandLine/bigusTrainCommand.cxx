@@ -371,8 +371,11 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
   if (vtkDataArray* untrained = fd->GetArray("UntrainedPoseCorrection"))
   {
     const double* u = untrained->GetTuple(0); // frames, bandwidth, leave-one-out error of none, of the chosen
-    char smoothing[64];
-    std::snprintf(smoothing, sizeof(smoothing), std::isinf(u[1]) ? "the whole sweep" : "%g training-frame intervals", u[1]);
+    char smoothing[64] = "the whole sweep";
+    if (!std::isinf(u[1]))
+    {
+      std::snprintf(smoothing, sizeof(smoothing), "%g training-frame intervals", u[1]);
+    }
     if (u[1] == 0)
     {
       std::printf("               frames not trained keep their tracked poses: no smoothing of the corrections predicts "
