@@ -301,8 +301,17 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
   }
   if (trainer->GetNumberOfGaussians() == 0)
   {
-    return Fail((processes.Rank ? "rank " + std::to_string(processes.Rank) + ": " : std::string()) +
+    const int code = Fail((processes.Rank ? "rank " + std::to_string(processes.Rank) + ": " : std::string()) +
       "training failed: " + error.Or("no field"));
+    if (processes.Controller && processes.Controller->GetNumberOfProcesses() > 1)
+    {
+      // The trainer's failures are agreed (every rank is here): each rank says why before any ends the job
+      // (Processes::Exit aborts, which could cut off a rank that had not printed yet).
+      std::fflush(stdout);
+      std::fflush(stderr);
+      processes.Controller->Barrier();
+    }
+    return code;
   }
   if (processes.Rank != 0)
   {
