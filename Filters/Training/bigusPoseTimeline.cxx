@@ -146,44 +146,46 @@ UntrainedCorrection CorrectUntrainedFrames(const TrainingData& data, std::vector
     return r2 * (delta[0] * delta[0] + delta[1] * delta[1] + delta[2] * delta[2]) + delta[3] * delta[3] +
       delta[4] * delta[4] + delta[5] * delta[5];
   };
-  const double inf = std::numeric_limits<double>::infinity();
-  const double bandwidths[] = { 0.5, 1, 2, 4, 8, 16, inf };
-  double none = 0, best = inf, chosen = 0;
+  // Every training frame of a sweep with others is predicted from them; no correction at all is the baseline.
+  double none = 0;
   int predicted = 0;
-  for (const double h : bandwidths)
+  for (const Sweep& sweep : sweeps)
   {
-    double error = 0;
-    predicted = 0;
-    none = 0;
-    for (const Sweep& sweep : sweeps)
+    for (std::size_t k = 0; k < sweep.Frames.size() && sweep.Frames.size() > 1; ++k)
     {
-      for (std::size_t k = 0; k < sweep.Frames.size(); ++k)
-      {
-        const int f = sweep.Frames[k];
-        double prediction[6];
-        if (!KernelMean(sweep.Frames, sweep.Times, sweep.Times[k], h * sweep.Interval, f, corrections, prediction))
-        {
-          continue; // the sweep's only training frame
-        }
-        double delta[6];
-        for (int c = 0; c < 6; ++c)
-        {
-          delta[c] = prediction[c] - corrections[f][c];
-        }
-        error += displacement(f, delta);
-        none += displacement(f, corrections[f].data());
-        ++predicted;
-      }
-    }
-    if (predicted > 0 && error < best)
-    {
-      best = error;
-      chosen = h;
+      none += displacement(sweep.Frames[k], corrections[sweep.Frames[k]].data());
+      ++predicted;
     }
   }
   UntrainedCorrection result;
   result.ErrorNone = predicted > 0 ? std::sqrt(none / predicted) : 0;
   result.ErrorChosen = result.ErrorNone;
+  const double inf = std::numeric_limits<double>::infinity();
+  const double bandwidths[] = { 0.5, 1, 2, 4, 8, 16, inf };
+  double best = inf, chosen = 0;
+  for (const double h : bandwidths)
+  {
+    double error = 0;
+    for (const Sweep& sweep : sweeps)
+    {
+      for (std::size_t k = 0; k < sweep.Frames.size() && sweep.Frames.size() > 1; ++k)
+      {
+        const int f = sweep.Frames[k];
+        double prediction[6], delta[6];
+        KernelMean(sweep.Frames, sweep.Times, sweep.Times[k], h * sweep.Interval, f, corrections, prediction);
+        for (int c = 0; c < 6; ++c)
+        {
+          delta[c] = prediction[c] - corrections[f][c];
+        }
+        error += displacement(f, delta);
+      }
+    }
+    if (error < best)
+    {
+      best = error;
+      chosen = h;
+    }
+  }
   if (predicted == 0 || !(best < none))
   {
     return result; // nothing predicts a training frame's correction better than none
