@@ -205,7 +205,7 @@ vtkGaussianFieldTrainer::vtkGaussianFieldTrainer()
   this->SolveIterations = d.Solve.MaximumIterations;
   this->DenseInitialisation = d.DenseInitialisation;
   this->PixelGridFit = d.PixelGridFit;
-  this->RefinePoses = d.RefinePoses;
+  this->RefinePoses = static_cast<int>(d.RefinePoses);
   this->PoseSmoothness = d.PoseSmoothness;
   this->RefineTimeOffset = d.RefineTimeOffset;
   this->RefineImageToProbe = d.RefineImageToProbe;
@@ -309,7 +309,7 @@ int vtkGaussianFieldTrainer::RequestData(
   s.Solve.MaximumIterations = this->SolveIterations;
   s.DenseInitialisation = this->DenseInitialisation;
   s.PixelGridFit = this->PixelGridFit;
-  s.RefinePoses = this->RefinePoses;
+  s.RefinePoses = static_cast<bigus::PoseRefinement>(this->RefinePoses);
   s.PoseSmoothness = this->PoseSmoothness;
   s.RefineTimeOffset = this->RefineTimeOffset;
   s.RefineImageToProbe = this->RefineImageToProbe;
@@ -436,6 +436,7 @@ int vtkGaussianFieldTrainer::RequestData(
   }
 
   const bigus::TrainerReport& report = trainer.GetReport();
+  const bigus::TrainerSettings& used = trainer.GetSettings(); // RefinePoses Auto resolved
   bigus::FieldModel model;
   model.ElevationSigma = bigus::EffectiveElevationSigma(trainer.Options());
   model.Gamma = trainer.GetGamma();
@@ -540,7 +541,7 @@ int vtkGaussianFieldTrainer::RequestData(
     }
     output->GetFieldData()->AddArray(corrections);
   }
-  if (s.RefinePoses)
+  if (used.RefinePoses == bigus::PoseRefinement::On)
   {
     const bigus::UntrainedCorrection& u = report.UntrainedCorrections;
     vtkNew<vtkDoubleArray> untrained;
@@ -556,7 +557,7 @@ int vtkGaussianFieldTrainer::RequestData(
     untrained->InsertNextTuple(tuple);
     output->GetFieldData()->AddArray(untrained);
   }
-  if (s.RefinesPoses())
+  if (used.RefinesPoses())
   {
     // Every input frame's pose as refined, for a sequence written with them (bigus train --refined-poses).
     vtkNew<vtkDoubleArray> refined;
@@ -568,14 +569,14 @@ int vtkGaussianFieldTrainer::RequestData(
     }
     output->GetFieldData()->AddArray(refined);
   }
-  if (s.RefineTimeOffset)
+  if (used.RefineTimeOffset)
   {
     vtkNew<vtkDoubleArray> offset;
     offset->SetName("TimeOffset");
     offset->InsertNextValue(report.TimeOffset);
     output->GetFieldData()->AddArray(offset);
   }
-  if (s.RefineImageToProbe)
+  if (used.RefineImageToProbe)
   {
     const std::array<double, 6>& xi = report.ImageToProbeCorrection;
     vtkNew<vtkDoubleArray> correction;

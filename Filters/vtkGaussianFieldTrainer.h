@@ -151,18 +151,28 @@ public:
   vtkGetMacro(PixelGridFit, bool);
   vtkBooleanMacro(PixelGridFit, bool);
   ///@}
-  ///@{ Pose refinement (default off): a rigid correction of each training frame's pose, optimised with the
-  /// field (bigus::TrainerSettings::RefinePoses). The output's field data then holds PoseCorrections, one
-  /// tuple per training frame: Frame, rotation about the frame's u, v, n axes through its centre pixel
+  ///@{ Pose refinement: a rigid correction of each training frame's pose, optimised with the field
+  /// (bigus::TrainerSettings::RefinePoses): POSE_REFINEMENT_OFF (0, the tracked poses are trusted),
+  /// POSE_REFINEMENT_ON (1, every sweep's training frames) or POSE_REFINEMENT_AUTO (2, the default: the sweeps
+  /// whose neighbouring training frames' speckle correlates, bigus::ChoosePoseRefinement; TrainingSettings says
+  /// what was chosen and why). Where poses are refined, the output's field data holds PoseCorrections, one
+  /// tuple per refined training frame: Frame, rotation about the frame's u, v, n axes through its centre pixel
   /// (degrees), translation along u, v, n (mm) (bigus::CorrectPose), TrainingPoses are the refined poses, and
   /// RefinedPoses (16 components, one tuple per input frame, the sweeps' frames in turn) every frame's pose as
   /// refined (held-out frames take the shared corrections and the smooth part of their sweep's training
   /// corrections, bigus::CorrectUntrainedFrames), and UntrainedPoseCorrection (one tuple: the held-out frames so
   /// corrected, the kernel's width in training-frame intervals, 0 for none and infinity for the sweep's mean, and
   /// the leave-one-out errors in mm of no correction and of the chosen width).
-  vtkSetMacro(RefinePoses, bool);
-  vtkGetMacro(RefinePoses, bool);
-  vtkBooleanMacro(RefinePoses, bool);
+  enum
+  {
+    POSE_REFINEMENT_OFF = 0,
+    POSE_REFINEMENT_ON = 1,
+    POSE_REFINEMENT_AUTO = 2
+  };
+  vtkSetClampMacro(RefinePoses, int, POSE_REFINEMENT_OFF, POSE_REFINEMENT_AUTO);
+  vtkGetMacro(RefinePoses, int);
+  vtkBooleanMacro(RefinePoses, int);
+  void SetRefinePosesToAuto() { this->SetRefinePoses(POSE_REFINEMENT_AUTO); }
   ///@}
   ///@{ Refinement of one tracker-to-video time offset shared by every frame (default off;
   /// bigus::TrainerSettings::RefineTimeOffset; needs the sweeps' Timestamp). The output's field data then holds
@@ -378,7 +388,7 @@ protected:
   int SolveIterations;
   bool DenseInitialisation;
   bool PixelGridFit;
-  bool RefinePoses;
+  int RefinePoses;
   double PoseSmoothness;
   bool RefineTimeOffset;
   bool RefineImageToProbe;

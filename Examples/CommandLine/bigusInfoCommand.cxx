@@ -162,6 +162,10 @@ int RunInfo(const InfoOptions& options)
       std::printf(" (mm:NCC)\n");
     }
     std::printf("elevation sigma %.3f mm, as `bigus train` chooses it: %s\n", choice.Sigma, choice.Reason.c_str());
+    // With every frame trained on; a hold-out widens the training frames' spacing.
+    const bigus::PoseRefinementChoice refine = bigus::ChoosePoseRefinement(data);
+    std::printf("pose refinement %s by default, every frame trained on: %s\n", refine.Any() ? "on" : "off",
+      refine.Reason.c_str());
     return 0;
   }
   std::printf("elevation sigma not measured: %s\n", error.c_str());

@@ -47,7 +47,8 @@ struct TrainOptions
   double GrowthMargin = 0, ResidualSeedShare = 0, CoarseFraction = 0, MergeTolerance = 0;
   int GrowthPatience = 0, SolveIterations = 0;
   bool NoFillGaps = false, ReflectivitySolve = false, DenseStart = false, DenseAdam = false,
-       NoPixelGridFit = false, RefinePoses = false, RefineTimeOffset = false, RefineImageToProbe = false;
+       NoPixelGridFit = false, RefinePoses = false, NoRefinePoses = false, RefineTimeOffset = false,
+       RefineImageToProbe = false;
   std::vector<std::string> RefinedPoses; ///< one per sweep
   double PoseSmoothness = 0;
   unsigned Seed = 0;
@@ -145,9 +146,9 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
       return 2;
     }
   }
-  if (!o.RefinedPoses.empty() && !o.RefinePoses && !o.RefineTimeOffset && !o.RefineImageToProbe)
+  if (!o.RefinedPoses.empty() && o.NoRefinePoses && !o.RefineTimeOffset && !o.RefineImageToProbe)
   {
-    std::fprintf(stderr, "bigus: --refined-poses needs --refine-poses, --refine-time-offset or --refine-image-to-probe\n");
+    std::fprintf(stderr, "bigus: --refined-poses with --no-refine-poses needs --refine-time-offset or --refine-image-to-probe\n");
     return 2;
   }
   if (!o.RefinedPoses.empty() && o.RefinedPoses.size() != count)
@@ -221,7 +222,9 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
   trainer->SetSolveIterations(o.SolveIterations);
   trainer->SetDenseInitialisation(o.DenseStart);
   trainer->SetPixelGridFit(!o.NoPixelGridFit);
-  trainer->SetRefinePoses(o.RefinePoses);
+  trainer->SetRefinePoses(o.RefinePoses ? vtkGaussianFieldTrainer::POSE_REFINEMENT_ON
+      : o.NoRefinePoses                  ? vtkGaussianFieldTrainer::POSE_REFINEMENT_OFF
+                                         : vtkGaussianFieldTrainer::POSE_REFINEMENT_AUTO);
   trainer->SetRefineTimeOffset(o.RefineTimeOffset);
   trainer->SetRefineImageToProbe(o.RefineImageToProbe);
   trainer->SetPoseSmoothness(o.PoseSmoothness);
@@ -410,7 +413,13 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
                 "%.3f mm (field data ImageToProbeCorrectionMatrix: ImageToProbe M)\n",
       c[0], c[1], c[2], c[3], c[4], c[5]);
   }
-  if (vtkDataArray* all = fd->GetArray("RefinedPoses"))
+  vtkDataArray* all = fd->GetArray("RefinedPoses");
+  if (!all && !o.RefinedPoses.empty())
+  {
+    std::printf("refined poses  not written: every sweep's tracked poses were trusted (the RefinePoses setting line "
+                "says why)\n");
+  }
+  if (all)
   {
     // Each input sweep with every frame's ImageToReference as refined (RefinedPoses: the sweeps' frames in turn).
     vtkIdType first = 0; // index of the sweep's first frame among all sweeps' frames
@@ -514,9 +523,12 @@ Command AddTrainCommand(CLI::App& app)
   trainCommand->add_flag("--no-pixel-grid-fit", train.NoPixelGridFit,
     "Train from Harris seeds even when the training frames hold at most twice --max-gaussians fan pixels (default: "
     "there, a pixel grid of at most --max-gaussians, its reflectivities solved, and no geometry steps)");
-  trainCommand->add_flag("--refine-poses", train.RefinePoses,
-    "Refine each training frame's tracked pose with the field (a rigid correction about its centre pixel, a prior "
-    "towards the tracked pose; default: the tracked poses are trusted)");
+  CLI::Option* refine = trainCommand->add_flag("--refine-poses", train.RefinePoses,
+    "Refine the tracked pose of every sweep's training frames with the field (a rigid correction about its centre "
+    "pixel, a prior towards the tracked pose; default: the sweeps whose neighbouring training frames' speckle "
+    "correlates, the others trusted, as the RefinePoses setting line says)");
+  trainCommand->add_flag("--no-refine-poses", train.NoRefinePoses, "Trust every tracked pose (see --refine-poses)")
+    ->excludes(refine);
   trainCommand->add_flag("--refine-time-offset", train.RefineTimeOffset,
     "Refine one time offset between tracker and video shared by every frame (needs the sweeps' timestamps; found "
     "from sweeps whose frames cross, not from one smooth sweep: docs/FINDINGS.md)");
@@ -524,13 +536,13 @@ Command AddTrainCommand(CLI::App& app)
     "Refine one correction of ImageToProbe shared by every frame (printed, and in the field data)");
   trainCommand
     ->add_option("--refined-poses", train.RefinedPoses,
-      "With a --refine-* option: write the sweep with its frames' ImageToReference as refined (.igs.mha; held-out "
+      "Write the sweep with its frames' ImageToReference as refined (.igs.mha; held-out "
       "frames take the shared corrections and the smooth part of their sweep's); one per sweep, in their order (repeat "
       "the option)")
     ->allow_extra_args(false);
   trainCommand->add_option("--pose-smoothness", train.PoseSmoothness,
-    "With --refine-poses: weight of the prior that keeps the corrections smooth along the sweep (0: none)")
-    ->needs("--refine-poses")
+    "Where poses are refined: weight of the prior that keeps the corrections smooth along the sweep (0: none)")
+    ->excludes("--no-refine-poses")
     ->check(CLI::NonNegativeNumber);
   trainCommand->add_flag("--no-fill-gaps", train.NoFillGaps,
     "Leave gaps between training frames wider than the beam empty (default: bridged, as bigus fill-gaps does)");

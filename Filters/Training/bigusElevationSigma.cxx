@@ -345,4 +345,64 @@ ElevationSigmaChoice ChooseElevationSigma(const TrainingData& data)
   return choice;
 }
 
+double CorrelationAtNeighbourSpacing(const ElevationDecorrelation& m)
+{
+  const std::vector<double>& d = m.Distance;
+  if (d.empty())
+  {
+    return 0;
+  }
+  if (m.NeighbourSpacing <= d.front())
+  {
+    return m.Correlation.front();
+  }
+  for (std::size_t k = 1; k < d.size(); ++k)
+  {
+    if (m.NeighbourSpacing <= d[k])
+    {
+      const double t = (m.NeighbourSpacing - d[k - 1]) / (d[k] - d[k - 1]);
+      return (1 - t) * m.Correlation[k - 1] + t * m.Correlation[k];
+    }
+  }
+  return 0;
+}
+
+bool PoseRefinementChoice::Any() const
+{
+  return std::any_of(this->Sweeps.begin(), this->Sweeps.end(), [](char on) { return on != 0; });
+}
+
+PoseRefinementChoice ChoosePoseRefinement(const TrainingData& data)
+{
+  PoseRefinementChoice choice;
+  const int sweeps = data.Sweeps.empty() ? 1 : *std::max_element(data.Sweeps.begin(), data.Sweeps.end()) + 1;
+  char text[256];
+  for (int s = 0; s < sweeps; ++s)
+  {
+    ElevationDecorrelationSettings settings;
+    settings.Sweep = sweeps > 1 ? s : -1;
+    ElevationDecorrelation m;
+    std::string error;
+    const bool measured = MeasureElevationDecorrelation(data, settings, m, &error) && m.NeighbourSpacing > 0;
+    const double rho = measured ? CorrelationAtNeighbourSpacing(m) : -1;
+    const bool refined = measured && rho >= PoseRefinementMinimumCorrelation;
+    choice.Sweeps.push_back(refined ? 1 : 0);
+    choice.Correlation.push_back(rho);
+    choice.Spacing.push_back(measured ? m.NeighbourSpacing : 0);
+    const std::string name = sweeps > 1 ? "sweep " + std::to_string(s) : std::string("the sweep");
+    if (measured)
+    {
+      std::snprintf(text, sizeof(text), "%s %s: speckle correlation %.2f at its training frames' spacing %.3g mm %s %.2g",
+        name.c_str(), refined ? "refined" : "trusted", rho, m.NeighbourSpacing, refined ? ">=" : "<",
+        PoseRefinementMinimumCorrelation);
+    }
+    else
+    {
+      std::snprintf(text, sizeof(text), "%s trusted: its frames cannot be measured (%s)", name.c_str(), error.c_str());
+    }
+    choice.Reason += (s > 0 ? "; " : "") + std::string(text);
+  }
+  return choice;
+}
+
 } // namespace bigus

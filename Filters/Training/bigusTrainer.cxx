@@ -152,12 +152,27 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
     s.CoarseFraction > 0
       ? Format(", CoarseFraction = %.3g (a quarter of the pixels per step until then)", s.CoarseFraction).c_str()
       : ""));
-  if (s.RefinePoses)
+  // Pose refinement: Auto is resolved here, sweep by sweep, from the speckle of neighbouring training frames.
+  const int sweeps = this->Data->Sweeps.empty() ? 1 : *std::max_element(this->Data->Sweeps.begin(), this->Data->Sweeps.end()) + 1;
+  std::string refinedBy = "given";
+  this->RefinedSweeps.assign(sweeps, this->Settings.RefinePoses == PoseRefinement::On ? 1 : 0);
+  if (this->Settings.RefinePoses == PoseRefinement::Auto)
+  {
+    const PoseRefinementChoice choice = ChoosePoseRefinement(*this->Data);
+    this->RefinedSweeps = choice.Sweeps;
+    this->Settings.RefinePoses = choice.Any() ? PoseRefinement::On : PoseRefinement::Off;
+    refinedBy = "chosen: " + choice.Reason;
+    if (!choice.Any())
+    {
+      this->Report.Settings.push_back("RefinePoses = off (" + refinedBy + ")");
+    }
+  }
+  if (s.RefinePoses == PoseRefinement::On)
   {
     this->Report.Settings.push_back(Format("RefinePoses = on (from %.0f %% of the schedule; Adam %.3g rad and %.3g mm per "
-                                           "step; prior %.3g at %.3g degrees and %.3g mm, smoothness %.3g)",
+                                           "step; prior %.3g at %.3g degrees and %.3g mm, smoothness %.3g; ",
       100 * s.PoseRefinementStart, s.PoseRotationLearningRate, s.PoseTranslationLearningRate, s.PosePrior,
-      s.PoseRotationSigma * 180 / M_PI, s.PoseTranslationSigma, s.PoseSmoothness));
+      s.PoseRotationSigma * 180 / M_PI, s.PoseTranslationSigma, s.PoseSmoothness) + refinedBy + ")");
     const std::size_t n = this->Data->Poses.size();
     this->State.PoseCorrections.assign(n, {});
     this->State.PoseFirstMoment.assign(n, {});
@@ -687,9 +702,13 @@ void Trainer::UpdatePoses(const std::vector<int>& frames, const std::vector<doub
     AdamPoseStep(7, g, rate, ++this->State.SharedPoseSteps, x.data(), this->State.SharedPoseFirstMoment.data(),
       this->State.SharedPoseSecondMoment.data());
   }
-  for (std::size_t b = 0; b < frames.size() && s.RefinePoses; ++b)
+  for (std::size_t b = 0; b < frames.size() && s.RefinePoses == PoseRefinement::On; ++b)
   {
     const int f = frames[b];
+    if (!this->IsSweepRefined(this->Data->SweepOf(f)))
+    {
+      continue;
+    }
     std::array<double, 6>& xi = this->State.PoseCorrections[f];
     // The neighbours along the sweep: the training frames before and after this one in its sweep
     // (TrainFrames in order; none where they are not).
@@ -755,7 +774,7 @@ void Trainer::ComposePose(int frame)
   {
     this->Timeline.PoseAt(frame, shared[6], pose.data());
   }
-  if (s.RefinePoses)
+  if (s.RefinePoses == PoseRefinement::On)
   {
     // The frame's own correction: stepped (a training frame) or set (a held-out one, CorrectUntrainedFrames).
     const std::array<double, 6>& xi = this->State.PoseCorrections[frame];
@@ -914,9 +933,20 @@ bool Trainer::RenderResiduals(int count, std::vector<int>& frames, std::vector<f
   return true;
 }
 
+void Trainer::PlaceUntrainedFrames()
+{
+  if (this->Settings.RefinePoses == PoseRefinement::On)
+  {
+    this->Report.UntrainedCorrections = CorrectUntrainedFrames(*this->Data, this->State.PoseCorrections);
+    this->ComposePoses();
+  }
+}
+
 bool Trainer::Evaluate(
   const std::vector<int>& frames, ImageMetrics& metrics, std::string* error, double* secondsPerFrame)
 {
+  // Mid-run too, the frames not trained on are scored where Finish will put them, among their refined neighbours.
+  this->PlaceUntrainedFrames();
   return this->EvaluateOn(*this->Data, frames, metrics, error, secondsPerFrame);
 }
 
@@ -1147,14 +1177,16 @@ bool Trainer::Finish(std::string* error)
     }
   }
   this->Report.PoseCorrections.clear();
-  if (s.RefinePoses)
+  if (s.RefinePoses == PoseRefinement::On)
   {
     // The frames not trained (held out) take the smooth part of their neighbours' corrections, if any.
-    this->Report.UntrainedCorrections = CorrectUntrainedFrames(*this->Data, this->State.PoseCorrections);
-    this->ComposePoses();
+    this->PlaceUntrainedFrames();
     for (int f : this->Data->TrainFrames)
     {
-      this->Report.PoseCorrections.push_back({ f, this->State.PoseCorrections[f] });
+      if (this->IsSweepRefined(this->Data->SweepOf(f)))
+      {
+        this->Report.PoseCorrections.push_back({ f, this->State.PoseCorrections[f] });
+      }
     }
   }
   const std::array<double, 7>& shared = this->State.SharedPoseCorrection;
@@ -1245,14 +1277,15 @@ bool Trainer::ReadCheckpoint(const std::string& file, std::string* error)
     return false;
   }
   // The pose corrections go on from where the checkpoint left them (the same settings, the same sweep).
-  const std::size_t frames = this->Settings.RefinePoses ? this->Data->Poses.size() : 0;
+  const bool refined = this->Settings.RefinePoses == PoseRefinement::On;
+  const std::size_t frames = refined ? this->Data->Poses.size() : 0;
   if (loaded.PoseCorrections.size() != frames)
   {
     if (error)
     {
       *error = file + ": the checkpoint holds pose corrections of " + std::to_string(loaded.PoseCorrections.size()) +
         " frames and this run " +
-        (this->Settings.RefinePoses ? "refines the poses of " : "refines the poses of none of ") +
+        (refined ? "refines the poses of " : "refines the poses of none of ") +
         std::to_string(this->Data->Poses.size()) +
         " (resume with the settings and sweep the checkpoint was written with)";
     }

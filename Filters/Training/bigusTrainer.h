@@ -38,6 +38,14 @@
 namespace bigus
 {
 
+/// Whether a trainer refines the tracked poses of the training frames (TrainerSettings::RefinePoses).
+enum class PoseRefinement : int
+{
+  Off = 0, ///< the tracked poses are trusted
+  On = 1,  ///< every sweep's training frames are refined
+  Auto = 2 ///< the sweeps whose neighbouring frames' speckle correlates (bigus::ChoosePoseRefinement)
+};
+
 struct TrainerSettings
 {
   // Model
@@ -160,8 +168,12 @@ struct TrainerSettings
   /// in its own axes: bigus::CorrectPose), optimised with the field by Adam on the gradient of the loss with
   /// respect to the frame's pose (FieldGradients::SlicePoses, taken at the corrected pose), with the prior
   /// PosePrior / 2 (|omega|^2 / PoseRotationSigma^2 + |t|^2 / PoseTranslationSigma^2) per frame. Held-out
-  /// frames keep their tracked poses. Off: the tracked poses are trusted.
-  bool RefinePoses = false;
+  /// frames take the smooth part of their sweep's corrections at the end (CorrectUntrainedFrames).
+  /// Off: the tracked poses are trusted. On: every sweep's training frames are refined. Auto (the default): the
+  /// training frames of the sweeps whose neighbouring frames' speckle correlates (bigus::ChoosePoseRefinement,
+  /// bigusElevationSigma.h), resolved when the trainer is made (GetSettings() then says On or Off, and
+  /// Trainer::IsSweepRefined which sweeps).
+  PoseRefinement RefinePoses = PoseRefinement::Auto;
   double PoseRefinementStart = 0.2;      ///< share of the schedule trained on the tracked poses before corrections move
   /// Adam's rates, rad and mm per step: on TestTrainer's synthetic sweep (0.5 degree and 0.5 mm errors)
   /// 2e-4 and 0.004 took the corner error from 0.505 to 0.401 mm, these 0.192, twice these 0.165.
@@ -190,7 +202,10 @@ struct TrainerSettings
   /// sigmas and prior of the per-frame corrections. Held-out frames take it too. From PoseRefinementStart.
   bool RefineImageToProbe = false;
   /// Whether any of the pose corrections is refined (RefinePoses, RefineTimeOffset, RefineImageToProbe).
-  bool RefinesPoses() const { return this->RefinePoses || this->RefineTimeOffset || this->RefineImageToProbe; }
+  bool RefinesPoses() const
+  {
+    return this->RefinePoses != PoseRefinement::Off || this->RefineTimeOffset || this->RefineImageToProbe;
+  }
   // Run
   unsigned Seed = 1;
   int CheckpointInterval = 0;        ///< steps between checkpoints (0 = none)
@@ -343,13 +358,17 @@ public:
   bool LoadCheckpoint(const std::string& file, std::string* error);
 
   /**
-   * Render @p frames at their poses and compare them with the recorded frames inside the mask
+   * Render @p frames at their poses (PlaceUntrainedFrames first) and compare them with the recorded frames inside the mask
    * (bigus::MeanFrameMetrics); @p metrics receives the mean of each metric. @p secondsPerFrame, if
    * non-null, receives the mean render time per frame (s). Returns false with @p error when a frame
    * cannot be rendered.
    */
   bool Evaluate(const std::vector<int>& frames, ImageMetrics& metrics, std::string* error,
     double* secondsPerFrame = nullptr);
+  /// With RefinePoses, the frames not trained on take the smooth part of their sweep's training corrections
+  /// (CorrectUntrainedFrames; report's UntrainedCorrections): Evaluate and Finish call it, so that a held-out
+  /// frame is scored among its refined neighbours mid-run as at the end.
+  void PlaceUntrainedFrames();
   /// The same for @p frames of other data (another frame size, e.g. a test sweep across the training
   /// frames). Frames whose mask is empty are left out of the means.
   bool EvaluateOn(const TrainingData& data, const std::vector<int>& frames, ImageMetrics& metrics, std::string* error,
@@ -371,6 +390,14 @@ public:
   /// Mean in-plane pixel spacing of the training frames, mm.
   double GetPixelSpacing() const { return this->PixelSpacing; }
   const TrainerReport& GetReport() const { return this->Report; }
+  /// The settings the run uses: those given, with what the trainer chose (ElevationSigma 0 replaced by the chosen
+  /// sigma, RefinePoses Auto by On or Off).
+  const TrainerSettings& GetSettings() const { return this->Settings; }
+  /// Whether the training frames of sweep @p sweep (TrainingData::Sweeps) have their poses refined.
+  bool IsSweepRefined(int sweep) const
+  {
+    return sweep >= 0 && sweep < static_cast<int>(this->RefinedSweeps.size()) && this->RefinedSweeps[sweep] != 0;
+  }
   int GetIteration() const { return this->State.Iteration; }
   const TrainingData& GetData() const { return *this->Data; }
   const TrainingEngine& GetEngine() const { return *this->Engine; }
@@ -436,6 +463,7 @@ private:
   std::vector<std::array<double, 16>> TrackedPoses;
   std::vector<bool> TrackedValid; // the renderer accepts the tracked pose (others are never corrected)
   PoseTimeline Timeline;          // RefineTimeOffset
+  std::vector<char> RefinedSweeps; // RefinePoses: 1 for each sweep whose training frames are refined
   /// Adam on the corrections of @p frames from their gradients @p gradients ([frames, 6]) and the prior, and on
   /// the shared corrections from their sum; the poses of the frames that moved are composed again.
   void UpdatePoses(const std::vector<int>& frames, const std::vector<double>& gradients);

@@ -485,7 +485,7 @@ TEST(CudaRenderer, AWholeTrainingStepThroughTheCudaEngine)
   settings.InitialGaussians = 3000;
   settings.Iterations = 1;
   settings.ElevationSigma = 0.3;
-  settings.RefinePoses = true;
+  settings.RefinePoses = bigus::PoseRefinement::On;
   settings.PoseRefinementStart = 0;
   std::string error;
   std::unique_ptr<TrainingEngine> engines[2] = { CreateTrainingEngine("cuda", &error), CreateTrainingEngine("cpu", &error) };

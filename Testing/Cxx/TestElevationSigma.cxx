@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -57,6 +58,7 @@ double HeldOutPsnr(const TrainingData& data, const std::vector<int>& heldOut, do
 {
   TrainerSettings s;
   s.ElevationSigma = sigma;
+  s.RefinePoses = PoseRefinement::Off; // exact poses: the sigma alone is compared
   s.InitialGaussians = 4000;
   s.Iterations = 1500;
   Trainer trainer(data, s);
@@ -142,4 +144,134 @@ TEST(ElevationSigma, InconsistentDataIsAnErrorNotACrash)
   EXPECT_NE(error.find("inconsistent sizes"), std::string::npos) << error;
   const ElevationSigmaChoice choice = ChooseElevationSigma(data);
   EXPECT_EQ(choice.Sigma, 0.5);
+}
+
+// CorrelationAtNeighbourSpacing on a measurement written by hand: linear between the bins around the spacing,
+// the first bin's below it, 0 past the last bin.
+TEST(PoseRefinementChoice, CorrelationAtTheNeighbourSpacingIsInterpolatedBetweenBins)
+{
+  ElevationDecorrelation m;
+  m.Distance = { 0.15, 0.25, 0.35 };
+  m.Correlation = { 0.9, 0.5, 0.2 };
+  m.Samples = { 1000, 1000, 1000 };
+  const double cases[][2] = { { 0.05, 0.9 }, { 0.15, 0.9 }, { 0.2, 0.7 }, { 0.325, 0.275 }, { 0.35, 0.2 }, { 0.5, 0 } };
+  for (const auto& c : cases)
+  {
+    m.NeighbourSpacing = c[0];
+    EXPECT_NEAR(CorrelationAtNeighbourSpacing(m), c[1], 1e-12) << "spacing " << c[0];
+  }
+  m.Distance.clear();
+  m.Correlation.clear();
+  EXPECT_EQ(CorrelationAtNeighbourSpacing(m), 0.0);
+}
+
+namespace
+{
+/// Sweep @p b's frames appended to sweep @p a's as a second sweep (the same frame size and mask).
+TrainingData TwoSweeps(const TrainingData& a, const TrainingData& b)
+{
+  TrainingData d = a;
+  d.Sweeps.assign(a.Count(), 0);
+  d.Frames.insert(d.Frames.end(), b.Frames.begin(), b.Frames.end());
+  d.Poses.insert(d.Poses.end(), b.Poses.begin(), b.Poses.end());
+  d.Sweeps.insert(d.Sweeps.end(), b.Count(), 1);
+  for (int f : b.TrainFrames)
+  {
+    d.TrainFrames.push_back(a.Count() + f);
+  }
+  return d;
+}
+}
+
+// The rule on speckle sweeps of known beam and spacing: frames 0.2 mm apart under a 0.6 mm beam correlate as
+// exp(-d^2 / (4 sigma_eff^2)) (about 0.96 at their training spacing) and are refined; frames 1.5 mm apart under a
+// 0.3 mm beam share no speckle (exp(-6) at 1.5 mm) and are trusted. Two such sweeps together are decided sweep by
+// sweep.
+TEST(PoseRefinementChoice, SweepsAreRefinedWhereNeighbouringFramesCorrelate)
+{
+  const GaussianField truth = SpeckleField(12000, 10.0, 7);
+  std::vector<int> heldOut;
+  const TrainingData dense = Sweep(truth, 0.6, 0.2, 30, heldOut);
+  const TrainingData sparse = Sweep(truth, 0.3, 1.5, 6, heldOut);
+  struct Case
+  {
+    const TrainingData* Data;
+    double Sigma;
+    bool Refined;
+  };
+  for (const Case c : { Case{ &dense, 0.6, true }, Case{ &sparse, 0.3, false } })
+  {
+    const PoseRefinementChoice choice = ChoosePoseRefinement(*c.Data);
+    ASSERT_EQ(choice.Sweeps.size(), 1u);
+    const double spacing = choice.Spacing[0];
+    const double sigma2 = c.Sigma * c.Sigma + 0.05 * 0.05;
+    const double expected = std::exp(-spacing * spacing / (4 * sigma2));
+    std::printf("beam %.2f mm, training frames %.3f mm apart: correlation %.3f (exp(-d^2 / 4 sigma^2) %.3f): %s\n",
+      c.Sigma, spacing, choice.Correlation[0], expected, choice.Reason.c_str());
+    EXPECT_NEAR(choice.Correlation[0], expected, 0.1);
+    EXPECT_EQ(choice.Sweeps[0] != 0, c.Refined) << choice.Reason;
+    EXPECT_EQ(choice.Any(), c.Refined);
+  }
+  const PoseRefinementChoice both = ChoosePoseRefinement(TwoSweeps(dense, sparse));
+  ASSERT_EQ(both.Sweeps.size(), 2u);
+  EXPECT_TRUE(both.Sweeps[0] != 0 && both.Sweeps[1] == 0) << both.Reason;
+  EXPECT_NE(both.Reason.find("sweep 0 refined"), std::string::npos) << both.Reason;
+  EXPECT_NE(both.Reason.find("sweep 1 trusted"), std::string::npos) << both.Reason;
+  // A sweep that cannot be measured (one training frame) is trusted, and says why.
+  TrainingData single = dense;
+  single.TrainFrames = { 0 };
+  const PoseRefinementChoice none = ChoosePoseRefinement(single);
+  EXPECT_FALSE(none.Any());
+  EXPECT_NE(none.Reason.find("cannot be measured"), std::string::npos) << none.Reason;
+}
+
+// The trainer's default (Auto) on the two sweeps: the dense sweep's training frames are refined, the sparse
+// sweep's keep their tracked poses exactly, and the settings say so; Off and On override the rule.
+TEST(PoseRefinementChoice, TheTrainerRefinesTheSweepsTheRuleChooses)
+{
+  const GaussianField truth = SpeckleField(12000, 10.0, 7);
+  std::vector<int> heldOut;
+  const TrainingData data =
+    TwoSweeps(Sweep(truth, 0.6, 0.2, 30, heldOut), Sweep(truth, 0.3, 1.5, 6, heldOut));
+  TrainerSettings s;
+  s.ElevationSigma = 0.5;
+  s.PixelGridFit = false;
+  s.InitialGaussians = 2000;
+  s.Iterations = 100;
+  ASSERT_EQ(s.RefinePoses, PoseRefinement::Auto);
+  Trainer trainer(data, s);
+  EXPECT_EQ(trainer.GetSettings().RefinePoses, PoseRefinement::On);
+  EXPECT_TRUE(trainer.IsSweepRefined(0));
+  EXPECT_FALSE(trainer.IsSweepRefined(1));
+  std::string error;
+  ASSERT_TRUE(trainer.Initialize(&error)) << error;
+  ASSERT_TRUE(trainer.Run(nullptr, nullptr, &error)) << error;
+  const TrainerReport& report = trainer.GetReport();
+  bool said = false;
+  for (const std::string& line : report.Settings)
+  {
+    said = said || (line.rfind("RefinePoses = on", 0) == 0 && line.find("sweep 1 trusted") != std::string::npos);
+  }
+  EXPECT_TRUE(said);
+  int moved = 0;
+  for (const TrainerReport::PoseCorrection& p : report.PoseCorrections)
+  {
+    EXPECT_EQ(data.SweepOf(p.Frame), 0) << "frame " << p.Frame << " of the trusted sweep was refined";
+    moved += std::any_of(p.Xi.begin(), p.Xi.end(), [](double v) { return v != 0; }) ? 1 : 0;
+  }
+  EXPECT_GT(moved, 0);
+  for (int f = 0; f < data.Count(); ++f)
+  {
+    if (data.SweepOf(f) == 1)
+    {
+      EXPECT_EQ(trainer.GetData().Poses[f], data.Poses[f]) << "frame " << f;
+    }
+  }
+  for (const PoseRefinement given : { PoseRefinement::Off, PoseRefinement::On })
+  {
+    s.RefinePoses = given;
+    Trainer fixed(data, s);
+    EXPECT_EQ(fixed.GetSettings().RefinePoses, given);
+    EXPECT_EQ(fixed.IsSweepRefined(1), given == PoseRefinement::On);
+  }
 }

@@ -427,7 +427,7 @@ LiverPathResult LiverPathCase(const LiverPathErrors& e)
   s.Iterations = e.Iterations;
   auto train = [&](const TrainingData& data, bool refine) {
     TrainerSettings settings = s;
-    settings.RefinePoses = refine && e.PerFrame;
+    settings.RefinePoses = refine && e.PerFrame ? PoseRefinement::On : PoseRefinement::Off;
     settings.RefineTimeOffset = refine && e.TimeOffset;
     settings.RefineImageToProbe = refine && e.RefineImageToProbe;
     auto trainer = std::make_unique<Trainer>(data, settings);

@@ -345,6 +345,7 @@ TEST(ReferenceResults, TrainingReachesTheRecordedPsnr)
   trainer->SetMaximumGaussians(training["max_gaussians"].get<vtkIdType>());
   trainer->SetElevationSigma(training["elevation_sigma"].get<double>());
   trainer->SetCoarseFraction(training["coarse_fraction"].get<double>());
+  trainer->SetRefinePoses(training["refine_poses"].get<int>());
   trainer->SetSeed(training["seed"].get<unsigned>());
   trainer->Update();
   ASSERT_GT(trainer->GetNumberOfGaussians(), 0);

@@ -165,6 +165,15 @@ def main():
                 name, fd.GetArray(name).GetNumberOfTuples() if fd.GetArray(name) else "missing"))
     print("pose refinement: per-frame corrections, time offset %.2f ms and ImageToProbe correction stored"
           % (1000 * fd.GetArray("TimeOffset").GetTuple1(0)))
+    # The default is Auto (2), as the filter's own, and the panel offers the three choices.
+    default = pvs.TrainGaussianField(Input=reader)
+    if default.GetProperty("RefinePoses").GetData() != "Auto (where neighbouring frames correlate)":
+        fail("RefinePoses defaults to %s, expected Auto (2)" % default.GetProperty("RefinePoses").GetData())
+    if sorted(default.GetProperty("RefinePoses").Available) != sorted(
+            ["Off (trust the tracked poses)", "On", "Auto (where neighbouring frames correlate)"]):
+        fail("RefinePoses choices: %s" % default.GetProperty("RefinePoses").Available)
+    print("RefinePoses default: %s" % default.GetProperty("RefinePoses").GetData())
+    pvs.Delete(default)
 
     # A chain built before anything ran, updated from its end (the slice asks for a small extent): the
     # trainer still gets every frame.

@@ -240,8 +240,23 @@ def check_refine_poses(sweep, xml, out):
     smooth part of the training frames' corrections where UntrainedPoseCorrection says one was chosen."""
     field = os.path.join(out, "nwire_refined.vtp")
     refined = os.path.join(out, "nwire_refined.igs.mha")
-    code, _, err = run("train", sweep, "--calibration", xml, "-o", field, "--refined-poses", refined)
-    assert code == 2 and "needs --refine-poses" in err, (code, err)
+    code, _, err = run("train", sweep, "--calibration", xml, "-o", field, "--no-refine-poses", "--refined-poses", refined)
+    assert code == 2 and "--refined-poses with --no-refine-poses needs" in err, (code, err)
+    code, _, err = run("train", sweep, "--calibration", xml, "-o", field, "--no-refine-poses", "--refine-poses")
+    assert code != 0 and "excludes" in err, (code, err)
+    # The default decides from the sweep's speckle: the setting line says what it chose and why, and the field data
+    # holds corrections exactly when it chose to refine.
+    code, out_text, err = run("train", sweep, "--calibration", xml, "-o", field, "--holdout-every", "4",
+                              "--holdout-offset", "2", "--iterations", "20", "--initial-gaussians", "2000",
+                              "--no-pixel-grid-fit", "--elevation-sigma", "1.0")
+    assert code == 0, (out_text, err)
+    line = [l for l in out_text.splitlines() if l.startswith("setting        RefinePoses = ")]
+    assert len(line) == 1 and "chosen: the sweep " in line[0] and "speckle correlation" in line[0], out_text
+    reader = vtk.vtkXMLPolyDataReader()
+    reader.SetFileName(field)
+    reader.Update()
+    chosen = reader.GetOutput().GetFieldData().GetArray("PoseCorrections") is not None
+    assert chosen == ("RefinePoses = on" in line[0]) == ("the sweep refined" in line[0]), line[0]
     code, out_text, err = run("train", sweep, "--calibration", xml, "-o", field, "--holdout-every", "4",
                               "--holdout-offset", "2", "--iterations", "60", "--initial-gaussians", "2000",
                               "--no-pixel-grid-fit", "--elevation-sigma", "1.0", "--refine-poses",
@@ -304,7 +319,7 @@ def check_refine_poses(sweep, xml, out):
     code, out_text, err = run("train", sweep, "--calibration", xml, "-o", field, "--holdout-every", "4",
                               "--holdout-offset", "2", "--iterations", "60", "--initial-gaussians", "2000",
                               "--no-pixel-grid-fit", "--elevation-sigma", "1.0", "--refine-image-to-probe",
-                              "--refined-poses", refined)
+                              "--no-refine-poses", "--refined-poses", refined)
     assert code == 0 and "RefineImageToProbe = on" in out_text and "ImageToProbe   corrected by" in out_text, \
         (out_text, err)
     reader.Modified()
@@ -340,7 +355,7 @@ def check_refine_poses(sweep, xml, out):
     assert "poses          the sweep's own (--tracked-poses)" in out_text, out_text
     code, out_text, err = run("train", sweep, "--calibration", xml, "-o", field, "--iterations", "30",
                               "--initial-gaussians", "2000", "--no-pixel-grid-fit", "--elevation-sigma", "1.0",
-                              "--refine-time-offset")
+                              "--refine-time-offset", "--no-refine-poses")
     assert code == 0 and "RefineTimeOffset = on" in out_text and "time offset    " in out_text, (out_text, err)
     assert "one sweep: not determined" in out_text, out_text
 

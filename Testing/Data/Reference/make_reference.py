@@ -38,6 +38,7 @@ TRAINING = {
     "max_gaussians": 4000,
     "elevation_sigma": 0.5,
     "coarse_fraction": 0,
+    "refine_poses": 0,
     "seed": 1,
     "threads": 1,
 }
@@ -65,7 +66,8 @@ def train(bigus_exe, field, seed):
         "--holdout-offset", str(t["holdout_offset"]), "--iterations", str(t["iterations"]),
         "--initial-gaussians", str(t["initial_gaussians"]), "--max-gaussians", str(t["max_gaussians"]),
         "--elevation-sigma", str(t["elevation_sigma"]), "--coarse-fraction", str(t["coarse_fraction"]),
-        "--seed", str(seed), "--threads", str(t["threads"]))
+        "--seed", str(seed), "--threads", str(t["threads"]),
+        *(["--refine-poses"] if t["refine_poses"] == 1 else ["--no-refine-poses"] if t["refine_poses"] == 0 else []))
     reader = vtk.vtkXMLPolyDataReader()
     reader.SetFileName(field)
     reader.Update()
