@@ -203,6 +203,7 @@ vtkGaussianFieldTrainer::vtkGaussianFieldTrainer()
   this->Densify = d.Densify;
   this->ReflectivitySolve = d.ReflectivitySolve;
   this->SolveIterations = d.Solve.MaximumIterations;
+  this->SolveL1 = d.Solve.L1;
   this->DenseInitialisation = d.DenseInitialisation;
   this->PixelGridFit = d.PixelGridFit;
   this->RefinePoses = static_cast<int>(d.RefinePoses);
@@ -307,6 +308,7 @@ int vtkGaussianFieldTrainer::RequestData(
   s.Densify = this->Densify;
   s.ReflectivitySolve = this->ReflectivitySolve;
   s.Solve.MaximumIterations = this->SolveIterations;
+  s.Solve.L1 = this->SolveL1;
   s.DenseInitialisation = this->DenseInitialisation;
   s.PixelGridFit = this->PixelGridFit;
   s.RefinePoses = static_cast<bigus::PoseRefinement>(this->RefinePoses);
@@ -485,8 +487,8 @@ int vtkGaussianFieldTrainer::RequestData(
   {
     const bigus::ReflectivitySolveReport& last = report.LastSolve;
     char text[300];
-    std::snprintf(text, sizeof(text), "%d in %.1f s; the last: %d CGLS iterations%s, objective %.4g -> %.4g",
-      report.Solves, report.SolveSeconds, last.Iterations,
+    std::snprintf(text, sizeof(text), "%d in %.1f s; the last: %d %s iterations%s, objective %.4g -> %.4g",
+      report.Solves, report.SolveSeconds, last.Iterations, last.L1Weight > 0 ? "FISTA (L1)" : "CGLS",
       last.TimeLimitReached ? " (ended by its share of the time budget)" : "",
       last.Objective.empty() ? 0.0 : last.Objective.front(), last.Objective.empty() ? 0.0 : last.Objective.back());
     addText("ReflectivitySolves", text);
@@ -637,6 +639,7 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "Densify: " << this->Densify << "\n";
   os << indent << "ReflectivitySolve: " << this->ReflectivitySolve << "\n";
   os << indent << "SolveIterations: " << this->SolveIterations << "\n";
+  os << indent << "SolveL1: " << this->SolveL1 << "\n";
   os << indent << "DenseInitialisation: " << this->DenseInitialisation << "\n";
   os << indent << "PixelGridFit: " << this->PixelGridFit << "\n";
   os << indent << "RefinePoses: " << this->RefinePoses << "\n";

@@ -137,6 +137,12 @@ public:
   vtkSetClampMacro(SolveIterations, int, 1, 100000);
   vtkGetMacro(SolveIterations, int);
   ///@}
+  ///@{ An L1 term in every reflectivity solve (default 0: none), as a share of the weight that would set every
+  /// reflectivity to 0: FISTA instead of CGLS, and the Gaussians it sets to 0 are pruned at the end
+  /// (bigus::ReflectivitySolveSettings::L1).
+  vtkSetClampMacro(SolveL1, double, 0.0, 1.0);
+  vtkGetMacro(SolveL1, double);
+  ///@}
   ///@{ A dense start: Gaussians on the training frames' pixel grid instead of Harris seeds (default
   /// off; bigus::TrainerSettings::DenseInitialisation).
   vtkSetMacro(DenseInitialisation, bool);
@@ -386,6 +392,7 @@ protected:
   bool Densify;
   bool ReflectivitySolve;
   int SolveIterations;
+  double SolveL1;
   bool DenseInitialisation;
   bool PixelGridFit;
   int RefinePoses;

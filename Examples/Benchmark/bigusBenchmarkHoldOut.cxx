@@ -62,7 +62,8 @@ bool MeasureErrorSources(const Sweep& sweep, Trainer& trainer, const Row& bigusR
   std::fill_n(image, pixels * data.Count(), 0.f);
   for (int f : data.TrainFrames)
   {
-    if (!trainer.RenderFrame(data, f, image + pixels * f, error))
+    // At the pose the field was trained at (refined, where the trainer refines the sweep's poses).
+    if (!trainer.RenderFrame(trainer.GetData(), f, image + pixels * f, error))
     {
       return false;
     }

@@ -44,7 +44,7 @@ struct TrainOptions
   std::vector<int> Frames; ///< explicit training frames (empty: the hold-out rule)
   double TimeBudget = 0, ElevationSigma = 0, EvaluationInterval = 0;
   long long MaxGaussians = 0, InitialGaussians = 0;
-  double GrowthMargin = 0, ResidualSeedShare = 0, CoarseFraction = 0, MergeTolerance = 0;
+  double GrowthMargin = 0, ResidualSeedShare = 0, CoarseFraction = 0, MergeTolerance = 0, SolveL1 = 0;
   int GrowthPatience = 0, SolveIterations = 0;
   bool NoFillGaps = false, ReflectivitySolve = false, DenseStart = false, DenseAdam = false,
        NoPixelGridFit = false, RefinePoses = false, NoRefinePoses = false, RefineTimeOffset = false,
@@ -65,6 +65,7 @@ struct TrainOptions
     this->GrowthPatience = defaults->GetGrowthPatience();
     this->ResidualSeedShare = defaults->GetResidualSeedShare();
     this->SolveIterations = defaults->GetSolveIterations();
+    this->SolveL1 = defaults->GetSolveL1();
     this->Seed = defaults->GetSeed();
     this->FramesPerStep = defaults->GetFramesPerStep();
     this->CoarseFraction = defaults->GetCoarseFraction();
@@ -220,6 +221,7 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
   trainer->SetMergeTolerance(o.MergeTolerance);
   trainer->SetReflectivitySolve(o.ReflectivitySolve);
   trainer->SetSolveIterations(o.SolveIterations);
+  trainer->SetSolveL1(o.SolveL1);
   trainer->SetDenseInitialisation(o.DenseStart);
   trainer->SetPixelGridFit(!o.NoPixelGridFit);
   trainer->SetRefinePoses(o.RefinePoses ? vtkGaussianFieldTrainer::POSE_REFINEMENT_ON
@@ -514,6 +516,11 @@ Command AddTrainCommand(CLI::App& app)
     "CGLS iterations of each reflectivity solve (each a forward and a backward pass over every training frame)")
     ->capture_default_str()
     ->check(CLI::PositiveNumber);
+  trainCommand->add_option("--solve-l1", train.SolveL1,
+    "An L1 term in each reflectivity solve (the pixel-grid fit's, variable projection's), as a share of the weight "
+    "that sets every reflectivity to 0 (FISTA; the Gaussians it zeroes are pruned; default 0: none, CGLS)")
+    ->capture_default_str()
+    ->check(CLI::Range(0.0, 1.0));
   trainCommand->add_flag("--dense-adam", train.DenseAdam,
     "Adam moves every Gaussian every step on its momentum (the ablation; default: only the Gaussians a step "
     "touched, the others keep their parameters and moments)");

@@ -67,11 +67,13 @@ bool Fail(std::string* error, const std::string& message)
 }
 }
 
-double ReflectivitySolveBytes(std::int64_t gaussians, std::int64_t pixels)
+double ReflectivitySolveBytes(std::int64_t gaussians, std::int64_t pixels, bool l1)
 {
-  // Per Gaussian: y, s, direction, ridge, the diagonal and P (double), the reflectivities applied (float);
-  // per pixel: the residual and A p (float).
-  return double(gaussians) * (6 * sizeof(double) + sizeof(float)) + double(pixels) * 2 * sizeof(float);
+  // CGLS, per Gaussian: y, s, direction, ridge, the diagonal and P (double), the reflectivities applied (float);
+  // per pixel: the residual and A p (float). FISTA: y, z, the trial point, s at y and at z, the diagonal and P;
+  // per pixel: the residuals at y, at z and at the trial point.
+  return l1 ? double(gaussians) * (7 * sizeof(double) + sizeof(float)) + double(pixels) * 3 * sizeof(float)
+            : double(gaussians) * (6 * sizeof(double) + sizeof(float)) + double(pixels) * 2 * sizeof(float);
 }
 
 bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const std::vector<int>& allFrames,
@@ -103,7 +105,8 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
   const int count = static_cast<int>(frames.size());
   const std::int64_t m = pixels * count;
   // Refused before anything is allocated when its vectors alone would not fit in this machine's memory.
-  const double needed = ReflectivitySolveBytes(n, m);
+  const bool l1 = settings.L1 > 0;
+  const double needed = ReflectivitySolveBytes(n, m, l1);
   const double physical = PhysicalMemoryBytes();
   const bool fits = physical <= 0 || needed <= physical;
   if (reduction && !reduction->AllSucceeded(fits, error))
@@ -167,50 +170,11 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
   std::vector<double> P(n);
   ForEach(n, [&](std::int64_t i) { P[i] = 1 / std::sqrt(diagonal[i] + lambda); });
 
-  // CGLS on B y = b, B = [G^1/2 A P; sqrt(lambda) P], b = [G^1/2 t; 0], r = P y.
-  std::vector<double> y(n), s(n), direction(n), ridge(n);
-  std::vector<float> applied(n);
-  ForEach(n, [&](std::int64_t i) { applied[i] = reflectivities[i]; });
-  if (!engine.ApplyBasis(applied.data(), frames.data(), count, options, q.data(), error))
-  {
-    return false;
-  }
-  ForEach(m, [&](std::int64_t k) {
-    const double target = -std::log1p(-intensity(k)) / gamma;
-    rho[k] = static_cast<float>(root(k) * (target - q[k]));
-  });
-  ForEach(n, [&](std::int64_t i) {
-    y[i] = reflectivities[i] / P[i];
-    ridge[i] = -rootLambda * reflectivities[i];
-  });
-  auto objective = [&]() {
-    return total(Sum(m, [&](std::int64_t k) { return double(rho[k]) * rho[k]; })) +
-      Sum(n, [&](std::int64_t i) { return ridge[i] * ridge[i]; });
-  };
-  // s = B^T residual; q is scratch here.
-  auto transpose = [&]() {
-    ForEach(m, [&](std::int64_t k) { q[k] = static_cast<float>(root(k) * rho[k]); });
-    std::fill(s.begin(), s.end(), 0.0);
-    if (!engine.ApplyBasisTranspose(q.data(), frames.data(), count, options, s.data(), error))
-    {
-      return false;
-    }
-    ForEach(n, [&](std::int64_t i) { s[i] = P[i] * (s[i] + rootLambda * ridge[i]); });
-    return true;
-  };
   ReflectivitySolveReport local;
   ReflectivitySolveReport& r = report ? *report : local;
   r = ReflectivitySolveReport();
   r.Lambda = lambda;
   r.UnseenGaussians = n - seen;
-  r.Objective.push_back(objective());
-  if (!communicated || !transpose())
-  {
-    return false;
-  }
-  direction = s;
-  double norm = Sum(n, [&](std::int64_t i) { return s[i] * s[i]; });
-  const double norm0 = norm;
   // The time limit: stop when one more iteration, as long as the last, would pass it (on the slowest clock).
   double iterationStart = Now();
   auto outOfTime = [&]() {
@@ -225,54 +189,249 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
     r.TimeLimitReached = clock[0] + clock[1] > settings.TimeLimit;
     return r.TimeLimitReached;
   };
-  for (int it = 0; it < settings.MaximumIterations && norm > 0 && norm > settings.Tolerance * settings.Tolerance * norm0;
-       ++it)
+  std::vector<double> y(n), s(n);
+  std::vector<float> applied(n);
+  if (l1)
   {
-    const bool stop = it > 0 && outOfTime();
-    if (!communicated)
+    // FISTA with backtracking (Beck and Teboulle, SIAM J. Imaging Sci. 2(1), 2009, section 4) on
+    // F(y) = |b - B y|^2 + mu |y|_1, B and b as CGLS's below: the penalty weighs each Gaussian's |r_i| by its
+    // basis norm 1 / P_i, and mu = L1 x 2 max_i |(B^T b)_i|, the smallest mu for which y = 0 is optimal. The
+    // residuals and gradient of the momentum point z are combined from those of the last two iterates (B is
+    // linear), so an iteration costs one A and one A^T, plus one A per doubling of the Lipschitz estimate L.
+    std::vector<float> atZ(m); // rho: the data part of b - B y at y; q: at the trial point
+    std::vector<double> z(n, 0.0), trial(n), sZ(n);
+    // out = G^1/2 (t - A P v), the data part of b - B v.
+    auto residual = [&](const std::vector<double>& v, std::vector<float>& out) {
+      ForEach(n, [&](std::int64_t i) { applied[i] = static_cast<float>(P[i] * v[i]); });
+      if (!engine.ApplyBasis(applied.data(), frames.data(), count, options, out.data(), error))
+      {
+        return false;
+      }
+      ForEach(m, [&](std::int64_t k) {
+        out[k] = static_cast<float>(root(k) * (-std::log1p(-intensity(k)) / gamma - out[k]));
+      });
+      return true;
+    };
+    // g = B^T (b - B v) from the data part res at v (res is overwritten).
+    auto gradient = [&](std::vector<float>& res, const std::vector<double>& v, std::vector<double>& g) {
+      ForEach(m, [&](std::int64_t k) { res[k] = static_cast<float>(root(k) * res[k]); });
+      std::fill(g.begin(), g.end(), 0.0);
+      if (!engine.ApplyBasisTranspose(res.data(), frames.data(), count, options, g.data(), error))
+      {
+        return false;
+      }
+      ForEach(n, [&](std::int64_t i) { g[i] = P[i] * g[i] - lambda * P[i] * P[i] * v[i]; });
+      return true;
+    };
+    // |b - B v|^2 from the data part at v.
+    auto leastSquares = [&](const std::vector<float>& res, const std::vector<double>& v) {
+      return total(Sum(m, [&](std::int64_t k) { return double(res[k]) * res[k]; })) +
+        lambda * Sum(n, [&](std::int64_t i) { return P[i] * v[i] * P[i] * v[i]; });
+    };
+    if (!residual(z, atZ) || !gradient(atZ, z, sZ))
     {
       return false;
     }
-    if (stop)
+    double largest = 0;
+    for (double g : sZ)
     {
-      break;
+      largest = std::max(largest, std::abs(g));
     }
-    ForEach(n, [&](std::int64_t i) { applied[i] = static_cast<float>(P[i] * direction[i]); });
+    const double mu = settings.L1 * 2 * largest;
+    auto l1Norm = [&](const std::vector<double>& v) { return Sum(n, [&](std::int64_t i) { return std::abs(v[i]); }); };
+    ForEach(n, [&](std::int64_t i) { y[i] = reflectivities[i] / P[i]; });
+    if (!residual(y, rho))
+    {
+      return false;
+    }
+    double f = leastSquares(rho, y);
+    r.Objective.push_back(f + mu * l1Norm(y));
+    atZ = rho;
+    if (!communicated || !gradient(atZ, y, s))
+    {
+      return false;
+    }
+    atZ = rho;
+    z = y;
+    sZ = s;
+    double fZ = f, L = 2, momentum = 1; // B^T B has a unit diagonal, so L >= 2
+    iterationStart = Now();
+    for (int it = 0; it < settings.MaximumIterations; ++it)
+    {
+      const bool stop = it > 0 && outOfTime();
+      if (!communicated)
+      {
+        return false;
+      }
+      if (stop)
+      {
+        break;
+      }
+      // The proximal step from z, L doubled until the quadratic model at z bounds the least squares.
+      double fTrial = 0, moved = 0;
+      for (int doubling = 0;; ++doubling)
+      {
+        const double threshold = mu / L;
+        ForEach(n, [&](std::int64_t i) {
+          const double v = z[i] + 2 * sZ[i] / L;
+          trial[i] = v > threshold ? v - threshold : v < -threshold ? v + threshold : 0.0;
+        });
+        if (!residual(trial, q))
+        {
+          return false;
+        }
+        fTrial = leastSquares(q, trial);
+        double inner = 0;
+        moved = 0;
+        for (std::int64_t i = 0; i < n; ++i)
+        {
+          inner += sZ[i] * (trial[i] - z[i]);
+          moved += (trial[i] - z[i]) * (trial[i] - z[i]);
+        }
+        if (!communicated)
+        {
+          return false;
+        }
+        // Float residuals: a bound met to their rounding is met.
+        if (fTrial <= fZ - 2 * inner + 0.5 * L * moved + 1e-6 * fZ)
+        {
+          break;
+        }
+        if (doubling == 60 || !std::isfinite(fTrial))
+        {
+          return Fail(error, "the L1 reflectivity solve found no step at iteration " + std::to_string(it + 1));
+        }
+        L *= 2;
+      }
+      const double next = 0.5 * (1 + std::sqrt(1 + 4 * momentum * momentum));
+      const double beta = (momentum - 1) / next;
+      momentum = next;
+      double change = 0, size = 0;
+      for (std::int64_t i = 0; i < n; ++i)
+      {
+        change += (trial[i] - y[i]) * (trial[i] - y[i]);
+        size += trial[i] * trial[i];
+      }
+      // z = y_new + beta (y_new - y), its residual and gradient likewise; then y = y_new.
+      ForEach(m, [&](std::int64_t k) {
+        atZ[k] = static_cast<float>(q[k] + beta * (double(q[k]) - rho[k]));
+        rho[k] = q[k];
+      });
+      if (!gradient(q, trial, sZ)) // sZ holds the gradient at y_new for now
+      {
+        return false;
+      }
+      ForEach(n, [&](std::int64_t i) {
+        const double g = sZ[i];
+        sZ[i] = g + beta * (g - s[i]);
+        s[i] = g;
+        z[i] = trial[i] + beta * (trial[i] - y[i]);
+        y[i] = trial[i];
+      });
+      fZ = leastSquares(atZ, z);
+      r.Objective.push_back(fTrial + mu * l1Norm(y));
+      r.Iterations = it + 1;
+      if (!communicated)
+      {
+        return false;
+      }
+      if (change <= settings.Tolerance * settings.Tolerance * size)
+      {
+        break;
+      }
+    }
+    r.L1Weight = mu;
+  }
+  else
+  {
+    // CGLS on B y = b, B = [G^1/2 A P; sqrt(lambda) P], b = [G^1/2 t; 0], r = P y.
+    std::vector<double> direction(n), ridge(n);
+    ForEach(n, [&](std::int64_t i) { applied[i] = reflectivities[i]; });
     if (!engine.ApplyBasis(applied.data(), frames.data(), count, options, q.data(), error))
     {
       return false;
     }
-    ForEach(m, [&](std::int64_t k) { q[k] = static_cast<float>(q[k] * root(k)); });
-    const double delta = total(Sum(m, [&](std::int64_t k) { return double(q[k]) * q[k]; })) +
-      lambda * Sum(n, [&](std::int64_t i) { return applied[i] * double(applied[i]); });
-    if (!communicated)
-    {
-      return false;
-    }
-    const double alpha = norm / delta;
-    if (!std::isfinite(alpha))
-    {
-      return Fail(error, "the reflectivity solve met a non-finite step at iteration " + std::to_string(it + 1));
-    }
-    ForEach(n, [&](std::int64_t i) {
-      y[i] += alpha * direction[i];
-      ridge[i] -= alpha * rootLambda * applied[i];
+    ForEach(m, [&](std::int64_t k) {
+      const double target = -std::log1p(-intensity(k)) / gamma;
+      rho[k] = static_cast<float>(root(k) * (target - q[k]));
     });
-    ForEach(m, [&](std::int64_t k) { rho[k] -= static_cast<float>(alpha * q[k]); });
+    ForEach(n, [&](std::int64_t i) {
+      y[i] = reflectivities[i] / P[i];
+      ridge[i] = -rootLambda * reflectivities[i];
+    });
+    auto objective = [&]() {
+      return total(Sum(m, [&](std::int64_t k) { return double(rho[k]) * rho[k]; })) +
+        Sum(n, [&](std::int64_t i) { return ridge[i] * ridge[i]; });
+    };
+    // s = B^T residual; q is scratch here.
+    auto transpose = [&]() {
+      ForEach(m, [&](std::int64_t k) { q[k] = static_cast<float>(root(k) * rho[k]); });
+      std::fill(s.begin(), s.end(), 0.0);
+      if (!engine.ApplyBasisTranspose(q.data(), frames.data(), count, options, s.data(), error))
+      {
+        return false;
+      }
+      ForEach(n, [&](std::int64_t i) { s[i] = P[i] * (s[i] + rootLambda * ridge[i]); });
+      return true;
+    };
     r.Objective.push_back(objective());
-    r.Iterations = it + 1;
-    if (!communicated)
+    if (!communicated || !transpose())
     {
       return false;
     }
-    if (!transpose())
+    direction = s;
+    double norm = Sum(n, [&](std::int64_t i) { return s[i] * s[i]; });
+    const double norm0 = norm;
+    iterationStart = Now();
+    for (int it = 0; it < settings.MaximumIterations && norm > 0 && norm > settings.Tolerance * settings.Tolerance * norm0;
+         ++it)
     {
-      return false;
+      const bool stop = it > 0 && outOfTime();
+      if (!communicated)
+      {
+        return false;
+      }
+      if (stop)
+      {
+        break;
+      }
+      ForEach(n, [&](std::int64_t i) { applied[i] = static_cast<float>(P[i] * direction[i]); });
+      if (!engine.ApplyBasis(applied.data(), frames.data(), count, options, q.data(), error))
+      {
+        return false;
+      }
+      ForEach(m, [&](std::int64_t k) { q[k] = static_cast<float>(q[k] * root(k)); });
+      const double delta = total(Sum(m, [&](std::int64_t k) { return double(q[k]) * q[k]; })) +
+        lambda * Sum(n, [&](std::int64_t i) { return applied[i] * double(applied[i]); });
+      if (!communicated)
+      {
+        return false;
+      }
+      const double alpha = norm / delta;
+      if (!std::isfinite(alpha))
+      {
+        return Fail(error, "the reflectivity solve met a non-finite step at iteration " + std::to_string(it + 1));
+      }
+      ForEach(n, [&](std::int64_t i) {
+        y[i] += alpha * direction[i];
+        ridge[i] -= alpha * rootLambda * applied[i];
+      });
+      ForEach(m, [&](std::int64_t k) { rho[k] -= static_cast<float>(alpha * q[k]); });
+      r.Objective.push_back(objective());
+      r.Iterations = it + 1;
+      if (!communicated)
+      {
+        return false;
+      }
+      if (!transpose())
+      {
+        return false;
+      }
+      const double next = Sum(n, [&](std::int64_t i) { return s[i] * s[i]; });
+      const double beta = next / norm;
+      norm = next;
+      ForEach(n, [&](std::int64_t i) { direction[i] = s[i] + beta * direction[i]; });
     }
-    const double next = Sum(n, [&](std::int64_t i) { return s[i] * s[i]; });
-    const double beta = next / norm;
-    norm = next;
-    ForEach(n, [&](std::int64_t i) { direction[i] = s[i] + beta * direction[i]; });
   }
   std::vector<float> solved(n);
   bool finite = true;

@@ -16,6 +16,10 @@
  * ApplyBasisTranspose (A^T), so a CUDA or distributed engine solves by implementing the same products.
  * In exact arithmetic each iteration lowers the objective; it starts from the field's reflectivities.
  *
+ * With an L1 term (ReflectivitySolveSettings::L1) the objective gains mu sum_i |r_i| / P_i, a lasso whose
+ * solution sets the reflectivities of the Gaussians the data do not need to exactly 0, and the solver is FISTA
+ * with backtracking (Beck and Teboulle 2009) on the same scaled system and products.
+ *
  * Eigen's iterative solvers were not used: their matrix-free path needs a wrapper type with Eigen's
  * traits and a custom preconditioner, while CGLS itself is a dozen lines here, keeps the residual in
  * data space (better conditioned than CG on the normal equations) and reports the objective per
@@ -48,6 +52,11 @@ struct ReflectivitySolveSettings
   /// long as the last one took, would exceed the limit. At least one iteration is taken; each one lowers the
   /// objective, so a solve cut short is still no worse a fit than its starting point.
   double TimeLimit = 0;
+  /// Weight of an L1 term mu sum_i |r_i| / P_i (each Gaussian's |r| times its basis norm sqrt(diag(A^T G A) +
+  /// lambda)) as a share of the smallest mu that makes every reflectivity 0 (0: none, CGLS; in (0, 1): FISTA,
+  /// the Gaussians it sets to exactly 0 are the ones a prune then removes). Tolerance then bounds the relative
+  /// change of the scaled reflectivities between iterations.
+  double L1 = 0;
 };
 
 struct ReflectivitySolveReport
@@ -59,11 +68,12 @@ struct ReflectivitySolveReport
   std::int64_t UnseenGaussians = 0; ///< Gaussians that no pixel of the frames weighs (their r goes to 0)
   double Seconds = 0;
   bool TimeLimitReached = false; ///< it ended on settings.TimeLimit before MaximumIterations or Tolerance
+  double L1Weight = 0;            ///< settings.L1: the weight mu used
 };
 
 /// Bytes a solve allocates for @p gaussians Gaussians over @p pixels pixels (frames x H x W): 52 per
-/// Gaussian and 8 per pixel.
-BIGUSTRAINING_EXPORT double ReflectivitySolveBytes(std::int64_t gaussians, std::int64_t pixels);
+/// Gaussian and 8 per pixel; with an L1 term (@p l1) 60 and 12.
+BIGUSTRAINING_EXPORT double ReflectivitySolveBytes(std::int64_t gaussians, std::int64_t pixels, bool l1 = false);
 
 /**
  * Solves for the reflectivities of the @p engine's current field on @p frames of @p data (the data

@@ -144,8 +144,9 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
   this->Report.Settings.push_back(!s.ReflectivitySolve ? "ReflectivitySolve = off (Adam alone)"
       : s.NonNegativeReflectivity
       ? "ReflectivitySolve = off (NonNegativeReflectivity: the model is not linear in r)"
-      : Format("ReflectivitySolve = on (CGLS, at most %d iterations, ridge %.3g, after seeding, after every "
-               "densification", s.Solve.MaximumIterations, s.Solve.Ridge) +
+      : Format("ReflectivitySolve = on (%s, at most %d iterations, ridge %.3g, after seeding, after every "
+               "densification", s.Solve.L1 > 0 ? Format("FISTA with L1 %.3g", s.Solve.L1).c_str() : "CGLS",
+          s.Solve.MaximumIterations, s.Solve.Ridge) +
         (s.SolveInterval > 0 ? Format(" and every %d steps)", s.SolveInterval) : std::string(")")));
   this->Report.Settings.push_back(Format("Seed = %u, FramesPerStep = %d, Cutoff = %.3g, SparseAdam = %s%s", s.Seed,
     s.FramesPerStep, s.Cutoff, s.SparseAdam ? "on" : "off",
@@ -388,7 +389,9 @@ bool Trainer::PrepareInitialField(std::string* error)
                                       count < planes.FanPixels
                                         ? "are at most twice MaximumGaussians, a grid of that many"
                                         : "fit under MaximumGaussians") +
-      grid + "; reflectivities solved, no geometry steps)");
+      grid + "; reflectivities solved" +
+      (this->Settings.Solve.L1 > 0 ? Format(" with an L1 term of %.3g (FISTA)", this->Settings.Solve.L1) : std::string()) +
+      ", no geometry steps)");
     return true;
   }
   if (this->Settings.DenseInitialisation)
