@@ -362,6 +362,7 @@ int vtkGaussianFieldTrainer::RequestData(
     vtkWarningMacro("Backend auto: " << notice);
   }
   this->BackendInUse = engine->GetName();
+  const std::vector<std::array<double, 16>> trackedPoses = data.Poses; // RefinedPoses' own, before refinement
   bigus::Trainer trainer(std::move(data), s, std::move(engine));
   if ((this->Controller && !trainer.SetProcessReduction(&reduction, &error)) || !trainer.Initialize(&error) ||
     (this->ResumeFile && *this->ResumeFile && !trainer.LoadCheckpoint(this->ResumeFile, &error)))
@@ -570,6 +571,15 @@ int vtkGaussianFieldTrainer::RequestData(
       refined->InsertNextTuple(pose.data());
     }
     output->GetFieldData()->AddArray(refined);
+    // ... and as tracked, so that a sweep is matched to its block of RefinedPoses exactly (bigus evaluate).
+    vtkNew<vtkDoubleArray> tracked;
+    tracked->SetName("TrackedPoses");
+    tracked->SetNumberOfComponents(16);
+    for (const std::array<double, 16>& pose : trackedPoses)
+    {
+      tracked->InsertNextTuple(pose.data());
+    }
+    output->GetFieldData()->AddArray(tracked);
   }
   if (used.RefineTimeOffset)
   {

@@ -165,7 +165,8 @@ public:
   /// tuple per refined training frame: Frame, rotation about the frame's u, v, n axes through its centre pixel
   /// (degrees), translation along u, v, n (mm) (bigus::CorrectPose), TrainingPoses are the refined poses, and
   /// RefinedPoses (16 components, one tuple per input frame, the sweeps' frames in turn) every frame's pose as
-  /// refined (held-out frames take the shared corrections and the smooth part of their sweep's training
+  /// refined, TrackedPoses the same frames' poses as given (RefinedPoses' matching key for bigus evaluate)
+  /// (held-out frames take the shared corrections and the smooth part of their sweep's training
   /// corrections, bigus::CorrectUntrainedFrames), and UntrainedPoseCorrection (one tuple: the held-out frames so
   /// corrected, the kernel's width in training-frame intervals, 0 for none and infinity for the sweep's mean, and
   /// the leave-one-out errors in mm of no correction and of the chosen width).

@@ -202,21 +202,23 @@ int ScoreAtRefinedPoses(vtkPolyData* field, vtkImageData* truth, bigus::Training
 }
 
 /**
- * Where @p sweep's frames lie in a field's RefinedPoses @p refined (every trained sweep's frames in turn): the
- * first block of as many consecutive poses whose frames' corners all lie within 5 mm of the sweep's own (pose
- * corrections are of the order of a millimetre; frames marked invalid are not compared). -1 when none does:
- * another sweep, or another frame range.
+ * Where @p sweep's frames lie in a field's RefinedPoses (every trained sweep's frames in turn): the
+ * first block of as many consecutive poses whose frames' corners all lie within @p tolerance mm of the sweep's own
+ * in @p poses (TrackedPoses, the same frames as tracked, where the field has them: 1e-3 mm; RefinedPoses itself in
+ * older fields: 5 mm, pose corrections being of the order of a millimetre, which a sweep a fraction of a frame
+ * spacing away matches too; frames marked invalid are not compared). -1 when none does: another sweep, or another
+ * frame range.
  */
-vtkIdType RefinedPosesOf(vtkImageData* sweep, vtkDataArray* refined)
+vtkIdType RefinedPosesOf(vtkImageData* sweep, vtkDataArray* poses, double tolerance)
 {
   int dims[3];
   sweep->GetDimensions(dims);
   vtkDataArray* own = sweep->GetFieldData()->GetArray("ImageToReference");
-  if (!own || refined->GetNumberOfComponents() != 16 || refined->GetNumberOfTuples() < dims[2])
+  if (!own || poses->GetNumberOfComponents() != 16 || poses->GetNumberOfTuples() < dims[2])
   {
     return -1;
   }
-  for (vtkIdType first = 0; first + dims[2] <= refined->GetNumberOfTuples(); ++first)
+  for (vtkIdType first = 0; first + dims[2] <= poses->GetNumberOfTuples(); ++first)
   {
     bool close = true;
     for (int k = 0; k < dims[2] && close; ++k)
@@ -227,7 +229,7 @@ vtkIdType RefinedPosesOf(vtkImageData* sweep, vtkDataArray* refined)
       }
       double a[16], b[16];
       own->GetTuple(k, a);
-      refined->GetTuple(first + k, b);
+      poses->GetTuple(first + k, b);
       for (double i : { 0.0, dims[0] - 1.0 })
       {
         for (double j : { 0.0, dims[1] - 1.0 })
@@ -238,7 +240,7 @@ vtkIdType RefinedPosesOf(vtkImageData* sweep, vtkDataArray* refined)
             const double d = (a[4 * r] - b[4 * r]) * i + (a[4 * r + 1] - b[4 * r + 1]) * j + a[4 * r + 3] - b[4 * r + 3];
             d2 += d * d;
           }
-          close = close && d2 < 25.0; // also false for a non-finite pose
+          close = close && d2 < tolerance * tolerance; // also false for a non-finite pose
         }
       }
     }
@@ -268,11 +270,15 @@ int RunEvaluate(const EvaluateOptions& o)
   std::string posesUsed = "tracked";
   if (vtkDataArray* refined = field->GetFieldData()->GetArray("RefinedPoses"))
   {
+    vtkDataArray* tracked = field->GetFieldData()->GetArray("TrackedPoses");
     if (o.TrackedPoses)
     {
       std::printf("poses          the sweep's own (--tracked-poses), not the field's RefinedPoses\n");
     }
-    else if (const vtkIdType first = RefinedPosesOf(truth, refined); first >= 0)
+    else if (const vtkIdType first = tracked && tracked->GetNumberOfTuples() == refined->GetNumberOfTuples()
+          ? RefinedPosesOf(truth, tracked, 1e-3)
+          : RefinedPosesOf(truth, refined, 5.0);
+             first >= 0)
     {
       atRefinedPoses = WithOwnFieldData(truth);
       vtkDataArray* poses = atRefinedPoses->GetFieldData()->GetArray("ImageToReference");
@@ -288,9 +294,10 @@ int RunEvaluate(const EvaluateOptions& o)
     }
     else
     {
-      std::printf("poses          the sweep's own: none of the field's RefinedPoses (%lld frames) match its %d frames "
-                  "within 5 mm (another sweep or frame range)\n",
-        static_cast<long long>(refined->GetNumberOfTuples()), dims[2]);
+      std::printf("poses          the sweep's own: none of the field's %s (%lld frames) match its %d frames "
+                  "(another sweep or frame range)\n",
+        tracked ? "TrackedPoses" : "RefinedPoses (within 5 mm)", static_cast<long long>(refined->GetNumberOfTuples()),
+        dims[2]);
     }
   }
   for (int k : o.Frames)

@@ -392,6 +392,24 @@ bool Trainer::PrepareInitialField(std::string* error)
       grid + "; reflectivities solved" +
       (this->Settings.Solve.L1 > 0 ? Format(" with an L1 term of %.3g (FISTA)", this->Settings.Solve.L1) : std::string()) +
       ", no geometry steps)");
+    if (this->Settings.RefinePoses == PoseRefinement::On)
+    {
+      // No step, so no pose correction: the tracked poses stay, and the field says so (no RefinedPoses).
+      this->Settings.RefinePoses = PoseRefinement::Off;
+      std::fill(this->RefinedSweeps.begin(), this->RefinedSweeps.end(), 0);
+      TrainingState& state = this->State;
+      state.PoseCorrections.clear();
+      state.PoseFirstMoment.clear();
+      state.PoseSecondMoment.clear();
+      state.PoseSteps.clear();
+      for (std::string& line : this->Report.Settings)
+      {
+        if (line.rfind("RefinePoses = ", 0) == 0)
+        {
+          line = "RefinePoses = off (the pixel-grid fit takes no step to refine the poses with)";
+        }
+      }
+    }
     return true;
   }
   if (this->Settings.DenseInitialisation)

@@ -1651,8 +1651,16 @@ TEST(Trainer, WhenOneGaussianPerFanPixelFitsTheDefaultsFitThePixelGridAndTakeNoS
   ASSERT_TRUE(trainer.Initialize(&error)) << error;
   EXPECT_EQ(trainer.GetReport().InitialGaussians, planes.FanPixels);
   EXPECT_EQ(trainer.GetReport().Solves, 1);
+  // No step, so nothing to refine the poses with, whatever the default (Auto) chose for this sweep.
+  EXPECT_EQ(trainer.GetSettings().RefinePoses, PoseRefinement::Off);
+  EXPECT_FALSE(trainer.IsSweepRefined(0));
+  EXPECT_EQ(std::count_if(trainer.GetReport().Settings.begin(), trainer.GetReport().Settings.end(),
+              [](const std::string& line) { return line.rfind("RefinePoses = off (", 0) == 0; }),
+    1);
   ASSERT_TRUE(trainer.Run(nullptr, nullptr, &error)) << error;
   EXPECT_EQ(trainer.GetIteration(), 0);
+  EXPECT_TRUE(trainer.GetReport().PoseCorrections.empty());
+  EXPECT_EQ(trainer.GetData().Poses, data.Poses);
   EXPECT_NE(trainer.GetReport().StopReason.find("pixel-grid fit"), std::string::npos) << trainer.GetReport().StopReason;
   const double grid = HeldOutPsnr(trainer, heldOut);
   EXPECT_GT(grid, 43.0) << "held-out frames between the planes";

@@ -296,6 +296,14 @@ def check_refine_poses(sweep, xml, out):
         else:
             moved += difference > 1e-6
     assert moved > 0, "no training frame's pose moved"
+    # TrackedPoses: the same frames as given, the key by which `bigus evaluate` finds a sweep's block of
+    # RefinedPoses; the refined sweep itself lies a fraction of a millimetre away and is scored at its own poses.
+    given = reader.GetOutput().GetFieldData().GetArray("TrackedPoses")
+    assert given.GetNumberOfTuples() == 20
+    assert max(abs(given.GetComponent(k, c) - a.GetComponent(k, c)) for k in range(20) for c in range(16)) == 0
+    code, out_text, err = run("evaluate", field, refined, "--frames", "2", "6",
+                              "--report", os.path.join(out, "nwire_refined_sweep_report"))
+    assert code == 0 and "poses          the sweep's own: none of the field's TrackedPoses" in out_text, (out_text, err)
     # `bigus evaluate` plots the corrections along the sweep and lists them, as the field data has them.
     report = os.path.join(out, "nwire_refined_report")
     code, out_text, err = run("evaluate", field, sweep, "--calibration", xml, "--frames", "2", "6", "--report", report,
