@@ -488,11 +488,19 @@ int vtkGaussianFieldTrainer::RequestData(
   {
     const bigus::ReflectivitySolveReport& last = report.LastSolve;
     char text[300];
-    std::snprintf(text, sizeof(text), "%d in %.1f s; the last: %d %s iterations%s, objective %.4g -> %.4g",
-      report.Solves, report.SolveSeconds, last.Iterations, last.L1Weight > 0 ? "FISTA (L1)" : "CGLS",
+    std::snprintf(text, sizeof(text), "%d in %.1f s; the last: %d CGLS iterations%s, objective %.4g -> %.4g",
+      report.Solves, report.SolveSeconds, last.Iterations,
       last.TimeLimitReached ? " (ended by its share of the time budget)" : "",
       last.Objective.empty() ? 0.0 : last.Objective.front(), last.Objective.empty() ? 0.0 : last.Objective.back());
-    addText("ReflectivitySolves", text);
+    std::string solves = text;
+    if (report.LastL1Solve.L1Weight > 0)
+    {
+      std::snprintf(text, sizeof(text), " (least squares on the Gaussians kept by FISTA with the L1 term: %d iterations, "
+                                        "%lld Gaussians set to 0 and removed)",
+        report.LastL1Solve.Iterations, static_cast<long long>(report.LastL1Removed));
+      solves += text;
+    }
+    addText("ReflectivitySolves", solves);
   }
   addText("StopReason", report.StopReason);
   addText("GrowthStopReason", report.GrowthStopReason);

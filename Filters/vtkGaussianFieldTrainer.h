@@ -138,8 +138,8 @@ public:
   vtkGetMacro(SolveIterations, int);
   ///@}
   ///@{ An L1 term in every reflectivity solve (default 0: none), as a share of the weight that would set every
-  /// reflectivity to 0: FISTA instead of CGLS, and the Gaussians it sets to 0 are pruned at the end
-  /// (bigus::ReflectivitySolveSettings::L1).
+  /// reflectivity to 0: FISTA, then the Gaussians it set to 0 are removed and the others refitted by CGLS
+  /// (bigus::ReflectivitySolveSettings::L1; the relaxed lasso).
   vtkSetClampMacro(SolveL1, double, 0.0, 1.0);
   vtkGetMacro(SolveL1, double);
   ///@}

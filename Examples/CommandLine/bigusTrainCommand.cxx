@@ -518,7 +518,8 @@ Command AddTrainCommand(CLI::App& app)
     ->check(CLI::PositiveNumber);
   trainCommand->add_option("--solve-l1", train.SolveL1,
     "An L1 term in each reflectivity solve (the pixel-grid fit's, variable projection's), as a share of the weight "
-    "that sets every reflectivity to 0 (FISTA; the Gaussians it zeroes are pruned; default 0: none, CGLS)")
+    "that sets every reflectivity to 0 (FISTA; the Gaussians it zeroes are removed and the others refitted by "
+    "least squares; default 0: none, CGLS)")
     ->capture_default_str()
     ->check(CLI::Range(0.0, 1.0));
   trainCommand->add_flag("--dense-adam", train.DenseAdam,

@@ -53,9 +53,9 @@ struct ReflectivitySolveSettings
   /// objective, so a solve cut short is still no worse a fit than its starting point.
   double TimeLimit = 0;
   /// Weight of an L1 term mu sum_i |r_i| / P_i (each Gaussian's |r| times its basis norm sqrt(diag(A^T G A) +
-  /// lambda)) as a share of the smallest mu that makes every reflectivity 0 (0: none, CGLS; in (0, 1): FISTA,
-  /// the Gaussians it sets to exactly 0 are the ones a prune then removes). Tolerance then bounds the relative
-  /// change of the scaled reflectivities between iterations.
+  /// lambda)) as a share of the smallest mu that makes every reflectivity 0 (0: none, CGLS; in (0, 1): FISTA;
+  /// the trainer then removes the Gaussians it set to exactly 0 and refits the others by CGLS, the relaxed lasso).
+  /// Tolerance then bounds the relative change of the scaled reflectivities between iterations.
   double L1 = 0;
 };
 

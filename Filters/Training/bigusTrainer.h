@@ -249,6 +249,10 @@ struct TrainerReport
   int Solves = 0;                   ///< reflectivity solves run (ReflectivitySolve)
   double SolveSeconds = 0;          ///< their time, s (all count towards TimeBudget, the first one's too)
   ReflectivitySolveReport LastSolve; ///< the last solve: iterations, objective per iteration
+  /// With Solve.L1: the last solve's L1 part (FISTA), and how many Gaussians it set to 0 and removed before the
+  /// least-squares refit that LastSolve describes (the relaxed lasso).
+  ReflectivitySolveReport LastL1Solve;
+  std::int64_t LastL1Removed = 0;
   double Gamma = 0;
   double LastLoss = 0;              ///< mean loss of the last 50 steps
   double ElevationSigma = 0;        ///< mm, the sigma trained with (given or chosen)
