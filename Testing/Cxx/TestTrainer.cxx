@@ -1782,6 +1782,86 @@ TEST(Trainer, ResidualSeedsLieWhereTheResidualIsAndCarryIt)
 // Through the trainer (ResidualSeedShare > 0): a densification adds, after what it splits and clones, new
 // Gaussians on training frames' planes carrying the residual as their reflectivity, where the same run
 // without adds none; the run goes on from them.
+// FastGS's high-error pixels (bigus::HighErrorPixels): on each frame, exactly ceil(share x fan pixels) pixels are
+// marked, all inside the fan mask, and every marked pixel's |I - recorded| is at least every unmarked fan pixel's.
+TEST(Trainer, HighErrorPixelsAreTheMostWrongShareOfEachFramesFan)
+{
+  std::vector<int> heldOut;
+  TrainingData data = SyntheticSweep(KnownField(200, 7), 0.5, heldOut);
+  for (std::size_t p = 0; p < data.Mask.size(); ++p)
+  {
+    data.Mask[p] = (p % W) >= 5; // a fan that leaves out five columns
+  }
+  std::unique_ptr<TrainingEngine> engine = CreateCpuTrainingEngine(CreateCpuRenderer());
+  std::string error;
+  ASSERT_TRUE(engine->SetData(&data, &error)) << error;
+  OptimizerState state;
+  state.Field = KnownField(200, 8); // another field: an error on every pixel
+  state.ResizeToField();
+  ASSERT_TRUE(engine->Push(state, &error)) << error;
+  RenderOptions o;
+  o.ElevationSigma = 0.5;
+  const std::vector<int> frames = { data.TrainFrames[0], data.TrainFrames[5] };
+  std::vector<float> indicator;
+  ASSERT_TRUE(HighErrorPixels(*engine, data, frames, o, 0.1, indicator, &error)) << error;
+  const std::size_t pixels = std::size_t(W) * H;
+  ASSERT_EQ(indicator.size(), pixels * frames.size());
+  const std::size_t fan = std::size_t(W - 5) * H;
+  std::vector<float> S(pixels), I(pixels);
+  for (std::size_t k = 0; k < frames.size(); ++k)
+  {
+    const SliceGeometry slice = data.Slice(frames[k]);
+    ASSERT_TRUE(engine->Render(&slice, 1, o, S.data(), I.data(), &error)) << error;
+    std::size_t marked = 0;
+    float leastMarked = 1e30f, mostUnmarked = -1;
+    for (std::size_t p = 0; p < pixels; ++p)
+    {
+      const float e = std::abs(I[p] - data.Frames[pixels * frames[k] + p]);
+      const float m = indicator[pixels * k + p];
+      ASSERT_TRUE(m == 0.f || m == 1.f);
+      if (!data.Mask[p])
+      {
+        EXPECT_EQ(m, 0.f) << "pixel " << p << " outside the fan";
+        continue;
+      }
+      marked += m == 1.f ? 1 : 0;
+      (m == 1.f ? leastMarked : mostUnmarked) = m == 1.f ? std::min(leastMarked, e) : std::max(mostUnmarked, e);
+    }
+    EXPECT_EQ(marked, static_cast<std::size_t>(std::ceil(0.1 * fan))) << "frame " << frames[k];
+    EXPECT_GE(leastMarked, mostUnmarked) << "frame " << frames[k];
+  }
+}
+
+// Through the trainer (HighErrorFrames > 0): the same run as with EA-D's attribution up to the densification,
+// which then densifies other Gaussians (the runs' fields differ), says so, and goes on.
+TEST(Trainer, ADensificationByHighErrorCountsRanksOtherGaussians)
+{
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(200, 7), 0.5, heldOut);
+  TrainerSettings s = ShortSettings();
+  s.Iterations = 100; // the one densification (DensifyStart 100) ends the first call of Train
+  Trainer attributed(data, s);
+  s.HighErrorFrames = 4;
+  Trainer trainer(data, s);
+  std::string error;
+  for (Trainer* t : { &attributed, &trainer })
+  {
+    ASSERT_TRUE(t->Initialize(&error)) << error;
+    ASSERT_TRUE(t->Train(nullptr, nullptr, &error)) << error;
+    ASSERT_EQ(t->GetIteration(), 100);
+    EXPECT_TRUE(AllFinite(t->GetField()));
+  }
+  EXPECT_EQ(attributed.GetState().LossHistory, trainer.GetState().LossHistory) << "the same steps before";
+  const GaussianField& a = attributed.GetField();
+  const GaussianField& b = trainer.GetField();
+  std::printf("after the densification: %lld Gaussians by EA-D's attribution, %lld by the high-error counts\n",
+    static_cast<long long>(a.Count()), static_cast<long long>(b.Count()));
+  EXPECT_TRUE(a.Count() != b.Count() || a.Means != b.Means) << "the same Gaussians densified";
+  const std::vector<std::string>& settings = trainer.GetReport().Settings;
+  EXPECT_TRUE(std::any_of(settings.begin(), settings.end(),
+    [](const std::string& line) { return line.find("FastGS's count") != std::string::npos; }));
+}
+
 TEST(Trainer, ADensificationAddsResidualSeedsOnTrainingFrames)
 {
   std::vector<int> heldOut;
