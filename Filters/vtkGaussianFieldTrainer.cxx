@@ -224,7 +224,6 @@ vtkGaussianFieldTrainer::vtkGaussianFieldTrainer()
   this->DensifyInterval = d.DensifyInterval;
   this->DensifyPercentile = d.DensifyPercentile;
   this->ResidualSeedShare = d.ResidualSeedShare;
-  this->HighErrorFrames = d.HighErrorFrames;
   this->CoarseFraction = d.CoarseFraction;
   this->GrowthMargin = d.GrowthMargin;
   this->GrowthPatience = d.GrowthPatience;
@@ -330,7 +329,6 @@ int vtkGaussianFieldTrainer::RequestData(
   s.DensifyInterval = this->DensifyInterval;
   s.DensifyPercentile = this->DensifyPercentile;
   s.ResidualSeedShare = this->ResidualSeedShare;
-  s.HighErrorFrames = this->HighErrorFrames;
   s.GrowthMargin = this->GrowthMargin;
   s.GrowthPatience = this->GrowthPatience;
   s.FillGaps = this->FillGaps;
@@ -676,7 +674,7 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
      << "\n";
   os << indent << "Densify schedule: start " << this->DensifyStart << ", end " << this->DensifyEnd << ", interval "
      << this->DensifyInterval << ", percentile " << this->DensifyPercentile
-     << ", residual seeds " << this->ResidualSeedShare << ", high-error frames " << this->HighErrorFrames << "\n";
+     << ", residual seeds " << this->ResidualSeedShare << "\n";
   os << indent << "GrowthMargin: " << this->GrowthMargin << ", GrowthPatience: " << this->GrowthPatience << "\n";
   os << indent << "FillGaps: " << this->FillGaps << "\n";
   os << indent << "MergeTolerance: " << this->MergeTolerance << "\n";

@@ -251,12 +251,6 @@ public:
   vtkSetClampMacro(ResidualSeedShare, double, 0.0, 100.0);
   vtkGetMacro(ResidualSeedShare, double);
   ///@}
-  ///@{ FastGS's densification score instead of EA-D's attribution: the count of high-error pixels in each
-  /// Gaussian's footprint over this many training frames drawn at each densification (default 0 = off;
-  /// bigus::TrainerSettings::HighErrorFrames).
-  vtkSetClampMacro(HighErrorFrames, int, 0, 10000);
-  vtkGetMacro(HighErrorFrames, int);
-  ///@}
   ///@{ Growth stops when the validation loss improves by less than GrowthMargin (relative) on the best
   /// so far over GrowthPatience densification intervals in a row (bigus::TrainerSettings).
   vtkSetClampMacro(GrowthMargin, double, 0.0, 1.0);
@@ -418,7 +412,6 @@ protected:
   int DensifyInterval;
   double DensifyPercentile;
   double ResidualSeedShare;
-  int HighErrorFrames;
   double GrowthMargin;
   int GrowthPatience;
   bool FillGaps;

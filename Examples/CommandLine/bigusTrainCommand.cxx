@@ -45,7 +45,7 @@ struct TrainOptions
   double TimeBudget = 0, ElevationSigma = 0, EvaluationInterval = 0;
   long long MaxGaussians = 0, InitialGaussians = 0;
   double GrowthMargin = 0, ResidualSeedShare = 0, CoarseFraction = 0, MergeTolerance = 0, SolveL1 = 0;
-  int GrowthPatience = 0, SolveIterations = 0, HighErrorFrames = 0;
+  int GrowthPatience = 0, SolveIterations = 0;
   bool NoFillGaps = false, ReflectivitySolve = false, DenseStart = false, DenseAdam = false,
        NoPixelGridFit = false, RefinePoses = false, NoRefinePoses = false, RefineTimeOffset = false,
        RefineImageToProbe = false;
@@ -64,7 +64,6 @@ struct TrainOptions
     this->GrowthMargin = defaults->GetGrowthMargin();
     this->GrowthPatience = defaults->GetGrowthPatience();
     this->ResidualSeedShare = defaults->GetResidualSeedShare();
-    this->HighErrorFrames = defaults->GetHighErrorFrames();
     this->SolveIterations = defaults->GetSolveIterations();
     this->SolveL1 = defaults->GetSolveL1();
     this->Seed = defaults->GetSeed();
@@ -218,7 +217,6 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
   trainer->SetGrowthMargin(o.GrowthMargin);
   trainer->SetGrowthPatience(o.GrowthPatience);
   trainer->SetResidualSeedShare(o.ResidualSeedShare);
-  trainer->SetHighErrorFrames(o.HighErrorFrames);
   trainer->SetFillGaps(!o.NoFillGaps);
   trainer->SetMergeTolerance(o.MergeTolerance);
   trainer->SetReflectivitySolve(o.ReflectivitySolve);
@@ -511,12 +509,6 @@ Command AddTrainCommand(CLI::App& app)
     "their reflectivity the residual (Image-GS; 0: off)")
     ->capture_default_str()
     ->check(CLI::Range(0.0, 100.0));
-  trainCommand->add_option("--high-error-frames", train.HighErrorFrames,
-    "Densify by FastGS's score instead of the error attribution: the count of high-error pixels (the 10 % most "
-    "wrong of a frame's fan) in each Gaussian's footprint over this many training frames drawn at each "
-    "densification (0: off)")
-    ->capture_default_str()
-    ->check(CLI::Range(0, 10000));
   trainCommand->add_flag("--reflectivity-solve", train.ReflectivitySolve,
     "Variable projection: solve the reflectivities by least squares after seeding and after every densification, "
     "Adam between the solves (default: Adam alone)");

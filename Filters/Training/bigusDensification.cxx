@@ -162,40 +162,4 @@ std::int64_t FinalPrune(OptimizerState& G, const TrainingData& data, const Rende
   return removed;
 }
 
-bool HighErrorPixels(TrainingEngine& engine, const TrainingData& data, const std::vector<int>& frames,
-  const RenderOptions& options, double share, std::vector<float>& indicator, std::string* error)
-{
-  const std::size_t pixels = std::size_t(data.Width) * data.Height;
-  indicator.assign(pixels * frames.size(), 0.f);
-  std::vector<float> S(pixels), I(pixels);
-  std::vector<std::pair<float, std::size_t>> errors;
-  for (std::size_t k = 0; k < frames.size(); ++k)
-  {
-    const SliceGeometry slice = data.Slice(frames[k]);
-    if (!engine.Render(&slice, 1, options, S.data(), I.data(), error))
-    {
-      return false;
-    }
-    const float* recorded = &data.Frames[pixels * frames[k]];
-    const unsigned char* mask = data.MaskOf(frames[k]);
-    errors.clear();
-    for (std::size_t p = 0; p < pixels; ++p)
-    {
-      if (mask[p])
-      {
-        errors.emplace_back(std::abs(I[p] - recorded[p]), p);
-      }
-    }
-    const std::size_t high =
-      std::min(errors.size(), static_cast<std::size_t>(std::ceil(share * static_cast<double>(errors.size()))));
-    std::nth_element(errors.begin(), errors.begin() + high, errors.end(),
-      [](const std::pair<float, std::size_t>& a, const std::pair<float, std::size_t>& b) { return a.first > b.first; });
-    for (std::size_t j = 0; j < high; ++j)
-    {
-      indicator[pixels * k + errors[j].second] = 1.f;
-    }
-  }
-  return true;
-}
-
 } // namespace bigus

@@ -11,8 +11,6 @@
 #include "bigusTrainingModule.h" // For export macro
 
 #include <cstdint>
-#include <string>
-#include <vector>
 
 namespace bigus
 {
@@ -49,18 +47,6 @@ struct DensificationResult
  */
 BIGUSTRAINING_EXPORT DensificationResult DensifyAndPrune(OptimizerState& G, bool grow, double percentile,
   std::int64_t maximumGaussians, double splitScale, double pruneReflectivity);
-
-/**
- * FastGS's high-error pixels (Ren et al. 2025, "FastGS", multi-view consistent densification): for each of
- * @p frames (indices into @p data), the engine's field is rendered at its pose and the ceil(@p share x fan
- * pixels) fan pixels with the largest |I - recorded| are marked 1, every other pixel 0, into @p indicator
- * ([frames, H, W]). Its A^T product (TrainingEngine::ApplyBasisTranspose) is each Gaussian's count of
- * high-error pixels weighted by its footprint, the densification score of TrainerSettings::HighErrorFrames.
- * False with @p error when a frame cannot be rendered.
- */
-BIGUSTRAINING_EXPORT bool HighErrorPixels(TrainingEngine& engine, const TrainingData& data,
-  const std::vector<int>& frames, const RenderOptions& options, double share, std::vector<float>& indicator,
-  std::string* error);
 
 /**
  * The final prune: removes from @p G every Gaussian whose removal changes no pixel of a training frame

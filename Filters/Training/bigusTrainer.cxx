@@ -129,9 +129,6 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
         (s.ResidualSeedShare > 0 ? Format(" and %.3g as many seeds where the residual of %d frames is largest",
                                      s.ResidualSeedShare, s.ResidualSeedFrames)
                                  : std::string()) +
-        (s.HighErrorFrames > 0 ? Format(" (the score: FastGS's count of the %.3g most wrong pixels of %d frames in "
-                                        "each footprint)", s.HighErrorShare, s.HighErrorFrames)
-                               : std::string()) +
         Format(", at most %lld Gaussians", static_cast<long long>(s.MaximumGaussians)) +
         Format("; growth stops when the validation loss improves by less than %.3g %%", 100 * s.GrowthMargin) +
         Format(" over %d intervals", s.GrowthPatience)
@@ -925,10 +922,6 @@ bool Trainer::DensifyAndPrune(double validation, std::string* error)
   {
     return false;
   }
-  if (this->Settings.HighErrorFrames > 0 && state.Growing && !this->HighErrorCounts(error))
-  {
-    return false;
-  }
   const DensificationResult result = bigus::DensifyAndPrune(state.Gaussians, state.Growing,
     this->Settings.DensifyPercentile, this->Settings.MaximumGaussians,
     this->Settings.SplitScalePixels * this->PixelSpacing, this->Settings.PruneReflectivity);
@@ -976,36 +969,6 @@ bool Trainer::RenderResiduals(int count, std::vector<int>& frames, std::vector<f
     {
       S[p] = static_cast<float>(ScatteringOfIntensity(frame[p], this->Gamma) - S[p]);
     }
-  }
-  return true;
-}
-
-bool Trainer::HighErrorCounts(std::string* error)
-{
-  const TrainingData& data = *this->Data;
-  const RenderOptions o = this->Options();
-  // The same frames on every process (one generator); each takes its share, and A^T sums over the processes.
-  std::vector<int> frames;
-  for (int k = 0; k < this->Settings.HighErrorFrames; ++k)
-  {
-    const int f = data.TrainFrames[static_cast<std::size_t>(Uniform(this->State.Random) * data.TrainFrames.size())];
-    if (!this->Reduction || k % this->Reduction->Size() == this->Reduction->Rank())
-    {
-      frames.push_back(f);
-    }
-  }
-  std::vector<float> indicator;
-  const bool rendered = HighErrorPixels(*this->Engine, data, frames, o, this->Settings.HighErrorShare, indicator, error);
-  OptimizerState& G = this->State.Gaussians;
-  std::vector<double> counts(G.Count(), 0.0);
-  if (!this->Agree(rendered, error) || !this->Engine->ApplyBasisTranspose(indicator.data(), frames.data(),
-                                          static_cast<int>(frames.size()), o, counts.data(), error))
-  {
-    return false;
-  }
-  for (std::int64_t i = 0; i < G.Count(); ++i)
-  {
-    G.Attribution[i] = static_cast<float>(counts[i]);
   }
   return true;
 }

@@ -146,13 +146,6 @@ struct TrainerSettings
   /// the 8-frame block hold-out (29.66 against 31.48), so off by default.
   double ResidualSeedShare = 0;
   int ResidualSeedFrames = 4;
-  /// FastGS's densification score (Ren et al. 2025; 0 = off, EA-D's attribution): at each densification, the
-  /// count of high-error pixels in each Gaussian's footprint, weighted by its footprint w_i(p), over this many
-  /// training frames drawn at random: sum_f sum_p [|I_f(p) - recorded_f(p)| among the HighErrorShare largest of
-  /// the frame's fan pixels] w_i(p), one A^T product (TrainingEngine::ApplyBasisTranspose). It replaces the
-  /// attribution score that ranks the Gaussians to densify; unlike EA-D's it does not weigh |r_i|.
-  int HighErrorFrames = 0;
-  double HighErrorShare = 0.1;
   double SplitScalePixels = 3.0;     ///< largest scale above which a Gaussian is split, not cloned
   double PruneReflectivity = 1e-3;   ///< |r| below this is pruned (after the first densification)
   double GrowthMargin = 0.005;       ///< growth stops when the validation loss improves by less (relative) ...
@@ -438,8 +431,6 @@ private:
   /// The S-space residuals t - S ([count, H, W]) of @p count training frames drawn from the run's generator, of
   /// the engine's field (ResidualSeedShare).
   bool RenderResiduals(int count, std::vector<int>& frames, std::vector<float>& residuals, std::string* error);
-  /// The HighErrorFrames score of every Gaussian into the engine's state's Attribution (pulled state).
-  bool HighErrorCounts(std::string* error);
   bool ValidationLoss(double& loss, std::string* error);
   /// Measures the validation loss; keeps a copy of the field when it is the best so far.
   bool CheckValidation(double& loss, std::string* error);
