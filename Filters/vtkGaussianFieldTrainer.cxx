@@ -495,8 +495,9 @@ int vtkGaussianFieldTrainer::RequestData(
     std::string solves = text;
     if (report.LastL1Solve.L1Weight > 0)
     {
-      std::snprintf(text, sizeof(text), " (least squares on the Gaussians kept by FISTA with the L1 term: %d iterations, "
-                                        "%lld Gaussians set to 0 and removed)",
+      std::snprintf(text, sizeof(text),
+        " (least squares on the Gaussians kept by FISTA with the L1 term: %d iterations, %lld Gaussians set to 0 and "
+        "removed)",
         report.LastL1Solve.Iterations, static_cast<long long>(report.LastL1Removed));
       solves += text;
     }

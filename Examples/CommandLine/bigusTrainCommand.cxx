@@ -149,7 +149,8 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
   }
   if (!o.RefinedPoses.empty() && o.NoRefinePoses && !o.RefineTimeOffset && !o.RefineImageToProbe)
   {
-    std::fprintf(stderr, "bigus: --refined-poses with --no-refine-poses needs --refine-time-offset or --refine-image-to-probe\n");
+    std::fprintf(stderr,
+      "bigus: --refined-poses with --no-refine-poses needs --refine-time-offset or --refine-image-to-probe\n");
     return 2;
   }
   if (!o.RefinedPoses.empty() && o.RefinedPoses.size() != count)

@@ -392,7 +392,8 @@ PoseRefinementChoice ChoosePoseRefinement(const TrainingData& data)
     const std::string name = sweeps > 1 ? "sweep " + std::to_string(s) : std::string("the sweep");
     if (measured)
     {
-      std::snprintf(text, sizeof(text), "%s %s: speckle correlation %.2f at its training frames' spacing %.3g mm %s %.2g",
+      std::snprintf(text, sizeof(text),
+        "%s %s: speckle correlation %.2f at its training frames' spacing %.3g mm %s %.2g",
         name.c_str(), refined ? "refined" : "trusted", rho, m.NeighbourSpacing, refined ? ">=" : "<",
         PoseRefinementMinimumCorrelation);
     }

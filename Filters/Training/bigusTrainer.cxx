@@ -154,7 +154,8 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
       ? Format(", CoarseFraction = %.3g (a quarter of the pixels per step until then)", s.CoarseFraction).c_str()
       : ""));
   // Pose refinement: Auto is resolved here, sweep by sweep, from the speckle of neighbouring training frames.
-  const int sweeps = this->Data->Sweeps.empty() ? 1 : *std::max_element(this->Data->Sweeps.begin(), this->Data->Sweeps.end()) + 1;
+  const std::vector<int>& sweepOf = this->Data->Sweeps;
+  const int sweeps = sweepOf.empty() ? 1 : *std::max_element(sweepOf.begin(), sweepOf.end()) + 1;
   std::string refinedBy = "given";
   this->RefinedSweeps.assign(sweeps, this->Settings.RefinePoses == PoseRefinement::On ? 1 : 0);
   if (this->Settings.RefinePoses == PoseRefinement::Auto)
@@ -390,7 +391,8 @@ bool Trainer::PrepareInitialField(std::string* error)
                                         ? "are at most twice MaximumGaussians, a grid of that many"
                                         : "fit under MaximumGaussians") +
       grid + "; reflectivities solved" +
-      (this->Settings.Solve.L1 > 0 ? Format(" with an L1 term of %.3g (FISTA)", this->Settings.Solve.L1) : std::string()) +
+      (this->Settings.Solve.L1 > 0 ? Format(" with an L1 term of %.3g (FISTA)", this->Settings.Solve.L1)
+                                   : std::string()) +
       ", no geometry steps)");
     if (this->Settings.RefinePoses == PoseRefinement::On)
     {

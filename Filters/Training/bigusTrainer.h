@@ -362,8 +362,8 @@ public:
   bool LoadCheckpoint(const std::string& file, std::string* error);
 
   /**
-   * Render @p frames at their poses (PlaceUntrainedFrames first) and compare them with the recorded frames inside the mask
-   * (bigus::MeanFrameMetrics); @p metrics receives the mean of each metric. @p secondsPerFrame, if
+   * Render @p frames at their poses (PlaceUntrainedFrames first) and compare them with the recorded frames inside
+   * the mask (bigus::MeanFrameMetrics); @p metrics receives the mean of each metric. @p secondsPerFrame, if
    * non-null, receives the mean render time per frame (s). Returns false with @p error when a frame
    * cannot be rendered.
    */

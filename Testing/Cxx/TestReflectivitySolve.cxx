@@ -91,6 +91,21 @@ std::unique_ptr<TrainingEngine> EngineFor(const TrainingData& data, const Gaussi
   return engine;
 }
 
+/// The solve's Gauss-Newton weights g = (1 - I)^2 inside the mask (0 outside) and targets t = -ln(1 - I) (gamma 1,
+/// I clamped to 0.98) of every pixel of @p data's frames, written out independently of the solver.
+void WeightsAndTargets(const TrainingData& data, Eigen::VectorXd& g, Eigen::VectorXd& t)
+{
+  const std::size_t pixels = data.Mask.size();
+  g.resize(data.Frames.size());
+  t.resize(data.Frames.size());
+  for (std::size_t p = 0; p < data.Frames.size(); ++p)
+  {
+    const double I = std::min(std::max(double(data.Frames[p]), 0.0), 0.98);
+    g[p] = data.Mask[p % pixels] ? (1 - I) * (1 - I) : 0.0;
+    t[p] = -std::log1p(-I);
+  }
+}
+
 /// The dense matrix A ([pixels of all frames, N]) of the engine's basis, column by column.
 Eigen::MatrixXd DenseBasis(TrainingEngine& engine, const TrainingData& data, std::int64_t n, const RenderOptions& o)
 {
@@ -205,14 +220,8 @@ TEST(ReflectivitySolve, MatchesADenseDirectSolveOnATinyProblem)
   auto engine = EngineFor(data, geometry);
   const RenderOptions o = Options(sigmaE);
   const Eigen::MatrixXd A = DenseBasis(*engine, data, geometry.Count(), o);
-  const std::size_t pixels = data.Mask.size();
-  Eigen::VectorXd g(data.Frames.size()), t(data.Frames.size());
-  for (std::size_t p = 0; p < data.Frames.size(); ++p)
-  {
-    const double I = std::min(std::max(double(data.Frames[p]), 0.0), 0.98);
-    g[p] = data.Mask[p % pixels] ? (1 - I) * (1 - I) : 0.0;
-    t[p] = -std::log1p(-I);
-  }
+  Eigen::VectorXd g, t;
+  WeightsAndTargets(data, g, t);
   ReflectivitySolveSettings settings;
   settings.MaximumIterations = 200;
   settings.Tolerance = 1e-10;
@@ -436,13 +445,8 @@ TEST(ReflectivitySolve, TheL1TermMatchesCoordinateDescentOnTheSameLasso)
   auto engine = EngineFor(data, geometry);
   const RenderOptions o = Options(sigmaE);
   const Eigen::MatrixXd A = DenseBasis(*engine, data, geometry.Count(), o);
-  Eigen::VectorXd g(data.Frames.size()), t(data.Frames.size());
-  for (std::size_t p = 0; p < data.Frames.size(); ++p)
-  {
-    const double I = std::min(std::max(double(data.Frames[p]), 0.0), 0.98);
-    g[p] = (1 - I) * (1 - I);
-    t[p] = -std::log1p(-I);
-  }
+  Eigen::VectorXd g, t;
+  WeightsAndTargets(data, g, t);
   for (double l1 : { 0.05, 0.3, 1.0 })
   {
     ReflectivitySolveSettings settings;
