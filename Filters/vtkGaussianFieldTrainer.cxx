@@ -362,7 +362,6 @@ int vtkGaussianFieldTrainer::RequestData(
     vtkWarningMacro("Backend auto: " << notice);
   }
   this->BackendInUse = engine->GetName();
-  const std::vector<std::array<double, 16>> trackedPoses = data.Poses; // RefinedPoses' own, before refinement
   bigus::Trainer trainer(std::move(data), s, std::move(engine));
   if ((this->Controller && !trainer.SetProcessReduction(&reduction, &error)) || !trainer.Initialize(&error) ||
     (this->ResumeFile && *this->ResumeFile && !trainer.LoadCheckpoint(this->ResumeFile, &error)))
@@ -584,7 +583,7 @@ int vtkGaussianFieldTrainer::RequestData(
     vtkNew<vtkDoubleArray> tracked;
     tracked->SetName("TrackedPoses");
     tracked->SetNumberOfComponents(16);
-    for (const std::array<double, 16>& pose : trackedPoses)
+    for (const std::array<double, 16>& pose : trainer.GetTrackedPoses())
     {
       tracked->InsertNextTuple(pose.data());
     }

@@ -279,7 +279,7 @@ ElevationSigmaChoice ChooseElevationSigma(const TrainingData& data)
 {
   ElevationSigmaChoice choice;
   std::string error;
-  const int sweeps = data.Sweeps.empty() ? 1 : *std::max_element(data.Sweeps.begin(), data.Sweeps.end()) + 1;
+  const int sweeps = data.SweepCount();
   std::string sweepText;
   if (sweeps > 1)
   {
@@ -375,7 +375,7 @@ bool PoseRefinementChoice::Any() const
 PoseRefinementChoice ChoosePoseRefinement(const TrainingData& data)
 {
   PoseRefinementChoice choice;
-  const int sweeps = data.Sweeps.empty() ? 1 : *std::max_element(data.Sweeps.begin(), data.Sweeps.end()) + 1;
+  const int sweeps = data.SweepCount();
   char text[256];
   for (int s = 0; s < sweeps; ++s)
   {

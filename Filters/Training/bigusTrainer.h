@@ -397,6 +397,9 @@ public:
   /// The settings the run uses: those given, with what the trainer chose (ElevationSigma 0 replaced by the chosen
   /// sigma, RefinePoses Auto by On or Off).
   const TrainerSettings& GetSettings() const { return this->Settings; }
+  /// The frames' poses as the trainer was given them (filled where RefinesPoses() when it was made; GetData()
+  /// holds them as refined).
+  const std::vector<std::array<double, 16>>& GetTrackedPoses() const { return this->TrackedPoses; }
   /// Whether the training frames of sweep @p sweep (TrainingData::Sweeps) have their poses refined.
   bool IsSweepRefined(int sweep) const
   {

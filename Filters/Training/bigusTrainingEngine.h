@@ -17,6 +17,7 @@
 #include "bigusRenderer.h"
 #include "bigusTrainingModule.h" // For export macro
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <memory>
@@ -56,6 +57,11 @@ struct BIGUSTRAINING_EXPORT TrainingData
   /// The sweep frame @p frame was recorded in (0 with a single sweep). Neighbours along a sweep (the
   /// elevation sigma's frame pairs, gap filling, the pose smoothness prior) are taken within one sweep.
   int SweepOf(int frame) const { return this->Sweeps.empty() ? 0 : this->Sweeps[frame]; }
+  /// How many sweeps the frames come from (1 with a single sweep): the largest index in Sweeps, plus one.
+  int SweepCount() const
+  {
+    return this->Sweeps.empty() ? 1 : *std::max_element(this->Sweeps.begin(), this->Sweeps.end()) + 1;
+  }
   /// The [H, W] mask of frame @p frame (the shared one, or that frame's own).
   const unsigned char* MaskOf(int frame) const
   {
