@@ -225,6 +225,7 @@ vtkGaussianFieldTrainer::vtkGaussianFieldTrainer()
   this->DensifyPercentile = d.DensifyPercentile;
   this->ResidualSeedShare = d.ResidualSeedShare;
   this->CoarseFraction = d.CoarseFraction;
+  this->CoarseLowPass = d.CoarseLowPass;
   this->GrowthMargin = d.GrowthMargin;
   this->GrowthPatience = d.GrowthPatience;
   this->FillGaps = d.FillGaps;
@@ -336,6 +337,7 @@ int vtkGaussianFieldTrainer::RequestData(
   s.Seed = this->Seed;
   s.FramesPerStep = this->FramesPerStep;
   s.CoarseFraction = this->CoarseFraction;
+  s.CoarseLowPass = this->CoarseLowPass != 0;
   s.CheckpointInterval = this->CheckpointInterval;
   s.CheckpointFile = this->CheckpointFile ? this->CheckpointFile : "";
 
@@ -650,6 +652,7 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "ElevationSigma: " << this->ElevationSigma << "\n";
   os << indent << "FramesPerStep: " << this->FramesPerStep << "\n";
   os << indent << "CoarseFraction: " << this->CoarseFraction << "\n";
+  os << indent << "CoarseLowPass: " << (this->CoarseLowPass ? "On" : "Off") << "\n";
   os << indent << "Controller: " << this->Controller << "\n";
   os << indent << "BeamIntegration: " << this->BeamIntegration << "\n";
   os << indent << "NonNegativeReflectivity: " << this->NonNegativeReflectivity << "\n";

@@ -333,6 +333,12 @@ public:
   vtkSetClampMacro(CoarseFraction, double, 0.0, 1.0);
   vtkGetMacro(CoarseFraction, double);
   ///@}
+  ///@{ The coarse steps' frames as 2 x 2 averages, each Gaussian rendered through the pixel's low-pass, instead of
+  /// point samples (bigus::TrainerSettings::CoarseLowPass). Default off.
+  vtkSetMacro(CoarseLowPass, vtkTypeBool);
+  vtkGetMacro(CoarseLowPass, vtkTypeBool);
+  vtkBooleanMacro(CoarseLowPass, vtkTypeBool);
+  ///@}
 
   ///@{ Checkpoints: written every CheckpointInterval steps (0 = never) to CheckpointFile;
   /// ResumeFile continues from one, schedule included: the seconds trained before it count towards
@@ -430,6 +436,7 @@ protected:
   vtkMultiProcessController* Controller = nullptr;
   int FramesPerStep = 1;
   double CoarseFraction; // from bigus::TrainerSettings
+  vtkTypeBool CoarseLowPass;
   double ReductionSeconds = 0;
   double ReductionBytes = 0;
 

@@ -68,6 +68,9 @@ struct SliceFrameD
 {
   double F[3][3];
   double Origin[3];
+  /// In-plane covariance L (xx, xy, yy; mm^2, along u and v) of a Gaussian low-pass that every footprint is
+  /// convolved with before it is sampled (SliceGeometry::PixelLowPass, PixelLowPassCovariance); 0: point samples.
+  double LowPass[3] = { 0, 0, 0 };
 };
 
 /// One Gaussian's parameters (double, for the setup).
@@ -108,8 +111,8 @@ struct Footprint
   double Conic[3];    ///< inverse of cov2: a, b, c of q = a dx^2 + 2 b dx dy + c dy^2 (1/mm^2)
   double Axes[4];     ///< cos, sin of the major axis; 1/sigma along the major and minor axes (1/mm):
                       ///< q = ((cos dx + sin dy) / s1)^2 + ((cos dy - sin dx) / s2)^2, never negative
-  double Cov[3];      ///< cov2: xx, xy, yy (mm^2), for the footprint's extent
-  double Amplitude;   ///< amp (unitless, <= 1)
+  double Cov[3];      ///< cov2 (+ the slice's LowPass): xx, xy, yy (mm^2), for the footprint's extent
+  double Amplitude;   ///< amp (unitless, <= 1; times the low-pass's sqrt(det cov2 / det(cov2 + L)))
   double Elevation;   ///< m_z, mm
   double ElevationVar;///< P2[z,z], mm^2
   double CutoffSquared; ///< k^2 - m_z^2 / P2[z,z]: the footprint keeps the pixels p with
@@ -260,6 +263,7 @@ BIGUS_HD void CorrectSliceFrame(const SliceFrameD& frame, const double pivot[3],
       out.F[i][j] = E[0][i] * frame.F[0][j] + E[1][i] * frame.F[1][j] + E[2][i] * frame.F[2][j];
     }
     out.Origin[i] = frame.Origin[i] + frame.F[0][i] * shift[0] + frame.F[1][i] * shift[1] + frame.F[2][i] * shift[2];
+    out.LowPass[i] = frame.LowPass[i]; // in-plane: a rigid motion of the slice keeps it
   }
 }
 
@@ -417,6 +421,24 @@ BIGUS_HD Footprint SetupFootprint(
     small += widen;
     det = large * small;
   }
+  // The slice's low-pass: cov2 + L, the amplitude times sqrt(det cov2 / det(cov2 + L)), the footprint convolved
+  // with a normalised Gaussian kernel of covariance L (its integral kept; Mip-Splatting's 2D filter, Yu et al.
+  // 2024, eq. 9). det(cov2 + L) = det cov2 + tr(adj(cov2) L) + det L: a sum of non-negative terms.
+  double lowPassFactor = 1;
+  const double* L = frame.LowPass;
+  if (L[0] != 0 || L[1] != 0 || L[2] != 0)
+  {
+    const double blurredDet =
+      det + f.Cov[2] * L[0] - 2 * f.Cov[1] * L[1] + f.Cov[0] * L[2] + (L[0] * L[2] - L[1] * L[1]);
+    lowPassFactor = std::sqrt(det / blurredDet);
+    f.Cov[0] += L[0];
+    f.Cov[1] += L[1];
+    f.Cov[2] += L[2];
+    det = blurredDet;
+    const double blurredHalf = 0.5 * (f.Cov[0] - f.Cov[2]);
+    large = 0.5 * (f.Cov[0] + f.Cov[2]) + std::sqrt(blurredHalf * blurredHalf + f.Cov[1] * f.Cov[1]);
+    small = det / large;
+  }
   f.Conic[0] = f.Cov[2] / det;
   f.Conic[1] = -f.Cov[1] / det;
   f.Conic[2] = f.Cov[0] / det;
@@ -429,7 +451,7 @@ BIGUS_HD Footprint SetupFootprint(
   f.Center[0] = c.m[0] + shift * c.P[0][2];
   f.Center[1] = c.m[1] + shift * c.P[1][2];
   const double elevationForm = c.m[2] * c.m[2] / c.Pzz2;
-  f.Amplitude = std::exp(-0.5 * elevationForm) / std::sqrt(1.0 + s2 * c.LambdaZZ);
+  f.Amplitude = lowPassFactor * std::exp(-0.5 * elevationForm) / std::sqrt(1.0 + s2 * c.LambdaZZ);
   f.CutoffSquared = cutoff * cutoff - elevationForm;
   f.Visible = true;
   return f;
@@ -459,6 +481,8 @@ struct GaussianGrad
  *
  * Derivation (symmetric matrices, G_X = dL/dX):
  *   conic = cov2^-1:          G_cov2 = -conic G_conic conic, with G_conic = [[Ga, Gb/2], [Gb/2, Gc]]
+ *   with the slice's low-pass L (cov2 + L in the conic, amp times sqrt(det cov2 / det(cov2 + L))):
+ *                             G_cov2 += G_amp amp (cov2^-1 - (cov2 + L)^-1) / 2
  *   cov2 = P_xy - b b^T / Pzz2 (b = P[xy,z]):  G_Pxy += G_cov2,  G_b += -2 G_cov2 b / Pzz2,
  *                                              G_Pzz2 += b^T G_cov2 b / Pzz2^2
  *   c = m_xy - m_z b / Pzz2:  G_mxy += G_c,  G_mz += -G_c.b / Pzz2,  G_b += -m_z G_c / Pzz2,
@@ -492,9 +516,24 @@ BIGUS_HD void SetupFootprintBackward(const Footprint& f, const SetupCache& c, co
   // G_cov2 = -C G C for C = [[a, b], [b, cc]].
   const double t00 = g00 * a + g01 * b, t01 = g00 * b + g01 * cc;
   const double t10 = g01 * a + g11 * b, t11 = g01 * b + g11 * cc;
-  const double gc00 = -(a * t00 + b * t10);
-  const double gc01 = -(a * t01 + b * t11);
-  const double gc11 = -(b * t01 + cc * t11);
+  double gc00 = -(a * t00 + b * t10);
+  double gc01 = -(a * t01 + b * t11);
+  double gc11 = -(b * t01 + cc * t11);
+  const double ga = gf.Amplitude * f.Amplitude;
+  const double* L = frame.LowPass;
+  if (L[0] != 0 || L[1] != 0 || L[2] != 0)
+  {
+    // amp ~ sqrt(det cov2 / det(cov2 + L)): G_cov2 += ga (cov2^-1 - (cov2 + L)^-1) / 2, with cov2 = f.Cov - L
+    // and (cov2 + L)^-1 the conic; the conic's own gradient above is taken at cov2 + L, which moves with cov2.
+    const double x = f.Cov[0] - L[0], y = f.Cov[1] - L[1], z = f.Cov[2] - L[2];
+    const double det = x * z - y * y;
+    if (det > 0)
+    {
+      gc00 += 0.5 * ga * (z / det - a);
+      gc01 += 0.5 * ga * (-y / det - b);
+      gc11 += 0.5 * ga * (x / det - cc);
+    }
+  }
 
   const double bx = c.P[0][2], by = c.P[1][2];
   const double mz = c.m[2];
@@ -508,7 +547,6 @@ BIGUS_HD void SetupFootprintBackward(const Footprint& f, const SetupCache& c, co
   Gb[0] += -mz * gf.Center[0] / Pzz2;
   Gb[1] += -mz * gf.Center[1] / Pzz2;
   GPzz2 += mz * gcb / (Pzz2 * Pzz2);
-  const double ga = gf.Amplitude * f.Amplitude;
   Gm[2] += -ga * mz / Pzz2;
   GPzz2 += ga * mz * mz / (2 * Pzz2 * Pzz2);
   const double GLzz = -ga * s2 / (2 * (1 + s2 * c.LambdaZZ));

@@ -55,6 +55,16 @@ inline bool PrepareSlice(const SliceGeometry& g, const RenderOptions& o, int ind
     }
     return false;
   }
+  if (!(g.PixelLowPass >= 0) || !(g.PixelLowPass < 1e6))
+  {
+    if (error)
+    {
+      *error = "slice " + std::to_string(index) + ": PixelLowPass " + std::to_string(g.PixelLowPass) +
+        " is not a variance between 0 and 1e6 pixels^2";
+    }
+    return false;
+  }
+  PixelLowPassCovariance(p.PixelToPlane, g.PixelLowPass, p.Frame.LowPass);
   p.Width = g.Width;
   p.Height = g.Height;
   p.TilesX = (g.Width + TileSize - 1) / TileSize;

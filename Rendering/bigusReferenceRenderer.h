@@ -60,8 +60,13 @@ struct GradD
 
 inline bool Prepare(const SliceGeometry& slice, const RenderOptions& o, SliceFrameD& frame, double pixel[3])
 {
-  return ComputeRenderingFrame(slice.ImageToReference, o.MaximumShearAngle, frame.F, frame.Origin, pixel) ==
-    PoseStatus::Ok;
+  if (ComputeRenderingFrame(slice.ImageToReference, o.MaximumShearAngle, frame.F, frame.Origin, pixel) !=
+    PoseStatus::Ok)
+  {
+    return false;
+  }
+  PixelLowPassCovariance(pixel, slice.PixelLowPass, frame.LowPass);
+  return true;
 }
 
 inline double Reflectivity(double r, const RenderOptions& o)

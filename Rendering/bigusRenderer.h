@@ -55,6 +55,11 @@ struct SliceGeometry
   double ImageToReference[16]; ///< row-major 4x4, pixel index -> mm (spacing inside)
   int Width = 0;               ///< pixels along the first matrix column
   int Height = 0;              ///< pixels along the second matrix column
+  /// Variance (pixels^2, along each of the slice's pixel axes) of a Gaussian low-pass that every footprint is
+  /// convolved with before it is sampled at the pixel centres: a pixel that stands for an area, not a point
+  /// (Mip-Splatting's 2D filter; a box of w pixels has variance w^2 / 12). 0 (default): point samples. The
+  /// resolution schedule's averaged coarse frames use 1/16 (bigus::DecimateFrames).
+  double PixelLowPass = 0;
 };
 
 /**

@@ -128,6 +128,19 @@ inline void SliceCentre(const double pixelToPlane[3], int width, int height, dou
 }
 
 /**
+ * The in-plane covariance (xx, xy, yy; mm^2, rendering axes u, v_perp) of a Gaussian low-pass of @p variance
+ * pixels^2 along each pixel axis of a slice whose pixel (i, j) lies at (i P0 + j P1, j P2) (ComputeRenderingFrame's
+ * @p pixelToPlane): variance (a a^T + b b^T) for the pixel's edges a = (P0, 0) and b = (P1, P2), so that a
+ * box of w x w pixels, sheared or not, has the covariance of variance w^2 / 12.
+ */
+inline void PixelLowPassCovariance(const double pixelToPlane[3], double variance, double lowPass[3])
+{
+  lowPass[0] = variance * (pixelToPlane[0] * pixelToPlane[0] + pixelToPlane[1] * pixelToPlane[1]);
+  lowPass[1] = variance * pixelToPlane[1] * pixelToPlane[2];
+  lowPass[2] = variance * pixelToPlane[2] * pixelToPlane[2];
+}
+
+/**
  * Orthonormal rendering frame of a slice and the affine map from pixel index to in-plane position.
  * Rows of @p F: u, v_perp (v made orthogonal to u), n = u x v. Pixel (i, j) lies at in-plane position
  * x = i * pixelToPlane[0] + j * pixelToPlane[1], y = j * pixelToPlane[2] (mm), elevation 0; this is

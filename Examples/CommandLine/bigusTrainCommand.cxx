@@ -45,6 +45,7 @@ struct TrainOptions
   double TimeBudget = 0, ElevationSigma = 0, EvaluationInterval = 0;
   long long MaxGaussians = 0, InitialGaussians = 0;
   double GrowthMargin = 0, ResidualSeedShare = 0, CoarseFraction = 0, MergeTolerance = 0, SolveL1 = 0;
+  bool CoarseLowPass = false;
   int GrowthPatience = 0, SolveIterations = 0;
   bool NoFillGaps = false, ReflectivitySolve = false, DenseStart = false, DenseAdam = false,
        NoPixelGridFit = false, RefinePoses = false, NoRefinePoses = false, RefineTimeOffset = false,
@@ -69,6 +70,7 @@ struct TrainOptions
     this->Seed = defaults->GetSeed();
     this->FramesPerStep = defaults->GetFramesPerStep();
     this->CoarseFraction = defaults->GetCoarseFraction();
+    this->CoarseLowPass = defaults->GetCoarseLowPass() != 0;
     this->MergeTolerance = defaults->GetMergeTolerance();
   }
 };
@@ -236,6 +238,7 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
   trainer->SetSeed(o.Seed);
   trainer->SetFramesPerStep(o.FramesPerStep);
   trainer->SetCoarseFraction(o.CoarseFraction);
+  trainer->SetCoarseLowPass(o.CoarseLowPass);
   trainer->SetController(processes.Controller);
   trainer->SetEvaluationInterval(o.EvaluationInterval);
   trainer->SetBackend(o.Backend.c_str());
@@ -576,6 +579,10 @@ Command AddTrainCommand(CLI::App& app)
     "its frames; 0: off")
     ->capture_default_str()
     ->check(CLI::Range(0.0, 1.0));
+  trainCommand->add_flag("--coarse-low-pass", train.CoarseLowPass,
+    "The coarse steps' frames as 2 x 2 averages, each Gaussian rendered through the pixel's low-pass, instead of "
+    "point samples")
+    ->capture_default_str();
   trainCommand->add_flag("--distributed", train.Distributed,
     "Under mpirun -n P: data-parallel training, each rank renders its share of every step's frames and the "
     "gradients are summed every step (MPI_Allreduce through vtkMPIController); rank 0 writes the field and "

@@ -151,7 +151,8 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
   this->Report.Settings.push_back(Format("Seed = %u, FramesPerStep = %d, Cutoff = %.3g, SparseAdam = %s%s", s.Seed,
     s.FramesPerStep, s.Cutoff, s.SparseAdam ? "on" : "off",
     s.CoarseFraction > 0
-      ? Format(", CoarseFraction = %.3g (a quarter of the pixels per step until then)", s.CoarseFraction).c_str()
+      ? Format(", CoarseFraction = %.3g (a quarter of the pixels per step until then, %s)", s.CoarseFraction,
+          s.CoarseLowPass ? "2 x 2 averages through the pixel's low-pass" : "point samples").c_str()
       : ""));
   // Pose refinement: Auto is resolved here, sweep by sweep, from the speckle of neighbouring training frames.
   const int sweeps = this->Data->SweepCount();
@@ -657,15 +658,17 @@ StepStatus Trainer::Step(double* loss, std::string* error)
   request.Loss = this->Settings.Loss;
   request.SparseAdam = this->Settings.SparseAdam;
   // The resolution schedule's coarse steps: the frames on every second pixel and row, at a random phase (frames
-  // narrower than 2 pixels keep every pixel).
-  const bool coarse = fraction < this->Settings.CoarseFraction && this->Data->Width >= 2 &&
-    this->Data->Height >= 2;
+  // narrower than 2 pixels, or 3 for averages, a whole 2 x 2 block at either phase, keep every pixel).
+  const int smallest = this->Settings.CoarseLowPass ? 3 : 2;
+  const bool coarse = fraction < this->Settings.CoarseFraction && this->Data->Width >= smallest &&
+    this->Data->Height >= smallest;
   TrainingData decimated;
   int phase = 0;
   if (coarse)
   {
     phase = static_cast<int>(Uniform(state.Random) * 4);
-    decimated = DecimateFrames(*this->Data, frames.data(), request.Count, phase & 1, phase >> 1);
+    decimated =
+      DecimateFrames(*this->Data, frames.data(), request.Count, phase & 1, phase >> 1, this->Settings.CoarseLowPass);
     request.Data = &decimated;
     request.Frames = decimated.TrainFrames.data();
   }
@@ -696,7 +699,8 @@ StepStatus Trainer::Step(double* loss, std::string* error)
   {
     for (std::size_t k = 0; coarse && k < frames.size(); ++k)
     {
-      DecimatedPoseGradientToSource(*this->Data, frames[k], phase & 1, phase >> 1, &poseGradients[6 * k]);
+      DecimatedPoseGradientToSource(
+        *this->Data, frames[k], phase & 1, phase >> 1, &poseGradients[6 * k], this->Settings.CoarseLowPass);
     }
     this->UpdatePoses(frames, poseGradients);
   }

@@ -117,6 +117,10 @@ struct TrainerSettings
   /// seeds, within their spread), the N-wire phantom unchanged at 60 s (0.9 measured); docs/FINDINGS.md, "The
   /// resolution schedule".
   double CoarseFraction = 0.5;
+  /// The coarse steps' frames as 2 x 2 averages rendered through the pixel's low-pass (DecimateFrames with
+  /// average, SliceGeometry::PixelLowPass: each footprint convolved with the 2 x 2 box's extra variance, as
+  /// DashGaussian's and Mip-Splatting's low-pass filter does) instead of point samples.
+  bool CoarseLowPass = false;
   /// Adam over the Gaussians a step touched only (StepRequest::SparseAdam): on. At 120 s it pays on the
   /// liver (+1.1 dB held out, 3 seeds each), the volume protocol (+1.0 dB) and the N-wire phantom (+0.2 dB,
   /// 60 s), within noise on the spine phantom (docs/FINDINGS.md, "Sparse Adam"). Off: every Gaussian's

@@ -76,14 +76,32 @@ SliceGeometry TrainingData::Slice(int frame) const
   std::copy(this->Poses[frame].begin(), this->Poses[frame].end(), g.ImageToReference);
   g.Width = this->Width;
   g.Height = this->Height;
+  g.PixelLowPass = this->PixelLowPass;
   return g;
 }
 
-TrainingData DecimateFrames(const TrainingData& data, const int* frames, int count, int offsetX, int offsetY)
+namespace
+{
+/// The grid of DecimateFrames: @p width x @p height pixels, pixel (i, j) at the source's pixel indices
+/// (first[0] + 2 i, first[1] + 2 j).
+void DecimatedGrid(const TrainingData& data, int offsetX, int offsetY, bool average, int& width, int& height,
+  double first[2])
+{
+  const int partial = average ? 0 : 1; // a point sample needs one pixel of its block, an average all four
+  width = (data.Width - offsetX + partial) / 2;
+  height = (data.Height - offsetY + partial) / 2;
+  first[0] = offsetX + (average ? 0.5 : 0.0);
+  first[1] = offsetY + (average ? 0.5 : 0.0);
+}
+}
+
+TrainingData DecimateFrames(
+  const TrainingData& data, const int* frames, int count, int offsetX, int offsetY, bool average)
 {
   TrainingData out;
-  out.Width = (data.Width - offsetX + 1) / 2;
-  out.Height = (data.Height - offsetY + 1) / 2;
+  double first[2];
+  DecimatedGrid(data, offsetX, offsetY, average, out.Width, out.Height, first);
+  out.PixelLowPass = average ? data.PixelLowPass / 4 + 1.0 / 16 : data.PixelLowPass / 4;
   const std::size_t pixels = std::size_t(out.Width) * out.Height;
   const std::size_t sourcePixels = std::size_t(data.Width) * data.Height;
   out.Frames.resize(pixels * count);
@@ -99,11 +117,21 @@ TrainingData DecimateFrames(const TrainingData& data, const int* frames, int cou
       for (int i = 0; i < out.Width; ++i)
       {
         const std::size_t from = std::size_t(offsetY + 2 * j) * data.Width + offsetX + 2 * i;
-        out.Frames[pixels * k + std::size_t(j) * out.Width + i] = image[from];
-        out.Mask[pixels * k + std::size_t(j) * out.Width + i] = mask[from];
+        const std::size_t to = pixels * k + std::size_t(j) * out.Width + i;
+        if (average)
+        {
+          const std::size_t below = from + data.Width;
+          out.Frames[to] = 0.25f * (image[from] + image[from + 1] + image[below] + image[below + 1]);
+          out.Mask[to] = mask[from] && mask[from + 1] && mask[below] && mask[below + 1];
+        }
+        else
+        {
+          out.Frames[to] = image[from];
+          out.Mask[to] = mask[from];
+        }
       }
     }
-    // ImageToReference times the map (i, j) -> (offsetX + 2 i, offsetY + 2 j), row-major.
+    // ImageToReference times the map (i, j) -> (first[0] + 2 i, first[1] + 2 j), row-major.
     const std::array<double, 16>& P = data.Poses[f];
     std::array<double, 16>& Q = out.Poses[k];
     for (int r = 0; r < 4; ++r)
@@ -111,7 +139,7 @@ TrainingData DecimateFrames(const TrainingData& data, const int* frames, int cou
       Q[4 * r + 0] = 2 * P[4 * r + 0];
       Q[4 * r + 1] = 2 * P[4 * r + 1];
       Q[4 * r + 2] = P[4 * r + 2];
-      Q[4 * r + 3] = P[4 * r + 0] * offsetX + P[4 * r + 1] * offsetY + P[4 * r + 3];
+      Q[4 * r + 3] = P[4 * r + 0] * first[0] + P[4 * r + 1] * first[1] + P[4 * r + 3];
     }
     if (!data.Sweeps.empty())
     {
@@ -122,7 +150,8 @@ TrainingData DecimateFrames(const TrainingData& data, const int* frames, int cou
   return out;
 }
 
-void DecimatedPoseGradientToSource(const TrainingData& data, int frame, int offsetX, int offsetY, double gradient[6])
+void DecimatedPoseGradientToSource(
+  const TrainingData& data, int frame, int offsetX, int offsetY, double gradient[6], bool average)
 {
   double F[3][3], origin[3], pixelToPlane[3];
   if (ComputeRenderingFrame(data.Poses[frame].data(), 90, F, origin, pixelToPlane) != PoseStatus::Ok)
@@ -130,8 +159,10 @@ void DecimatedPoseGradientToSource(const TrainingData& data, int frame, int offs
     return;
   }
   // The decimated frame's centre pixel in the source's pixel indices, then both centres in plane coordinates.
-  const int width = (data.Width - offsetX + 1) / 2, height = (data.Height - offsetY + 1) / 2;
-  const double i = offsetX + (width - 1.0), j = offsetY + (height - 1.0);
+  int width, height;
+  double first[2];
+  DecimatedGrid(data, offsetX, offsetY, average, width, height, first);
+  const double i = first[0] + (width - 1.0), j = first[1] + (height - 1.0);
   double centre[3];
   SliceCentre(pixelToPlane, data.Width, data.Height, centre);
   const double d[3] = { i * pixelToPlane[0] + j * pixelToPlane[1] - centre[0], j * pixelToPlane[2] - centre[1], 0 };

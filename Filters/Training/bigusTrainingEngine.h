@@ -52,6 +52,9 @@ struct BIGUSTRAINING_EXPORT TrainingData
   /// [N] 0 for a frame the sweep marks invalid (field data FrameValid 0: its pose is no tracked pose); empty:
   /// every frame valid. The tracked path in time (bigus::PoseTimeline) and the pose corrections skip them.
   std::vector<unsigned char> Valid;
+  /// Variance (pixels^2) of the low-pass the frames' pixels stand for (SliceGeometry::PixelLowPass): 0 for
+  /// recorded frames (point samples), 1/16 for the averaged coarse frames of DecimateFrames.
+  double PixelLowPass = 0;
   bool IsValid(int frame) const { return this->Valid.empty() || this->Valid[frame] != 0; }
   int Count() const { return static_cast<int>(this->Poses.size()); }
   /// The sweep frame @p frame was recorded in (0 with a single sweep). Neighbours along a sweep (the
@@ -74,25 +77,28 @@ struct BIGUSTRAINING_EXPORT TrainingData
 
 /**
  * Frames @p frames ([count] indices into @p data) on every second pixel and row from pixel (@p offsetX,
- * @p offsetY), @p offsetX, @p offsetY in {0, 1}: a quarter of the pixels, as point samples of the frame (no
- * averaging, which the renderer's point-sampled pixels could not match). Frame k of the result is
- * @p frames[k]: its pixel (i, j) is the source's (offsetX + 2 i, offsetY + 2 j), its ImageToReference maps
- * it to the same point (spacing doubled in plane), and its mask is the source's at those pixels (one per
- * frame); sweeps carry over, TrainFrames lists every frame. The coarse steps of the resolution schedule
- * (TrainerSettings::CoarseFraction).
+ * @p offsetY), @p offsetX, @p offsetY in {0, 1}: a quarter of the pixels. Frame k of the result is
+ * @p frames[k]; sweeps carry over, TrainFrames lists every frame. The coarse steps of the resolution schedule
+ * (TrainerSettings::CoarseFraction, CoarseLowPass).
+ * - Point samples (@p average false): pixel (i, j) is the source's (offsetX + 2 i, offsetY + 2 j), its
+ *   ImageToReference maps it to the same point (spacing doubled in plane), its mask is the source's there.
+ * - Averages (@p average true): pixel (i, j) is the mean of the source's 2 x 2 block from (offsetX + 2 i,
+ *   offsetY + 2 j) (whole blocks only), masked unless all four are imaged, placed at the block's centre; the
+ *   result's PixelLowPass is data.PixelLowPass / 4 + 1/16 (decimated pixels^2: the 2 x 2 box's variance 1/12
+ *   less the source pixel's 1/48), so that the renderer draws each Gaussian blurred as the average blurs it.
  */
 BIGUSTRAINING_EXPORT TrainingData DecimateFrames(
-  const TrainingData& data, const int* frames, int count, int offsetX, int offsetY);
+  const TrainingData& data, const int* frames, int count, int offsetX, int offsetY, bool average = false);
 
 /**
  * The pose gradient @p gradient (6 values, FieldGradients::SlicePoses) of a frame of DecimateFrames(@p data, ...,
- * @p offsetX, @p offsetY), made the gradient with respect to the correction of the source frame @p frame: both
- * are taken in the same axes, about the decimated and the source frame's centre pixel, so the translation part
- * is the same and the rotation part gains d x dL/dt, d the decimated centre minus the source centre (mm, in
- * plane). Unchanged when the source pose is not a valid frame.
+ * @p offsetX, @p offsetY, @p average), made the gradient with respect to the correction of the source frame
+ * @p frame: both are taken in the same axes, about the decimated and the source frame's centre pixel, so the
+ * translation part is the same and the rotation part gains d x dL/dt, d the decimated centre minus the source
+ * centre (mm, in plane). Unchanged when the source pose is not a valid frame.
  */
 BIGUSTRAINING_EXPORT void DecimatedPoseGradientToSource(
-  const TrainingData& data, int frame, int offsetX, int offsetY, double gradient[6]);
+  const TrainingData& data, int frame, int offsetX, int offsetY, double gradient[6], bool average = false);
 
 /// A Gaussian field's parameters (float, structure of arrays).
 struct BIGUSTRAINING_EXPORT GaussianField

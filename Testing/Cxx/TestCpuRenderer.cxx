@@ -121,6 +121,37 @@ TEST(RendererGradients, MatchFiniteDifferencesThroughTheRectifier)
   std::printf("worst relative error, loss on I: %.3g\n", worst);
 }
 
+// The same through the pixel low-pass (SliceGeometry::PixelLowPass) on a sheared slice: the footprints' covariance
+// and amplitude both carry it.
+TEST(RendererGradients, MatchFiniteDifferencesThroughThePixelLowPass)
+{
+  const double axis[3] = { 0.3, 1.0, 0.2 }, origin[3] = { 0.5, 0.2, 0.4 };
+  SliceGeometry slice = MakeSlice(22, 18, 0.4, 25, axis, origin);
+  const double t = std::tan(3.0 * M_PI / 180.0); // 3 degrees of shear
+  for (int r = 0; r < 3; ++r)
+  {
+    slice.ImageToReference[4 * r + 1] += t * slice.ImageToReference[4 * r + 0];
+  }
+  slice.PixelLowPass = 1.5;
+  RenderOptions o;
+  o.ElevationSigma = 0.8;
+  o.Gamma = 1.3;
+  double worst = 0;
+  CheckGradients(GradientCaseField(), slice, o, false, &worst);
+  std::printf("worst relative error, loss on I through the low-pass: %.3g\n", worst);
+  // The low-pass changes the render (the case exercises it).
+  std::vector<double> blurred, point;
+  ASSERT_TRUE(reference::Forward(GradientCaseField(), slice, o, blurred, nullptr));
+  slice.PixelLowPass = 0;
+  ASSERT_TRUE(reference::Forward(GradientCaseField(), slice, o, point, nullptr));
+  double change = 0;
+  for (std::size_t p = 0; p < point.size(); ++p)
+  {
+    change = std::max(change, std::abs(blurred[p] - point[p]));
+  }
+  EXPECT_GT(change, 1e-2);
+}
+
 TEST(RendererGradients, MatchFiniteDifferencesOnTheScatteringField)
 {
   const double axis[3] = { 1.0, -0.4, 0.5 }, origin[3] = { 0.2, 0.6, -0.3 };
@@ -441,7 +472,7 @@ TEST(CpuRenderer, HardCasesGiveNoNaNOrInfInOutputsOrGradients)
 // Pose refinement: CorrectPose moves a slice as the correction says (a known motion), and the CPU backend's
 // gradient with respect to the correction (FieldGradients::SlicePoses) matches central differences of the
 // double reference renderer's loss over corrected poses, on an oblique slice and on one with 3 degrees of
-// shear, two slices in one call.
+// shear and a pixel low-pass, two slices in one call.
 TEST(CpuRenderer, ThePoseGradientMatchesCentralDifferencesOverCorrectedPoses)
 {
   const RealisticCase c = MakeRealisticCase(600, 48);
@@ -452,6 +483,7 @@ TEST(CpuRenderer, ThePoseGradientMatchesCentralDifferencesOverCorrectedPoses)
   {
     sheared.ImageToReference[4 * r + 1] += t * sheared.ImageToReference[4 * r + 0];
   }
+  sheared.PixelLowPass = 1.0 / 16; // and the coarse frames' low-pass (DecimateFrames with averages)
   const SliceGeometry slices[2] = { c.Slice, sheared };
 
   // A known motion: 1 mm along the normal moves every pixel by n; a quarter turn about n keeps the centre

@@ -2,6 +2,7 @@
 // oracle that knows nothing of it: adaptive Gauss-Kronrod quadrature over elevation of the 3D Gaussian
 // times the beam, with the Gaussian evaluated in its own principal frame (no matrix is inverted).
 #include "bigusGaussianMath.h"
+#include "bigusSliceFrame.h"
 
 #include <gtest/gtest.h>
 
@@ -1159,6 +1160,7 @@ TEST(SlicePose, TheGradientWithRespectToTheCorrectionMatchesCentralDifferences)
       weights[3] * f.Conic[1] + weights[4] * f.Conic[2] + weights[5] * f.Amplitude;
   };
   const double pivot[3] = { 7.5, -3.0, 0 };
+  const double pixelToPlane[3] = { 0.6, 0.1, 0.55 }; // a sheared pixel, for the cases with a low-pass
   int cases = 0;
   for (bool needle : { true, false })
   {
@@ -1167,8 +1169,10 @@ TEST(SlicePose, TheGradientWithRespectToTheCorrectionMatchesCentralDifferences)
       for (double tilt : { 0.0, 30.0, 75.0 })
       {
         for (double offset : { 0.0, 0.8 })
+        for (double lowPass : { 0.0, 0.5 })
         {
-          const Case c = MakeGridCase(needle, ratio, tilt, offset, 0.5);
+          Case c = MakeGridCase(needle, ratio, tilt, offset, 0.5);
+          bigus::PixelLowPassCovariance(pixelToPlane, lowPass, c.Frame.LowPass);
           bigus::SetupCache cache;
           const Footprint f = bigus::SetupFootprint(c.G, c.Frame, c.SigmaE, 1e3, &cache);
           ASSERT_TRUE(f.Visible);
@@ -1201,7 +1205,71 @@ TEST(SlicePose, TheGradientWithRespectToTheCorrectionMatchesCentralDifferences)
             bigus::CorrectSliceFrame(c.Frame, pivot, xi, minus);
             const double numeric = (loss(c, plus) - loss(c, minus)) / (2 * h);
             EXPECT_NEAR(dxi[k], numeric, 1e-6 * std::max(1.0, scale))
-              << Describe(needle, ratio, tilt, offset, c.SigmaE) << ", component " << k;
+              << Describe(needle, ratio, tilt, offset, c.SigmaE) << ", low-pass " << lowPass << ", component " << k;
+          }
+          ++cases;
+        }
+      }
+    }
+  }
+  EXPECT_EQ(cases, 48);
+}
+
+// The pixel low-pass (SliceFrameD::LowPass): the footprint's weight equals the point footprint's convolved with
+// the normalised Gaussian kernel of covariance L, by quadrature over the kernel (the trapezoid rule on the
+// whitened kernel's grid, spectrally accurate on a Gaussian integrand), on needles and pancakes, tilted, on and off
+// the plane, through a sheared pixel; and the low-pass keeps the footprint's integral (its amplitude times
+// 2 pi sqrt(det cov2)).
+TEST(GaussianFootprint, ThePixelLowPassIsTheConvolutionWithItsKernel)
+{
+  const double pixelToPlane[3] = { 0.6, 0.1, 0.55 };
+  double L[3];
+  bigus::PixelLowPassCovariance(pixelToPlane, 0.5, L);
+  EXPECT_NEAR(L[0], 0.5 * (0.36 + 0.01), 1e-15); // variance (a a^T + b b^T), a = (0.6, 0), b = (0.1, 0.55)
+  EXPECT_NEAR(L[1], 0.5 * 0.055, 1e-15);
+  EXPECT_NEAR(L[2], 0.5 * 0.3025, 1e-15);
+  const double c00 = std::sqrt(L[0]), c10 = L[1] / c00, c11 = std::sqrt(L[2] - c10 * c10); // L = C C^T
+  const double h = 0.04, reach = 9; // grid step and half-width in kernel standard deviations
+  const int n = static_cast<int>(std::lround(reach / h));
+  auto integral = [](const Footprint& f) {
+    return f.Amplitude * 2 * Pi / std::sqrt(f.Conic[0] * f.Conic[2] - f.Conic[1] * f.Conic[1]);
+  };
+  int cases = 0;
+  double worst = 0;
+  for (bool needle : { true, false })
+  {
+    for (double ratio : { 1.0, 10.0 })
+    {
+      for (double tilt : { 0.0, 30.0, 75.0 })
+      {
+        for (double offset : { 0.0, 0.8 })
+        {
+          const Case c = MakeGridCase(needle, ratio, tilt, offset, 0.5);
+          Case b = c;
+          std::copy(L, L + 3, b.Frame.LowPass);
+          const Footprint point = bigus::SetupFootprint(c.G, c.Frame, c.SigmaE, 1e3, nullptr);
+          const Footprint blurred = bigus::SetupFootprint(b.G, b.Frame, b.SigmaE, 1e3, nullptr);
+          ASSERT_TRUE(point.Visible && blurred.Visible);
+          const std::string where = Describe(needle, ratio, tilt, offset, c.SigmaE);
+          EXPECT_EQ(point.Center[0], blurred.Center[0]) << where;
+          EXPECT_EQ(point.Center[1], blurred.Center[1]) << where;
+          EXPECT_NEAR(integral(blurred), integral(point), 1e-12 * integral(point)) << where;
+          for (const auto& d : FootprintOffsets(blurred, 3))
+          {
+            double sum = 0;
+            for (int a = -n; a <= n; ++a)
+            {
+              for (int e = -n; e <= n; ++e)
+              {
+                const double za = a * h, ze = e * h;
+                const double tx = c00 * za, ty = c10 * za + c11 * ze;
+                sum += std::exp(-0.5 * (za * za + ze * ze)) * ClosedFormWeight(point, d[0] - tx, d[1] - ty);
+              }
+            }
+            sum *= h * h / (2 * Pi);
+            const double error = std::abs(ClosedFormWeight(blurred, d[0], d[1]) - sum) / point.Amplitude;
+            worst = std::max(worst, error);
+            EXPECT_LT(error, 1e-9) << where << Where("", d);
           }
           ++cases;
         }
@@ -1209,4 +1277,5 @@ TEST(SlicePose, TheGradientWithRespectToTheCorrectionMatchesCentralDifferences)
     }
   }
   EXPECT_EQ(cases, 24);
+  std::printf("worst error of the low-passed weight against quadrature, relative to the amplitude: %.3g\n", worst);
 }
