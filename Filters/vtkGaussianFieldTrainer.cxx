@@ -208,6 +208,7 @@ vtkGaussianFieldTrainer::vtkGaussianFieldTrainer()
   this->PixelGridFit = d.PixelGridFit;
   this->RefinePoses = static_cast<int>(d.RefinePoses);
   this->PoseSmoothness = d.PoseSmoothness;
+  this->PoseRefinementStart = d.PoseRefinementStart;
   this->RefineTimeOffset = d.RefineTimeOffset;
   this->RefineImageToProbe = d.RefineImageToProbe;
   this->SparseAdam = d.SparseAdam;
@@ -314,6 +315,7 @@ int vtkGaussianFieldTrainer::RequestData(
   s.PixelGridFit = this->PixelGridFit;
   s.RefinePoses = static_cast<bigus::PoseRefinement>(this->RefinePoses);
   s.PoseSmoothness = this->PoseSmoothness;
+  s.PoseRefinementStart = this->PoseRefinementStart;
   s.RefineTimeOffset = this->RefineTimeOffset;
   s.RefineImageToProbe = this->RefineImageToProbe;
   s.SparseAdam = this->SparseAdam;
@@ -665,6 +667,7 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "PixelGridFit: " << this->PixelGridFit << "\n";
   os << indent << "RefinePoses: " << this->RefinePoses << "\n";
   os << indent << "PoseSmoothness: " << this->PoseSmoothness << "\n";
+  os << indent << "PoseRefinementStart: " << this->PoseRefinementStart << "\n";
   os << indent << "RefineTimeOffset: " << this->RefineTimeOffset << "\n";
   os << indent << "RefineImageToProbe: " << this->RefineImageToProbe << "\n";
   os << indent << "SparseAdam: " << this->SparseAdam << "\n";

@@ -203,6 +203,11 @@ public:
   vtkSetClampMacro(PoseSmoothness, double, 0, 1e12);
   vtkGetMacro(PoseSmoothness, double);
   ///@}
+  ///@{ Where poses are refined: the share of the schedule (0 to 1) trained on the tracked poses before the
+  /// corrections move (bigus::TrainerSettings::PoseRefinementStart).
+  vtkSetClampMacro(PoseRefinementStart, double, 0.0, 1.0);
+  vtkGetMacro(PoseRefinementStart, double);
+  ///@}
   ///@{ Adam over the Gaussians a step touched only (default on; off moves every Gaussian every step on its
   /// momentum, the ablation; bigus::TrainerSettings::SparseAdam).
   vtkSetMacro(SparseAdam, bool);
@@ -404,6 +409,7 @@ protected:
   bool PixelGridFit;
   int RefinePoses;
   double PoseSmoothness;
+  double PoseRefinementStart;
   bool RefineTimeOffset;
   bool RefineImageToProbe;
   bool SparseAdam;

@@ -51,7 +51,7 @@ struct TrainOptions
        NoPixelGridFit = false, RefinePoses = false, NoRefinePoses = false, RefineTimeOffset = false,
        RefineImageToProbe = false;
   std::vector<std::string> RefinedPoses; ///< one per sweep
-  double PoseSmoothness = 0;
+  double PoseSmoothness = 0, PoseRefinementStart = 0;
   unsigned Seed = 0;
 
   /// The filter's own defaults, so that `bigus train` and vtkGaussianFieldTrainer agree.
@@ -71,6 +71,7 @@ struct TrainOptions
     this->FramesPerStep = defaults->GetFramesPerStep();
     this->CoarseFraction = defaults->GetCoarseFraction();
     this->CoarseLowPass = defaults->GetCoarseLowPass() != 0;
+    this->PoseRefinementStart = defaults->GetPoseRefinementStart();
     this->MergeTolerance = defaults->GetMergeTolerance();
   }
 };
@@ -233,6 +234,7 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
   trainer->SetRefineTimeOffset(o.RefineTimeOffset);
   trainer->SetRefineImageToProbe(o.RefineImageToProbe);
   trainer->SetPoseSmoothness(o.PoseSmoothness);
+  trainer->SetPoseRefinementStart(o.PoseRefinementStart);
   trainer->SetSparseAdam(!o.DenseAdam);
   trainer->SetElevationSigma(o.ElevationSigma);
   trainer->SetSeed(o.Seed);
@@ -556,6 +558,12 @@ Command AddTrainCommand(CLI::App& app)
     "Where poses are refined: weight of the prior that keeps the corrections smooth along the sweep (0: none)")
     ->excludes("--no-refine-poses")
     ->check(CLI::NonNegativeNumber);
+  trainCommand->add_option("--pose-refinement-start", train.PoseRefinementStart,
+    "Where poses are refined: the share of the schedule (0 to 1) trained on the tracked poses before the corrections "
+    "move")
+    ->capture_default_str()
+    ->excludes("--no-refine-poses")
+    ->check(CLI::Range(0.0, 1.0));
   trainCommand->add_flag("--no-fill-gaps", train.NoFillGaps,
     "Leave gaps between training frames wider than the beam empty (default: bridged, as bigus fill-gaps does)");
   trainCommand

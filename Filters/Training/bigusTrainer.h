@@ -110,16 +110,19 @@ struct TrainerSettings
   /// The resolution schedule: steps in the first CoarseFraction of the schedule see their frames on every second
   /// pixel and row, from a pixel drawn at random among the first 2 x 2 every step (DecimateFrames: a quarter of
   /// the pixels, point samples as the renderer's pixels are), later steps the whole frames; 0 = off. After
-  /// DashGaussian's coarse-to-fine schedule (Chen et al. 2025), without its low-pass images: an average of 2 x 2
-  /// pixels is not what a point-sampled render can match. A coarse step's pose gradients are moved to the source
-  /// frame's pivot (DecimatedPoseGradientToSource). Default 0.5: the liver's held-out PSNR +0.7 dB at 120 s (2
+  /// DashGaussian's coarse-to-fine schedule (Chen et al. 2025); its low-pass images are CoarseLowPass. A coarse
+  /// step's pose gradients are moved to the source frame's pivot (DecimatedPoseGradientToSource). Default 0.5:
+  /// the liver's held-out PSNR +0.7 dB at 120 s (2
   /// seeds) and +0.24 at the main job's 300 s (38.46 against 38.22 dB), the spine phantom -0.05 dB at 120 s (2
   /// seeds, within their spread), the N-wire phantom unchanged at 60 s (0.9 measured); docs/FINDINGS.md, "The
   /// resolution schedule".
   double CoarseFraction = 0.5;
   /// The coarse steps' frames as 2 x 2 averages rendered through the pixel's low-pass (DecimateFrames with
   /// average, SliceGeometry::PixelLowPass: each footprint convolved with the 2 x 2 box's extra variance, as
-  /// DashGaussian's and Mip-Splatting's low-pass filter does) instead of point samples.
+  /// DashGaussian's and Mip-Splatting's low-pass filter does) instead of point samples. Off: on the liver at 120 s
+  /// -0.05 to -0.17 dB held out (2 seeds; CoarseFraction 0.5 and 0.9), the spine phantom +0.03 (docs/FINDINGS.md,
+  /// "The pixel low-pass on the coarse steps"): a random phase makes the point samples an unbiased sample of the
+  /// whole frame's loss, the averages a blurred one.
   bool CoarseLowPass = false;
   /// Adam over the Gaussians a step touched only (StepRequest::SparseAdam): on. At 120 s it pays on the
   /// liver (+1.1 dB held out, 3 seeds each), the volume protocol (+1.0 dB) and the N-wire phantom (+0.2 dB,
@@ -178,7 +181,11 @@ struct TrainerSettings
   /// bigusElevationSigma.h), resolved when the trainer is made (GetSettings() then says On or Off, and
   /// Trainer::IsSweepRefined which sweeps).
   PoseRefinement RefinePoses = PoseRefinement::Auto;
-  double PoseRefinementStart = 0.2;      ///< share of the schedule trained on the tracked poses before corrections move
+  /// Share of the schedule trained on the tracked poses before the corrections move. 0.2: from the first step (0)
+  /// the liver's held-out PSNR fell 0.41 and 0.42 dB at 120 s (2 seeds), the N-wire phantom's rose 0.11 and 0.10
+  /// at 60 s; the issue's synthetic case (0.5 degrees and 0.5 mm per frame at random) needs 0 to halve its pose
+  /// error (docs/FINDINGS.md, "When pose refinement starts").
+  double PoseRefinementStart = 0.2;
   /// Adam's rates, rad and mm per step: on TestTrainer's synthetic sweep (0.5 degree and 0.5 mm errors)
   /// 2e-4 and 0.004 took the corner error from 0.505 to 0.401 mm, these 0.192, twice these 0.165.
   double PoseRotationLearningRate = 1e-3;

@@ -4,6 +4,7 @@
 // where no usable GPU exists.
 #include "bigusCudaDevice.h"
 #include "bigusGaussianMath.h"
+#include "bigusSliceFrame.h"
 
 #include <cuda_runtime.h>
 
@@ -259,6 +260,11 @@ std::vector<Case> MakeCases()
       k.Quaternions[i] = static_cast<float>(uniform(-1, 1));
     }
     k.Reflectivity = static_cast<float>(uniform(-1, 1));
+    if (n % 3 == 1) // a pixel low-pass (SliceGeometry::PixelLowPass) through a sheared pixel
+    {
+      const double pixel[3] = { uniform(0.1, 0.6), uniform(-0.05, 0.05), uniform(0.1, 0.6) };
+      PixelLowPassCovariance(pixel, uniform(0.02, 1), k.Frame.LowPass);
+    }
     k.SigmaE = n % 7 == 0 ? 0.0 : uniform(0.1, 2);
     k.Cutoff = n % 5 == 0 ? std::numeric_limits<double>::infinity() : uniform(3, 6);
     for (double& v : k.FootprintSeed)

@@ -337,6 +337,7 @@ struct LiverPathErrors
   std::array<double, 6> ImageToProbe{}; ///< every recorded pose moved by this correction (CorrectPose)
   bool PerFrame = false, TimeOffset = true, RefineImageToProbe = false; ///< what the refined run refines
   int Iterations = 2000;
+  double PoseRefinementStart = TrainerSettings().PoseRefinementStart; ///< of every run (the refined one's matters)
 };
 
 LiverPathResult LiverPathCase(const LiverPathErrors& e)
@@ -425,6 +426,7 @@ LiverPathResult LiverPathCase(const LiverPathErrors& e)
   s.PixelGridFit = false;
   s.InitialGaussians = 6000;
   s.Iterations = e.Iterations;
+  s.PoseRefinementStart = e.PoseRefinementStart;
   auto train = [&](const TrainingData& data, bool refine) {
     TrainerSettings settings = s;
     settings.RefinePoses = refine && e.PerFrame ? PoseRefinement::On : PoseRefinement::Off;
@@ -451,10 +453,10 @@ LiverPathResult LiverPathCase(const LiverPathErrors& e)
   result.FairOnTruth = FairPsnr(onTruth->GetField(), onTruth->Options(), truth, heldOut, s);
   result.AlignedCornerErrorBefore = AlignedCornerError(tracked, truth, truth.TrainFrames, W, H);
   result.AlignedCornerErrorAfter = AlignedCornerError(refined->GetData(), truth, truth.TrainFrames, W, H);
-  std::printf("liver path, two crossing sweeps, %.0f ms late, %.2g degree and %.2g mm errors, %d steps: corner "
-              "error %.3f -> %.3f mm; time offset %.1f ms; held-out PSNR at the true poses %.2f dB refined, "
-              "%.2f trusting the recorded poses, %.2f trained on the true poses\n",
-    1000 * e.Offset, e.Degrees, e.Mm, e.Iterations, result.CornerErrorBefore, result.CornerErrorAfter, 1000 * result.TimeOffset,
+  std::printf("liver path, two crossing sweeps, %.0f ms late, %.2g degree and %.2g mm errors, %d steps (poses refined "
+              "from %.0f %% of them): corner error %.3f -> %.3f mm; time offset %.1f ms; held-out PSNR at the true poses "
+              "%.2f dB refined, %.2f trusting the recorded poses, %.2f trained on the true poses\n",
+    1000 * e.Offset, e.Degrees, e.Mm, e.Iterations, 100 * e.PoseRefinementStart, result.CornerErrorBefore, result.CornerErrorAfter, 1000 * result.TimeOffset,
     result.Refined, result.Trusting, result.OnTruth);
   std::printf("  aligned corner error %.3f -> %.3f mm; fair held-out PSNR (each frame's pose refined with the field frozen) "
               "%.2f dB refined, %.2f trusting, %.2f on the true poses\n", result.AlignedCornerErrorBefore, result.AlignedCornerErrorAfter,
@@ -479,25 +481,29 @@ TEST(PoseRefinement, ATimeOffsetOnTheLiversPathIsFoundFromTwoCrossingSweeps)
 TEST(PoseRefinement, TrackerErrorsAndATimeOffsetOnTheLiversPathFallWithEachFramesCorrection)
 {
   // The issue's case: 0.5 degrees and 0.5 mm per frame at random, and 30 ms late; each frame's correction and the
-  // offset refined. Measured (every 2nd frame, 3000 steps): corner error 0.597 -> 0.330 mm, offset 15.6 ms (the
-  // frames' own corrections take up part of it), held-out 35.24 dB against 31.44 trusting the recorded poses
-  // and 42.33 on the true poses: the pose error falls by 45 %, not half, and the held-out frames stay 7 dB
-  // from training on the true poses (the issue's aims are 50 % and 0.5 dB). Scored fairly (the corners after
-  // the rigid motion of the whole scene that no image tells; each held-out frame's pose refined with the field
-  // frozen): 0.538 -> 0.291 mm (46 %), 39.42 dB against 34.59 trusting and 42.61 on the true poses (8,000 steps:
-  // 0.273 mm, 49 %; 43.56 against 46.04).
+  // offset refined, from the first step (PoseRefinementStart 0; the default 0.2 trains the first fifth on the
+  // recorded poses), 16,000 steps. The issue's aims: the pose error falls by at least half, and held-out PSNR comes
+  // within 0.5 dB of training on the true poses. Measured (every 2nd frame): corner error 0.597 -> 0.286 mm (52 %),
+  // 0.538 -> 0.235 (56 %) after the rigid motion of the whole scene that no image tells; offset 13.3 ms (the
+  // frames' own corrections take up part of it); held-out at the true poses 37.98 dB against 31.15 trusting the
+  // recorded poses and 44.45 on the true poses; scored fairly (each held-out frame's pose refined with the field
+  // frozen) 45.66 against 34.72 and 44.77. With the default start: 3,000 steps 0.291 aligned (46 %), fair 39.42
+  // against 42.61 on the true poses; 8,000 steps 0.273 (49 %), 43.56 against 46.04 (docs/FINDINGS.md, "When
+  // pose refinement starts").
   LiverPathErrors e;
   e.Stride = 2;
   e.Degrees = e.Mm = 0.5;
   e.PerFrame = true;
-  e.Iterations = 3000;
+  e.Iterations = 16000;
+  e.PoseRefinementStart = 0;
   const LiverPathResult r = LiverPathCase(e);
-  EXPECT_LT(r.CornerErrorAfter, 0.6 * r.CornerErrorBefore);
+  EXPECT_LT(r.CornerErrorAfter, 0.5 * r.CornerErrorBefore) << "the pose error falls by at least half";
+  EXPECT_LT(r.AlignedCornerErrorAfter, 0.5 * r.AlignedCornerErrorBefore);
   EXPECT_GT(r.TimeOffset, 0.005) << "the offset moves towards the truth";
   EXPECT_LT(r.TimeOffset, 0.045);
-  EXPECT_GT(r.Refined, r.Trusting + 2.0);
-  EXPECT_LT(r.AlignedCornerErrorAfter, 0.6 * r.AlignedCornerErrorBefore);
-  EXPECT_GT(r.FairRefined, r.FairTrusting + 3.0);
+  EXPECT_GT(r.Refined, r.Trusting + 4.0);
+  EXPECT_GT(r.FairRefined, r.FairOnTruth - 0.5) << "held out within 0.5 dB of training on the true poses";
+  EXPECT_GT(r.FairRefined, r.FairTrusting + 8.0);
 }
 
 TEST(PoseRefinement, AnImageToProbeErrorSharedByEveryFrameIsFound)
