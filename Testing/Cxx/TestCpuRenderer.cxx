@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstring>
 #include <cstdio>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -393,7 +394,7 @@ TEST(CpuRenderer, GradientsAreIdenticalAcrossRuns)
   EXPECT_EQ(runs[0], runs[1]);
 }
 
-TEST(CpuRenderer, BadPosesAreRejectedWithAReason)
+TEST(CpuRenderer, BadPosesAndLowPassesAreRejectedWithAReason)
 {
   const RealisticCase c = MakeRealisticCase(10, 16);
   SliceGeometry slices[2] = { c.Slice, c.Slice };
@@ -408,6 +409,16 @@ TEST(CpuRenderer, BadPosesAreRejectedWithAReason)
   EXPECT_NE(error.find("slice 1"), std::string::npos) << error;
   EXPECT_NE(error.find("singular"), std::string::npos) << error;
   EXPECT_TRUE(std::all_of(S.begin(), S.end(), [](float v) { return v == -7.f; })) << "nothing written";
+  // A pixel low-pass that is no variance.
+  for (double lowPass : { -0.25, std::numeric_limits<double>::quiet_NaN(), 1e7 })
+  {
+    slices[1] = c.Slice;
+    slices[1].PixelLowPass = lowPass;
+    error.clear();
+    EXPECT_FALSE(renderer->Forward(c.Float.View(), slices, 2, o, S.data(), nullptr, nullptr, &error));
+    EXPECT_NE(error.find("slice 1: PixelLowPass"), std::string::npos) << error;
+    EXPECT_TRUE(std::all_of(S.begin(), S.end(), [](float v) { return v == -7.f; })) << "nothing written";
+  }
 }
 
 TEST(CpuRenderer, HardCasesGiveNoNaNOrInfInOutputsOrGradients)

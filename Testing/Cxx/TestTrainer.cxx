@@ -909,12 +909,12 @@ std::unique_ptr<TrainingEngine> MakeBrokenEngine(std::string* error)
 }
 }
 
-TEST(Trainer, DecimatedFramesAreTheFramesPointSamplesAtTheSamePoints)
+namespace
 {
-  // DecimateFrames (the resolution schedule's coarse frames) against the source frames: each pixel (i, j) is the
-  // source's (ox + 2 i, oy + 2 j), in value, mask and position in mm, and a known field rendered at the decimated
-  // pose gives the source render's pixels there.
-  const GaussianField truth = KnownField(200, 5);
+/// SyntheticSweep of @p truth (sigma_E 0.5 mm) with a shared fan mask that leaves out every 7th pixel in a slanted
+/// pattern, for the decimation tests.
+TrainingData SweepWithAMaskWithHoles(const GaussianField& truth)
+{
   std::vector<int> heldOut;
   TrainingData data = SyntheticSweep(truth, 0.5, heldOut);
   data.Mask.assign(std::size_t(W) * H, 1);
@@ -922,9 +922,20 @@ TEST(Trainer, DecimatedFramesAreTheFramesPointSamplesAtTheSamePoints)
   {
     for (int i = 0; i < W; ++i)
     {
-      data.Mask[std::size_t(j) * W + i] = (i + 3 * j) % 7 != 0; // a mask with holes
+      data.Mask[std::size_t(j) * W + i] = (i + 3 * j) % 7 != 0;
     }
   }
+  return data;
+}
+}
+
+TEST(Trainer, DecimatedFramesAreTheFramesPointSamplesAtTheSamePoints)
+{
+  // DecimateFrames (the resolution schedule's coarse frames) against the source frames: each pixel (i, j) is the
+  // source's (ox + 2 i, oy + 2 j), in value, mask and position in mm, and a known field rendered at the decimated
+  // pose gives the source render's pixels there.
+  const GaussianField truth = KnownField(200, 5);
+  TrainingData data = SweepWithAMaskWithHoles(truth);
   data.Sweeps.assign(data.Count(), 0);
   data.Sweeps[31] = 1;
   const int frames[2] = { 31, 7 };
@@ -984,16 +995,7 @@ TEST(Trainer, AveragedDecimatedFramesAreTheBlockMeansAndTheLowPassRendersThem)
   // render over the block than the point sample at the block's centre is (the truth: the block mean of the
   // full-resolution render).
   const GaussianField truth = KnownField(200, 5);
-  std::vector<int> heldOut;
-  TrainingData data = SyntheticSweep(truth, 0.5, heldOut);
-  data.Mask.assign(std::size_t(W) * H, 1);
-  for (int j = 0; j < H; ++j)
-  {
-    for (int i = 0; i < W; ++i)
-    {
-      data.Mask[std::size_t(j) * W + i] = (i + 3 * j) % 7 != 0; // a mask with holes
-    }
-  }
+  TrainingData data = SweepWithAMaskWithHoles(truth);
   const int frame = 31;
   auto cpu = CreateCpuRenderer();
   RenderOptions o;
