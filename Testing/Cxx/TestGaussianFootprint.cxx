@@ -1169,45 +1169,47 @@ TEST(SlicePose, TheGradientWithRespectToTheCorrectionMatchesCentralDifferences)
       for (double tilt : { 0.0, 30.0, 75.0 })
       {
         for (double offset : { 0.0, 0.8 })
-        for (double lowPass : { 0.0, 0.5 })
         {
-          Case c = MakeGridCase(needle, ratio, tilt, offset, 0.5);
-          bigus::PixelLowPassCovariance(pixelToPlane, lowPass, c.Frame.LowPass);
-          bigus::SetupCache cache;
-          const Footprint f = bigus::SetupFootprint(c.G, c.Frame, c.SigmaE, 1e3, &cache);
-          ASSERT_TRUE(f.Visible);
-          bigus::FootprintGrad gf;
-          gf.Center[0] = weights[0];
-          gf.Center[1] = weights[1];
-          // FootprintGrad's conic entries are dL/da, dL/db, dL/dc of q = a dx^2 + 2 b dx dy + c dy^2.
-          gf.Conic[0] = weights[2];
-          gf.Conic[1] = weights[3];
-          gf.Conic[2] = weights[4];
-          gf.Amplitude = weights[5];
-          bigus::GaussianGrad gg{};
-          bigus::SliceFrameGrad sg;
-          bigus::SetupFootprintBackward(f, cache, c.Frame, c.SigmaE, gf, gg, &sg);
-          double dxi[6] = { 0, 0, 0, 0, 0, 0 };
-          bigus::SlicePoseBackward(cache, pivot, sg, dxi);
-          double scale = 0;
-          for (double v : dxi)
+          for (double lowPass : { 0.0, 0.5 })
           {
-            scale = std::max(scale, std::abs(v));
+            Case c = MakeGridCase(needle, ratio, tilt, offset, 0.5);
+            bigus::PixelLowPassCovariance(pixelToPlane, lowPass, c.Frame.LowPass);
+            bigus::SetupCache cache;
+            const Footprint f = bigus::SetupFootprint(c.G, c.Frame, c.SigmaE, 1e3, &cache);
+            ASSERT_TRUE(f.Visible);
+            bigus::FootprintGrad gf;
+            gf.Center[0] = weights[0];
+            gf.Center[1] = weights[1];
+            // FootprintGrad's conic entries are dL/da, dL/db, dL/dc of q = a dx^2 + 2 b dx dy + c dy^2.
+            gf.Conic[0] = weights[2];
+            gf.Conic[1] = weights[3];
+            gf.Conic[2] = weights[4];
+            gf.Amplitude = weights[5];
+            bigus::GaussianGrad gg{};
+            bigus::SliceFrameGrad sg;
+            bigus::SetupFootprintBackward(f, cache, c.Frame, c.SigmaE, gf, gg, &sg);
+            double dxi[6] = { 0, 0, 0, 0, 0, 0 };
+            bigus::SlicePoseBackward(cache, pivot, sg, dxi);
+            double scale = 0;
+            for (double v : dxi)
+            {
+              scale = std::max(scale, std::abs(v));
+            }
+            for (int k = 0; k < 6; ++k)
+            {
+              const double h = k < 3 ? 1e-6 : 1e-5; // rad, mm
+              double xi[6] = { 0, 0, 0, 0, 0, 0 };
+              SliceFrameD plus, minus;
+              xi[k] = h;
+              bigus::CorrectSliceFrame(c.Frame, pivot, xi, plus);
+              xi[k] = -h;
+              bigus::CorrectSliceFrame(c.Frame, pivot, xi, minus);
+              const double numeric = (loss(c, plus) - loss(c, minus)) / (2 * h);
+              EXPECT_NEAR(dxi[k], numeric, 1e-6 * std::max(1.0, scale))
+                << Describe(needle, ratio, tilt, offset, c.SigmaE) << ", low-pass " << lowPass << ", component " << k;
+            }
+            ++cases;
           }
-          for (int k = 0; k < 6; ++k)
-          {
-            const double h = k < 3 ? 1e-6 : 1e-5; // rad, mm
-            double xi[6] = { 0, 0, 0, 0, 0, 0 };
-            SliceFrameD plus, minus;
-            xi[k] = h;
-            bigus::CorrectSliceFrame(c.Frame, pivot, xi, plus);
-            xi[k] = -h;
-            bigus::CorrectSliceFrame(c.Frame, pivot, xi, minus);
-            const double numeric = (loss(c, plus) - loss(c, minus)) / (2 * h);
-            EXPECT_NEAR(dxi[k], numeric, 1e-6 * std::max(1.0, scale))
-              << Describe(needle, ratio, tilt, offset, c.SigmaE) << ", low-pass " << lowPass << ", component " << k;
-          }
-          ++cases;
         }
       }
     }

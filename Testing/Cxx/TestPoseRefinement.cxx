@@ -453,10 +453,11 @@ LiverPathResult LiverPathCase(const LiverPathErrors& e)
   result.FairOnTruth = FairPsnr(onTruth->GetField(), onTruth->Options(), truth, heldOut, s);
   result.AlignedCornerErrorBefore = AlignedCornerError(tracked, truth, truth.TrainFrames, W, H);
   result.AlignedCornerErrorAfter = AlignedCornerError(refined->GetData(), truth, truth.TrainFrames, W, H);
-  std::printf("liver path, two crossing sweeps, %.0f ms late, %.2g degree and %.2g mm errors, %d steps (poses refined "
-              "from %.0f %% of them): corner error %.3f -> %.3f mm; time offset %.1f ms; held-out PSNR at the true poses "
-              "%.2f dB refined, %.2f trusting the recorded poses, %.2f trained on the true poses\n",
-    1000 * e.Offset, e.Degrees, e.Mm, e.Iterations, 100 * e.PoseRefinementStart, result.CornerErrorBefore, result.CornerErrorAfter, 1000 * result.TimeOffset,
+  std::printf("liver path, two crossing sweeps, %.0f ms late, %.2g degree and %.2g mm errors, %d steps (poses "
+              "refined from %.0f %% of them): corner error %.3f -> %.3f mm; time offset %.1f ms; held-out PSNR at the "
+              "true poses %.2f dB refined, %.2f trusting the recorded poses, %.2f trained on the true poses\n",
+    1000 * e.Offset, e.Degrees, e.Mm, e.Iterations, 100 * e.PoseRefinementStart, result.CornerErrorBefore,
+    result.CornerErrorAfter, 1000 * result.TimeOffset,
     result.Refined, result.Trusting, result.OnTruth);
   std::printf("  aligned corner error %.3f -> %.3f mm; fair held-out PSNR (each frame's pose refined with the field frozen) "
               "%.2f dB refined, %.2f trusting, %.2f on the true poses\n", result.AlignedCornerErrorBefore, result.AlignedCornerErrorAfter,

@@ -1023,8 +1023,8 @@ TEST(Trainer, AveragedDecimatedFramesAreTheBlockMeansAndTheLowPassRendersThem)
       for (int i = 0; i < d.Width; ++i)
       {
         const std::size_t c = std::size_t(j) * d.Width + i;
-        const std::size_t f[4] = { std::size_t(oy + 2 * j) * W + ox + 2 * i, std::size_t(oy + 2 * j) * W + ox + 2 * i + 1,
-          std::size_t(oy + 2 * j + 1) * W + ox + 2 * i, std::size_t(oy + 2 * j + 1) * W + ox + 2 * i + 1 };
+        const std::size_t top = std::size_t(oy + 2 * j) * W + ox + 2 * i;
+        const std::size_t f[4] = { top, top + 1, top + W, top + W + 1 };
         ASSERT_FLOAT_EQ(d.Frames[c], 0.25f * (image[f[0]] + image[f[1]] + image[f[2]] + image[f[3]]));
         ASSERT_EQ(d.Mask[c], data.Mask[f[0]] && data.Mask[f[1]] && data.Mask[f[2]] && data.Mask[f[3]]);
         for (int r = 0; r < 3; ++r)
@@ -1069,46 +1069,48 @@ TEST(Trainer, ADecimatedFramesPoseGradientMovedToTheSourcePivotMatchesCentralDif
   }
   std::string error;
   for (bool average : { false, true }) // point samples; 2 x 2 averages at the blocks' centres, with the low-pass
-  for (const auto& [ox, oy] : { std::pair<int, int>{ 0, 0 }, { 1, 0 }, { 0, 1 }, { 1, 1 } })
   {
-    const SliceGeometry coarse = DecimateFrames(data, &frame, 1, ox, oy, average).Slice(0);
-    w.resize(std::size_t(coarse.Width) * coarse.Height);
-    const std::vector<float> dL(w.begin(), w.end());
-    std::vector<float> S(w.size());
-    double pose[6] = { 0, 0, 0, 0, 0, 0 };
-    FieldGradients g;
-    g.SlicePoses = pose;
-    ASSERT_TRUE(cpu->Forward(truth.View(), &coarse, 1, o, S.data(), nullptr, nullptr, &error)) << error;
-    ASSERT_TRUE(cpu->Backward(truth.View(), &coarse, 1, o, S.data(), dL.data(), true, g, nullptr, &error)) << error;
-    double moved[6];
-    std::copy(pose, pose + 6, moved);
-    DecimatedPoseGradientToSource(data, frame, ox, oy, moved, average);
-    auto loss = [&](const double xi[6]) {
-      TrainingData corrected = data;
-      EXPECT_EQ(CorrectPose(data.Poses[frame].data(), W, H, xi, corrected.Poses[frame].data()), PoseStatus::Ok);
-      std::vector<double> Sd;
-      EXPECT_TRUE(reference::Forward(
-        field, DecimateFrames(corrected, &frame, 1, ox, oy, average).Slice(0), o, Sd, nullptr, false));
-      double sum = 0;
-      for (std::size_t p = 0; p < Sd.size(); ++p)
+    for (const auto& [ox, oy] : { std::pair<int, int>{ 0, 0 }, { 1, 0 }, { 0, 1 }, { 1, 1 } })
+    {
+      const SliceGeometry coarse = DecimateFrames(data, &frame, 1, ox, oy, average).Slice(0);
+      w.resize(std::size_t(coarse.Width) * coarse.Height);
+      const std::vector<float> dL(w.begin(), w.end());
+      std::vector<float> S(w.size());
+      double pose[6] = { 0, 0, 0, 0, 0, 0 };
+      FieldGradients g;
+      g.SlicePoses = pose;
+      ASSERT_TRUE(cpu->Forward(truth.View(), &coarse, 1, o, S.data(), nullptr, nullptr, &error)) << error;
+      ASSERT_TRUE(cpu->Backward(truth.View(), &coarse, 1, o, S.data(), dL.data(), true, g, nullptr, &error)) << error;
+      double moved[6];
+      std::copy(pose, pose + 6, moved);
+      DecimatedPoseGradientToSource(data, frame, ox, oy, moved, average);
+      auto loss = [&](const double xi[6]) {
+        TrainingData corrected = data;
+        EXPECT_EQ(CorrectPose(data.Poses[frame].data(), W, H, xi, corrected.Poses[frame].data()), PoseStatus::Ok);
+        std::vector<double> Sd;
+        EXPECT_TRUE(reference::Forward(
+          field, DecimateFrames(corrected, &frame, 1, ox, oy, average).Slice(0), o, Sd, nullptr, false));
+        double sum = 0;
+        for (std::size_t p = 0; p < Sd.size(); ++p)
+        {
+          sum += w[p] * Sd[p];
+        }
+        return sum;
+      };
+      double largest = 0;
+      for (double v : moved)
       {
-        sum += w[p] * Sd[p];
+        largest = std::max(largest, std::abs(v));
       }
-      return sum;
-    };
-    double largest = 0;
-    for (double v : moved)
-    {
-      largest = std::max(largest, std::abs(v));
-    }
-    ASSERT_GT(largest, 0);
-    for (int k = 0; k < 6; ++k)
-    {
-      const double fd = test::PoseCentralDifference(loss, k);
-      std::printf("%s, offset %d %d, xi[%d]: central difference %.6g, moved %.6g (about the decimated centre %.6g)\n",
-        average ? "averages" : "point samples", ox, oy, k, fd, moved[k], pose[k]);
-      EXPECT_NEAR(moved[k], fd, 1e-4 * largest)
-        << (average ? "averages" : "point samples") << ", offset " << ox << ", " << oy << ", component " << k;
+      ASSERT_GT(largest, 0);
+      for (int k = 0; k < 6; ++k)
+      {
+        const double fd = test::PoseCentralDifference(loss, k);
+        std::printf("%s, offset %d %d, xi[%d]: central difference %.6g, moved %.6g (about the decimated centre %.6g)\n",
+          average ? "averages" : "point samples", ox, oy, k, fd, moved[k], pose[k]);
+        EXPECT_NEAR(moved[k], fd, 1e-4 * largest)
+          << (average ? "averages" : "point samples") << ", offset " << ox << ", " << oy << ", component " << k;
+      }
     }
   }
 }
