@@ -112,9 +112,9 @@ void FillDefaults(Grid& g, const bigus::FieldCache& field, vtkMatrix4x4* axes, b
 }
 
 /// Pose of slice k of @p extent: pixel (i, j) -> axes * (origin + (extent[0] + i, extent[2] + j,
-/// extent[4] + k) * spacing).
+/// extent[4] + k) * spacing), with the low-pass @p pixelLowPass (pixels^2).
 bigus::SliceGeometry SliceAt(vtkMatrix4x4* axes, const double spacing[3], const double origin[3],
-  const int extent[6], int k)
+  const int extent[6], int k, double pixelLowPass)
 {
   vtkNew<vtkMatrix4x4> grid, pose;
   grid->SetElement(0, 0, spacing[0]);
@@ -127,6 +127,7 @@ bigus::SliceGeometry SliceAt(vtkMatrix4x4* axes, const double spacing[3], const 
   std::copy(pose->GetData(), pose->GetData() + 16, slice.ImageToReference);
   slice.Width = extent[1] - extent[0] + 1;
   slice.Height = extent[3] - extent[2] + 1;
+  slice.PixelLowPass = pixelLowPass;
   return slice;
 }
 }
@@ -384,7 +385,7 @@ int vtkGaussianFieldReslice::RequestData(
       // The output stays empty, so the pipeline does not take it for the requested extent.
       return 1;
     }
-    const bigus::SliceGeometry slice = SliceAt(axes, grid.Spacing, grid.Origin, extent, k);
+    const bigus::SliceGeometry slice = SliceAt(axes, grid.Spacing, grid.Origin, extent, k, this->PixelLowPass);
     float* s = S.data() + (this->OutputScatteringField ? k * slicePixels : 0);
     if (!renderer->Forward(view, &slice, 1, options, s, I.data() + k * slicePixels, nullptr, &error))
     {
@@ -454,6 +455,7 @@ void vtkGaussianFieldReslice::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "ElevationSigma: " << this->ElevationSigma << (this->ElevationSigma < 0 ? " (the field's)" : "")
      << "\n";
   os << indent << "Cutoff: " << this->Cutoff << "\n";
+  os << indent << "PixelLowPass: " << this->PixelLowPass << "\n";
   os << indent << "OutputScatteringField: " << this->OutputScatteringField << "\n";
   os << indent << "OutputCoverage: " << this->OutputCoverage << "\n";
   os << indent << "OutputScalarType: " << vtkImageScalarTypeNameMacro(this->OutputScalarType) << "\n";

@@ -128,6 +128,18 @@ public:
 
   ///@{
   /**
+   * Variance (output pixels^2, along each output axis; clamped to [0, 1e6]) of a Gaussian low-pass that every
+   * Gaussian is convolved with before it is sampled at the output pixel centres (bigus::SliceGeometry::
+   * PixelLowPass). 1/12 makes each pixel the average over its own area (the variance of a box of one pixel):
+   * anti-aliasing where the output spacing is coarser than the field's detail, as vtkImageReslice's
+   * antialiasing interpolators do. Default 0: point samples.
+   */
+  vtkSetClampMacro(PixelLowPass, double, 0.0, 1e6);
+  vtkGetMacro(PixelLowPass, double);
+  ///@}
+
+  ///@{
+  /**
    * Also output the signed scattering field S as float point data "ScatteringField". Default off.
    */
   vtkSetMacro(OutputScatteringField, bool);
@@ -191,6 +203,7 @@ protected:
   int OutputDimensionality = 2;
   double ElevationSigma = -1;
   double Cutoff = 5.0;
+  double PixelLowPass = 0.0;
   bool OutputScatteringField = false;
   bool OutputCoverage = true;
   int OutputScalarType = VTK_FLOAT;

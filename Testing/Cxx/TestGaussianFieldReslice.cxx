@@ -192,6 +192,57 @@ TEST(GaussianFieldReslice, SlicesMatchTheNaiveDoubleRenderer)
   EXPECT_LT(worst, 1e-5);
 }
 
+// PixelLowPass 1/12 (a box of one output pixel) makes each pixel of a coarse slice the average over its area: the
+// truth is the mean of a 4 x 4 grid of point samples inside each coarse pixel (a render at a quarter of the
+// spacing); the low-passed slice must be much closer to it than the point-sampled one.
+TEST(GaussianFieldReslice, APixelLowPassOfOneTwelfthAveragesEachPixelsArea)
+{
+  reference::FieldD exact;
+  vtkSmartPointer<vtkPolyData> field = RandomField(300, 4, exact);
+  vtkSmartPointer<vtkMatrix4x4> axes = Oblique(5, 5, 5);
+  const double coarse = 0.8, fine = coarse / 4;
+  auto render = [&](double spacing, double origin, int width, int height, double lowPass) {
+    vtkNew<vtkGaussianFieldReslice> reslice;
+    reslice->SetInputData(field);
+    reslice->SetResliceAxes(axes);
+    reslice->SetOutputSpacing(spacing, spacing, 1);
+    reslice->SetOutputOrigin(origin, origin, 0);
+    reslice->SetOutputExtent(0, width - 1, 0, height - 1, 0, 0);
+    reslice->SetPixelLowPass(lowPass);
+    reslice->OutputScatteringFieldOn();
+    reslice->Update();
+    vtkFloatArray* S =
+      vtkFloatArray::SafeDownCast(reslice->GetOutput()->GetPointData()->GetArray("ScatteringField"));
+    EXPECT_NE(S, nullptr);
+    return std::vector<float>(S->GetPointer(0), S->GetPointer(0) + std::size_t(width) * height);
+  };
+  const int w = 16, h = 12;
+  const std::vector<float> point = render(coarse, -6, w, h, 0);
+  const std::vector<float> blurred = render(coarse, -6, w, h, 1.0 / 12);
+  const std::vector<float> sub = render(fine, -6 - 1.5 * fine, 4 * w, 4 * h, 0);
+  double pointError = 0, blurredError = 0;
+  for (int j = 0; j < h; ++j)
+  {
+    for (int i = 0; i < w; ++i)
+    {
+      double mean = 0;
+      for (int b = 0; b < 4; ++b)
+      {
+        for (int a = 0; a < 4; ++a)
+        {
+          mean += sub[std::size_t(4 * j + b) * 4 * w + 4 * i + a] / 16.0;
+        }
+      }
+      pointError += (point[j * w + i] - mean) * (point[j * w + i] - mean);
+      blurredError += (blurred[j * w + i] - mean) * (blurred[j * w + i] - mean);
+    }
+  }
+  std::printf("RMS against the pixels' area means: low-pass %.3g, point samples %.3g\n",
+    std::sqrt(blurredError / (w * h)), std::sqrt(pointError / (w * h)));
+  EXPECT_GT(pointError, 0);
+  EXPECT_LT(blurredError, 0.25 * pointError);
+}
+
 TEST(GaussianFieldReslice, DefaultsCoverTheFieldAndAStackIsAVolumeForImageReslice)
 {
   reference::FieldD exact;
