@@ -339,7 +339,7 @@ int vtkGaussianFieldTrainer::RequestData(
   s.Seed = this->Seed;
   s.FramesPerStep = this->FramesPerStep;
   s.CoarseFraction = this->CoarseFraction;
-  s.CoarseLowPass = this->CoarseLowPass != 0;
+  s.CoarseLowPass = this->CoarseLowPass;
   s.CheckpointInterval = this->CheckpointInterval;
   s.CheckpointFile = this->CheckpointFile ? this->CheckpointFile : "";
 

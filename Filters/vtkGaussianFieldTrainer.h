@@ -340,9 +340,9 @@ public:
   ///@}
   ///@{ The coarse steps' frames as 2 x 2 averages, each Gaussian rendered through the pixel's low-pass, instead of
   /// point samples (bigus::TrainerSettings::CoarseLowPass). Default off.
-  vtkSetMacro(CoarseLowPass, vtkTypeBool);
-  vtkGetMacro(CoarseLowPass, vtkTypeBool);
-  vtkBooleanMacro(CoarseLowPass, vtkTypeBool);
+  vtkSetMacro(CoarseLowPass, bool);
+  vtkGetMacro(CoarseLowPass, bool);
+  vtkBooleanMacro(CoarseLowPass, bool);
   ///@}
 
   ///@{ Checkpoints: written every CheckpointInterval steps (0 = never) to CheckpointFile;
@@ -442,7 +442,7 @@ protected:
   vtkMultiProcessController* Controller = nullptr;
   int FramesPerStep = 1;
   double CoarseFraction; // from bigus::TrainerSettings
-  vtkTypeBool CoarseLowPass;
+  bool CoarseLowPass;
   double ReductionSeconds = 0;
   double ReductionBytes = 0;
 

@@ -70,7 +70,7 @@ struct TrainOptions
     this->Seed = defaults->GetSeed();
     this->FramesPerStep = defaults->GetFramesPerStep();
     this->CoarseFraction = defaults->GetCoarseFraction();
-    this->CoarseLowPass = defaults->GetCoarseLowPass() != 0;
+    this->CoarseLowPass = defaults->GetCoarseLowPass();
     this->PoseRefinementStart = defaults->GetPoseRefinementStart();
     this->MergeTolerance = defaults->GetMergeTolerance();
   }

@@ -94,6 +94,17 @@ void CheckGradients(reference::FieldD field, const SliceGeometry& slice, const R
   }
 }
 
+/// @p slice with its image's second axis tilted @p degrees towards the first, in the plane (a sheared pose).
+SliceGeometry Sheared(SliceGeometry slice, double degrees)
+{
+  const double t = std::tan(degrees * M_PI / 180.0);
+  for (int r = 0; r < 3; ++r)
+  {
+    slice.ImageToReference[4 * r + 1] += t * slice.ImageToReference[4 * r + 0];
+  }
+  return slice;
+}
+
 reference::FieldD GradientCaseField()
 {
   // Five Gaussians near a tilted slice: anisotropic, off-plane, one with negative reflectivity and
@@ -127,12 +138,7 @@ TEST(RendererGradients, MatchFiniteDifferencesThroughTheRectifier)
 TEST(RendererGradients, MatchFiniteDifferencesThroughThePixelLowPass)
 {
   const double axis[3] = { 0.3, 1.0, 0.2 }, origin[3] = { 0.5, 0.2, 0.4 };
-  SliceGeometry slice = MakeSlice(22, 18, 0.4, 25, axis, origin);
-  const double t = std::tan(3.0 * M_PI / 180.0); // 3 degrees of shear
-  for (int r = 0; r < 3; ++r)
-  {
-    slice.ImageToReference[4 * r + 1] += t * slice.ImageToReference[4 * r + 0];
-  }
+  SliceGeometry slice = Sheared(MakeSlice(22, 18, 0.4, 25, axis, origin), 3);
   slice.PixelLowPass = 1.5;
   RenderOptions o;
   o.ElevationSigma = 0.8;
@@ -487,13 +493,7 @@ TEST(CpuRenderer, HardCasesGiveNoNaNOrInfInOutputsOrGradients)
 TEST(CpuRenderer, ThePoseGradientMatchesCentralDifferencesOverCorrectedPoses)
 {
   const RealisticCase c = MakeRealisticCase(600, 48);
-  SliceGeometry sheared = c.Slice;
-  // Shear: the image's second axis tilted 3 degrees towards the first, in the plane.
-  const double t = std::tan(3.0 * M_PI / 180.0);
-  for (int r = 0; r < 3; ++r)
-  {
-    sheared.ImageToReference[4 * r + 1] += t * sheared.ImageToReference[4 * r + 0];
-  }
+  SliceGeometry sheared = Sheared(c.Slice, 3);
   sheared.PixelLowPass = 1.0 / 16; // and the coarse frames' low-pass (DecimateFrames with averages)
   const SliceGeometry slices[2] = { c.Slice, sheared };
 
