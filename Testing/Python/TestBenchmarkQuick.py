@@ -283,6 +283,32 @@ def main():
     for row in block["rows"]:
         assert math.isfinite(row["psnr"]) and "| %.2f | %.4f |" % (row["psnr"], row["ssim"]) in report, row
 
+    check_main_section(executable, os.path.join(out, "main"), results)
+
+
+def check_main_section(executable, out, full):
+    """`--section main` alone: the hold-out sections of the four sweeps and the sections that read the liver's
+    field (capacity, render cutoffs), written to BENCHMARKS_main.md and results_main.json; nothing else runs
+    and the full report's name is not written."""
+    result = subprocess.run([executable, "benchmark", "--quick", "--section", "main", "--output", out],
+                            capture_output=True, text=True)
+    assert result.returncode == 0, (result.stdout[-3000:], result.stderr)
+    assert not os.path.exists(os.path.join(out, "BENCHMARKS.md"))
+    report = open(os.path.join(out, "BENCHMARKS_main.md")).read()
+    results = json.load(open(os.path.join(out, "benchmarks", "results_main.json")))
+    assert sorted(results["sweeps"]) == sorted(full["sweeps"]), sorted(results["sweeps"])
+    assert sorted(results["section_seconds"]) == sorted(list(full["sweeps"]) + ["capacity", "render cutoffs"]), \
+        results["section_seconds"]
+    for heading in ("## liver", "## spine phantom", "## N-wire phantom", "## liver, frames 40 to 59",
+                    "## Quality against the number of Gaussians", "## Render speed against render error"):
+        assert heading in report, heading
+    for heading in ("## Volume protocol", "## Ablations", "## Defaults against hand-tuned", "## Block hold-outs"):
+        assert heading not in report, heading
+    # The baselines are deterministic: the same as in the full report.
+    for name, sweep in results["sweeps"].items():
+        for row, other in zip(sweep["baselines"][:2], full["sweeps"][name]["baselines"][:2]):
+            assert row["method"] == other["method"] and abs(row["psnr"] - other["psnr"]) < 1e-9, (name, row, other)
+
 
 if __name__ == "__main__":
     main()
