@@ -23,7 +23,7 @@ Command AddBenchmarkCommand(CLI::App& app, const std::string& sourceDirectory)
   benchmarkCommand
     ->add_option("--section", benchmark.Section,
       "all, or one section alone, written to BENCHMARKS_<section>.md: main (the hold-out sections of the four "
-      "sweeps against the baselines, quality against the number of Gaussians, render cutoffs; about 45 minutes), "
+      "sweeps against the baselines, quality against the number of Gaussians, render cutoffs; about 25 minutes), "
       "defaults (defaults against hand-tuned), "
       "volume (the volume protocol), blocks (block hold-outs on the liver) or ablations (every switch at equal "
       "iterations and equal time, 3 seeds; about 2 hours) or pareto (held-out PSNR against Gaussians and time: "
