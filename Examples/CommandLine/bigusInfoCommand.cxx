@@ -148,7 +148,8 @@ int RunInfo(const InfoOptions& options)
         data.TrainFrames.push_back(k);
       }
     }
-    const bigus::ElevationSigmaChoice choice = bigus::ChooseElevationSigma(data);
+    const std::vector<bigus::SweepDecorrelation> measured = bigus::MeasureSweeps(data);
+    const bigus::ElevationSigmaChoice choice = bigus::ChooseElevationSigma(measured);
     const bigus::ElevationDecorrelation& decorrelation = choice.Measurement;
     if (!decorrelation.Distance.empty())
     {
@@ -163,7 +164,7 @@ int RunInfo(const InfoOptions& options)
     }
     std::printf("elevation sigma %.3f mm, as `bigus train` chooses it: %s\n", choice.Sigma, choice.Reason.c_str());
     // With every frame trained on; a hold-out widens the training frames' spacing.
-    const bigus::PoseRefinementChoice refine = bigus::ChoosePoseRefinement(data);
+    const bigus::PoseRefinementChoice refine = bigus::ChoosePoseRefinement(measured);
     std::printf("pose refinement %s by default, every frame trained on: %s\n", refine.Any() ? "on" : "off",
       refine.Reason.c_str());
     return 0;

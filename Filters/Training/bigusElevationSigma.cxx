@@ -275,31 +275,45 @@ bool MeasureElevationDecorrelation(const TrainingData& data, const ElevationDeco
   return true;
 }
 
+std::vector<SweepDecorrelation> MeasureSweeps(const TrainingData& data)
+{
+  const int sweeps = data.SweepCount();
+  std::vector<SweepDecorrelation> out(sweeps); // SweepCount is at least 1
+  for (std::size_t s = 0; s < out.size(); ++s)
+  {
+    ElevationDecorrelationSettings settings;
+    settings.Sweep = sweeps > 1 ? static_cast<int>(s) : -1;
+    out[s].Measured = MeasureElevationDecorrelation(data, settings, out[s].Measurement, &out[s].Error);
+  }
+  return out;
+}
+
 ElevationSigmaChoice ChooseElevationSigma(const TrainingData& data)
 {
+  return ChooseElevationSigma(MeasureSweeps(data));
+}
+
+ElevationSigmaChoice ChooseElevationSigma(const std::vector<SweepDecorrelation>& sweeps)
+{
   ElevationSigmaChoice choice;
-  std::string error;
-  const int sweeps = data.SweepCount();
   std::string sweepText;
-  if (sweeps > 1)
+  if (sweeps.size() > 1)
   {
     // Each sweep alone; the one whose frames lie closest decides (see the header).
-    for (int s = 0; s < sweeps; ++s)
+    std::string error;
+    for (std::size_t s = 0; s < sweeps.size(); ++s)
     {
-      ElevationDecorrelationSettings settings;
-      settings.Sweep = s;
-      ElevationDecorrelation m;
-      std::string sweepError;
-      if (MeasureElevationDecorrelation(data, settings, m, &sweepError) && m.NeighbourSpacing > 0 &&
-        (sweepText.empty() || m.NeighbourSpacing < choice.Measurement.NeighbourSpacing))
+      const SweepDecorrelation& d = sweeps[s];
+      if (d.Measured && d.Measurement.NeighbourSpacing > 0 &&
+        (sweepText.empty() || d.Measurement.NeighbourSpacing < choice.Measurement.NeighbourSpacing))
       {
-        choice.Measurement = m;
-        sweepText =
-          "sweep " + std::to_string(s) + " of " + std::to_string(sweeps) + ", the one whose frames lie closest: ";
+        choice.Measurement = d.Measurement;
+        sweepText = "sweep " + std::to_string(s) + " of " + std::to_string(sweeps.size()) +
+          ", the one whose frames lie closest: ";
       }
       else if (sweepText.empty() && error.empty())
       {
-        error = sweepError;
+        error = d.Error;
       }
     }
     if (sweepText.empty())
@@ -308,10 +322,15 @@ ElevationSigmaChoice ChooseElevationSigma(const TrainingData& data)
       return choice;
     }
   }
-  else if (!MeasureElevationDecorrelation(data, ElevationDecorrelationSettings(), choice.Measurement, &error))
+  else if (sweeps.empty() || !sweeps[0].Measured)
   {
-    choice.Reason = "0.5 mm, the fixed default: " + error;
+    choice.Reason = "0.5 mm, the fixed default: " +
+      (sweeps.empty() ? std::string("no training frames were measured") : sweeps[0].Error);
     return choice;
+  }
+  else
+  {
+    choice.Measurement = sweeps[0].Measurement;
   }
   const ElevationDecorrelation& m = choice.Measurement;
   char text[256];
@@ -374,16 +393,19 @@ bool PoseRefinementChoice::Any() const
 
 PoseRefinementChoice ChoosePoseRefinement(const TrainingData& data)
 {
+  return ChoosePoseRefinement(MeasureSweeps(data));
+}
+
+PoseRefinementChoice ChoosePoseRefinement(const std::vector<SweepDecorrelation>& sweepMeasurements)
+{
   PoseRefinementChoice choice;
-  const int sweeps = data.SweepCount();
+  const std::size_t sweeps = sweepMeasurements.size();
   char text[256];
-  for (int s = 0; s < sweeps; ++s)
+  for (std::size_t s = 0; s < sweeps; ++s)
   {
-    ElevationDecorrelationSettings settings;
-    settings.Sweep = sweeps > 1 ? s : -1;
-    ElevationDecorrelation m;
-    std::string error;
-    const bool measured = MeasureElevationDecorrelation(data, settings, m, &error) && m.NeighbourSpacing > 0;
+    const ElevationDecorrelation& m = sweepMeasurements[s].Measurement;
+    const std::string& error = sweepMeasurements[s].Error;
+    const bool measured = sweepMeasurements[s].Measured && m.NeighbourSpacing > 0;
     const double rho = measured ? CorrelationAtNeighbourSpacing(m) : -1;
     const bool refined = measured && rho >= PoseRefinementMinimumCorrelation;
     choice.Sweeps.push_back(refined ? 1 : 0);

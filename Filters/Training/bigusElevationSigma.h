@@ -62,6 +62,20 @@ struct ElevationDecorrelationSettings
 BIGUSTRAINING_EXPORT bool MeasureElevationDecorrelation(const TrainingData& data,
   const ElevationDecorrelationSettings& settings, ElevationDecorrelation& result, std::string* error);
 
+/// One sweep's training frames measured alone (MeasureElevationDecorrelation with the default settings).
+struct BIGUSTRAINING_EXPORT SweepDecorrelation
+{
+  bool Measured = false;            ///< whether the measurement succeeded
+  ElevationDecorrelation Measurement;
+  std::string Error;                ///< why not, where it did not
+};
+
+/**
+ * Each sweep of @p data measured alone ([TrainingData::SweepCount()]; with one sweep, all training frames),
+ * what ChooseElevationSigma and ChoosePoseRefinement read, so that a trainer choosing both measures once.
+ */
+BIGUSTRAINING_EXPORT std::vector<SweepDecorrelation> MeasureSweeps(const TrainingData& data);
+
 /// The elevation sigma a trainer uses when none is given, and why.
 struct BIGUSTRAINING_EXPORT ElevationSigmaChoice
 {
@@ -99,6 +113,8 @@ struct BIGUSTRAINING_EXPORT ElevationSigmaChoice
  * training frames, or none overlapping).
  */
 BIGUSTRAINING_EXPORT ElevationSigmaChoice ChooseElevationSigma(const TrainingData& data);
+/// The same from measurements already taken (MeasureSweeps).
+BIGUSTRAINING_EXPORT ElevationSigmaChoice ChooseElevationSigma(const std::vector<SweepDecorrelation>& sweeps);
 
 /// The factors of ChooseElevationSigma's two rules.
 constexpr double ElevationSigmaDecorrelationFactor = 0.4;
@@ -136,6 +152,8 @@ struct BIGUSTRAINING_EXPORT PoseRefinementChoice
  * training frames, none overlapping) is not refined.
  */
 BIGUSTRAINING_EXPORT PoseRefinementChoice ChoosePoseRefinement(const TrainingData& data);
+/// The same from measurements already taken (MeasureSweeps).
+BIGUSTRAINING_EXPORT PoseRefinementChoice ChoosePoseRefinement(const std::vector<SweepDecorrelation>& sweeps);
 
 } // namespace bigus
 

@@ -102,13 +102,22 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
     }
     this->PixelSpacing = spacing / this->Data->TrainFrames.size();
   }
+  // The speckle decorrelation of each sweep, measured once for the choices below that need it.
+  std::vector<SweepDecorrelation> measured;
+  auto measuredSweeps = [&]() -> const std::vector<SweepDecorrelation>& {
+    if (measured.empty())
+    {
+      measured = MeasureSweeps(*this->Data);
+    }
+    return measured;
+  };
   if (this->Settings.ElevationSigma > 0)
   {
     this->Report.Settings.push_back(Format("ElevationSigma = %.4g mm (given)", this->Settings.ElevationSigma));
   }
   else
   {
-    const ElevationSigmaChoice choice = ChooseElevationSigma(*this->Data);
+    const ElevationSigmaChoice choice = ChooseElevationSigma(measuredSweeps());
     this->Settings.ElevationSigma = choice.Sigma;
     this->Report.Settings.push_back(Format("ElevationSigma = %.4g mm (chosen: ", choice.Sigma) + choice.Reason + ")");
   }
@@ -160,7 +169,7 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
   this->RefinedSweeps.assign(sweeps, this->Settings.RefinePoses == PoseRefinement::On ? 1 : 0);
   if (this->Settings.RefinePoses == PoseRefinement::Auto)
   {
-    const PoseRefinementChoice choice = ChoosePoseRefinement(*this->Data);
+    const PoseRefinementChoice choice = ChoosePoseRefinement(measuredSweeps());
     this->RefinedSweeps = choice.Sweeps;
     this->Settings.RefinePoses = choice.Any() ? PoseRefinement::On : PoseRefinement::Off;
     refinedBy = "chosen: " + choice.Reason;
