@@ -13,12 +13,12 @@ struct BenchmarkOptions
   bool Quick = false;           ///< a few minutes instead of about 3 hours (smoke test)
   /// "all" (written to Output/BENCHMARKS.md), or one section alone (Output/BENCHMARKS_<section>.md):
   /// "main" (the hold-out sections of the bundled sweeps, and the capacity and render-cutoff sections that
-  /// read the liver's field), "defaults" (defaults against hand-tuned, without the fixed-schedule column), "volume" (the volume
-  /// protocol), "blocks" (block hold-outs on the liver) or "ablations" (every switch at equal iterations
-  /// and equal time, 3 seeds) or "pareto" (held-out PSNR against Gaussians and time: Adam alone, variable
-  /// projection, the regular grid with the same solve) or "sweeps" (two sweeps of the volume protocol into one
-  /// field). With "all", the defaults section also reads the hold-out sections' runs (its fixed-schedule
-  /// column).
+  /// read the liver's field), "defaults" (defaults against hand-tuned, without the fixed-schedule column),
+  /// "volume" (the volume protocol), "blocks" (block hold-outs on the liver), "ablations" (every switch at
+  /// equal iterations and equal time, 3 seeds), "pareto" (held-out PSNR against Gaussians and time: Adam alone,
+  /// variable projection, the regular grid with the same solve) or "sweeps" (two sweeps of the volume protocol
+  /// into one field). With "all", the defaults section also reads the hold-out sections' runs (its
+  /// fixed-schedule column).
   std::string Section = "all";
 };
 
