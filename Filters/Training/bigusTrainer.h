@@ -90,8 +90,8 @@ struct TrainerSettings
   /// frame) after seeding, after every densification and every SolveInterval steps, and Adam moves every
   /// parameter between the solves. Off (default): one least-squares scale of the seeds' reflectivities,
   /// then Adam alone. At 120 s Adam alone measured better on every sweep (docs/BENCHMARKS_pareto.md:
-  /// liver 35.83 against 33.09 dB held out, spine phantom 21.18 against 20.59, volume protocol 36.82
-  /// against 35.71): a liver solve costs 30 to 100 s on 2 cores, and on 1.5-pixel Harris seeds it fits
+  /// liver 36.55 against 32.58 dB held out, spine phantom 21.06 against 20.49, volume protocol 37.44
+  /// against 34.54): a liver solve costs 30 to 100 s on 2 cores, and on 1.5-pixel Harris seeds it fits
   /// the frames to 18 dB only (docs/FINDINGS.md).
   /// Ignored (off) with NonNegativeReflectivity, whose model is not linear in r. With a TimeBudget (and no
   /// Solve.TimeLimit given) each solve may take a quarter of the budget left when it starts, the pixel-grid fit's
