@@ -94,18 +94,20 @@ def main():
     frames = vtk_to_numpy(image.GetPointData().GetScalars()).reshape(n, h, w).astype(np.float64) / 255
     mask = vtk_to_numpy(fan.GetOutput().GetPointData().GetScalars()).reshape(h, w) != 0
     stamps = vtk_to_numpy(image.GetFieldData().GetArray("Timestamp"))
+    scales = (1.0, 2.0, 4.0)
+    mask_weights = {s: np.maximum(blur(mask.astype(float), s), 1e-6) for s in scales}  # the local means' normalisers
+    yy, xx = np.mgrid[0:h, 0:w].astype(float)
     for block in (range(66, 74), range(60, 80)):
         before, after = block[0] - 1, block[-1] + 1
         a, b = frames[before], frames[after]
         dy, dx = displacement(a, b, mask, args.patch, args.radius, args.smooth)
-        yy, xx = np.mgrid[0:h, 0:w].astype(float)
         scores = {}
         for k in block:
             t = (stamps[k] - stamps[before]) / (stamps[after] - stamps[before])
             blend = (1 - t) * a + t * b
             scores.setdefault("blend", []).append(masked_psnr(blend, frames[k], mask))
-            for s in (1.0, 2.0, 4.0):
-                local = blur(blend * mask, s) / np.maximum(blur(mask.astype(float), s), 1e-6)
+            for s in scales:
+                local = blur(blend * mask, s) / mask_weights[s]
                 for shrink in (0.5, 0.75):
                     key = "shrunk, s %.0f px, a %.2f" % (s, shrink)
                     scores.setdefault(key, []).append(masked_psnr(local + shrink * (blend - local), frames[k], mask))
