@@ -45,6 +45,12 @@ struct VolumeBudgetResults
   /// the recorded training slices on each side of the in-between slices (the recording's interpolation).
   ErrorSources DefaultsSources;
   Row RecordedBlend;
+  /// The same blend with each training slice used only where its mask says it holds data (what the trainer
+  /// sees), and the pixels where both slices hold data: their share of the in-between slices' scored pixels
+  /// and the defaults run's and the recorded blend's scores there.
+  Row MaskedBlend;
+  double BothHoldDataShare = 0;
+  ImageMetrics DefaultsWhereBothHoldData, RecordedBlendWhereBothHoldData;
 };
 
 /// The volume protocol's compounded baseline and its defaults and hand-tuned runs at a time budget (600 s,

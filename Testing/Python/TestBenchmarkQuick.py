@@ -86,15 +86,34 @@ def check_volume_error_sources(example_data, inbetween, report):
         images = vtk_to_numpy(sweep.GetOutput().GetPointData().GetScalars()).reshape(n, h, w).astype(np.float64)
         masks = vtk_to_numpy(sweep.GetMaskOutput().GetPointData().GetScalars()).reshape(n, h, w) > 0
         sweeps.append((images, masks))
-    (train, _), (between, masks) = sweeps
-    blend = [masked_psnr(0.5 * (train[k] + train[k + 1]), between[k], masks[k])
-             for k in range(len(between) - 1) if masks[k].any()]
+    (train, train_masks), (between, masks) = sweeps
+    blend, masked_blend, blend_where_both, scored, both_hold = [], [], [], 0, 0
+    for k in range(len(between) - 1):
+        if not masks[k].any():
+            continue
+        a, b = train_masks[k], train_masks[k + 1]
+        mean = 0.5 * (train[k] + train[k + 1])
+        blend.append(masked_psnr(mean, between[k], masks[k]))
+        within = np.where(a & b, mean, np.where(a, train[k], np.where(b, train[k + 1], 0.0)))
+        masked_blend.append(masked_psnr(within, between[k], masks[k]))
+        both = masks[k] & a & b
+        scored += int(masks[k].sum())
+        both_hold += int(both.sum())
+        if both.any():
+            blend_where_both.append(masked_psnr(mean, between[k], both))
     assert abs(inbetween["recorded_blend"]["psnr"] - float(np.mean(blend))) < 1e-3, (inbetween["recorded_blend"], blend)
+    # The blend within the training masks, and the scores where both training slices on each side hold data.
+    assert abs(inbetween["masked_blend"]["psnr"] - float(np.mean(masked_blend))) < 1e-3, inbetween["masked_blend"]
+    where = inbetween["where_both_hold_data"]
+    assert abs(where["share"] - both_hold / scored) < 1e-9 and 0 < where["share"] < 1, (where, both_hold, scored)
+    assert abs(where["recorded_blend_psnr"] - float(np.mean(blend_where_both))) < 1e-3, where
+    assert math.isfinite(where["defaults_psnr"]) and where["defaults_psnr"] > 5, where
     (source,) = inbetween["error_sources"]
     assert source["seconds"] == inbetween["budget_runs"][0]["seconds"], (source, inbetween["budget_runs"][0])
     for key in ("training_psnr", "held_out_psnr", "blended_renders_psnr"):
         assert math.isfinite(source[key]) and source[key] > 5, source
     assert "the blend of the recorded frames scores %.2f dB" % inbetween["recorded_blend"]["psnr"] in report
+    assert "does) scores %.2f dB" % inbetween["masked_blend"]["psnr"] in report
 
 
 def check_ablations(ablations, report):
