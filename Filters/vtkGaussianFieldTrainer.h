@@ -204,8 +204,9 @@ public:
   vtkGetMacro(PoseSmoothness, double);
   ///@}
   ///@{ Where poses are refined: the share of the schedule (0 to 1) trained on the tracked poses before the
-  /// corrections move (bigus::TrainerSettings::PoseRefinementStart).
-  vtkSetClampMacro(PoseRefinementStart, double, 0.0, 1.0);
+  /// corrections move; negative (default): chosen from how much the tracked path jitters from frame to frame, 0
+  /// over 0.35 mm, else 0.2 (bigus::TrainerSettings::PoseRefinementStart, bigus::ChoosePoseRefinementStart).
+  vtkSetClampMacro(PoseRefinementStart, double, -1.0, 1.0);
   vtkGetMacro(PoseRefinementStart, double);
   ///@}
   ///@{ Adam over the Gaussians a step touched only (default on; off moves every Gaussian every step on its

@@ -4,11 +4,83 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <utility>
 
 namespace bigus
 {
+
+double TrackedPathJitter(const TrainingData& data, int sweep)
+{
+  // The four corner pixels of each usable frame of the sweep, in sequence order.
+  std::vector<std::array<double, 12>> corners;
+  for (int f = 0; f < data.Count(); ++f)
+  {
+    SliceFrame frame;
+    if (data.SweepOf(f) != sweep || !data.IsValid(f) ||
+      ComputeSliceFrame(data.Poses[f].data(), 90, frame) != PoseStatus::Ok)
+    {
+      continue;
+    }
+    const double* m = data.Poses[f].data();
+    std::array<double, 12> c;
+    int k = 0;
+    for (double j : { 0.0, data.Height - 1.0 })
+    {
+      for (double i : { 0.0, data.Width - 1.0 })
+      {
+        for (int r = 0; r < 3; ++r)
+        {
+          c[k++] = m[4 * r] * i + m[4 * r + 1] * j + m[4 * r + 3];
+        }
+      }
+    }
+    corners.push_back(c);
+  }
+  if (corners.size() < 3)
+  {
+    return -1;
+  }
+  double sum = 0;
+  for (std::size_t f = 1; f + 1 < corners.size(); ++f)
+  {
+    for (int k = 0; k < 12; ++k)
+    {
+      const double d = corners[f][k] - 0.5 * (corners[f - 1][k] + corners[f + 1][k]);
+      sum += d * d;
+    }
+  }
+  const double meanSquare = sum / (4.0 * (corners.size() - 2)); // per corner
+  return std::sqrt(meanSquare / 1.5);
+}
+
+PoseRefinementStartChoice ChoosePoseRefinementStart(const TrainingData& data, const std::vector<char>& sweeps)
+{
+  PoseRefinementStartChoice choice;
+  std::string measured;
+  double largest = -1;
+  char text[96];
+  for (int s = 0; s < data.SweepCount(); ++s)
+  {
+    if (!sweeps.empty() && (s >= static_cast<int>(sweeps.size()) || !sweeps[s]))
+    {
+      continue;
+    }
+    const double jitter = TrackedPathJitter(data, s);
+    largest = std::max(largest, jitter);
+    measured += measured.empty() ? "" : ",";
+    measured += data.SweepCount() > 1 ? " sweep " + std::to_string(s) : std::string();
+    std::snprintf(text, sizeof(text), " %.3f mm", jitter);
+    measured += jitter < 0 ? std::string(" too few frames") : std::string(text);
+  }
+  choice.Start = largest > PoseRefinementEarlyJitter ? 0.0 : 0.2;
+  std::snprintf(text, sizeof(text), " (%s %.3g mm)", largest > PoseRefinementEarlyJitter ? "over" : "not over",
+    PoseRefinementEarlyJitter);
+  choice.Reason = "chosen: the tracked path jitters from frame to frame by" +
+    (measured.empty() ? std::string(" nothing measured") : measured) + text;
+  return choice;
+}
 
 PoseStatus PoseCorrectionBetween(const double from[16], const double to[16], int width, int height, double xi[6])
 {

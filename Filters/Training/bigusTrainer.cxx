@@ -39,8 +39,10 @@ constexpr double MaximumScaleMm = 100.0;
 template <typename... Args>
 std::string Format(const char* format, Args... args)
 {
-  char text[256];
-  std::snprintf(text, sizeof(text), format, args...);
+  const int length = std::snprintf(nullptr, 0, format, args...);
+  std::string text(static_cast<std::size_t>(std::max(length, 0)) + 1, '\0');
+  std::snprintf(text.data(), text.size(), format, args...);
+  text.resize(text.size() - 1);
   return text;
 }
 
@@ -178,17 +180,34 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
       this->Report.Settings.push_back("RefinePoses = off (" + refinedBy + ")");
     }
   }
+  // The start of the corrections, where not given: from the jitter of the corrected sweeps' tracked paths (every
+  // sweep where only the shared corrections are refined).
+  std::string startBy;
+  if (s.PoseRefinementStart < 0)
+  {
+    const PoseRefinementStartChoice start = ChoosePoseRefinementStart(
+      *this->Data, s.RefinePoses == PoseRefinement::On ? this->RefinedSweeps : std::vector<char>());
+    this->Settings.PoseRefinementStart = start.Start;
+    startBy = start.Reason;
+  }
   if (s.RefinePoses == PoseRefinement::On)
   {
-    this->Report.Settings.push_back(Format("RefinePoses = on (from %.0f %% of the schedule; Adam %.3g rad and %.3g mm per "
-                                           "step; prior %.3g at %.3g degrees and %.3g mm, smoothness %.3g; ",
-      100 * s.PoseRefinementStart, s.PoseRotationLearningRate, s.PoseTranslationLearningRate, s.PosePrior,
-      s.PoseRotationSigma * 180 / M_PI, s.PoseTranslationSigma, s.PoseSmoothness) + refinedBy + ")");
+    this->Report.Settings.push_back(Format("RefinePoses = on (from %.0f %% of the schedule, %sAdam %.3g rad and %.3g mm "
+                                           "per step; prior %.3g at %.3g degrees and %.3g mm, smoothness %.3g; ",
+      100 * s.PoseRefinementStart, startBy.empty() ? "" : (startBy + "; ").c_str(), s.PoseRotationLearningRate,
+      s.PoseTranslationLearningRate, s.PosePrior, s.PoseRotationSigma * 180 / M_PI, s.PoseTranslationSigma,
+      s.PoseSmoothness) + refinedBy + ")");
     const std::size_t n = this->Data->Poses.size();
     this->State.PoseCorrections.assign(n, {});
     this->State.PoseFirstMoment.assign(n, {});
     this->State.PoseSecondMoment.assign(n, {});
     this->State.PoseSteps.assign(n, 0);
+  }
+  else if (s.RefinesPoses())
+  {
+    this->Report.Settings.push_back(
+      Format("PoseRefinementStart = %.0f %% of the schedule (%s)", 100 * s.PoseRefinementStart,
+        startBy.empty() ? "given" : startBy.c_str()));
   }
   // A change common to the frames of one smooth sweep is a warp of the scene the field takes up
   // (docs/FINDINGS.md, "Shared pose corrections"): said where it is switched on.

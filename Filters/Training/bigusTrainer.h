@@ -181,11 +181,13 @@ struct TrainerSettings
   /// bigusElevationSigma.h), resolved when the trainer is made (GetSettings() then says On or Off, and
   /// Trainer::IsSweepRefined which sweeps).
   PoseRefinement RefinePoses = PoseRefinement::Auto;
-  /// Share of the schedule trained on the tracked poses before the corrections move. 0.2: from the first step (0)
-  /// the liver's held-out PSNR fell 0.41 and 0.42 dB at 120 s (2 seeds), the N-wire phantom's rose 0.11 and 0.10
-  /// at 60 s; the synthetic case (0.5 degrees and 0.5 mm per frame at random) needs 0 to halve its pose
-  /// error (docs/FINDINGS.md, "When pose refinement starts").
-  double PoseRefinementStart = 0.2;
+  /// Share of the schedule (0 to 1) trained on the tracked poses before the corrections move. Negative (default):
+  /// chosen when the trainer is made (GetSettings() then says which) from how much the tracked paths of the sweeps
+  /// whose poses are corrected jitter from frame to frame (bigus::ChoosePoseRefinementStart, bigusPoseTimeline.h):
+  /// 0 over 0.35 mm (the synthetic case, 0.5 degrees and 0.5 mm per frame at random, needs it to halve its
+  /// pose error), else 0.2 (from the first step the liver's held-out PSNR fell 0.41 and 0.42 dB at 120 s, 2 seeds;
+  /// the N-wire phantom's rose 0.11 and 0.10 at 60 s; docs/FINDINGS.md, "When pose refinement starts").
+  double PoseRefinementStart = -1;
   /// Adam's rates, rad and mm per step: on TestTrainer's synthetic sweep (0.5 degree and 0.5 mm errors)
   /// 2e-4 and 0.004 took the corner error from 0.505 to 0.401 mm, these 0.192, twice these 0.165.
   double PoseRotationLearningRate = 1e-3;
