@@ -76,9 +76,9 @@ BIGUSTRAINING_EXPORT UntrainedCorrection CorrectUntrainedFrames(
 /**
  * How much a sweep's tracked path jitters from frame to frame (mm): the root mean square, over the valid frames of
  * sweep @p sweep of @p data (TrainingData::IsValid, with a pose the renderer accepts; every frame, trained on or
- * not: they share one tracker) in sequence order, of the distance of each of a frame's four corner pixels from the
- * midpoint of the same corners of the frames before and after it (the path's second difference), divided by
- * sqrt(3/2). Independent errors of each frame's pose whose displacement at the corners has root mean square e
+ * not: they share one tracker) in sequence order, of the distance of each of a frame's four corner pixels (those
+ * of the frames' shared Width x Height grid) from the midpoint of the same corners of the frames before and after
+ * it (the path's second difference), divided by sqrt(3/2). Independent errors of each frame's pose whose displacement at the corners has root mean square e
  * give e in expectation (the second difference of independent errors has variance (1 + 1/4 + 1/4) e^2); motion
  * smooth over three frames gives half the corners' acceleration times the frame interval squared. Measured
  * (docs/FINDINGS.md, "The pose refinement's start chosen from the tracked path"): the liver 0.247 mm, the spine
