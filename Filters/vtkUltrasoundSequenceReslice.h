@@ -26,8 +26,10 @@
  *   trilinear support voxels with a non-zero weight) holds data: its ValidityArrayName value is
  *   non-zero, or, with no validity array, its scalar is non-zero (a PLUS reconstruction leaves the
  *   voxels that no frame filled at 0).
- * Outside the bounds the sample is 0. A frame whose FrameValid is 0 has no usable pose: its pixels
- * and mask are all 0.
+ * Outside the bounds the sample is 0. Inside them a pixel whose mask is 0 still holds its sample (the empty
+ * voxels read as 0): a consumer that must see only data reads the pixels inside the mask (a blend of slices that
+ * does not is given what a trainer honouring the mask is not: docs/FINDINGS.md, "The volume protocol's 600 s
+ * aim"). A frame whose FrameValid is 0 has no usable pose: its pixels and mask are all 0.
  *
  * Implementation: one vtkSMPTools pass over the rows of all frames with a closed-form sampler rather
  * than a vtkImageReslice per frame: the mask needs the same support voxels as the value (computed
