@@ -74,9 +74,12 @@ PoseRefinementStartChoice ChoosePoseRefinementStart(const TrainingData& data, co
     std::snprintf(text, sizeof(text), " %.3f mm", jitter);
     measured += jitter < 0 ? std::string(" too few frames") : std::string(text);
   }
-  choice.Start = largest > PoseRefinementEarlyJitter ? 0.0 : 0.2;
-  std::snprintf(text, sizeof(text), " (%s %.3g mm)", largest > PoseRefinementEarlyJitter ? "over" : "not over",
-    PoseRefinementEarlyJitter);
+  const bool jitters = largest > PoseRefinementEarlyJitter;
+  if (jitters)
+  {
+    choice.Start = 0; // else the struct's default, 0.2
+  }
+  std::snprintf(text, sizeof(text), " (%s %.3g mm)", jitters ? "over" : "not over", PoseRefinementEarlyJitter);
   choice.Reason = "chosen: the tracked path jitters from frame to frame by" +
     (measured.empty() ? std::string(" nothing measured") : measured) + text;
   return choice;

@@ -75,16 +75,16 @@ BIGUSTRAINING_EXPORT UntrainedCorrection CorrectUntrainedFrames(
 
 /**
  * How much a sweep's tracked path jitters from frame to frame (mm): the root mean square, over the valid frames of
- * sweep @p sweep of @p data (TrainingData::IsValid, with a pose the renderer accepts; every frame, trained on or
- * not: they share one tracker) in sequence order, of the distance of each of a frame's four corner pixels (those
- * of the frames' shared Width x Height grid) from the midpoint of the same corners of the frames before and after
- * it (the path's second difference), divided by sqrt(3/2). Independent errors of each frame's pose whose displacement at the corners has root mean square e
- * give e in expectation (the second difference of independent errors has variance (1 + 1/4 + 1/4) e^2); motion
- * smooth over three frames gives half the corners' acceleration times the frame interval squared. Measured
- * (docs/FINDINGS.md, "The pose refinement's start chosen from the tracked path"): the liver 0.247 mm, the spine
- * phantom 0.224, the N-wire phantom 0.247; TestPoseRefinement's sweeps along the liver's path (a 64 x 64 window of
- * 0.315 mm pixels, every 2nd frame) 0.186, and 0.508 and 0.482 with 0.5 degrees and 0.5 mm of independent error
- * per frame. Returns -1 where the sweep has fewer than three such frames.
+ * sweep @p sweep of @p data (TrainingData::IsValid, with a pose the renderer accepts; every frame, trained on or not:
+ * they share one tracker) in sequence order, of the distance of each of a frame's four corner pixels (those of the
+ * frames' shared Width x Height grid) from the midpoint of the same corners of the frames before and after it (the
+ * path's second difference), divided by sqrt(3/2). Independent errors of each frame's pose whose displacement at the
+ * corners has root mean square e give e in expectation (the second difference of independent errors has variance
+ * (1 + 1/4 + 1/4) e^2); motion smooth over three frames gives half the corners' acceleration times the frame interval
+ * squared. Measured (docs/FINDINGS.md, "The pose refinement's start chosen from the tracked path"): the liver 0.247 mm,
+ * the spine phantom 0.224, the N-wire phantom 0.247; TestPoseRefinement's sweeps along the liver's path (a 64 x 64
+ * window of 0.315 mm pixels, every 2nd frame) 0.186, and 0.508 and 0.482 with 0.5 degrees and 0.5 mm of independent
+ * error per frame. Returns -1 where the sweep has fewer than three such frames.
  */
 BIGUSTRAINING_EXPORT double TrackedPathJitter(const TrainingData& data, int sweep);
 

@@ -192,8 +192,9 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
   }
   if (s.RefinePoses == PoseRefinement::On)
   {
-    this->Report.Settings.push_back(Format("RefinePoses = on (from %.0f %% of the schedule, %sAdam %.3g rad and %.3g mm "
-                                           "per step; prior %.3g at %.3g degrees and %.3g mm, smoothness %.3g; ",
+    this->Report.Settings.push_back(Format("RefinePoses = on (from %.0f %% of the schedule, %sAdam %.3g rad and "
+                                           "%.3g mm per step; prior %.3g at %.3g degrees and %.3g mm, "
+                                           "smoothness %.3g; ",
       100 * s.PoseRefinementStart, startBy.empty() ? "" : (startBy + "; ").c_str(), s.PoseRotationLearningRate,
       s.PoseTranslationLearningRate, s.PosePrior, s.PoseRotationSigma * 180 / M_PI, s.PoseTranslationSigma,
       s.PoseSmoothness) + refinedBy + ")");

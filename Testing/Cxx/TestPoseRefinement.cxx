@@ -465,7 +465,7 @@ LiverPathResult LiverPathCase(const LiverPathErrors& e)
   std::printf("  aligned corner error %.3f -> %.3f mm; fair held-out PSNR (each frame's pose refined with the field frozen) "
               "%.2f dB refined, %.2f trusting, %.2f on the true poses\n", result.AlignedCornerErrorBefore, result.AlignedCornerErrorAfter,
     result.FairRefined, result.FairTrusting, result.FairOnTruth);
-  std::printf("  the recorded paths jitter by %.3f and %.3f mm from frame to frame (TrackedPathJitter, sweeps 0 and 1)\n",
+  std::printf("  the recorded paths jitter by %.3f and %.3f mm from frame to frame (TrackedPathJitter, sweeps 0, 1)\n",
     TrackedPathJitter(tracked, 0), TrackedPathJitter(tracked, 1));
   return result;
 }
