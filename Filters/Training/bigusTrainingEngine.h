@@ -13,6 +13,7 @@
 #ifndef bigusTrainingEngine_h
 #define bigusTrainingEngine_h
 
+#include "bigusAdam.h"
 #include "bigusImageLoss.h"
 #include "bigusRenderer.h"
 #include "bigusTrainingModule.h" // For export macro
@@ -183,12 +184,6 @@ struct BIGUSTRAINING_EXPORT TrainingState
   /// truncated header or data, corrupt random state) this state and @p gamma are unchanged.
   bool Load(const std::string& file, double& gamma, std::string* error);
 };
-
-/// Adam's constants (Kingma and Ba 2015), shared by the engines' update of the field and the trainer's of the
-/// pose corrections.
-constexpr double AdamBeta1 = 0.9;
-constexpr double AdamBeta2 = 0.999;
-constexpr double AdamEpsilon = 1e-12;
 
 /// One training step's work.
 struct StepRequest
