@@ -191,56 +191,134 @@ bool ReadTrainerInputs(vtkInformationVector** inputVector, int holdOutEvery, int
 vtkCxxSetObjectMacro(vtkGaussianFieldTrainer, TrainingFrameList, vtkIdList);
 
 vtkGaussianFieldTrainer::vtkGaussianFieldTrainer()
+  : Settings(new bigus::TrainerSettings)
 {
   this->SetNumberOfInputPorts(2);
   this->SetBackend("auto");
-  // One place for the defaults: the trainer's own (RequestData hands these back to it).
-  const bigus::TrainerSettings d;
-  this->ElevationSigma = d.ElevationSigma;
-  this->BeamIntegration = d.BeamIntegration;
-  this->NonNegativeReflectivity = d.NonNegativeReflectivity;
-  this->HarrisInitialisation = d.HarrisInitialisation;
-  this->Densify = d.Densify;
-  this->ReflectivitySolve = d.ReflectivitySolve;
-  this->SolveIterations = d.Solve.MaximumIterations;
-  this->SolveL1 = d.Solve.L1;
-  this->DenseInitialisation = d.DenseInitialisation;
-  this->PixelGridFit = d.PixelGridFit;
-  this->RefinePoses = static_cast<int>(d.RefinePoses);
-  this->PoseSmoothness = d.PoseSmoothness;
-  this->PoseRefinementStart = d.PoseRefinementStart;
-  this->RefineTimeOffset = d.RefineTimeOffset;
-  this->RefineImageToProbe = d.RefineImageToProbe;
-  this->SparseAdam = d.SparseAdam;
-  this->Iterations = d.Iterations;
-  this->TimeBudget = d.TimeBudget;
-  this->ConvergenceTolerance = d.ConvergenceTolerance;
-  this->InitialGaussians = d.InitialGaussians;
-  this->MaximumGaussians = d.MaximumGaussians;
-  this->LossWeights[0] = d.Loss.L1;
-  this->LossWeights[1] = d.Loss.DSSIM;
-  this->LossWeights[2] = d.Loss.FFL;
-  this->DensifyStart = d.DensifyStart;
-  this->DensifyEnd = d.DensifyEnd;
-  this->DensifyInterval = d.DensifyInterval;
-  this->DensifyPercentile = d.DensifyPercentile;
-  this->ResidualSeedShare = d.ResidualSeedShare;
-  this->CoarseFraction = d.CoarseFraction;
-  this->CoarseLowPass = d.CoarseLowPass;
-  this->GrowthMargin = d.GrowthMargin;
-  this->GrowthPatience = d.GrowthPatience;
-  this->FillGaps = d.FillGaps;
-  this->MergeTolerance = d.Merge.Tolerance;
-  this->Seed = d.Seed;
 }
 
 vtkGaussianFieldTrainer::~vtkGaussianFieldTrainer()
 {
   this->SetTrainingFrameList(nullptr);
-  this->SetCheckpointFile(nullptr);
   this->SetResumeFile(nullptr);
   this->SetBackend(nullptr);
   this->SetController(nullptr);
+}
+
+// The settings' setters and getters: each reads and writes its field of the one bigus::TrainerSettings, whose
+// defaults are the filter's (a clamped one keeps a value in [lo, hi], as vtkSetClampMacro does).
+#define bigusTrainerSettingMacro(name, type, member)                                                                  \
+  void vtkGaussianFieldTrainer::Set##name(type value)                                                                  \
+  {                                                                                                                    \
+    if (this->Settings->member != value)                                                                               \
+    {                                                                                                                  \
+      this->Settings->member = value;                                                                                  \
+      this->Modified();                                                                                                \
+    }                                                                                                                  \
+  }                                                                                                                    \
+  type vtkGaussianFieldTrainer::Get##name() const { return static_cast<type>(this->Settings->member); }
+#define bigusTrainerClampedSettingMacro(name, type, member, lo, hi)                                                   \
+  void vtkGaussianFieldTrainer::Set##name(type value)                                                                  \
+  {                                                                                                                    \
+    value = std::min<type>(std::max<type>(value, lo), hi);                                                             \
+    if (this->Settings->member != value)                                                                               \
+    {                                                                                                                  \
+      this->Settings->member = value;                                                                                  \
+      this->Modified();                                                                                                \
+    }                                                                                                                  \
+  }                                                                                                                    \
+  type vtkGaussianFieldTrainer::Get##name() const { return static_cast<type>(this->Settings->member); }
+bigusTrainerClampedSettingMacro(ElevationSigma, double, ElevationSigma, 0.0, 1000.0)
+bigusTrainerSettingMacro(BeamIntegration, bool, BeamIntegration)
+bigusTrainerSettingMacro(NonNegativeReflectivity, bool, NonNegativeReflectivity)
+bigusTrainerSettingMacro(HarrisInitialisation, bool, HarrisInitialisation)
+bigusTrainerSettingMacro(Densify, bool, Densify)
+bigusTrainerSettingMacro(ReflectivitySolve, bool, ReflectivitySolve)
+bigusTrainerClampedSettingMacro(SolveIterations, int, Solve.MaximumIterations, 1, 100000)
+bigusTrainerClampedSettingMacro(SolveL1, double, Solve.L1, 0.0, 1.0)
+bigusTrainerSettingMacro(DenseInitialisation, bool, DenseInitialisation)
+bigusTrainerSettingMacro(PixelGridFit, bool, PixelGridFit)
+bigusTrainerClampedSettingMacro(PoseSmoothness, double, Poses.Smoothness, 0.0, 1e12)
+bigusTrainerClampedSettingMacro(PoseRefinementStart, double, Poses.Start, -1.0, 1.0)
+bigusTrainerSettingMacro(RefineTimeOffset, bool, Poses.RefineTimeOffset)
+bigusTrainerSettingMacro(RefineImageToProbe, bool, Poses.RefineImageToProbe)
+bigusTrainerSettingMacro(SparseAdam, bool, SparseAdam)
+bigusTrainerClampedSettingMacro(Iterations, int, Iterations, 0, 100000000)
+bigusTrainerClampedSettingMacro(TimeBudget, double, TimeBudget, 0.0, 1e9)
+bigusTrainerClampedSettingMacro(ConvergenceTolerance, double, ConvergenceTolerance, 0.0, 1.0)
+bigusTrainerClampedSettingMacro(InitialGaussians, vtkIdType, InitialGaussians, 0, VTK_ID_MAX)
+bigusTrainerClampedSettingMacro(MaximumGaussians, vtkIdType, MaximumGaussians, 1, VTK_ID_MAX)
+bigusTrainerSettingMacro(DensifyStart, int, DensifyStart)
+bigusTrainerSettingMacro(DensifyEnd, int, DensifyEnd)
+bigusTrainerClampedSettingMacro(DensifyInterval, int, DensifyInterval, 1, VTK_INT_MAX)
+bigusTrainerClampedSettingMacro(DensifyPercentile, double, DensifyPercentile, 0.0, 100.0)
+bigusTrainerClampedSettingMacro(ResidualSeedShare, double, ResidualSeedShare, 0.0, 100.0)
+bigusTrainerClampedSettingMacro(GrowthMargin, double, GrowthMargin, 0.0, 1.0)
+bigusTrainerClampedSettingMacro(GrowthPatience, int, GrowthPatience, 1, VTK_INT_MAX)
+bigusTrainerSettingMacro(FillGaps, bool, FillGaps)
+bigusTrainerClampedSettingMacro(MergeTolerance, double, Merge.Tolerance, 0.0, 1.0)
+bigusTrainerSettingMacro(Seed, unsigned int, Seed)
+bigusTrainerClampedSettingMacro(FramesPerStep, int, FramesPerStep, 1, 4096)
+bigusTrainerClampedSettingMacro(CoarseFraction, double, CoarseFraction, 0.0, 1.0)
+bigusTrainerSettingMacro(CoarseLowPass, bool, CoarseLowPass)
+bigusTrainerClampedSettingMacro(CheckpointInterval, int, CheckpointInterval, 0, VTK_INT_MAX)
+#undef bigusTrainerSettingMacro
+#undef bigusTrainerClampedSettingMacro
+
+void vtkGaussianFieldTrainer::SetRefinePoses(int mode)
+{
+  const auto value = static_cast<bigus::PoseRefinement>(std::min(std::max(mode, 0), 2));
+  if (this->Settings->Poses.RefinePoses != value)
+  {
+    this->Settings->Poses.RefinePoses = value;
+    this->Modified();
+  }
+}
+
+int vtkGaussianFieldTrainer::GetRefinePoses() const
+{
+  return static_cast<int>(this->Settings->Poses.RefinePoses);
+}
+
+void vtkGaussianFieldTrainer::SetLossWeights(double l1, double dssim, double ffl)
+{
+  bigus::ImageLossWeights& w = this->Settings->Loss;
+  if (w.L1 != l1 || w.DSSIM != dssim || w.FFL != ffl)
+  {
+    w.L1 = l1;
+    w.DSSIM = dssim;
+    w.FFL = ffl;
+    this->Modified();
+  }
+}
+
+void vtkGaussianFieldTrainer::GetLossWeights(double weights[3]) const
+{
+  const bigus::ImageLossWeights& w = this->Settings->Loss;
+  weights[0] = w.L1;
+  weights[1] = w.DSSIM;
+  weights[2] = w.FFL;
+}
+
+void vtkGaussianFieldTrainer::SetCheckpointFile(const char* file)
+{
+  const std::string value = file ? file : "";
+  if (this->Settings->CheckpointFile != value)
+  {
+    this->Settings->CheckpointFile = value;
+    this->Modified();
+  }
+}
+
+const char* vtkGaussianFieldTrainer::GetCheckpointFile() const
+{
+  return this->Settings->CheckpointFile.empty() ? nullptr : this->Settings->CheckpointFile.c_str();
+}
+
+void vtkGaussianFieldTrainer::SetTrainerSettings(const bigus::TrainerSettings& settings)
+{
+  *this->Settings = settings;
+  this->Modified();
 }
 
 int vtkGaussianFieldTrainer::FillInputPortInformation(int port, vtkInformation* info)
@@ -302,46 +380,7 @@ int vtkGaussianFieldTrainer::RequestData(
   bigus::TrainingData& data = in.Data;
   const int sweepCount = in.SweepCount, maskCount = in.MaskCount;
 
-  bigus::TrainerSettings s;
-  s.ElevationSigma = this->ElevationSigma;
-  s.BeamIntegration = this->BeamIntegration;
-  s.NonNegativeReflectivity = this->NonNegativeReflectivity;
-  s.HarrisInitialisation = this->HarrisInitialisation;
-  s.Densify = this->Densify;
-  s.ReflectivitySolve = this->ReflectivitySolve;
-  s.Solve.MaximumIterations = this->SolveIterations;
-  s.Solve.L1 = this->SolveL1;
-  s.DenseInitialisation = this->DenseInitialisation;
-  s.PixelGridFit = this->PixelGridFit;
-  s.RefinePoses = static_cast<bigus::PoseRefinement>(this->RefinePoses);
-  s.PoseSmoothness = this->PoseSmoothness;
-  s.PoseRefinementStart = this->PoseRefinementStart;
-  s.RefineTimeOffset = this->RefineTimeOffset;
-  s.RefineImageToProbe = this->RefineImageToProbe;
-  s.SparseAdam = this->SparseAdam;
-  s.InitialGaussians = this->InitialGaussians;
-  s.MaximumGaussians = this->MaximumGaussians;
-  s.Iterations = this->Iterations;
-  s.TimeBudget = this->TimeBudget;
-  s.ConvergenceTolerance = this->ConvergenceTolerance;
-  s.Loss.L1 = this->LossWeights[0];
-  s.Loss.DSSIM = this->LossWeights[1];
-  s.Loss.FFL = this->LossWeights[2];
-  s.DensifyStart = this->DensifyStart;
-  s.DensifyEnd = this->DensifyEnd;
-  s.DensifyInterval = this->DensifyInterval;
-  s.DensifyPercentile = this->DensifyPercentile;
-  s.ResidualSeedShare = this->ResidualSeedShare;
-  s.GrowthMargin = this->GrowthMargin;
-  s.GrowthPatience = this->GrowthPatience;
-  s.FillGaps = this->FillGaps;
-  s.Merge.Tolerance = this->MergeTolerance;
-  s.Seed = this->Seed;
-  s.FramesPerStep = this->FramesPerStep;
-  s.CoarseFraction = this->CoarseFraction;
-  s.CoarseLowPass = this->CoarseLowPass;
-  s.CheckpointInterval = this->CheckpointInterval;
-  s.CheckpointFile = this->CheckpointFile ? this->CheckpointFile : "";
+  const bigus::TrainerSettings& s = *this->Settings;
 
   std::string notice;
   std::unique_ptr<bigus::TrainingEngine> engine;
@@ -481,12 +520,11 @@ int vtkGaussianFieldTrainer::RequestData(
     validationHistory->InsertNextTuple(tuple);
   }
   output->GetFieldData()->AddArray(validationHistory);
-  bigus::GapFillingSettings gaps;
-  gaps.MaximumGaussians = this->MaximumGaussians;
-  addText("GapFilling", this->FillGaps ? bigus::DescribeGapFilling(report.GapFilling, gaps) : std::string("off"));
-  bigus::GaussianMergeSettings merge;
-  merge.Tolerance = this->MergeTolerance;
-  addText("GaussianMerge", merge.Tolerance > 0 ? bigus::DescribeGaussianMerge(report.Merge, merge) : std::string("off"));
+  bigus::GapFillingSettings gaps = used.GapFilling;
+  gaps.MaximumGaussians = used.MaximumGaussians;
+  addText("GapFilling", used.FillGaps ? bigus::DescribeGapFilling(report.GapFilling, gaps) : std::string("off"));
+  addText("GaussianMerge",
+    used.Merge.Tolerance > 0 ? bigus::DescribeGaussianMerge(report.Merge, used.Merge) : std::string("off"));
   if (report.Solves > 0)
   {
     const bigus::ReflectivitySolveReport& last = report.LastSolve;
@@ -556,7 +594,7 @@ int vtkGaussianFieldTrainer::RequestData(
     }
     output->GetFieldData()->AddArray(corrections);
   }
-  if (used.RefinePoses == bigus::PoseRefinement::On)
+  if (used.Poses.RefinePoses == bigus::PoseRefinement::On)
   {
     const bigus::UntrainedCorrection& u = report.UntrainedCorrections;
     vtkNew<vtkDoubleArray> untrained;
@@ -572,7 +610,7 @@ int vtkGaussianFieldTrainer::RequestData(
     untrained->InsertNextTuple(tuple);
     output->GetFieldData()->AddArray(untrained);
   }
-  if (used.RefinesPoses())
+  if (used.Poses.Any())
   {
     // Every input frame's pose as refined, for a sequence written with them (bigus train --refined-poses).
     vtkNew<vtkDoubleArray> refined;
@@ -587,20 +625,20 @@ int vtkGaussianFieldTrainer::RequestData(
     vtkNew<vtkDoubleArray> tracked;
     tracked->SetName("TrackedPoses");
     tracked->SetNumberOfComponents(16);
-    for (const std::array<double, 16>& pose : trainer.GetTrackedPoses())
+    for (const std::array<double, 16>& pose : trainer.GetPoseRefiner().GetTrackedPoses())
     {
       tracked->InsertNextTuple(pose.data());
     }
     output->GetFieldData()->AddArray(tracked);
   }
-  if (used.RefineTimeOffset)
+  if (used.Poses.RefineTimeOffset)
   {
     vtkNew<vtkDoubleArray> offset;
     offset->SetName("TimeOffset");
     offset->InsertNextValue(report.TimeOffset);
     output->GetFieldData()->AddArray(offset);
   }
-  if (used.RefineImageToProbe)
+  if (used.Poses.RefineImageToProbe)
   {
     const std::array<double, 6>& xi = report.ImageToProbeCorrection;
     vtkNew<vtkDoubleArray> correction;
@@ -651,47 +689,48 @@ int vtkGaussianFieldTrainer::RequestData(
 void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
 {
   this->Superclass::PrintSelf(os, indent);
-  os << indent << "ElevationSigma: " << this->ElevationSigma << "\n";
-  os << indent << "FramesPerStep: " << this->FramesPerStep << "\n";
-  os << indent << "CoarseFraction: " << this->CoarseFraction << "\n";
-  os << indent << "CoarseLowPass: " << (this->CoarseLowPass ? "On" : "Off") << "\n";
+  os << indent << "ElevationSigma: " << this->GetElevationSigma() << "\n";
+  os << indent << "FramesPerStep: " << this->GetFramesPerStep() << "\n";
+  os << indent << "CoarseFraction: " << this->GetCoarseFraction() << "\n";
+  os << indent << "CoarseLowPass: " << (this->GetCoarseLowPass() ? "On" : "Off") << "\n";
   os << indent << "Controller: " << this->Controller << "\n";
-  os << indent << "BeamIntegration: " << this->BeamIntegration << "\n";
-  os << indent << "NonNegativeReflectivity: " << this->NonNegativeReflectivity << "\n";
-  os << indent << "HarrisInitialisation: " << this->HarrisInitialisation << "\n";
-  os << indent << "Densify: " << this->Densify << "\n";
-  os << indent << "ReflectivitySolve: " << this->ReflectivitySolve << "\n";
-  os << indent << "SolveIterations: " << this->SolveIterations << "\n";
-  os << indent << "SolveL1: " << this->SolveL1 << "\n";
-  os << indent << "DenseInitialisation: " << this->DenseInitialisation << "\n";
-  os << indent << "PixelGridFit: " << this->PixelGridFit << "\n";
-  os << indent << "RefinePoses: " << this->RefinePoses << "\n";
-  os << indent << "PoseSmoothness: " << this->PoseSmoothness << "\n";
-  os << indent << "PoseRefinementStart: " << this->PoseRefinementStart << "\n";
-  os << indent << "RefineTimeOffset: " << this->RefineTimeOffset << "\n";
-  os << indent << "RefineImageToProbe: " << this->RefineImageToProbe << "\n";
-  os << indent << "SparseAdam: " << this->SparseAdam << "\n";
-  os << indent << "Iterations: " << this->Iterations << "\n";
-  os << indent << "TimeBudget: " << this->TimeBudget << "\n";
-  os << indent << "ConvergenceTolerance: " << this->ConvergenceTolerance << "\n";
-  os << indent << "InitialGaussians: " << this->InitialGaussians << "\n";
-  os << indent << "MaximumGaussians: " << this->MaximumGaussians << "\n";
-  os << indent << "LossWeights: " << this->LossWeights[0] << " " << this->LossWeights[1] << " " << this->LossWeights[2]
-     << "\n";
-  os << indent << "Densify schedule: start " << this->DensifyStart << ", end " << this->DensifyEnd << ", interval "
-     << this->DensifyInterval << ", percentile " << this->DensifyPercentile
-     << ", residual seeds " << this->ResidualSeedShare << "\n";
-  os << indent << "GrowthMargin: " << this->GrowthMargin << ", GrowthPatience: " << this->GrowthPatience << "\n";
-  os << indent << "FillGaps: " << this->FillGaps << "\n";
-  os << indent << "MergeTolerance: " << this->MergeTolerance << "\n";
+  os << indent << "BeamIntegration: " << this->GetBeamIntegration() << "\n";
+  os << indent << "NonNegativeReflectivity: " << this->GetNonNegativeReflectivity() << "\n";
+  os << indent << "HarrisInitialisation: " << this->GetHarrisInitialisation() << "\n";
+  os << indent << "Densify: " << this->GetDensify() << "\n";
+  os << indent << "ReflectivitySolve: " << this->GetReflectivitySolve() << "\n";
+  os << indent << "SolveIterations: " << this->GetSolveIterations() << "\n";
+  os << indent << "SolveL1: " << this->GetSolveL1() << "\n";
+  os << indent << "DenseInitialisation: " << this->GetDenseInitialisation() << "\n";
+  os << indent << "PixelGridFit: " << this->GetPixelGridFit() << "\n";
+  os << indent << "RefinePoses: " << this->GetRefinePoses() << "\n";
+  os << indent << "PoseSmoothness: " << this->GetPoseSmoothness() << "\n";
+  os << indent << "PoseRefinementStart: " << this->GetPoseRefinementStart() << "\n";
+  os << indent << "RefineTimeOffset: " << this->GetRefineTimeOffset() << "\n";
+  os << indent << "RefineImageToProbe: " << this->GetRefineImageToProbe() << "\n";
+  os << indent << "SparseAdam: " << this->GetSparseAdam() << "\n";
+  os << indent << "Iterations: " << this->GetIterations() << "\n";
+  os << indent << "TimeBudget: " << this->GetTimeBudget() << "\n";
+  os << indent << "ConvergenceTolerance: " << this->GetConvergenceTolerance() << "\n";
+  os << indent << "InitialGaussians: " << this->GetInitialGaussians() << "\n";
+  os << indent << "MaximumGaussians: " << this->GetMaximumGaussians() << "\n";
+  double weights[3];
+  this->GetLossWeights(weights);
+  os << indent << "LossWeights: " << weights[0] << " " << weights[1] << " " << weights[2] << "\n";
+  os << indent << "Densify schedule: start " << this->GetDensifyStart() << ", end " << this->GetDensifyEnd() << ", interval "
+     << this->GetDensifyInterval() << ", percentile " << this->GetDensifyPercentile()
+     << ", residual seeds " << this->GetResidualSeedShare() << "\n";
+  os << indent << "GrowthMargin: " << this->GetGrowthMargin() << ", GrowthPatience: " << this->GetGrowthPatience() << "\n";
+  os << indent << "FillGaps: " << this->GetFillGaps() << "\n";
+  os << indent << "MergeTolerance: " << this->GetMergeTolerance() << "\n";
   os << indent << "HoldOutEvery: " << this->HoldOutEvery << ", HoldOutOffset: " << this->HoldOutOffset
      << ", HoldOutSweep: " << this->HoldOutSweep << "\n";
   os << indent << "TrainingFrameList: " << (this->TrainingFrameList ? this->TrainingFrameList->GetNumberOfIds() : 0)
      << " frames\n";
-  os << indent << "Seed: " << this->Seed << "\n";
+  os << indent << "Seed: " << this->GetSeed() << "\n";
   os << indent << "EvaluationInterval: " << this->EvaluationInterval << "\n";
-  os << indent << "CheckpointFile: " << (this->CheckpointFile ? this->CheckpointFile : "(none)") << " every "
-     << this->CheckpointInterval << " steps\n";
+  os << indent << "CheckpointFile: " << (this->GetCheckpointFile() ? this->GetCheckpointFile() : "(none)") << " every "
+     << this->GetCheckpointInterval() << " steps\n";
   os << indent << "ResumeFile: " << (this->ResumeFile ? this->ResumeFile : "(none)") << "\n";
   os << indent << "Backend: " << (this->Backend ? this->Backend : "(none)") << " (last run: "
      << (this->BackendInUse.empty() ? "none" : this->BackendInUse) << ")\n";

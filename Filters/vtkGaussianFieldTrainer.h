@@ -38,34 +38,10 @@
  * improving, and a final prune of every Gaussian whose removal changes no training pixel by more than
  * 1/512.
  *
- * Defaults and why (the measurements behind them, dated and with their commands, are in
- * docs/FINDINGS.md; current numbers in docs/BENCHMARKS.md):
- * - ElevationSigma 0 = chosen from the training frames (bigus::ChooseElevationSigma): 0.4 times the
- *   sigma that the speckle's decorrelation between neighbouring frames shows, or, where the frames lie too
- *   far apart for their speckle to correlate, the median spacing of neighbouring frames along the
- *   elevation axis. A rendered frame is the field averaged over the
- *   beam, so it cannot change faster across the sweep than the beam allows; too small makes frames
- *   independent (no interpolation between them), too large blurs across the sweep. A value > 0 (mm;
- *   FWHM / 2.355 from a probe's data sheet) overrides the rule.
- * - Loss weights L1 0.8, D-SSIM 0.2 (the 3D Gaussian splatting balance), FFL 0 (off): the FFL's two
- *   DFTs cost about as much as the rest of the loss, so it is an option (e.g. 0.1) rather than the
- *   default; TestImageLoss checks each gradient.
- * - InitialGaussians 0 = automatic: one seed per 200 masked training pixels, at least 20,000 and at
- *   most half of MaximumGaussians (500,000): held-out quality rises with the seed count, and a field
- *   that is too small underfits (training and held-out PSNR stay equal). Growth and the final prune
- *   then set the count that training ends with, which is reported, not fixed.
- * - Training renders with cutoff k = 4 (held-out metrics and the render filters use 5): a step is
- *   about 1.6 times faster, and the rendered intensity changes by at most ~1e-3.
- * - Densify every 200 steps from step 200 to 60 % of the iterations, top 5 % by attribution; growth
- *   stops when the validation loss has not improved by GrowthMargin 0.5 % on its best over
- *   GrowthPatience 4 intervals in a row. The validation loss moves by a few % between intervals with
- *   the learning rate and the dip after each densification (field data ValidationHistory), so two
- *   intervals stopped growth on noise (liver: at iteration 1,800 of 3,600, 215k Gaussians).
- * - FillGaps on: a gap between training frames wider than the beam (frames dropped, the probe lifted)
- *   renders almost nothing from the trained Gaussians alone; bigus::FillElevationGaps extrudes the
- *   two frames on its sides, as the field renders them, across it, blended linearly (liver, frames 66
- *   to 73 out, 1,618 steps: 25.28 -> 29.62 dB in the gap, bracketing frames 31.35 / 34.21 -> 33.38 /
- *   34.74 dB). A sweep without such gaps is unchanged.
+ * Defaults: every setting's default, and the rule that chooses it from the data where it is chosen, is
+ * bigus::TrainerSettings' (bigusTrainer.h and the stage headers it cites; the measurements behind them are in
+ * docs/FINDINGS.md): the setters below write into one TrainerSettings, and a run's TrainingSettings says what
+ * was chosen and why.
  *
  * What limits held-out quality: held-out error is close to the training-frame error plus the error
  * of blending the two bracketing recorded frames (the part of a held-out frame that no neighbour
@@ -88,7 +64,13 @@
 #include "vtkCommand.h" // For SettingsChosenEvent
 #include "vtkPolyDataAlgorithm.h"
 
+#include <memory> // For std::unique_ptr
 #include <string> // For std::string
+
+namespace bigus
+{
+struct TrainerSettings;
+}
 
 class vtkMultiProcessController;
 
@@ -110,58 +92,57 @@ public:
   void RemoveAllMaskConnections() { this->RemoveAllInputConnections(1); }
 
   ///@{ Elevation beam standard deviation (mm). Default 0: chosen from the sweep (bigusElevationSigma.h).
-  vtkSetClampMacro(ElevationSigma, double, 0.0, 1000.0);
-  vtkGetMacro(ElevationSigma, double);
+  virtual void SetElevationSigma(double value);
+  virtual double GetElevationSigma() const;
   ///@}
   ///@{ Ablations: beam integration off (thin plane), non-negative reflectivities, random initialisation,
   /// no densification.
-  vtkSetMacro(BeamIntegration, bool);
-  vtkGetMacro(BeamIntegration, bool);
-  vtkSetMacro(NonNegativeReflectivity, bool);
-  vtkGetMacro(NonNegativeReflectivity, bool);
-  vtkSetMacro(HarrisInitialisation, bool);
-  vtkGetMacro(HarrisInitialisation, bool);
-  vtkSetMacro(Densify, bool);
-  vtkGetMacro(Densify, bool);
+  virtual void SetBeamIntegration(bool value);
+  virtual bool GetBeamIntegration() const;
+  virtual void SetNonNegativeReflectivity(bool value);
+  virtual bool GetNonNegativeReflectivity() const;
+  virtual void SetHarrisInitialisation(bool value);
+  virtual bool GetHarrisInitialisation() const;
+  virtual void SetDensify(bool value);
+  virtual bool GetDensify() const;
   ///@}
   ///@{ Variable projection: the reflectivities solved by least squares after seeding and after every
   /// densification, Adam between the solves (default off: Adam alone measured better at 120 s on the
   /// liver, the spine phantom and the volume protocol, docs/BENCHMARKS_pareto.md). See
   /// bigus::TrainerSettings::ReflectivitySolve.
-  vtkSetMacro(ReflectivitySolve, bool);
-  vtkGetMacro(ReflectivitySolve, bool);
+  virtual void SetReflectivitySolve(bool value);
+  virtual bool GetReflectivitySolve() const;
   vtkBooleanMacro(ReflectivitySolve, bool);
   ///@}
   ///@{ CGLS iterations of each reflectivity solve (default 12; each one a forward and a backward pass over
   /// every training frame). See bigus::ReflectivitySolveSettings::MaximumIterations.
-  vtkSetClampMacro(SolveIterations, int, 1, 100000);
-  vtkGetMacro(SolveIterations, int);
+  virtual void SetSolveIterations(int value);
+  virtual int GetSolveIterations() const;
   ///@}
   ///@{ An L1 term in every reflectivity solve (default 0: none), as a share of the weight that would set every
   /// reflectivity to 0: FISTA, then the Gaussians it set to 0 are removed and the others refitted by CGLS
   /// (bigus::ReflectivitySolveSettings::L1; the relaxed lasso).
-  vtkSetClampMacro(SolveL1, double, 0.0, 1.0);
-  vtkGetMacro(SolveL1, double);
+  virtual void SetSolveL1(double value);
+  virtual double GetSolveL1() const;
   ///@}
   ///@{ A dense start: Gaussians on the training frames' pixel grid instead of Harris seeds (default
   /// off; bigus::TrainerSettings::DenseInitialisation).
-  vtkSetMacro(DenseInitialisation, bool);
-  vtkGetMacro(DenseInitialisation, bool);
+  virtual void SetDenseInitialisation(bool value);
+  virtual bool GetDenseInitialisation() const;
   vtkBooleanMacro(DenseInitialisation, bool);
   ///@}
   ///@{ The fit when the data are few (default on): when the training planes hold at most twice
   /// MaximumGaussians fan pixels, the field is a pixel grid (every fan pixel, or MaximumGaussians of them)
   /// with solved reflectivities and no geometry step is taken (bigus::TrainerSettings::PixelGridFit). Applies
   /// with the default start only.
-  vtkSetMacro(PixelGridFit, bool);
-  vtkGetMacro(PixelGridFit, bool);
+  virtual void SetPixelGridFit(bool value);
+  virtual bool GetPixelGridFit() const;
   vtkBooleanMacro(PixelGridFit, bool);
   ///@}
   ///@{ Pose refinement: a rigid correction of each training frame's pose, optimised with the field
-  /// (bigus::TrainerSettings::RefinePoses): POSE_REFINEMENT_OFF (0, the tracked poses are trusted),
-  /// POSE_REFINEMENT_ON (1, every sweep's training frames) or POSE_REFINEMENT_AUTO (2, the default: the sweeps
-  /// whose neighbouring training frames' speckle correlates, bigus::ChoosePoseRefinement; TrainingSettings says
-  /// what was chosen and why). Where poses are refined, the output's field data holds PoseCorrections, one
+  /// (bigus::PoseRefinementSettings::RefinePoses): POSE_REFINEMENT_OFF (0, the tracked poses are trusted),
+  /// POSE_REFINEMENT_ON (1, every sweep's training frames) or POSE_REFINEMENT_AUTO (2, the default: chosen sweep by
+  /// sweep, bigus::ChoosePoseRefinement; TrainingSettings says what was chosen and why). Where poses are refined, the output's field data holds PoseCorrections, one
   /// tuple per refined training frame: Frame, rotation about the frame's u, v, n axes through its centre pixel
   /// (degrees), translation along u, v, n (mm) (bigus::CorrectPose), TrainingPoses are the refined poses, and
   /// RefinedPoses (16 components, one tuple per input frame, the sweeps' frames in turn) every frame's pose as
@@ -176,43 +157,43 @@ public:
     POSE_REFINEMENT_ON = 1,
     POSE_REFINEMENT_AUTO = 2
   };
-  vtkSetClampMacro(RefinePoses, int, POSE_REFINEMENT_OFF, POSE_REFINEMENT_AUTO);
-  vtkGetMacro(RefinePoses, int);
+  virtual void SetRefinePoses(int value);
+  virtual int GetRefinePoses() const;
   vtkBooleanMacro(RefinePoses, int);
   void SetRefinePosesToAuto() { this->SetRefinePoses(POSE_REFINEMENT_AUTO); }
   ///@}
   ///@{ Refinement of one tracker-to-video time offset shared by every frame (default off;
-  /// bigus::TrainerSettings::RefineTimeOffset; needs the sweeps' Timestamp). The output's field data then holds
+  /// bigus::PoseRefinementSettings::RefineTimeOffset; needs the sweeps' Timestamp). The output's field data then holds
   /// TimeOffset (s, added to every frame's timestamp to find its tracked pose) and RefinedPoses.
-  vtkSetMacro(RefineTimeOffset, bool);
-  vtkGetMacro(RefineTimeOffset, bool);
+  virtual void SetRefineTimeOffset(bool value);
+  virtual bool GetRefineTimeOffset() const;
   vtkBooleanMacro(RefineTimeOffset, bool);
   ///@}
   ///@{ Refinement of one ImageToProbe correction shared by every frame (default off;
-  /// bigus::TrainerSettings::RefineImageToProbe). The output's field data then holds ImageToProbeCorrection
+  /// bigus::PoseRefinementSettings::RefineImageToProbe). The output's field data then holds ImageToProbeCorrection
   /// (rotation about u, v, n through the centre pixel of the frame grid, degrees; translation along u, v, n,
   /// mm), ImageToProbeCorrectionMatrix (row-major 4x4 M in pixel indices: the corrected ImageToProbe is
   /// ImageToProbe M; M depends on the pixel spacing, and is the first training frame's sweep's when sweeps of
   /// other spacings are trained together) and RefinedPoses.
-  vtkSetMacro(RefineImageToProbe, bool);
-  vtkGetMacro(RefineImageToProbe, bool);
+  virtual void SetRefineImageToProbe(bool value);
+  virtual bool GetRefineImageToProbe() const;
   vtkBooleanMacro(RefineImageToProbe, bool);
   ///@}
   ///@{ Weight of the smoothness prior on the pose corrections along the sweep (default 0;
-  /// bigus::TrainerSettings::PoseSmoothness).
-  vtkSetClampMacro(PoseSmoothness, double, 0, 1e12);
-  vtkGetMacro(PoseSmoothness, double);
+  /// bigus::PoseRefinementSettings::Smoothness).
+  virtual void SetPoseSmoothness(double value);
+  virtual double GetPoseSmoothness() const;
   ///@}
   ///@{ Where poses are refined: the share of the schedule (0 to 1) trained on the tracked poses before the
-  /// corrections move; negative (default): chosen from how much the tracked path jitters from frame to frame, 0
-  /// over 0.35 mm, else 0.2 (bigus::TrainerSettings::PoseRefinementStart, bigus::ChoosePoseRefinementStart).
-  vtkSetClampMacro(PoseRefinementStart, double, -1.0, 1.0);
-  vtkGetMacro(PoseRefinementStart, double);
+  /// corrections move; negative (default): chosen from the tracked path's jitter (bigus::ChoosePoseRefinementStart;
+  /// TrainingSettings says why).
+  virtual void SetPoseRefinementStart(double value);
+  virtual double GetPoseRefinementStart() const;
   ///@}
   ///@{ Adam over the Gaussians a step touched only (default on; off moves every Gaussian every step on its
   /// momentum, the ablation; bigus::TrainerSettings::SparseAdam).
-  vtkSetMacro(SparseAdam, bool);
-  vtkGetMacro(SparseAdam, bool);
+  virtual void SetSparseAdam(bool value);
+  virtual bool GetSparseAdam() const;
   vtkBooleanMacro(SparseAdam, bool);
   ///@}
   ///@{
@@ -224,57 +205,58 @@ public:
    * the schedule and training runs until it (Iterations 0 without a budget means 3000). A run
    * scheduled by time is not reproducible step for step; one scheduled by Iterations is.
    */
-  vtkSetClampMacro(Iterations, int, 0, 100000000);
-  vtkGetMacro(Iterations, int);
-  vtkSetClampMacro(TimeBudget, double, 0.0, 1e9);
-  vtkGetMacro(TimeBudget, double);
-  vtkSetClampMacro(ConvergenceTolerance, double, 0.0, 1.0);
-  vtkGetMacro(ConvergenceTolerance, double);
+  virtual void SetIterations(int value);
+  virtual int GetIterations() const;
+  virtual void SetTimeBudget(double value);
+  virtual double GetTimeBudget() const;
+  virtual void SetConvergenceTolerance(double value);
+  virtual double GetConvergenceTolerance() const;
   ///@}
   ///@{ Field size: seeds (0 = automatic, see above) and hard maximum (gap filling's copies included: a gap
   /// whose copies would exceed it is bridged by the strongest Gaussians only and field data `GapFilling` says so).
-  vtkSetClampMacro(InitialGaussians, vtkIdType, 0, VTK_ID_MAX);
-  vtkGetMacro(InitialGaussians, vtkIdType);
-  vtkSetClampMacro(MaximumGaussians, vtkIdType, 1, VTK_ID_MAX);
-  vtkGetMacro(MaximumGaussians, vtkIdType);
+  virtual void SetInitialGaussians(vtkIdType value);
+  virtual vtkIdType GetInitialGaussians() const;
+  virtual void SetMaximumGaussians(vtkIdType value);
+  virtual vtkIdType GetMaximumGaussians() const;
   ///@}
   ///@{ Loss weights (L1, D-SSIM, focal frequency loss).
-  vtkSetVector3Macro(LossWeights, double);
-  vtkGetVector3Macro(LossWeights, double);
+  virtual void SetLossWeights(double l1, double dssim, double ffl);
+  void SetLossWeights(const double weights[3]) { this->SetLossWeights(weights[0], weights[1], weights[2]); }
+  void GetLossWeights(double weights[3]) const;
   ///@}
   ///@{ Densification schedule: first step, last step (-1: 60 % of the schedule), interval, top percentile.
-  vtkSetMacro(DensifyStart, int);
-  vtkGetMacro(DensifyStart, int);
-  vtkSetMacro(DensifyEnd, int);
-  vtkGetMacro(DensifyEnd, int);
-  vtkSetClampMacro(DensifyInterval, int, 1, VTK_INT_MAX);
-  vtkGetMacro(DensifyInterval, int);
-  vtkSetClampMacro(DensifyPercentile, double, 0.0, 100.0);
-  vtkGetMacro(DensifyPercentile, double);
+  virtual void SetDensifyStart(int value);
+  virtual int GetDensifyStart() const;
+  virtual void SetDensifyEnd(int value);
+  virtual int GetDensifyEnd() const;
+  virtual void SetDensifyInterval(int value);
+  virtual int GetDensifyInterval() const;
+  virtual void SetDensifyPercentile(double value);
+  virtual double GetDensifyPercentile() const;
   ///@}
   ///@{ New Gaussians where the residual is largest at each densification, as a share of those densified
   /// (default 0 = off; 0.25 measured): their reflectivity is the residual (Image-GS; bigus::TrainerSettings::ResidualSeedShare).
-  vtkSetClampMacro(ResidualSeedShare, double, 0.0, 100.0);
-  vtkGetMacro(ResidualSeedShare, double);
+  virtual void SetResidualSeedShare(double value);
+  virtual double GetResidualSeedShare() const;
   ///@}
   ///@{ Growth stops when the validation loss improves by less than GrowthMargin (relative) on the best
   /// so far over GrowthPatience densification intervals in a row (bigus::TrainerSettings).
-  vtkSetClampMacro(GrowthMargin, double, 0.0, 1.0);
-  vtkGetMacro(GrowthMargin, double);
-  vtkSetClampMacro(GrowthPatience, int, 1, VTK_INT_MAX);
-  vtkGetMacro(GrowthPatience, int);
+  virtual void SetGrowthMargin(double value);
+  virtual double GetGrowthMargin() const;
+  virtual void SetGrowthPatience(int value);
+  virtual int GetGrowthPatience() const;
   ///@}
   ///@{ After training, bridge the gaps between training frames that are wider than the beam
   /// (bigus::FillElevationGaps; default on). Field data `GapFilling` says what was added.
-  vtkSetMacro(FillGaps, bool);
-  vtkGetMacro(FillGaps, bool);
+  virtual void SetFillGaps(bool value);
+  virtual bool GetFillGaps() const;
   vtkBooleanMacro(FillGaps, bool);
   ///@}
   ///@{ Last, merge neighbouring Gaussians that one Gaussian represents: moment-matched pairs whose relative
   /// integrated squared error ||a + b - merged||^2 / ||a + b||^2 (over 3D) stays below MergeTolerance
   /// (bigus::MergeGaussians; default 0.001, 0 = off). Field data `GaussianMerge` says what was merged.
-  vtkSetClampMacro(MergeTolerance, double, 0.0, 1.0);
-  vtkGetMacro(MergeTolerance, double);
+  virtual void SetMergeTolerance(double value);
+  virtual double GetMergeTolerance() const;
   ///@}
   ///@{ Which frames to train on: all valid frames except those with index % HoldOutEvery ==
   /// HoldOutOffset (HoldOutEvery 0 = none; the index within the frame's own sweep), or the explicit list
@@ -296,8 +278,8 @@ public:
   vtkGetMacro(EvaluationInterval, double);
   ///@}
   ///@{ Random seed.
-  vtkSetMacro(Seed, unsigned int);
-  vtkGetMacro(Seed, unsigned int);
+  virtual void SetSeed(unsigned int value);
+  virtual unsigned int GetSeed() const;
   ///@}
   ///@{
   /**
@@ -311,6 +293,18 @@ public:
   vtkGetStringMacro(Backend);
   const char* GetBackendInUse() const { return this->BackendInUse.c_str(); }
   ///@}
+
+#ifndef __VTK_WRAP__
+  ///@{
+  /**
+   * The trainer's settings as one bigus::TrainerSettings (C++ only): what the setters above write into, for a
+   * program that keeps its own (`bigus train` binds its options to one). What a run chose from the data is in
+   * GetSettingsText(), not here.
+   */
+  const bigus::TrainerSettings& GetTrainerSettings() const { return *this->Settings; }
+  void SetTrainerSettings(const bigus::TrainerSettings& settings);
+  ///@}
+#endif
 
   ///@{
   /**
@@ -331,28 +325,28 @@ public:
   vtkGetObjectMacro(Controller, vtkMultiProcessController);
   ///@}
   ///@{ Training frames rendered per step (per process with a Controller); their losses are averaged.
-  vtkSetClampMacro(FramesPerStep, int, 1, 4096);
-  vtkGetMacro(FramesPerStep, int);
+  virtual void SetFramesPerStep(int value);
+  virtual int GetFramesPerStep() const;
   ///@}
   ///@{ The resolution schedule: the first CoarseFraction (0 to 1) of the schedule steps on every second pixel
   /// and row of its frames (a quarter of the pixels; bigus::TrainerSettings::CoarseFraction). Default 0.5; 0 = off.
-  vtkSetClampMacro(CoarseFraction, double, 0.0, 1.0);
-  vtkGetMacro(CoarseFraction, double);
+  virtual void SetCoarseFraction(double value);
+  virtual double GetCoarseFraction() const;
   ///@}
   ///@{ The coarse steps' frames as 2 x 2 averages, each Gaussian rendered through the pixel's low-pass, instead of
   /// point samples (bigus::TrainerSettings::CoarseLowPass). Default off.
-  vtkSetMacro(CoarseLowPass, bool);
-  vtkGetMacro(CoarseLowPass, bool);
+  virtual void SetCoarseLowPass(bool value);
+  virtual bool GetCoarseLowPass() const;
   vtkBooleanMacro(CoarseLowPass, bool);
   ///@}
 
   ///@{ Checkpoints: written every CheckpointInterval steps (0 = never) to CheckpointFile;
   /// ResumeFile continues from one, schedule included: the seconds trained before it count towards
   /// TimeBudget (a run stopped at 70 % of its budget and resumed trains for the remaining 30 %).
-  vtkSetStringMacro(CheckpointFile);
-  vtkGetStringMacro(CheckpointFile);
-  vtkSetClampMacro(CheckpointInterval, int, 0, VTK_INT_MAX);
-  vtkGetMacro(CheckpointInterval, int);
+  virtual void SetCheckpointFile(const char* file);
+  const char* GetCheckpointFile() const;
+  virtual void SetCheckpointInterval(int value);
+  virtual int GetCheckpointInterval() const;
   vtkSetStringMacro(ResumeFile);
   vtkGetStringMacro(ResumeFile);
   ///@}
@@ -397,53 +391,17 @@ protected:
   int RequestUpdateExtent(vtkInformation*, vtkInformationVector**, vtkInformationVector*) override;
   int RequestData(vtkInformation*, vtkInformationVector**, vtkInformationVector*) override;
 
-  // The trainer's settings: the constructor takes their defaults from bigus::TrainerSettings.
-  double ElevationSigma;
-  bool BeamIntegration;
-  bool NonNegativeReflectivity;
-  bool HarrisInitialisation;
-  bool Densify;
-  bool ReflectivitySolve;
-  int SolveIterations;
-  double SolveL1;
-  bool DenseInitialisation;
-  bool PixelGridFit;
-  int RefinePoses;
-  double PoseSmoothness;
-  double PoseRefinementStart;
-  bool RefineTimeOffset;
-  bool RefineImageToProbe;
-  bool SparseAdam;
-  int Iterations;
-  double TimeBudget;
-  double ConvergenceTolerance;
-  vtkIdType InitialGaussians;
-  vtkIdType MaximumGaussians;
-  double LossWeights[3];
-  int DensifyStart;
-  int DensifyEnd;
-  int DensifyInterval;
-  double DensifyPercentile;
-  double ResidualSeedShare;
-  double GrowthMargin;
-  int GrowthPatience;
-  bool FillGaps;
-  double MergeTolerance; // from bigus::TrainerSettings::Merge
+  // The one copy of the trainer's settings (bigus::TrainerSettings): every setting's setter writes into it.
+  std::unique_ptr<bigus::TrainerSettings> Settings;
   int HoldOutEvery = 0;
   int HoldOutOffset = 0;
   int HoldOutSweep = -1;
   vtkIdList* TrainingFrameList = nullptr;
-  unsigned int Seed;
   double EvaluationInterval = 0;
-  char* CheckpointFile = nullptr;
-  int CheckpointInterval = 0;
   char* ResumeFile = nullptr;
   char* Backend = nullptr;
   std::string BackendInUse;
   vtkMultiProcessController* Controller = nullptr;
-  int FramesPerStep = 1;
-  double CoarseFraction; // from bigus::TrainerSettings
-  bool CoarseLowPass;
   double ReductionSeconds = 0;
   double ReductionBytes = 0;
 

@@ -161,8 +161,8 @@ int ScoreAtRefinedPoses(vtkPolyData* field, vtkImageData* truth, bigus::Training
   const bigus::TrainerSettings settings;
   if (!bigus::FieldFromPolyData(field, gaussians, model, &message) ||
     !bigus::RefinePosesWithFieldFrozen(gaussians, data, scored,
-      bigus::RenderOptionsFor(model, -1, settings.Cutoff), settings, o.RefineSteps, o.Backend, corrections,
-      &message))
+      bigus::RenderOptionsFor(model, -1, settings.Cutoff), settings.Poses, settings.Loss, o.RefineSteps, o.Backend,
+      corrections, &message))
   {
     return Fail("--refine-poses: " + message);
   }

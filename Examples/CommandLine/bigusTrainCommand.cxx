@@ -3,6 +3,7 @@
 #include "bigusGapFilling.h"
 #include "bigusGaussianFieldData.h"
 #include "bigusPlot.h"
+#include "bigusTrainer.h"
 #include "bigusSliceFrame.h"
 #include "vtkCallbackCommand.h"
 #include "vtkCommand.h"
@@ -39,41 +40,13 @@ struct TrainOptions
   std::vector<std::string> Sweeps, Calibrations, Masks; ///< one calibration / mask for all, or one per sweep
   std::string Chain;                                     ///< --transform, for every sweep
   std::string Output, Checkpoint, Resume, Backend = "auto";
-  int HoldOutEvery = 0, HoldOutOffset = 0, HoldOutSweep = -1, Iterations = 0, Threads = 0, FramesPerStep = 1;
+  int HoldOutEvery = 0, HoldOutOffset = 0, HoldOutSweep = -1, Threads = 0;
   bool Distributed = false;
   std::vector<int> Frames; ///< explicit training frames (empty: the hold-out rule)
-  double TimeBudget = 0, ElevationSigma = 0, EvaluationInterval = 0;
-  long long MaxGaussians = 0, InitialGaussians = 0;
-  double GrowthMargin = 0, ResidualSeedShare = 0, CoarseFraction = 0, MergeTolerance = 0, SolveL1 = 0;
-  bool CoarseLowPass = false;
-  int GrowthPatience = 0, SolveIterations = 0;
-  bool NoFillGaps = false, ReflectivitySolve = false, DenseStart = false, DenseAdam = false,
-       NoPixelGridFit = false, RefinePoses = false, NoRefinePoses = false, RefineTimeOffset = false,
-       RefineImageToProbe = false;
+  double EvaluationInterval = 0;
   std::vector<std::string> RefinedPoses; ///< one per sweep
-  double PoseSmoothness = 0, PoseRefinementStart = 0;
-  unsigned Seed = 0;
-
-  /// The filter's own defaults, so that `bigus train` and vtkGaussianFieldTrainer agree.
-  TrainOptions()
-  {
-    vtkNew<vtkGaussianFieldTrainer> defaults;
-    this->Iterations = defaults->GetIterations();
-    this->ElevationSigma = defaults->GetElevationSigma();
-    this->MaxGaussians = defaults->GetMaximumGaussians();
-    this->InitialGaussians = defaults->GetInitialGaussians();
-    this->GrowthMargin = defaults->GetGrowthMargin();
-    this->GrowthPatience = defaults->GetGrowthPatience();
-    this->ResidualSeedShare = defaults->GetResidualSeedShare();
-    this->SolveIterations = defaults->GetSolveIterations();
-    this->SolveL1 = defaults->GetSolveL1();
-    this->Seed = defaults->GetSeed();
-    this->FramesPerStep = defaults->GetFramesPerStep();
-    this->CoarseFraction = defaults->GetCoarseFraction();
-    this->CoarseLowPass = defaults->GetCoarseLowPass();
-    this->PoseRefinementStart = defaults->GetPoseRefinementStart();
-    this->MergeTolerance = defaults->GetMergeTolerance();
-  }
+  /// The trainer's settings, the options bound to them: their defaults are the trainer's own.
+  TrainerSettings Settings;
 };
 
 /// --distributed under mpirun: the MPI controller of the run (finalised when the command ends), this rank.
@@ -150,7 +123,9 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
       return 2;
     }
   }
-  if (!o.RefinedPoses.empty() && o.NoRefinePoses && !o.RefineTimeOffset && !o.RefineImageToProbe)
+  const PoseRefinementSettings& poses = o.Settings.Poses;
+  if (!o.RefinedPoses.empty() && poses.RefinePoses == PoseRefinement::Off && !poses.RefineTimeOffset &&
+    !poses.RefineImageToProbe)
   {
     std::fprintf(stderr,
       "bigus: --refined-poses with --no-refine-poses needs --refine-time-offset or --refine-image-to-probe\n");
@@ -214,41 +189,13 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
     }
     trainer->SetTrainingFrameList(frames);
   }
-  trainer->SetIterations(o.Iterations);
-  trainer->SetTimeBudget(o.TimeBudget);
-  trainer->SetMaximumGaussians(o.MaxGaussians);
-  trainer->SetInitialGaussians(o.InitialGaussians);
-  trainer->SetGrowthMargin(o.GrowthMargin);
-  trainer->SetGrowthPatience(o.GrowthPatience);
-  trainer->SetResidualSeedShare(o.ResidualSeedShare);
-  trainer->SetFillGaps(!o.NoFillGaps);
-  trainer->SetMergeTolerance(o.MergeTolerance);
-  trainer->SetReflectivitySolve(o.ReflectivitySolve);
-  trainer->SetSolveIterations(o.SolveIterations);
-  trainer->SetSolveL1(o.SolveL1);
-  trainer->SetDenseInitialisation(o.DenseStart);
-  trainer->SetPixelGridFit(!o.NoPixelGridFit);
-  trainer->SetRefinePoses(o.RefinePoses ? vtkGaussianFieldTrainer::POSE_REFINEMENT_ON
-      : o.NoRefinePoses                  ? vtkGaussianFieldTrainer::POSE_REFINEMENT_OFF
-                                         : vtkGaussianFieldTrainer::POSE_REFINEMENT_AUTO);
-  trainer->SetRefineTimeOffset(o.RefineTimeOffset);
-  trainer->SetRefineImageToProbe(o.RefineImageToProbe);
-  trainer->SetPoseSmoothness(o.PoseSmoothness);
-  trainer->SetPoseRefinementStart(o.PoseRefinementStart);
-  trainer->SetSparseAdam(!o.DenseAdam);
-  trainer->SetElevationSigma(o.ElevationSigma);
-  trainer->SetSeed(o.Seed);
-  trainer->SetFramesPerStep(o.FramesPerStep);
-  trainer->SetCoarseFraction(o.CoarseFraction);
-  trainer->SetCoarseLowPass(o.CoarseLowPass);
+  TrainerSettings settings = o.Settings;
+  settings.CheckpointFile = o.Checkpoint;
+  settings.CheckpointInterval = o.Checkpoint.empty() ? 0 : 200;
+  trainer->SetTrainerSettings(settings);
   trainer->SetController(processes.Controller);
   trainer->SetEvaluationInterval(o.EvaluationInterval);
   trainer->SetBackend(o.Backend.c_str());
-  if (!o.Checkpoint.empty())
-  {
-    trainer->SetCheckpointFile(o.Checkpoint.c_str());
-    trainer->SetCheckpointInterval(200);
-  }
   if (!o.Resume.empty())
   {
     trainer->SetResumeFile(o.Resume.c_str());
@@ -492,61 +439,70 @@ Command AddTrainCommand(CLI::App& app)
   trainCommand->add_option("--frames", train.Frames,
     "Train on these frames only (indices, counting the sweeps' frames in turn); the others are held out")
     ->excludes("--holdout-every");
-  trainCommand->add_option("--time-budget", train.TimeBudget,
+  TrainerSettings& settings = train.Settings;
+  trainCommand->add_option("--time-budget", settings.TimeBudget,
     "Wall-clock budget for training, seconds (0: none); alone, it is the whole schedule (learning-rate decay, "
-    "densification window) and training runs until it");
-  auto* iterations = trainCommand->add_option("--iterations", train.Iterations,
-    "Optimisation steps (with --time-budget: whichever ends first)")->capture_default_str();
-  trainCommand->add_option("--max-gaussians", train.MaxGaussians, "Hard maximum of Gaussians (gap filling's copies included)")->capture_default_str();
-  trainCommand->add_option("--initial-gaussians", train.InitialGaussians,
-    "Seeds (0: one per 200 fan pixels of the training frames, 20,000 to half the maximum)")
+    "densification window) and training runs until it")
+    ->check(CLI::NonNegativeNumber);
+  auto* iterations = trainCommand->add_option("--iterations", settings.Iterations,
+    "Optimisation steps (with --time-budget: whichever ends first)")
     ->capture_default_str()
     ->check(CLI::NonNegativeNumber);
-  trainCommand->add_option("--growth-margin", train.GrowthMargin,
+  trainCommand->add_option("--max-gaussians", settings.MaximumGaussians, "Hard maximum of Gaussians (gap filling's copies included)")
+    ->capture_default_str()
+    ->check(CLI::PositiveNumber);
+  trainCommand->add_option("--initial-gaussians", settings.InitialGaussians,
+    "Seeds (0: chosen from the training frames' fan pixels; the InitialGaussians setting line says how)")
+    ->capture_default_str()
+    ->check(CLI::NonNegativeNumber);
+  trainCommand->add_option("--growth-margin", settings.GrowthMargin,
     "Growth stops when the validation loss improves by less than this (relative) on the best so far ...")
     ->capture_default_str()
     ->check(CLI::Range(0.0, 1.0));
-  trainCommand->add_option("--growth-patience", train.GrowthPatience,
+  trainCommand->add_option("--growth-patience", settings.GrowthPatience,
     "... over this many densification intervals in a row")
     ->capture_default_str()
     ->check(CLI::PositiveNumber);
-  trainCommand->add_option("--residual-seeds", train.ResidualSeedShare,
+  trainCommand->add_option("--residual-seeds", settings.ResidualSeedShare,
     "New Gaussians where the residual is largest at each densification, as a share of those split or cloned, "
     "their reflectivity the residual (Image-GS; 0: off)")
     ->capture_default_str()
     ->check(CLI::Range(0.0, 100.0));
-  trainCommand->add_flag("--reflectivity-solve", train.ReflectivitySolve,
+  trainCommand->add_flag("--reflectivity-solve", settings.ReflectivitySolve,
     "Variable projection: solve the reflectivities by least squares after seeding and after every densification, "
     "Adam between the solves (default: Adam alone)");
-  trainCommand->add_option("--solve-iterations", train.SolveIterations,
+  trainCommand->add_option("--solve-iterations", settings.Solve.MaximumIterations,
     "CGLS iterations of each reflectivity solve (each a forward and a backward pass over every training frame)")
     ->capture_default_str()
     ->check(CLI::PositiveNumber);
-  trainCommand->add_option("--solve-l1", train.SolveL1,
+  trainCommand->add_option("--solve-l1", settings.Solve.L1,
     "An L1 term in each reflectivity solve (the pixel-grid fit's, variable projection's), as a share of the weight "
     "that sets every reflectivity to 0 (FISTA; the Gaussians it zeroes are removed and the others refitted by "
     "least squares; default 0: none, CGLS)")
     ->capture_default_str()
     ->check(CLI::Range(0.0, 1.0));
-  trainCommand->add_flag("--dense-adam", train.DenseAdam,
+  trainCommand->add_flag("--dense-adam{false}", settings.SparseAdam,
     "Adam moves every Gaussian every step on its momentum (the ablation; default: only the Gaussians a step "
     "touched, the others keep their parameters and moments)");
-  trainCommand->add_flag("--dense-start", train.DenseStart,
+  trainCommand->add_flag("--dense-start", settings.DenseInitialisation,
     "Start from Gaussians on the training frames' pixel grid (--initial-gaussians of them, default half of "
     "--max-gaussians) instead of Harris seeds");
-  trainCommand->add_flag("--no-pixel-grid-fit", train.NoPixelGridFit,
+  trainCommand->add_flag("--no-pixel-grid-fit{false}", settings.PixelGridFit,
     "Train from Harris seeds even when the training frames hold at most twice --max-gaussians fan pixels (default: "
     "there, a pixel grid of at most --max-gaussians, its reflectivities solved, and no geometry steps)");
-  CLI::Option* refine = trainCommand->add_flag("--refine-poses", train.RefinePoses,
+  CLI::Option* refine = trainCommand->add_flag_callback("--refine-poses",
+    [&settings] { settings.Poses.RefinePoses = PoseRefinement::On; },
     "Refine the tracked pose of every sweep's training frames with the field (a rigid correction about its centre "
     "pixel, a prior towards the tracked pose; default: the sweeps whose neighbouring training frames' speckle "
     "correlates, the others trusted, as the RefinePoses setting line says)");
-  trainCommand->add_flag("--no-refine-poses", train.NoRefinePoses, "Trust every tracked pose (see --refine-poses)")
+  trainCommand
+    ->add_flag_callback("--no-refine-poses", [&settings] { settings.Poses.RefinePoses = PoseRefinement::Off; },
+      "Trust every tracked pose (see --refine-poses)")
     ->excludes(refine);
-  trainCommand->add_flag("--refine-time-offset", train.RefineTimeOffset,
+  trainCommand->add_flag("--refine-time-offset", settings.Poses.RefineTimeOffset,
     "Refine one time offset between tracker and video shared by every frame (needs the sweeps' timestamps; found "
     "from sweeps whose frames cross, not from one smooth sweep: docs/FINDINGS.md)");
-  trainCommand->add_flag("--refine-image-to-probe", train.RefineImageToProbe,
+  trainCommand->add_flag("--refine-image-to-probe", settings.Poses.RefineImageToProbe,
     "Refine one correction of ImageToProbe shared by every frame (printed, and in the field data)");
   trainCommand
     ->add_option("--refined-poses", train.RefinedPoses,
@@ -554,40 +510,42 @@ Command AddTrainCommand(CLI::App& app)
       "frames take the shared corrections and the smooth part of their sweep's); one per sweep, in their order (repeat "
       "the option)")
     ->allow_extra_args(false);
-  trainCommand->add_option("--pose-smoothness", train.PoseSmoothness,
+  trainCommand->add_option("--pose-smoothness", settings.Poses.Smoothness,
     "Where poses are refined: weight of the prior that keeps the corrections smooth along the sweep (0: none)")
     ->excludes("--no-refine-poses")
     ->check(CLI::NonNegativeNumber);
-  trainCommand->add_option("--pose-refinement-start", train.PoseRefinementStart,
+  trainCommand->add_option("--pose-refinement-start", settings.Poses.Start,
     "Where poses are refined: the share of the schedule (0 to 1) trained on the tracked poses before the corrections "
-    "move; -1: chosen from how much the tracked path jitters from frame to frame (0 over 0.35 mm, else 0.2)")
+    "move; -1: chosen from the tracked path's jitter (bigus::ChoosePoseRefinementStart; its setting line says why)")
     ->capture_default_str()
     ->excludes("--no-refine-poses")
     ->check(CLI::Range(-1.0, 1.0));
-  trainCommand->add_flag("--no-fill-gaps", train.NoFillGaps,
+  trainCommand->add_flag("--no-fill-gaps{false}", settings.FillGaps,
     "Leave gaps between training frames wider than the beam empty (default: bridged, as bigus fill-gaps does)");
   trainCommand
-    ->add_option("--merge-tolerance", train.MergeTolerance,
+    ->add_option("--merge-tolerance", settings.Merge.Tolerance,
       "Last, merge neighbouring Gaussians whose moment-matched merge has a relative integrated squared error "
       "below this (as bigus merge does); 0: off")
     ->capture_default_str()
     ->check(CLI::Range(0.0, 1.0));
-  trainCommand->add_option("--elevation-sigma", train.ElevationSigma, "Elevation beam sigma, mm (FWHM / 2.355); 0: chosen from the sweep (frame spacing, speckle decorrelation)")
-    ->capture_default_str();
+  trainCommand->add_option("--elevation-sigma", settings.ElevationSigma, "Elevation beam sigma, mm (FWHM / 2.355); 0: chosen from the sweep (bigus::ChooseElevationSigma; its setting line "
+    "says why)")
+    ->capture_default_str()
+    ->check(CLI::NonNegativeNumber);
   trainCommand->add_option("--backend", train.Backend, "Training backend: auto, cpu or cuda (as registered)")
     ->capture_default_str();
   trainCommand->add_option("--threads", train.Threads,
     "Threads (0: all cores; with --distributed, the cores divided among the ranks on each machine)");
-  trainCommand->add_option("--frames-per-step", train.FramesPerStep,
+  trainCommand->add_option("--frames-per-step", settings.FramesPerStep,
     "Training frames rendered per step (per rank with --distributed); their losses are averaged")
     ->capture_default_str()
     ->check(CLI::Range(1, 4096));
-  trainCommand->add_option("--coarse-fraction", train.CoarseFraction,
+  trainCommand->add_option("--coarse-fraction", settings.CoarseFraction,
     "The resolution schedule: the first fraction (0 to 1) of the schedule steps on every second pixel and row of "
     "its frames; 0: off")
     ->capture_default_str()
     ->check(CLI::Range(0.0, 1.0));
-  trainCommand->add_flag("--coarse-low-pass", train.CoarseLowPass,
+  trainCommand->add_flag("--coarse-low-pass", settings.CoarseLowPass,
     "The coarse steps' frames as 2 x 2 averages, each Gaussian rendered through the pixel's low-pass, instead of "
     "point samples")
     ->capture_default_str();
@@ -595,7 +553,7 @@ Command AddTrainCommand(CLI::App& app)
     "Under mpirun -n P: data-parallel training, each rank renders its share of every step's frames and the "
     "gradients are summed every step (MPI_Allreduce through vtkMPIController); rank 0 writes the field and "
     "checkpoints. Resume with the same P");
-  trainCommand->add_option("--seed", train.Seed, "Random seed")->capture_default_str();
+  trainCommand->add_option("--seed", settings.Seed, "Random seed")->capture_default_str();
   trainCommand->add_option("--checkpoint", train.Checkpoint, "Checkpoint file, written every 200 steps");
   trainCommand->add_option("--resume", train.Resume, "Continue from this checkpoint (same settings; the seconds trained before it count towards --time-budget)")
     ->check(CLI::ExistingFile);
@@ -603,9 +561,9 @@ Command AddTrainCommand(CLI::App& app)
     "Record the held-out PSNR every S seconds (field data HeldOutPSNR)");
   return { trainCommand, [options, iterations] {
     TrainOptions& train = *options;
-    if (iterations->count() == 0 && train.TimeBudget > 0)
+    if (iterations->count() == 0 && train.Settings.TimeBudget > 0)
     {
-      train.Iterations = 0; // the budget alone is the schedule
+      train.Settings.Iterations = 0; // the budget alone is the schedule
     }
     return RunTrain(train);
   } };

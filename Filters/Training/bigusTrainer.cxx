@@ -46,20 +46,6 @@ std::string Format(const char* format, Args... args)
   return text;
 }
 
-/// One Adam step (t counts from 1) of @p count parameters @p x (a pose correction: rotation vector, rad;
-/// translation, mm; then, for the shared one, the time offset, s) on their gradient @p g, with a rate per
-/// parameter @p rate and their moments.
-void AdamPoseStep(int count, const double* g, const double* rate, int t, double* x, double* first, double* second)
-{
-  const double c1 = 1 - std::pow(AdamBeta1, t), c2 = 1 - std::pow(AdamBeta2, t);
-  for (int k = 0; k < count; ++k)
-  {
-    first[k] = AdamBeta1 * first[k] + (1 - AdamBeta1) * g[k];
-    second[k] = AdamBeta2 * second[k] + (1 - AdamBeta2) * g[k] * g[k];
-    x[k] -= rate[k] * (first[k] / c1) / (std::sqrt(second[k] / c2) + AdamEpsilon);
-  }
-}
-
 /// Uniform double in [0, 1) from the generator's raw output (identical on every platform).
 double Uniform(std::mt19937_64& rng)
 {
@@ -165,79 +151,8 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
       ? Format(", CoarseFraction = %.3g (a quarter of the pixels per step until then, %s)", s.CoarseFraction,
           s.CoarseLowPass ? "2 x 2 averages through the pixel's low-pass" : "point samples").c_str()
       : ""));
-  // Pose refinement: Auto is resolved here, sweep by sweep, from the speckle of neighbouring training frames.
-  const int sweeps = this->Data->SweepCount();
-  std::string refinedBy = "given";
-  this->RefinedSweeps.assign(sweeps, this->Settings.RefinePoses == PoseRefinement::On ? 1 : 0);
-  if (this->Settings.RefinePoses == PoseRefinement::Auto)
-  {
-    const PoseRefinementChoice choice = ChoosePoseRefinement(measuredSweeps());
-    this->RefinedSweeps = choice.Sweeps;
-    this->Settings.RefinePoses = choice.Any() ? PoseRefinement::On : PoseRefinement::Off;
-    refinedBy = "chosen: " + choice.Reason;
-    if (!choice.Any())
-    {
-      this->Report.Settings.push_back("RefinePoses = off (" + refinedBy + ")");
-    }
-  }
-  // The start of the corrections, where not given: from the jitter of the corrected sweeps' tracked paths (every
-  // sweep where only the shared corrections are refined).
-  std::string startBy;
-  if (s.PoseRefinementStart < 0)
-  {
-    const PoseRefinementStartChoice start = ChoosePoseRefinementStart(
-      *this->Data, s.RefinePoses == PoseRefinement::On ? this->RefinedSweeps : std::vector<char>());
-    this->Settings.PoseRefinementStart = start.Start;
-    startBy = start.Reason;
-  }
-  if (s.RefinePoses == PoseRefinement::On)
-  {
-    this->Report.Settings.push_back(Format("RefinePoses = on (from %.0f %% of the schedule, %sAdam %.3g rad and "
-                                           "%.3g mm per step; prior %.3g at %.3g degrees and %.3g mm, "
-                                           "smoothness %.3g; ",
-      100 * s.PoseRefinementStart, startBy.empty() ? "" : (startBy + "; ").c_str(), s.PoseRotationLearningRate,
-      s.PoseTranslationLearningRate, s.PosePrior, s.PoseRotationSigma * 180 / M_PI, s.PoseTranslationSigma,
-      s.PoseSmoothness) + refinedBy + ")");
-    const std::size_t n = this->Data->Poses.size();
-    this->State.PoseCorrections.assign(n, {});
-    this->State.PoseFirstMoment.assign(n, {});
-    this->State.PoseSecondMoment.assign(n, {});
-    this->State.PoseSteps.assign(n, 0);
-  }
-  else if (s.RefinesPoses())
-  {
-    this->Report.Settings.push_back(
-      Format("PoseRefinementStart = %.0f %% of the schedule (%s)", 100 * s.PoseRefinementStart,
-        startBy.empty() ? "given" : startBy.c_str()));
-  }
-  // A change common to the frames of one smooth sweep is a warp of the scene the field takes up
-  // (docs/FINDINGS.md, "Shared pose corrections"): said where it is switched on.
-  const bool oneSweep = std::none_of(
-    this->Data->Sweeps.begin(), this->Data->Sweeps.end(), [](int sweep) { return sweep != 0; });
-  const std::string caveat = oneSweep ? "; one sweep: not determined, sweeps whose frames cross are" : "";
-  if (s.RefineTimeOffset)
-  {
-    this->Report.Settings.push_back(Format("RefineTimeOffset = on (Adam %.3g s per step, prior %.3g at %.3g s",
-      s.TimeOffsetLearningRate, s.PosePrior, s.TimeOffsetSigma) + caveat + ")");
-  }
-  if (s.RefineImageToProbe)
-  {
-    this->Report.Settings.push_back(Format("RefineImageToProbe = on (Adam %.3g rad and %.3g mm per step, prior %.3g "
-                                           "at %.3g degrees and %.3g mm",
-      s.PoseRotationLearningRate, s.PoseTranslationLearningRate, s.PosePrior, s.PoseRotationSigma * 180 / M_PI,
-      s.PoseTranslationSigma) + caveat + ")");
-  }
-  if (s.RefinesPoses())
-  {
-    this->TrackedPoses = this->Data->Poses;
-    for (const std::array<double, 16>& pose : this->TrackedPoses)
-    {
-      SliceFrame frame;
-      const int f = static_cast<int>(this->TrackedValid.size());
-      this->TrackedValid.push_back(
-        this->Data->IsValid(f) && ComputeSliceFrame(pose.data(), 90, frame) == PoseStatus::Ok);
-    }
-  }
+  this->Poses.Configure(this->Data.get(), s.Poses, measuredSweeps, this->State, this->Report.Settings);
+  this->Settings.Poses = this->Poses.GetSettings();
   this->Engine->SetData(this->Data.get(), nullptr);
 }
 
@@ -332,12 +247,8 @@ bool Trainer::PrepareInitialField(std::string* error)
       return false;
     }
   }
-  if (this->Settings.RefineTimeOffset && !this->Timeline.Build(data, this->Settings.TimeOffsetWindow, error))
+  if (!this->Poses.Prepare(error))
   {
-    if (error)
-    {
-      *error = "RefineTimeOffset: " + *error;
-    }
     return false;
   }
   double sum = 0;
@@ -423,24 +334,10 @@ bool Trainer::PrepareInitialField(std::string* error)
       (this->Settings.Solve.L1 > 0 ? Format(" with an L1 term of %.3g (FISTA)", this->Settings.Solve.L1)
                                    : std::string()) +
       ", no geometry steps)");
-    if (this->Settings.RefinePoses == PoseRefinement::On)
-    {
-      // No step, so no pose correction: the tracked poses stay, and the field says so (no RefinedPoses).
-      this->Settings.RefinePoses = PoseRefinement::Off;
-      std::fill(this->RefinedSweeps.begin(), this->RefinedSweeps.end(), 0);
-      TrainingState& state = this->State;
-      state.PoseCorrections.clear();
-      state.PoseFirstMoment.clear();
-      state.PoseSecondMoment.clear();
-      state.PoseSteps.clear();
-      for (std::string& line : this->Report.Settings)
-      {
-        if (line.rfind("RefinePoses = ", 0) == 0)
-        {
-          line = "RefinePoses = off (the pixel-grid fit takes no step to refine the poses with)";
-        }
-      }
-    }
+    // No step, so no pose correction: the tracked poses stay, and the field says so (no RefinedPoses).
+    this->Poses.TurnOffCorrections(
+      this->State, this->Report.Settings, "the pixel-grid fit takes no step to refine the poses with");
+    this->Settings.Poses = this->Poses.GetSettings();
     return true;
   }
   if (this->Settings.DenseInitialisation)
@@ -701,7 +598,7 @@ StepStatus Trainer::Step(double* loss, std::string* error)
     request.Data = &decimated;
     request.Frames = decimated.TrainFrames.data();
   }
-  const bool refine = this->Settings.RefinesPoses() && fraction >= this->Settings.PoseRefinementStart;
+  const bool refine = this->Poses.RefinesAt(fraction);
   std::vector<double> poseGradients(refine ? 6 * frames.size() : 0);
   request.PoseGradients = refine ? poseGradients.data() : nullptr;
   this->HostCurrent = false;
@@ -731,137 +628,10 @@ StepStatus Trainer::Step(double* loss, std::string* error)
       DecimatedPoseGradientToSource(
         *this->Data, frames[k], phase & 1, phase >> 1, &poseGradients[6 * k], this->Settings.CoarseLowPass);
     }
-    this->UpdatePoses(frames, poseGradients);
+    this->Poses.Step(frames, poseGradients, state.LearningRateScale, state);
   }
   state.LossHistory.push_back(*loss);
   return status;
-}
-
-void Trainer::UpdatePoses(const std::vector<int>& frames, const std::vector<double>& gradients)
-{
-  const TrainerSettings& s = this->Settings;
-  // Constant rates: decaying them as the means' rate decays measured no better on TestTrainer's case.
-  const double scale = this->State.LearningRateScale;
-  const double rotation = s.PoseRotationLearningRate * scale, translation = s.PoseTranslationLearningRate * scale;
-  const double rate[7] = { rotation, rotation, rotation, translation, translation, translation,
-    s.TimeOffsetLearningRate * scale };
-  const double sigma[7] = { s.PoseRotationSigma, s.PoseRotationSigma, s.PoseRotationSigma, s.PoseTranslationSigma,
-    s.PoseTranslationSigma, s.PoseTranslationSigma, s.TimeOffsetSigma };
-  const bool shared = s.RefineTimeOffset || s.RefineImageToProbe;
-  if (shared)
-  {
-    // The shared corrections move every frame: their gradient is the sum over the batch of the frames' pose
-    // gradients (ImageToProbe, composed last) and of their dot products with the tracked path's velocity (the
-    // time offset).
-    std::array<double, 7>& x = this->State.SharedPoseCorrection;
-    double g[7] = { 0, 0, 0, 0, 0, 0, 0 };
-    for (std::size_t b = 0; b < frames.size(); ++b)
-    {
-      const double* gb = &gradients[6 * b];
-      if (!std::all_of(gb, gb + 6, [](double v) { return std::isfinite(v); }))
-      {
-        continue;
-      }
-      for (int k = 0; k < 6; ++k)
-      {
-        g[k] += gb[k];
-        g[6] += s.RefineTimeOffset ? gb[k] * this->Timeline.Velocity(frames[b])[k] : 0.0;
-      }
-    }
-    for (int k = 0; k < 7; ++k)
-    {
-      const bool refined = k < 6 ? s.RefineImageToProbe : s.RefineTimeOffset;
-      g[k] = refined ? g[k] + s.PosePrior * x[k] / (sigma[k] * sigma[k]) : 0.0;
-    }
-    AdamPoseStep(7, g, rate, ++this->State.SharedPoseSteps, x.data(), this->State.SharedPoseFirstMoment.data(),
-      this->State.SharedPoseSecondMoment.data());
-  }
-  for (std::size_t b = 0; b < frames.size() && s.RefinePoses == PoseRefinement::On; ++b)
-  {
-    const int f = frames[b];
-    if (!this->IsSweepRefined(this->Data->SweepOf(f)))
-    {
-      continue;
-    }
-    std::array<double, 6>& xi = this->State.PoseCorrections[f];
-    // The neighbours along the sweep: the training frames before and after this one in its sweep
-    // (TrainFrames in order; none where they are not).
-    const std::vector<int>& train = this->Data->TrainFrames;
-    const auto at = std::lower_bound(train.begin(), train.end(), f);
-    const bool found = at != train.end() && *at == f;
-    const int sweep = this->Data->SweepOf(f);
-    const auto& corrections = this->State.PoseCorrections;
-    const std::array<double, 6>* before =
-      found && at != train.begin() && this->Data->SweepOf(*(at - 1)) == sweep ? &corrections[*(at - 1)] : nullptr;
-    const std::array<double, 6>* after =
-      found && at + 1 != train.end() && this->Data->SweepOf(*(at + 1)) == sweep ? &corrections[*(at + 1)] : nullptr;
-    double g[6];
-    bool finite = true;
-    for (int k = 0; k < 6; ++k)
-    {
-      double smooth = 0;
-      for (const std::array<double, 6>* n : { before, after })
-      {
-        smooth += n ? xi[k] - (*n)[k] : 0.0;
-      }
-      g[k] = gradients[6 * b + k] + (s.PosePrior * xi[k] + s.PoseSmoothness * smooth) / (sigma[k] * sigma[k]);
-      finite = finite && std::isfinite(g[k]);
-    }
-    if (!finite)
-    {
-      continue; // a non-finite pose gradient moves none of the frame's correction
-    }
-    AdamPoseStep(6, g, rate, ++this->State.PoseSteps[f], xi.data(), this->State.PoseFirstMoment[f].data(),
-      this->State.PoseSecondMoment[f].data());
-  }
-  if (shared)
-  {
-    this->ComposePoses();
-  }
-  else
-  {
-    for (int f : frames)
-    {
-      this->ComposePose(f);
-    }
-  }
-}
-
-void Trainer::ComposePoses()
-{
-  for (int f = 0; f < this->Data->Count() && this->Settings.RefinesPoses(); ++f)
-  {
-    this->ComposePose(f);
-  }
-}
-
-void Trainer::ComposePose(int frame)
-{
-  const TrainerSettings& s = this->Settings;
-  if (!this->TrackedValid[frame])
-  {
-    return; // a pose the renderer rejects (an invalid frame) stays as it was recorded
-  }
-  const std::array<double, 7>& shared = this->State.SharedPoseCorrection;
-  std::array<double, 16> pose = this->TrackedPoses[frame];
-  if (s.RefineTimeOffset)
-  {
-    this->Timeline.PoseAt(frame, shared[6], pose.data());
-  }
-  if (s.RefinePoses == PoseRefinement::On)
-  {
-    // The frame's own correction: stepped (a training frame) or set (a held-out one, CorrectUntrainedFrames).
-    const std::array<double, 6>& xi = this->State.PoseCorrections[frame];
-    if (this->State.PoseSteps[frame] > 0 || std::any_of(xi.begin(), xi.end(), [](double v) { return v != 0; }))
-    {
-      CorrectPose(pose.data(), this->Data->Width, this->Data->Height, xi.data(), pose.data());
-    }
-  }
-  if (s.RefineImageToProbe)
-  {
-    CorrectPose(pose.data(), this->Data->Width, this->Data->Height, shared.data(), pose.data());
-  }
-  this->Data->Poses[frame] = pose;
 }
 
 bool Trainer::ValidationLoss(double& loss, std::string* error)
@@ -916,8 +686,7 @@ bool Trainer::CheckValidation(double& loss, std::string* error)
     state.BestFieldLoss = loss;
     state.BestFieldIteration = state.Iteration;
     state.BestField = this->GetField();
-    state.BestPoseCorrections = state.PoseCorrections;
-    state.BestSharedPoseCorrection = state.SharedPoseCorrection;
+    PoseRefiner::KeepBest(state);
   }
   return true;
 }
@@ -1009,10 +778,9 @@ bool Trainer::RenderResiduals(int count, std::vector<int>& frames, std::vector<f
 
 void Trainer::PlaceUntrainedFrames()
 {
-  if (this->Settings.RefinePoses == PoseRefinement::On)
+  if (this->Settings.Poses.RefinePoses == PoseRefinement::On)
   {
-    this->Report.UntrainedCorrections = CorrectUntrainedFrames(*this->Data, this->State.PoseCorrections);
-    this->ComposePoses();
+    this->Report.UntrainedCorrections = this->Poses.PlaceUntrainedFrames(this->State);
   }
 }
 
@@ -1238,31 +1006,15 @@ bool Trainer::Finish(std::string* error)
     this->State.Gaussians = OptimizerState();
     this->State.Gaussians.Field = this->State.BestField;
     this->State.Gaussians.ResizeToField();
-    // ... at the poses it was measured at.
-    if (this->State.BestPoseCorrections.size() == this->State.PoseCorrections.size())
-    {
-      this->State.PoseCorrections = this->State.BestPoseCorrections;
-    }
-    this->State.SharedPoseCorrection = this->State.BestSharedPoseCorrection;
-    this->ComposePoses();
+    this->Poses.RestoreBest(this->State); // ... at the poses it was measured at
     if (!this->PushState(error))
     {
       return false;
     }
   }
-  this->Report.PoseCorrections.clear();
-  if (s.RefinePoses == PoseRefinement::On)
-  {
-    // The frames not trained (held out) take the smooth part of their neighbours' corrections, if any.
-    this->PlaceUntrainedFrames();
-    for (int f : this->Data->TrainFrames)
-    {
-      if (this->IsSweepRefined(this->Data->SweepOf(f)))
-      {
-        this->Report.PoseCorrections.push_back({ f, this->State.PoseCorrections[f] });
-      }
-    }
-  }
+  // The frames not trained (held out) take the smooth part of their neighbours' corrections, if any.
+  this->PlaceUntrainedFrames();
+  this->Report.PoseCorrections = this->Poses.Corrections(this->State);
   const std::array<double, 7>& shared = this->State.SharedPoseCorrection;
   this->Report.TimeOffset = shared[6];
   std::copy_n(shared.begin(), 6, this->Report.ImageToProbeCorrection.begin());
@@ -1342,107 +1094,15 @@ bool Trainer::ReadCheckpoint(const std::string& file, std::string* error)
   {
     return false;
   }
-  if (this->Settings.RefineTimeOffset && !this->Timeline.IsBuilt(this->Data->Count()))
+  if (!this->Poses.CheckCheckpoint(loaded, file, error))
   {
-    if (error)
-    {
-      *error = file + ": a run that refines the time offset loads a checkpoint after Initialize";
-    }
-    return false;
-  }
-  // The pose corrections go on from where the checkpoint left them (the same settings, the same sweep).
-  const bool refined = this->Settings.RefinePoses == PoseRefinement::On;
-  const std::size_t frames = refined ? this->Data->Poses.size() : 0;
-  if (loaded.PoseCorrections.size() != frames)
-  {
-    if (error)
-    {
-      *error = file + ": the checkpoint holds pose corrections of " + std::to_string(loaded.PoseCorrections.size()) +
-        " frames and this run " +
-        (refined ? "refines the poses of " : "refines the poses of none of ") +
-        std::to_string(this->Data->Poses.size()) +
-        " (resume with the settings and sweep the checkpoint was written with)";
-    }
-    return false;
-  }
-  const std::array<double, 7>& shared = loaded.SharedPoseCorrection;
-  const bool imageToProbe = std::any_of(shared.begin(), shared.begin() + 6, [](double v) { return v != 0; });
-  if ((imageToProbe && !this->Settings.RefineImageToProbe) || (shared[6] != 0 && !this->Settings.RefineTimeOffset))
-  {
-    if (error)
-    {
-      *error = file + ": the checkpoint holds " + (imageToProbe ? "an ImageToProbe correction" : "a time offset") +
-        " that this run does not refine (resume with the settings the checkpoint was written with)";
-    }
     return false;
   }
   this->State = std::move(loaded);
-  this->ComposePoses(); // frames never corrected (held out, or before the corrections moved) stay as tracked
+  this->Poses.ComposePoses(this->State); // frames never corrected (held out, or before the corrections moved) stay as tracked
   this->Gamma = gamma;
   this->PixelGrid = false; // a checkpoint comes from a run that takes steps: it goes on with them
   return this->PushState(error);
-}
-
-bool RefinePosesWithFieldFrozen(const GaussianField& field, TrainingData& data, const std::vector<int>& frames,
-  const RenderOptions& options, const TrainerSettings& settings, int steps, const std::string& backend,
-  std::vector<std::array<double, 6>>& corrections, std::string* error)
-{
-  std::unique_ptr<TrainingEngine> engine = CreateTrainingEngine(backend, error);
-  OptimizerState frozen;
-  frozen.Field = field;
-  frozen.ResizeToField();
-  if (!engine || !engine->SetData(&data, error) || !engine->Push(frozen, error))
-  {
-    return false;
-  }
-  // Every learning rate of the field 0: the engine's step gives the pose gradients and moves nothing.
-  StepRequest request;
-  request.Count = 1;
-  request.Options = options;
-  request.Loss = settings.Loss;
-  request.MinimumLogScale = -1e30;
-  request.MaximumLogScale = 1e30;
-  double gradient[6];
-  request.PoseGradients = gradient;
-  const double rotation = settings.PoseRotationLearningRate, translation = settings.PoseTranslationLearningRate;
-  const double rate[6] = { rotation, rotation, rotation, translation, translation, translation };
-  const double sigma[2] = { settings.PoseRotationSigma, settings.PoseTranslationSigma };
-  corrections.assign(frames.size(), {});
-  std::vector<std::array<double, 6>> first(frames.size()), second(frames.size());
-  std::vector<std::array<double, 16>> tracked;
-  for (int f : frames)
-  {
-    tracked.push_back(data.Poses.at(f));
-  }
-  for (int t = 1; t <= steps; ++t)
-  {
-    for (std::size_t b = 0; b < frames.size(); ++b)
-    {
-      request.Frames = &frames[b];
-      request.Iteration = t - 1;
-      double loss = 0;
-      const StepStatus status = engine->Step(request, &loss, error);
-      if (status == StepStatus::Failed)
-      {
-        return false;
-      }
-      double g[6];
-      bool finite = status == StepStatus::Done;
-      for (int k = 0; k < 6 && finite; ++k)
-      {
-        g[k] = gradient[k] + settings.PosePrior * corrections[b][k] / (sigma[k / 3] * sigma[k / 3]);
-        finite = std::isfinite(g[k]);
-      }
-      if (!finite)
-      {
-        engine->Restore();
-        continue; // this frame's correction stays where it is for this step
-      }
-      AdamPoseStep(6, g, rate, t, corrections[b].data(), first[b].data(), second[b].data());
-      CorrectPose(tracked[b].data(), data.Width, data.Height, corrections[b].data(), data.Poses[frames[b]].data());
-    }
-  }
-  return true;
 }
 
 } // namespace bigus

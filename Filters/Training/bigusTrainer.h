@@ -19,7 +19,7 @@
 #include "bigusGapFilling.h"
 #include "bigusGaussianMerging.h"
 #include "bigusImageLoss.h"
-#include "bigusPoseTimeline.h"
+#include "bigusPoseRefinement.h"
 #include "bigusImageMetrics.h"
 #include "bigusReflectivitySolve.h"
 #include "bigusSeeding.h"
@@ -37,14 +37,6 @@
 
 namespace bigus
 {
-
-/// Whether a trainer refines the tracked poses of the training frames (TrainerSettings::RefinePoses).
-enum class PoseRefinement : int
-{
-  Off = 0, ///< the tracked poses are trusted
-  On = 1,  ///< every sweep's training frames are refined
-  Auto = 2 ///< the sweeps whose neighbouring frames' speckle correlates (bigus::ChoosePoseRefinement)
-};
 
 struct TrainerSettings
 {
@@ -170,55 +162,8 @@ struct TrainerSettings
   /// Gaussians and the liver main job's from 325,190 to 281,737, with held-out PSNR within 0.02 dB
   /// (docs/FINDINGS.md, "Merging").
   GaussianMergeSettings Merge{ 1e-3 };
-  // Pose refinement (issue 33)
-  /// A rigid correction per training frame (rotation vector about the frame's centre pixel and translation,
-  /// in its own axes: bigus::CorrectPose), optimised with the field by Adam on the gradient of the loss with
-  /// respect to the frame's pose (FieldGradients::SlicePoses, taken at the corrected pose), with the prior
-  /// PosePrior / 2 (|omega|^2 / PoseRotationSigma^2 + |t|^2 / PoseTranslationSigma^2) per frame. Held-out
-  /// frames take the smooth part of their sweep's corrections at the end (CorrectUntrainedFrames).
-  /// Off: the tracked poses are trusted. On: every sweep's training frames are refined. Auto (the default): the
-  /// training frames of the sweeps whose neighbouring frames' speckle correlates (bigus::ChoosePoseRefinement,
-  /// bigusElevationSigma.h), resolved when the trainer is made (GetSettings() then says On or Off, and
-  /// Trainer::IsSweepRefined which sweeps).
-  PoseRefinement RefinePoses = PoseRefinement::Auto;
-  /// Share of the schedule (0 to 1) trained on the tracked poses before the corrections move. Negative (default):
-  /// chosen when the trainer is made (GetSettings() then says which) from how much the tracked paths of the sweeps
-  /// whose poses are corrected jitter from frame to frame (bigus::ChoosePoseRefinementStart, bigusPoseTimeline.h):
-  /// 0 over 0.35 mm (the issue's synthetic case, 0.5 degrees and 0.5 mm per frame at random, needs it to halve its
-  /// pose error), else 0.2 (from the first step the liver's held-out PSNR fell 0.41 and 0.42 dB at 120 s, 2 seeds;
-  /// the N-wire phantom's rose 0.11 and 0.10 at 60 s; docs/FINDINGS.md, "When pose refinement starts").
-  double PoseRefinementStart = -1;
-  /// Adam's rates, rad and mm per step: on TestTrainer's synthetic sweep (0.5 degree and 0.5 mm errors)
-  /// 2e-4 and 0.004 took the corner error from 0.505 to 0.401 mm, these 0.192, twice these 0.165.
-  double PoseRotationLearningRate = 1e-3;
-  double PoseTranslationLearningRate = 0.02;
-  double PoseRotationSigma = 0.0175;     ///< rad (1 degree): the prior's scale, a tracker's typical error
-  double PoseTranslationSigma = 1.0;     ///< mm
-  double PosePrior = 1e-3;               ///< weight of the prior against the image loss (0: none)
-  /// Weight of the smoothness prior PoseSmoothness / 2 sum |xi_f - xi_g|^2 (each component over its sigma
-  /// squared) over consecutive training frames f, g of the sweep: a tracker's error drifts along a sweep,
-  /// while a correction that jumps from frame to frame fits the image, not the pose (0: none).
-  double PoseSmoothness = 0;
-  /// One time offset between tracker and video shared by every frame: frame f's pose is its tracked pose moved
-  /// along the tracked path's velocity v_f for the offset (bigus::PoseTimeline; needs TrainingData::Timestamps),
-  /// then its own correction (RefinePoses) and the ImageToProbe correction (RefineImageToProbe). Adam on
-  /// sum_f g_f . v_f over the step's frames, g_f the frame's pose gradient, with the prior
-  /// PosePrior / 2 (offset / TimeOffsetSigma)^2. Held-out frames take it too: it belongs to the system, not to
-  /// a frame. From PoseRefinementStart. Off: the tracked poses are the poses at the frames' timestamps.
-  bool RefineTimeOffset = false;
-  double TimeOffsetLearningRate = 5e-4; ///< s per step (Adam's rate)
-  double TimeOffsetSigma = 0.1;         ///< s: the prior's scale
-  double TimeOffsetWindow = 0.25;       ///< s: the window of the path's velocity (PoseTimeline::Build)
-  /// One rigid correction of ImageToProbe shared by every frame: the same correction (rotation vector about the
-  /// centre pixel, translation; CorrectPose) of every frame in its own axes, composed last (ImageToReference =
-  /// ProbeToReference ImageToProbe C), so its gradient is the sum of the frames' pose gradients. The pose rates,
-  /// sigmas and prior of the per-frame corrections. Held-out frames take it too. From PoseRefinementStart.
-  bool RefineImageToProbe = false;
-  /// Whether any of the pose corrections is refined (RefinePoses, RefineTimeOffset, RefineImageToProbe).
-  bool RefinesPoses() const
-  {
-    return this->RefinePoses != PoseRefinement::Off || this->RefineTimeOffset || this->RefineImageToProbe;
-  }
+  // Pose refinement (bigusPoseRefinement.h)
+  PoseRefinementSettings Poses;
   // Run
   unsigned Seed = 1;
   int CheckpointInterval = 0;        ///< steps between checkpoints (0 = none)
@@ -286,11 +231,7 @@ struct TrainerReport
   std::vector<ValidationRecord> ValidationHistory;
   /// Pose refinement (RefinePoses): each training frame's correction, rotation vector (rad) then
   /// translation (mm) in its own axes about its centre pixel (bigus::CorrectPose); empty when off.
-  struct PoseCorrection
-  {
-    int Frame = 0;
-    std::array<double, 6> Xi{};
-  };
+  using PoseCorrection = FramePoseCorrection;
   std::vector<PoseCorrection> PoseCorrections;
   /// RefinePoses: how the frames not trained (held out) were placed among the refined ones
   /// (bigus::CorrectUntrainedFrames).
@@ -410,14 +351,9 @@ public:
   /// The settings the run uses: those given, with what the trainer chose (ElevationSigma 0 replaced by the chosen
   /// sigma, RefinePoses Auto by On or Off).
   const TrainerSettings& GetSettings() const { return this->Settings; }
-  /// The frames' poses as the trainer was given them (filled where RefinesPoses() when it was made; GetData()
-  /// holds them as refined).
-  const std::vector<std::array<double, 16>>& GetTrackedPoses() const { return this->TrackedPoses; }
-  /// Whether the training frames of sweep @p sweep (TrainingData::Sweeps) have their poses refined.
-  bool IsSweepRefined(int sweep) const
-  {
-    return sweep >= 0 && sweep < static_cast<int>(this->RefinedSweeps.size()) && this->RefinedSweeps[sweep] != 0;
-  }
+  /// The pose-refinement stage: the tracked poses (GetTrackedPoses; GetData() holds them as refined) and which
+  /// sweeps are refined (IsSweepRefined).
+  const PoseRefiner& GetPoseRefiner() const { return this->Poses; }
   int GetIteration() const { return this->State.Iteration; }
   const TrainingData& GetData() const { return *this->Data; }
   const TrainingEngine& GetEngine() const { return *this->Engine; }
@@ -479,41 +415,12 @@ private:
   double TrainedBefore = 0;        // the run's training seconds before that call
   bool DensificationEnded = false; // the last Train call ended past the densification window
   bool PixelGrid = false;          // the field is the pixel-grid fit (PixelGridFit): Train takes no step
-  // Pose refinement (RefinesPoses): the tracked poses and their path in time (the corrections are in State).
-  std::vector<std::array<double, 16>> TrackedPoses;
-  std::vector<bool> TrackedValid; // the renderer accepts the tracked pose (others are never corrected)
-  PoseTimeline Timeline;          // RefineTimeOffset
-  std::vector<char> RefinedSweeps; // RefinePoses: 1 for each sweep whose training frames are refined
-  /// Adam on the corrections of @p frames from their gradients @p gradients ([frames, 6]) and the prior, and on
-  /// the shared corrections from their sum; the poses of the frames that moved are composed again.
-  void UpdatePoses(const std::vector<int>& frames, const std::vector<double>& gradients);
-  /// Frame @p frame's pose in the data: its tracked pose at its timestamp plus the time offset, then its own
-  /// correction, then the ImageToProbe correction (each when refined).
-  void ComposePose(int frame);
-  /// ComposePose of every frame (after a shared correction moved, or the state was replaced).
-  void ComposePoses();
+  PoseRefiner Poses;
   std::vector<float> S; // scratch for RenderFrame
 };
 
 /// Mean in-plane pixel spacing (mm) of a pose.
 double PixelSpacingOf(const std::array<double, 16>& pose);
-
-/**
- * The fair score of frames that were not trained on, when poses are imperfect: each of @p frames (indices into
- * @p data) has its pose refined with @p field frozen, as view-synthesis papers score held-out views under
- * pose error (Lin et al. 2021, BARF, section 4; Wang et al. 2021, NeRF--): @p steps Adam steps per frame
- * (TrainerSettings' pose learning rates) on the gradient of the image loss (TrainerSettings::Loss) with
- * respect to a rigid correction of the frame's pose about its centre pixel (FieldGradients::SlicePoses,
- * bigus::CorrectPose), plus the training prior PosePrior / 2 (|omega|^2 / PoseRotationSigma^2 +
- * |t|^2 / PoseTranslationSigma^2). No smoothness term: the frames are scored one by one. The field never
- * moves (every learning rate of its parameters is 0). @p data's Poses of @p frames become the refined poses;
- * @p corrections ([frames.size()]: rotation vector, rad; translation, mm, in the frame's own axes) what was
- * applied. Rendering with @p options on the training engine of @p backend. Returns false with @p error when
- * the engine cannot be made or a pose is rejected.
- */
-BIGUSTRAINING_EXPORT bool RefinePosesWithFieldFrozen(const GaussianField& field, TrainingData& data,
-  const std::vector<int>& frames, const RenderOptions& options, const TrainerSettings& settings, int steps,
-  const std::string& backend, std::vector<std::array<double, 6>>& corrections, std::string* error);
 
 } // namespace bigus
 

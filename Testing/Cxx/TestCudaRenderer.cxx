@@ -485,8 +485,8 @@ TEST(CudaRenderer, AWholeTrainingStepThroughTheCudaEngine)
   settings.InitialGaussians = 3000;
   settings.Iterations = 1;
   settings.ElevationSigma = 0.3;
-  settings.RefinePoses = bigus::PoseRefinement::On;
-  settings.PoseRefinementStart = 0;
+  settings.Poses.RefinePoses = bigus::PoseRefinement::On;
+  settings.Poses.Start = 0;
   std::string error;
   std::unique_ptr<TrainingEngine> engines[2] = { CreateTrainingEngine("cuda", &error), CreateTrainingEngine("cpu", &error) };
   ASSERT_TRUE(engines[0] && engines[1]) << error;
@@ -834,8 +834,8 @@ TEST(CudaTrainingEngine, TheSolveOperatorsMatchTheCpuEngineAndAreAdjoint)
 
 TEST(CudaTrainingEngine, DataParallelStepsOnTwoProcessesAreTheStepsOfOne)
 {
-  // Two processes on this GPU (threads with a ThreadReduction, as the ranks of mpirun): SetReduction switches the
-  // CUDA engine to the CPU engine's step over the CUDA renderer, which sums the halves of each step's frames
+  // Two processes on this GPU (threads with a ThreadReduction, as the ranks of mpirun): CreateTrainingEngine with
+  // dataParallel gives the CPU engine's step over the CUDA renderer, which sums the halves of each step's frames
   // through the host. Three steps with pose gradients give both processes the same state, and that state is the
   // device-resident engine's steps on all the frames in one process, to float rounding; A^T y summed over the
   // processes' frames is one process's A^T y on all of them.
@@ -855,7 +855,7 @@ TEST(CudaTrainingEngine, DataParallelStepsOnTwoProcessesAreTheStepsOfOne)
   OptimizerState after[3];
   auto train = [&](ProcessReduction* reduction, int e) {
     std::string error;
-    std::unique_ptr<TrainingEngine> engine = CreateTrainingEngine("cuda", &error);
+    std::unique_ptr<TrainingEngine> engine = CreateTrainingEngine("cuda", &error, nullptr, reduction != nullptr);
     ASSERT_TRUE(engine) << error;
     ASSERT_TRUE(engine->SetData(&c.Data, &error) && engine->SetReduction(reduction, &error) &&
       engine->Push(c.State, &error))

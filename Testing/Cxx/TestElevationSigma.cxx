@@ -58,7 +58,7 @@ double HeldOutPsnr(const TrainingData& data, const std::vector<int>& heldOut, do
 {
   TrainerSettings s;
   s.ElevationSigma = sigma;
-  s.RefinePoses = PoseRefinement::Off; // exact poses: the sigma alone is compared
+  s.Poses.RefinePoses = PoseRefinement::Off; // exact poses: the sigma alone is compared
   s.InitialGaussians = 4000;
   s.Iterations = 1500;
   Trainer trainer(data, s);
@@ -238,11 +238,11 @@ TEST(PoseRefinementChoice, TheTrainerRefinesTheSweepsTheRuleChooses)
   s.PixelGridFit = false;
   s.InitialGaussians = 2000;
   s.Iterations = 100;
-  ASSERT_EQ(s.RefinePoses, PoseRefinement::Auto);
+  ASSERT_EQ(s.Poses.RefinePoses, PoseRefinement::Auto);
   Trainer trainer(data, s);
-  EXPECT_EQ(trainer.GetSettings().RefinePoses, PoseRefinement::On);
-  EXPECT_TRUE(trainer.IsSweepRefined(0));
-  EXPECT_FALSE(trainer.IsSweepRefined(1));
+  EXPECT_EQ(trainer.GetSettings().Poses.RefinePoses, PoseRefinement::On);
+  EXPECT_TRUE(trainer.GetPoseRefiner().IsSweepRefined(0));
+  EXPECT_FALSE(trainer.GetPoseRefiner().IsSweepRefined(1));
   std::string error;
   ASSERT_TRUE(trainer.Initialize(&error)) << error;
   ASSERT_TRUE(trainer.Run(nullptr, nullptr, &error)) << error;
@@ -269,9 +269,9 @@ TEST(PoseRefinementChoice, TheTrainerRefinesTheSweepsTheRuleChooses)
   }
   for (const PoseRefinement given : { PoseRefinement::Off, PoseRefinement::On })
   {
-    s.RefinePoses = given;
+    s.Poses.RefinePoses = given;
     Trainer fixed(data, s);
-    EXPECT_EQ(fixed.GetSettings().RefinePoses, given);
-    EXPECT_EQ(fixed.IsSweepRefined(1), given == PoseRefinement::On);
+    EXPECT_EQ(fixed.GetSettings().Poses.RefinePoses, given);
+    EXPECT_EQ(fixed.GetPoseRefiner().IsSweepRefined(1), given == PoseRefinement::On);
   }
 }

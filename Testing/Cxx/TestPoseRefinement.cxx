@@ -338,7 +338,7 @@ struct LiverPathErrors
   std::array<double, 6> ImageToProbe{}; ///< every recorded pose moved by this correction (CorrectPose)
   bool PerFrame = false, TimeOffset = true, RefineImageToProbe = false; ///< what the refined run refines
   int Iterations = 2000;
-  double PoseRefinementStart = TrainerSettings().PoseRefinementStart; ///< of every run (the refined one's matters;
+  double PoseRefinementStart = TrainerSettings().Poses.Start; ///< of every run (the refined one's matters;
                                                                       ///< default: chosen from the tracked path)
 };
 
@@ -428,12 +428,12 @@ LiverPathResult LiverPathCase(const LiverPathErrors& e)
   s.PixelGridFit = false;
   s.InitialGaussians = 6000;
   s.Iterations = e.Iterations;
-  s.PoseRefinementStart = e.PoseRefinementStart;
+  s.Poses.Start = e.PoseRefinementStart;
   auto train = [&](const TrainingData& data, bool refine) {
     TrainerSettings settings = s;
-    settings.RefinePoses = refine && e.PerFrame ? PoseRefinement::On : PoseRefinement::Off;
-    settings.RefineTimeOffset = refine && e.TimeOffset;
-    settings.RefineImageToProbe = refine && e.RefineImageToProbe;
+    settings.Poses.RefinePoses = refine && e.PerFrame ? PoseRefinement::On : PoseRefinement::Off;
+    settings.Poses.RefineTimeOffset = refine && e.TimeOffset;
+    settings.Poses.RefineImageToProbe = refine && e.RefineImageToProbe;
     auto trainer = std::make_unique<Trainer>(data, settings);
     std::string error;
     EXPECT_TRUE(trainer->Initialize(&error)) << error;
@@ -446,7 +446,7 @@ LiverPathResult LiverPathCase(const LiverPathErrors& e)
   result.CornerErrorBefore = CornerError(tracked, truth, truth.TrainFrames, W, H);
   result.CornerErrorAfter = CornerError(refined->GetData(), truth, truth.TrainFrames, W, H);
   result.TimeOffset = refined->GetReport().TimeOffset;
-  result.PoseRefinementStart = refined->GetSettings().PoseRefinementStart;
+  result.PoseRefinementStart = refined->GetSettings().Poses.Start;
   result.ImageToProbe = refined->GetReport().ImageToProbeCorrection;
   result.Refined = PsnrAt(refined->GetField(), refined->Options(), truth, heldOut);
   result.Trusting = PsnrAt(trusting->GetField(), trusting->Options(), truth, heldOut);
@@ -663,10 +663,10 @@ TEST(PoseTimeline, ThePoseRefinementStartsAtOnceWhereACorrectedSweepsPathJitters
   s.PixelGridFit = false;
   s.InitialGaussians = 50;
   s.Iterations = 1;
-  s.RefinePoses = PoseRefinement::On;
-  EXPECT_EQ(Trainer(jittered, s).GetSettings().PoseRefinementStart, 0.0);
-  EXPECT_EQ(Trainer(smooth, s).GetSettings().PoseRefinementStart, 0.2);
-  s.PoseRefinementStart = 0.5;
-  EXPECT_EQ(Trainer(jittered, s).GetSettings().PoseRefinementStart, 0.5);
+  s.Poses.RefinePoses = PoseRefinement::On;
+  EXPECT_EQ(Trainer(jittered, s).GetSettings().Poses.Start, 0.0);
+  EXPECT_EQ(Trainer(smooth, s).GetSettings().Poses.Start, 0.2);
+  s.Poses.Start = 0.5;
+  EXPECT_EQ(Trainer(jittered, s).GetSettings().Poses.Start, 0.5);
 }
 

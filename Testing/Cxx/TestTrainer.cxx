@@ -127,7 +127,7 @@ TrainerSettings ShortSettings()
   s.DensifyStart = 100;
   s.DensifyInterval = 100;
   s.DensifyEnd = 150;
-  s.RefinePoses = PoseRefinement::Off; // exact synthetic poses: the tests of pose refinement switch it on
+  s.Poses.RefinePoses = PoseRefinement::Off; // exact synthetic poses: the tests of pose refinement switch it on
   return s;
 }
 
@@ -323,8 +323,8 @@ TEST(Trainer, AResumedRunGoesOnWithThePoseCorrectionsOfItsCheckpoint)
   std::vector<int> heldOut;
   const TrainingData data = SyntheticSweep(KnownField(200, 6), 0.5, heldOut);
   TrainerSettings s = ShortSettings();
-  s.RefinePoses = PoseRefinement::On;
-  s.PoseRefinementStart = 0.25; // the corrections move from step 50, well before the checkpoint
+  s.Poses.RefinePoses = PoseRefinement::On;
+  s.Poses.Start = 0.25; // the corrections move from step 50, well before the checkpoint
   std::string error;
   Trainer straight(data, s);
   ASSERT_TRUE(straight.Initialize(&error));
@@ -448,8 +448,8 @@ TEST(Trainer, CheckpointHoldsTheWholeTrainingState)
   std::vector<int> heldOut;
   const TrainingData data = SyntheticSweep(KnownField(200, 7), 0.5, heldOut);
   TrainerSettings settings = ShortSettings();
-  settings.RefineImageToProbe = true; // the shared pose correction moves from the start
-  settings.PoseRefinementStart = 0;
+  settings.Poses.RefineImageToProbe = true; // the shared pose correction moves from the start
+  settings.Poses.Start = 0;
   Trainer trainer(data, settings);
   std::string error;
   ASSERT_TRUE(trainer.Initialize(&error)) << error;
@@ -1186,8 +1186,8 @@ TEST(Trainer, TheResolutionScheduleStepsOnAQuarterOfThePixelsFirstAndLearnsThere
     s.Iterations = 400;
     s.CoarseFraction = 0.5;
     s.CoarseLowPass = lowPass;
-    s.RefinePoses = PoseRefinement::On;
-    s.PoseRefinementStart = 0;
+    s.Poses.RefinePoses = PoseRefinement::On;
+    s.Poses.Start = 0;
     auto owned = std::make_unique<SizeRecordingEngine>();
     SizeRecordingEngine* engine = owned.get();
     Trainer trainer(data, s, std::move(owned));
@@ -1780,8 +1780,8 @@ TEST(Trainer, WhenOneGaussianPerFanPixelFitsTheDefaultsFitThePixelGridAndTakeNoS
   EXPECT_EQ(trainer.GetReport().InitialGaussians, planes.FanPixels);
   EXPECT_EQ(trainer.GetReport().Solves, 1);
   // No step, so nothing to refine the poses with, whatever the default (Auto) chose for this sweep.
-  EXPECT_EQ(trainer.GetSettings().RefinePoses, PoseRefinement::Off);
-  EXPECT_FALSE(trainer.IsSweepRefined(0));
+  EXPECT_EQ(trainer.GetSettings().Poses.RefinePoses, PoseRefinement::Off);
+  EXPECT_FALSE(trainer.GetPoseRefiner().IsSweepRefined(0));
   EXPECT_EQ(std::count_if(trainer.GetReport().Settings.begin(), trainer.GetReport().Settings.end(),
               [](const std::string& line) { return line.rfind("RefinePoses = off (", 0) == 0; }),
     1);
@@ -2029,7 +2029,8 @@ TEST(Trainer, HeldOutPosesRefinedWithTheFieldFrozenComeBackToTheTruth)
   TrainerSettings s;
   std::vector<std::array<double, 6>> corrections;
   std::string error;
-  ASSERT_TRUE(RefinePosesWithFieldFrozen(field, data, heldOut, options, s, 100, "cpu", corrections, &error)) << error;
+  ASSERT_TRUE(RefinePosesWithFieldFrozen(field, data, heldOut, options, s.Poses, s.Loss, 100, "cpu", corrections, &error))
+    << error;
   ASSERT_EQ(corrections.size(), heldOut.size());
   const double after = CornerError(data, truth, heldOut, W, H), psnrAfter = psnrAt(data);
   std::printf("held-out poses refined with the field frozen (100 steps): corner error %.3f -> %.3f mm, PSNR %.2f -> "
@@ -2053,13 +2054,13 @@ TEST(Trainer, RefiningPosesBringsPerturbedTrainingPosesTowardsTheTruth)
   s.PixelGridFit = false;
   s.InitialGaussians = 3000;
   s.Iterations = 1500;
-  s.RefinePoses = PoseRefinement::On;
+  s.Poses.RefinePoses = PoseRefinement::On;
   Trainer trainer(perturbed, s);
   std::string error;
   ASSERT_TRUE(trainer.Initialize(&error)) << error;
   ASSERT_TRUE(trainer.Run(nullptr, nullptr, &error)) << error;
   const double after = CornerError(trainer.GetData(), truth, truth.TrainFrames, W, H);
-  s.RefinePoses = PoseRefinement::Off;
+  s.Poses.RefinePoses = PoseRefinement::Off;
   Trainer trusting(perturbed, s);
   ASSERT_TRUE(trusting.Initialize(&error)) << error;
   ASSERT_TRUE(trusting.Run(nullptr, nullptr, &error)) << error;
@@ -2100,8 +2101,8 @@ TEST(Trainer, RefiningPosesBringsPerturbedTrainingPosesTowardsTheTruth)
     }
     return std::sqrt(sum / (report.PoseCorrections.size() - 1));
   };
-  s.RefinePoses = PoseRefinement::On;
-  s.PoseSmoothness = 10;
+  s.Poses.RefinePoses = PoseRefinement::On;
+  s.Poses.Smoothness = 10;
   Trainer smooth(perturbed, s);
   ASSERT_TRUE(smooth.Initialize(&error)) << error;
   ASSERT_TRUE(smooth.Train(nullptr, nullptr, &error)) << error;

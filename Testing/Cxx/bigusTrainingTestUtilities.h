@@ -198,7 +198,8 @@ inline double FairPsnr(const GaussianField& field, const RenderOptions& options,
   TrainingData scored = truth;
   std::vector<std::array<double, 6>> corrections;
   std::string error;
-  EXPECT_TRUE(RefinePosesWithFieldFrozen(field, scored, frames, options, settings, steps, "cpu", corrections, &error))
+  EXPECT_TRUE(RefinePosesWithFieldFrozen(
+                field, scored, frames, options, settings.Poses, settings.Loss, steps, "cpu", corrections, &error))
     << error;
   return PsnrAt(field, options, scored, frames);
 }

@@ -1,0 +1,414 @@
+// The pose-refinement stage (see bigusPoseRefinement.h and DESIGN section 4).
+#include "bigusPoseRefinement.h"
+
+#include "bigusAdam.h"
+#include "bigusSliceFrame.h"
+
+#include <vtk_fmt.h>
+// clang-format off
+#include VTK_FMT(fmt/printf.h)
+// clang-format on
+
+#include <algorithm>
+#include <cmath>
+
+namespace bigus
+{
+
+namespace
+{
+/// One Adam step (t counts from 1) of @p count double parameters @p x with their moments.
+void AdamSteps(int count, const double* g, const double* rate, int t, double* x, double* first, double* second)
+{
+  const AdamBias bias = AdamBiasAt(t);
+  for (int k = 0; k < count; ++k)
+  {
+    AdamUpdate(x[k], first[k], second[k], g[k], rate[k], bias);
+  }
+}
+}
+
+void PoseRefiner::Configure(TrainingData* data, const PoseRefinementSettings& settings,
+  const std::function<const std::vector<SweepDecorrelation>&()>& measured, TrainingState& state,
+  std::vector<std::string>& lines)
+{
+  this->Data = data;
+  this->Settings = settings;
+  PoseRefinementSettings& s = this->Settings;
+  // Auto is resolved here, sweep by sweep, from the speckle of neighbouring training frames.
+  std::string refinedBy = "given";
+  this->RefinedSweeps.assign(data->SweepCount(), s.RefinePoses == PoseRefinement::On ? 1 : 0);
+  if (s.RefinePoses == PoseRefinement::Auto)
+  {
+    const PoseRefinementChoice choice = ChoosePoseRefinement(measured());
+    this->RefinedSweeps = choice.Sweeps;
+    s.RefinePoses = choice.Any() ? PoseRefinement::On : PoseRefinement::Off;
+    refinedBy = "chosen: " + choice.Reason;
+    if (!choice.Any())
+    {
+      lines.push_back("RefinePoses = off (" + refinedBy + ")");
+    }
+  }
+  // The start of the corrections, where not given: from the jitter of the corrected sweeps' tracked paths (every
+  // sweep where only the shared corrections are refined).
+  std::string startBy;
+  if (s.Start < 0)
+  {
+    const PoseRefinementStartChoice start =
+      ChoosePoseRefinementStart(*data, s.RefinePoses == PoseRefinement::On ? this->RefinedSweeps : std::vector<char>());
+    s.Start = start.Start;
+    startBy = start.Reason;
+  }
+  if (s.RefinePoses == PoseRefinement::On)
+  {
+    lines.push_back(vtkfmt::sprintf("RefinePoses = on (from %.0f %% of the schedule, %sAdam %.3g rad and %.3g mm per "
+                                    "step; prior %.3g at %.3g degrees and %.3g mm, smoothness %.3g; ",
+                      100 * s.Start, startBy.empty() ? "" : startBy + "; ", s.RotationLearningRate,
+                      s.TranslationLearningRate, s.Prior, s.RotationSigma * 180 / M_PI, s.TranslationSigma,
+                      s.Smoothness) +
+      refinedBy + ")");
+    const std::size_t n = data->Poses.size();
+    state.PoseCorrections.assign(n, {});
+    state.PoseFirstMoment.assign(n, {});
+    state.PoseSecondMoment.assign(n, {});
+    state.PoseSteps.assign(n, 0);
+  }
+  else if (s.Any())
+  {
+    lines.push_back(vtkfmt::sprintf("PoseRefinementStart = %.0f %% of the schedule (%s)", 100 * s.Start,
+      startBy.empty() ? "given" : startBy));
+  }
+  // A change common to the frames of one smooth sweep is a warp of the scene the field takes up
+  // (docs/FINDINGS.md, "Shared pose corrections"): said where it is switched on.
+  const bool oneSweep = data->SweepCount() <= 1;
+  const std::string caveat = oneSweep ? "; one sweep: not determined, sweeps whose frames cross are" : "";
+  if (s.RefineTimeOffset)
+  {
+    lines.push_back(vtkfmt::sprintf("RefineTimeOffset = on (Adam %.3g s per step, prior %.3g at %.3g s",
+                      s.TimeOffsetLearningRate, s.Prior, s.TimeOffsetSigma) +
+      caveat + ")");
+  }
+  if (s.RefineImageToProbe)
+  {
+    lines.push_back(vtkfmt::sprintf("RefineImageToProbe = on (Adam %.3g rad and %.3g mm per step, prior %.3g at "
+                                    "%.3g degrees and %.3g mm",
+                      s.RotationLearningRate, s.TranslationLearningRate, s.Prior, s.RotationSigma * 180 / M_PI,
+                      s.TranslationSigma) +
+      caveat + ")");
+  }
+  this->TrackedPoses.clear();
+  this->TrackedValid.clear();
+  if (s.Any())
+  {
+    this->TrackedPoses = data->Poses;
+    for (const std::array<double, 16>& pose : this->TrackedPoses)
+    {
+      SliceFrame frame;
+      const int f = static_cast<int>(this->TrackedValid.size());
+      this->TrackedValid.push_back(data->IsValid(f) && ComputeSliceFrame(pose.data(), 90, frame) == PoseStatus::Ok);
+    }
+  }
+}
+
+bool PoseRefiner::Prepare(std::string* error)
+{
+  if (this->Settings.RefineTimeOffset && !this->Timeline.Build(*this->Data, this->Settings.TimeOffsetWindow, error))
+  {
+    if (error)
+    {
+      *error = "RefineTimeOffset: " + *error;
+    }
+    return false;
+  }
+  return true;
+}
+
+void PoseRefiner::TurnOffCorrections(TrainingState& state, std::vector<std::string>& lines, const std::string& reason)
+{
+  if (this->Settings.RefinePoses != PoseRefinement::On)
+  {
+    return;
+  }
+  // The field says so too: no RefinedPoses where no frame moved.
+  this->Settings.RefinePoses = PoseRefinement::Off;
+  std::fill(this->RefinedSweeps.begin(), this->RefinedSweeps.end(), 0);
+  state.PoseCorrections.clear();
+  state.PoseFirstMoment.clear();
+  state.PoseSecondMoment.clear();
+  state.PoseSteps.clear();
+  for (std::string& line : lines)
+  {
+    if (line.rfind("RefinePoses = ", 0) == 0)
+    {
+      line = "RefinePoses = off (" + reason + ")";
+    }
+  }
+}
+
+void PoseRefiner::Step(
+  const std::vector<int>& frames, const std::vector<double>& gradients, double rateScale, TrainingState& state)
+{
+  const PoseRefinementSettings& s = this->Settings;
+  // Constant rates: decaying them as the means' rate decays measured no better on TestPoseRefinement's case.
+  const double rotation = s.RotationLearningRate * rateScale, translation = s.TranslationLearningRate * rateScale;
+  const double rate[7] = { rotation, rotation, rotation, translation, translation, translation,
+    s.TimeOffsetLearningRate * rateScale };
+  const double sigma[7] = { s.RotationSigma, s.RotationSigma, s.RotationSigma, s.TranslationSigma,
+    s.TranslationSigma, s.TranslationSigma, s.TimeOffsetSigma };
+  const bool shared = s.RefineTimeOffset || s.RefineImageToProbe;
+  if (shared)
+  {
+    // The shared corrections move every frame: their gradient is the sum over the batch of the frames' pose
+    // gradients (ImageToProbe, composed last) and of their dot products with the tracked path's velocity (the
+    // time offset).
+    std::array<double, 7>& x = state.SharedPoseCorrection;
+    double g[7] = { 0, 0, 0, 0, 0, 0, 0 };
+    for (std::size_t b = 0; b < frames.size(); ++b)
+    {
+      const double* gb = &gradients[6 * b];
+      if (!std::all_of(gb, gb + 6, [](double v) { return std::isfinite(v); }))
+      {
+        continue;
+      }
+      for (int k = 0; k < 6; ++k)
+      {
+        g[k] += gb[k];
+        g[6] += s.RefineTimeOffset ? gb[k] * this->Timeline.Velocity(frames[b])[k] : 0.0;
+      }
+    }
+    for (int k = 0; k < 7; ++k)
+    {
+      const bool refined = k < 6 ? s.RefineImageToProbe : s.RefineTimeOffset;
+      g[k] = refined ? g[k] + s.Prior * x[k] / (sigma[k] * sigma[k]) : 0.0;
+    }
+    AdamSteps(7, g, rate, ++state.SharedPoseSteps, x.data(), state.SharedPoseFirstMoment.data(),
+      state.SharedPoseSecondMoment.data());
+  }
+  const TrainingData& data = *this->Data;
+  for (std::size_t b = 0; b < frames.size() && s.RefinePoses == PoseRefinement::On; ++b)
+  {
+    const int f = frames[b];
+    const int sweep = data.SweepOf(f);
+    if (!this->IsSweepRefined(sweep))
+    {
+      continue;
+    }
+    std::array<double, 6>& xi = state.PoseCorrections[f];
+    // The neighbours along the sweep: the training frames before and after this one in its sweep
+    // (TrainFrames in order; none where they are not).
+    const std::vector<int>& train = data.TrainFrames;
+    const auto at = std::lower_bound(train.begin(), train.end(), f);
+    const bool found = at != train.end() && *at == f;
+    const auto& corrections = state.PoseCorrections;
+    const std::array<double, 6>* before =
+      found && at != train.begin() && data.SweepOf(*(at - 1)) == sweep ? &corrections[*(at - 1)] : nullptr;
+    const std::array<double, 6>* after =
+      found && at + 1 != train.end() && data.SweepOf(*(at + 1)) == sweep ? &corrections[*(at + 1)] : nullptr;
+    double g[6];
+    bool finite = true;
+    for (int k = 0; k < 6; ++k)
+    {
+      double smooth = 0;
+      for (const std::array<double, 6>* n : { before, after })
+      {
+        smooth += n ? xi[k] - (*n)[k] : 0.0;
+      }
+      g[k] = gradients[6 * b + k] + (s.Prior * xi[k] + s.Smoothness * smooth) / (sigma[k] * sigma[k]);
+      finite = finite && std::isfinite(g[k]);
+    }
+    if (!finite)
+    {
+      continue; // a non-finite pose gradient moves none of the frame's correction
+    }
+    AdamSteps(6, g, rate, ++state.PoseSteps[f], xi.data(), state.PoseFirstMoment[f].data(),
+      state.PoseSecondMoment[f].data());
+  }
+  if (shared)
+  {
+    this->ComposePoses(state);
+    return;
+  }
+  for (int f : frames)
+  {
+    this->ComposePose(f, state);
+  }
+}
+
+void PoseRefiner::ComposePoses(const TrainingState& state)
+{
+  for (int f = 0; f < this->Data->Count() && this->Settings.Any(); ++f)
+  {
+    this->ComposePose(f, state);
+  }
+}
+
+void PoseRefiner::ComposePose(int frame, const TrainingState& state)
+{
+  const PoseRefinementSettings& s = this->Settings;
+  if (!this->TrackedValid[frame])
+  {
+    return; // a pose the renderer rejects (an invalid frame) stays as it was recorded
+  }
+  const std::array<double, 7>& shared = state.SharedPoseCorrection;
+  std::array<double, 16> pose = this->TrackedPoses[frame];
+  const int width = this->Data->Width, height = this->Data->Height;
+  if (s.RefineTimeOffset)
+  {
+    this->Timeline.PoseAt(frame, shared[6], pose.data());
+  }
+  if (s.RefinePoses == PoseRefinement::On)
+  {
+    // The frame's own correction: stepped (a training frame) or set (a held-out one, CorrectUntrainedFrames).
+    const std::array<double, 6>& xi = state.PoseCorrections[frame];
+    if (state.PoseSteps[frame] > 0 || std::any_of(xi.begin(), xi.end(), [](double v) { return v != 0; }))
+    {
+      CorrectPose(pose.data(), width, height, xi.data(), pose.data());
+    }
+  }
+  if (s.RefineImageToProbe)
+  {
+    CorrectPose(pose.data(), width, height, shared.data(), pose.data());
+  }
+  this->Data->Poses[frame] = pose;
+}
+
+UntrainedCorrection PoseRefiner::PlaceUntrainedFrames(TrainingState& state)
+{
+  if (this->Settings.RefinePoses != PoseRefinement::On)
+  {
+    return {};
+  }
+  const UntrainedCorrection placed = CorrectUntrainedFrames(*this->Data, state.PoseCorrections);
+  this->ComposePoses(state);
+  return placed;
+}
+
+void PoseRefiner::KeepBest(TrainingState& state)
+{
+  state.BestPoseCorrections = state.PoseCorrections;
+  state.BestSharedPoseCorrection = state.SharedPoseCorrection;
+}
+
+void PoseRefiner::RestoreBest(TrainingState& state)
+{
+  if (state.BestPoseCorrections.size() == state.PoseCorrections.size())
+  {
+    state.PoseCorrections = state.BestPoseCorrections;
+  }
+  state.SharedPoseCorrection = state.BestSharedPoseCorrection;
+  this->ComposePoses(state);
+}
+
+std::vector<FramePoseCorrection> PoseRefiner::Corrections(const TrainingState& state) const
+{
+  std::vector<FramePoseCorrection> corrections;
+  if (this->Settings.RefinePoses != PoseRefinement::On)
+  {
+    return corrections;
+  }
+  for (int f : this->Data->TrainFrames)
+  {
+    if (this->IsSweepRefined(this->Data->SweepOf(f)))
+    {
+      corrections.push_back({ f, state.PoseCorrections[f] });
+    }
+  }
+  return corrections;
+}
+
+bool PoseRefiner::CheckCheckpoint(const TrainingState& loaded, const std::string& file, std::string* error) const
+{
+  const PoseRefinementSettings& s = this->Settings;
+  auto fail = [&](const std::string& what) {
+    if (error)
+    {
+      *error = file + ": " + what;
+    }
+    return false;
+  };
+  if (s.RefineTimeOffset && !this->Timeline.IsBuilt(this->Data->Count()))
+  {
+    return fail("a run that refines the time offset loads a checkpoint after Initialize");
+  }
+  // The pose corrections go on from where the checkpoint left them (the same settings, the same sweep).
+  const bool refined = s.RefinePoses == PoseRefinement::On;
+  const std::size_t frames = refined ? this->Data->Poses.size() : 0;
+  if (loaded.PoseCorrections.size() != frames)
+  {
+    return fail("the checkpoint holds pose corrections of " + std::to_string(loaded.PoseCorrections.size()) +
+      " frames and this run " + (refined ? "refines the poses of " : "refines the poses of none of ") +
+      std::to_string(this->Data->Poses.size()) + " (resume with the settings and sweep the checkpoint was written with)");
+  }
+  const std::array<double, 7>& shared = loaded.SharedPoseCorrection;
+  const bool imageToProbe = std::any_of(shared.begin(), shared.begin() + 6, [](double v) { return v != 0; });
+  if ((imageToProbe && !s.RefineImageToProbe) || (shared[6] != 0 && !s.RefineTimeOffset))
+  {
+    return fail(std::string("the checkpoint holds ") + (imageToProbe ? "an ImageToProbe correction" : "a time offset") +
+      " that this run does not refine (resume with the settings the checkpoint was written with)");
+  }
+  return true;
+}
+
+bool RefinePosesWithFieldFrozen(const GaussianField& field, TrainingData& data, const std::vector<int>& frames,
+  const RenderOptions& options, const PoseRefinementSettings& settings, const ImageLossWeights& loss, int steps,
+  const std::string& backend, std::vector<std::array<double, 6>>& corrections, std::string* error)
+{
+  std::unique_ptr<TrainingEngine> engine = CreateTrainingEngine(backend, error);
+  OptimizerState frozen;
+  frozen.Field = field;
+  frozen.ResizeToField();
+  if (!engine || !engine->SetData(&data, error) || !engine->Push(frozen, error))
+  {
+    return false;
+  }
+  // Every learning rate of the field 0: the engine's step gives the pose gradients and moves nothing.
+  StepRequest request;
+  request.Count = 1;
+  request.Options = options;
+  request.Loss = loss;
+  request.MinimumLogScale = -1e30;
+  request.MaximumLogScale = 1e30;
+  double gradient[6];
+  request.PoseGradients = gradient;
+  const double rotation = settings.RotationLearningRate, translation = settings.TranslationLearningRate;
+  const double rate[6] = { rotation, rotation, rotation, translation, translation, translation };
+  const double sigma[2] = { settings.RotationSigma, settings.TranslationSigma };
+  corrections.assign(frames.size(), {});
+  std::vector<std::array<double, 6>> first(frames.size()), second(frames.size());
+  std::vector<std::array<double, 16>> tracked;
+  for (int f : frames)
+  {
+    tracked.push_back(data.Poses.at(f));
+  }
+  for (int t = 1; t <= steps; ++t)
+  {
+    for (std::size_t b = 0; b < frames.size(); ++b)
+    {
+      request.Frames = &frames[b];
+      request.Iteration = t - 1;
+      double value = 0;
+      const StepStatus status = engine->Step(request, &value, error);
+      if (status == StepStatus::Failed)
+      {
+        return false;
+      }
+      double g[6];
+      bool finite = status == StepStatus::Done;
+      for (int k = 0; k < 6 && finite; ++k)
+      {
+        g[k] = gradient[k] + settings.Prior * corrections[b][k] / (sigma[k / 3] * sigma[k / 3]);
+        finite = std::isfinite(g[k]);
+      }
+      if (!finite)
+      {
+        engine->Restore();
+        continue; // this frame's correction stays where it is for this step
+      }
+      AdamSteps(6, g, rate, t, corrections[b].data(), first[b].data(), second[b].data());
+      CorrectPose(tracked[b].data(), data.Width, data.Height, corrections[b].data(), data.Poses[frames[b]].data());
+    }
+  }
+  return true;
+}
+
+} // namespace bigus
