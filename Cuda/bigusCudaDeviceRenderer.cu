@@ -56,18 +56,15 @@ CallExtent Extent(std::int64_t gaussians, const std::vector<PreparedSlice>& slic
 bool UploadField(const FieldView& field, float* device, cudaStream_t stream, std::string* error)
 {
   const std::int64_t n = field.Count;
-  const float* arrays[4] = { field.Means, field.LogScales, field.Quaternions, field.Reflectivities };
-  const std::int64_t widths[4] = { 3, 3, 4, 1 };
-  std::int64_t offset = 0;
-  for (int q = 0; q < 4 && n > 0; ++q)
+  const float* arrays[FieldGroups] = { field.Means, field.LogScales, field.Quaternions, field.Reflectivities };
+  for (int q = 0; q < FieldGroups && n > 0; ++q)
   {
-    if (!Check(cudaMemcpyAsync(device + offset, arrays[q], sizeof(float) * widths[q] * n, cudaMemcpyHostToDevice,
-                 stream),
+    if (!Check(cudaMemcpyAsync(device + FieldGroupFirst(q) * n, arrays[q], sizeof(float) * FieldGroupWidth(q) * n,
+                 cudaMemcpyHostToDevice, stream),
           "copying the field to the device", error))
     {
       return false;
     }
-    offset += widths[q] * n;
   }
   return true;
 }

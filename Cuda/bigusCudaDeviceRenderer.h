@@ -13,6 +13,7 @@
 #define bigusCudaDeviceRenderer_h
 
 #include "bigusCudaKernels.h"
+#include "bigusFieldLayout.h"
 
 #include <cuda_runtime.h>
 
@@ -32,11 +33,12 @@ constexpr std::int64_t BinningBytes = sizeof(Splat) + 2 * sizeof(unsigned long l
 constexpr std::int64_t PoseBytesPerGaussian = 6 * sizeof(double);
 constexpr std::int64_t EntryBytes = 4 * sizeof(std::uint32_t);
 
-/// The field at @p base on the device: [N, 11] floats, means [N, 3], log-scales [N, 3], quaternions [N, 4] and
-/// reflectivities [N] one after the other.
+/// The field at @p base on the device, in the packed layout of bigusFieldLayout.h (means [N, 3], log-scales
+/// [N, 3], quaternions [N, 4] and reflectivities [N] one after the other).
 inline DeviceField FieldAt(const float* base, std::int64_t n)
 {
-  return DeviceField{ base, base + 3 * n, base + 6 * n, base + 10 * n, n };
+  return DeviceField{ base + FieldGroupFirst(MeanGroup) * n, base + FieldGroupFirst(LogScaleGroup) * n,
+    base + FieldGroupFirst(QuaternionGroup) * n, base + FieldGroupFirst(ReflectivityGroup) * n, n };
 }
 
 /// The largest slice of a call, its tiles, and the call named for memory errors.

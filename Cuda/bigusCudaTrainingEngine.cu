@@ -3,7 +3,7 @@
 
 #include "bigusBasisNorms.h"
 #include "bigusCudaDeviceRenderer.h"
-#include "bigusCudaRenderer.h"
+#include "bigusFieldLayout.h"
 #include "bigusImageLoss.h"
 #include "bigusRasterGeometry.h"
 
@@ -21,39 +21,25 @@ namespace cuda
 
 namespace
 {
-constexpr int Parameters = 11;                  // floats per Gaussian: mean 3, log-scale 3, quaternion 4, r 1
-/// Parameter group q (means, log-scales, quaternions, reflectivities): its first entry in units of N, and its
-/// floats per Gaussian (the field's layout, as GaussianField's arrays one after the other).
-__host__ __device__ inline int GroupFirst(int q)
-{
-  return q == 0 ? 0 : q == 1 ? 3 : q == 2 ? 6 : 10;
-}
-__host__ __device__ inline int GroupWidth(int q)
-{
-  return q == 2 ? 4 : q == 3 ? 1 : 3;
-}
-constexpr std::int64_t StateBytes = 6 * Parameters * sizeof(float); // field, m, v and their known-good copies
-constexpr std::int64_t StepBytes = Parameters * sizeof(float) + sizeof(float) + sizeof(int); // gradients, E, seen
+// Per Gaussian: the field, m, v and their known-good copies (each FieldParameters floats, bigusFieldLayout.h);
+// the step's gradients, E and seen count.
+constexpr std::int64_t StateBytes = 6 * FieldParameters * sizeof(float);
+constexpr std::int64_t StepBytes = FieldParameters * sizeof(float) + sizeof(float) + sizeof(int);
 constexpr std::int64_t ImageBytes = 3 * sizeof(float); // per pixel: S, I (then dL/dI), dL/dS
 constexpr std::int64_t SolveBytes = 2 * sizeof(float) + sizeof(double); // r or dL/dr of one frame, their sum
 
 /// One Adam step's constants (StepRequest).
 struct AdamStep
 {
-  double C1, C2;  // bias corrections 1 - beta^t
-  double Rate[4]; // learning rate of each group: means, log-scales, quaternions, reflectivities
+  AdamBias Bias;            // bias corrections 1 - beta^t
+  double Rate[FieldGroups]; // learning rate of each group (StepRequest::Rate)
   float MinimumLogScale, MaximumLogScale;
   bool Sparse;
 };
 
-/// Entry c of group q of Gaussian i in an array laid out as the field.
-__device__ __forceinline__ std::int64_t Entry(std::int64_t n, std::int64_t i, int q, int c)
-{
-  return GroupFirst(q) * n + GroupWidth(q) * i + c;
-}
-
 /**
- * Adam on Gaussian i (one thread each), as CpuTrainingEngine::Adam: the moments in double, stored as float,
+ * Adam on Gaussian i (one thread each), as CpuTrainingEngine::Adam (AdamUpdate: the moments in double, stored as
+ * float), the arrays in the field's packed layout (bigusFieldLayout.h),
  * the parameters kept in range (unit quaternion, clamped log-scales); @p finite becomes 0 when a gradient or an
  * updated parameter is not finite.
  */
@@ -64,35 +50,21 @@ __global__ void AdamKernel(float* field, float* m, float* v, const float* g, std
   {
     return;
   }
-  if (a.Sparse)
+  if (a.Sparse && !FieldGradientTouched(g, n, i))
   {
-    bool touched = false;
-    for (int q = 0; q < 4; ++q)
-    {
-      for (int c = 0; c < GroupWidth(q); ++c)
-      {
-        touched = touched || g[Entry(n, i, q, c)] != 0.f;
-      }
-    }
-    if (!touched)
-    {
-      return;
-    }
+    return;
   }
   bool ok = true;
-  for (int q = 0; q < 4; ++q)
+  for (int q = 0; q < FieldGroups; ++q)
   {
-    for (int c = 0; c < GroupWidth(q); ++c)
+    for (int c = 0; c < FieldGroupWidth(q); ++c)
     {
-      const std::int64_t k = Entry(n, i, q, c);
-      const double gk = g[k];
+      const std::int64_t k = FieldEntry(n, i, q, c);
       ok = ok && isfinite(g[k]);
-      m[k] = static_cast<float>(AdamBeta1 * m[k] + (1 - AdamBeta1) * gk);
-      v[k] = static_cast<float>(AdamBeta2 * v[k] + (1 - AdamBeta2) * gk * gk);
-      field[k] -= static_cast<float>(a.Rate[q] * (m[k] / a.C1) / (sqrt(v[k] / a.C2) + AdamEpsilon));
+      AdamUpdate(field[k], m[k], v[k], g[k], a.Rate[q], a.Bias);
     }
   }
-  float* quaternion = field + 6 * n + 4 * i;
+  float* quaternion = field + FieldEntry(n, i, QuaternionGroup, 0);
   const float norm = sqrtf(quaternion[0] * quaternion[0] + quaternion[1] * quaternion[1] +
     quaternion[2] * quaternion[2] + quaternion[3] * quaternion[3]);
   if (norm > 1e-12f)
@@ -105,12 +77,12 @@ __global__ void AdamKernel(float* field, float* m, float* v, const float* g, std
   }
   for (int c = 0; c < 3; ++c)
   {
-    float& l = field[3 * n + 3 * i + c];
+    float& l = field[FieldEntry(n, i, LogScaleGroup, c)];
     l = fminf(a.MaximumLogScale, fmaxf(a.MinimumLogScale, l));
-    ok = ok && isfinite(field[3 * i + c]) && isfinite(l);
+    ok = ok && isfinite(field[FieldEntry(n, i, MeanGroup, c)]) && isfinite(l);
   }
   ok = ok && isfinite(quaternion[0]) && isfinite(quaternion[1]) && isfinite(quaternion[2]) &&
-    isfinite(quaternion[3]) && isfinite(field[10 * n + i]);
+    isfinite(quaternion[3]) && isfinite(field[FieldEntry(n, i, ReflectivityGroup, 0)]);
   if (!ok)
   {
     *finite = 0;
@@ -150,36 +122,9 @@ public:
 
   const char* GetName() const override { return "cuda"; }
 
-  bool SetData(const TrainingData* data, std::string* error) override
+  bool SetData(const TrainingData* data, std::string*) override
   {
     this->Data = data;
-    return !this->Host || this->Host->SetData(data, error);
-  }
-
-  bool SetReduction(ProcessReduction* reduction, std::string* error) override
-  {
-    if (this->Host)
-    {
-      return this->Host->SetReduction(reduction, error);
-    }
-    if (!reduction || reduction->Size() <= 1)
-    {
-      return true;
-    }
-    // Several processes: the CPU engine's step over the CUDA renderer sums through the host.
-    std::unique_ptr<Renderer> renderer = CreateCudaRenderer(error);
-    if (!renderer)
-    {
-      return false;
-    }
-    std::unique_ptr<TrainingEngine> host = CreateCpuTrainingEngine(std::move(renderer));
-    OptimizerState state;
-    if ((this->Data && !host->SetData(this->Data, error)) || !host->SetReduction(reduction, error) ||
-      (this->N > 0 && (!this->Pull(state, error) || !host->Push(state, error))))
-    {
-      return false;
-    }
-    this->Host = std::move(host);
     return true;
   }
 
@@ -206,7 +151,7 @@ private:
     field.Reflectivities = reflectivities ? reflectivities : field.Reflectivities;
     return field;
   }
-  float* Moment(int which) const { return this->State.As<float>() + which * Parameters * this->N; }
+  float* Moment(int which) const { return this->State.As<float>() + which * FieldParameters * this->N; }
 
   /// Checks the memory of a call on the @p prepared slices (forward, or backward with or without pose gradients)
   /// and reserves the image buffers and the renderer's work buffers.
@@ -224,7 +169,6 @@ private:
   }
 
   DeviceRenderer Device;
-  std::unique_ptr<TrainingEngine> Host; // data-parallel runs: the CPU engine over the CUDA renderer
   const TrainingData* Data = nullptr;
   std::int64_t N = 0;
   Buffer State;      // [3, N, 11] floats: field, Adam m, Adam v, each laid out as the field (Field)
@@ -245,10 +189,6 @@ private:
 
 bool CudaTrainingEngine::Push(const OptimizerState& input, std::string* error)
 {
-  if (this->Host)
-  {
-    return this->Host->Push(input, error);
-  }
   OptimizerState state = input;
   state.ResizeToField();
   const std::int64_t n = state.Count();
@@ -265,9 +205,9 @@ bool CudaTrainingEngine::Push(const OptimizerState& input, std::string* error)
     this->Seen.Bytes;
   if (!this->Device.Fits(n * TrainingBytesPerGaussian(), held,
         "the training state of " + std::to_string(n) + " Gaussians", error) ||
-    !this->State.Reserve(slots * 3 * Parameters * sizeof(float), "allocating the training state", error) ||
-    !this->Saved.Reserve(slots * 3 * Parameters * sizeof(float), "allocating the training state", error) ||
-    !this->Gradients.Reserve(slots * Parameters * sizeof(float), "allocating gradients", error) ||
+    !this->State.Reserve(slots * 3 * FieldParameters * sizeof(float), "allocating the training state", error) ||
+    !this->Saved.Reserve(slots * 3 * FieldParameters * sizeof(float), "allocating the training state", error) ||
+    !this->Gradients.Reserve(slots * FieldParameters * sizeof(float), "allocating gradients", error) ||
     !this->Attribution.Reserve(slots * sizeof(float), "allocating the attribution", error) ||
     !this->Seen.Reserve(slots * sizeof(int), "allocating visible counts", error) ||
     !this->Finite.Reserve(sizeof(int), "allocating a flag", error))
@@ -299,10 +239,6 @@ bool CudaTrainingEngine::Push(const OptimizerState& input, std::string* error)
 
 bool CudaTrainingEngine::Pull(OptimizerState& state, std::string* error)
 {
-  if (this->Host)
-  {
-    return this->Host->Pull(state, error);
-  }
   const std::int64_t n = this->N;
   GaussianField* parts[3] = { &state.Field, &state.FirstMoment, &state.SecondMoment };
   for (int which = 0; which < 3; ++which)
@@ -324,10 +260,6 @@ bool CudaTrainingEngine::Pull(OptimizerState& state, std::string* error)
 
 bool CudaTrainingEngine::PullField(GaussianField& field, std::string* error)
 {
-  if (this->Host)
-  {
-    return this->Host->PullField(field, error);
-  }
   return this->DownloadField(0, field, error) &&
     Check(cudaStreamSynchronize(this->Device.GetStream()), "copying the field to the host", error);
 }
@@ -336,11 +268,10 @@ bool CudaTrainingEngine::DownloadField(int which, GaussianField& field, std::str
 {
   const std::int64_t n = this->N;
   field.Resize(n);
-  std::vector<float>* arrays[4] = { &field.Means, &field.LogScales, &field.Quaternions, &field.Reflectivities };
-  for (int q = 0; q < 4 && n > 0; ++q)
+  for (int q = 0; q < FieldGroups && n > 0; ++q)
   {
-    if (!Check(cudaMemcpyAsync(arrays[q]->data(), this->Moment(which) + GroupFirst(q) * n,
-                 sizeof(float) * arrays[q]->size(), cudaMemcpyDeviceToHost, this->Device.GetStream()),
+    if (!Check(cudaMemcpyAsync(field.Group(q).data(), this->Moment(which) + FieldGroupFirst(q) * n,
+                 sizeof(float) * field.Group(q).size(), cudaMemcpyDeviceToHost, this->Device.GetStream()),
           "copying the training state to the host", error))
     {
       return false;
@@ -351,24 +282,14 @@ bool CudaTrainingEngine::DownloadField(int which, GaussianField& field, std::str
 
 void CudaTrainingEngine::Snapshot()
 {
-  if (this->Host)
-  {
-    this->Host->Snapshot();
-    return;
-  }
   // Stream-ordered after the work queued so far; a failure shows at the next call's check.
-  cudaMemcpyAsync(this->Saved.Data, this->State.Data, sizeof(float) * 3 * Parameters * this->N,
+  cudaMemcpyAsync(this->Saved.Data, this->State.Data, sizeof(float) * 3 * FieldParameters * this->N,
     cudaMemcpyDeviceToDevice, this->Device.GetStream());
 }
 
 void CudaTrainingEngine::Restore()
 {
-  if (this->Host)
-  {
-    this->Host->Restore();
-    return;
-  }
-  cudaMemcpyAsync(this->State.Data, this->Saved.Data, sizeof(float) * 3 * Parameters * this->N,
+  cudaMemcpyAsync(this->State.Data, this->Saved.Data, sizeof(float) * 3 * FieldParameters * this->N,
     cudaMemcpyDeviceToDevice, this->Device.GetStream());
 }
 
@@ -396,10 +317,6 @@ bool CudaTrainingEngine::PrepareSolve(std::string* error)
 
 StepStatus CudaTrainingEngine::Step(const StepRequest& request, double* loss, std::string* error)
 {
-  if (this->Host)
-  {
-    return this->Host->Step(request, loss, error);
-  }
   const TrainingData& data = request.Data ? *request.Data : *this->Data;
   const std::size_t pixels = std::size_t(data.Width) * data.Height;
   const std::int64_t n = this->N;
@@ -412,14 +329,10 @@ StepStatus CudaTrainingEngine::Step(const StepRequest& request, double* loss, st
     return StepStatus::Failed;
   }
   float* gradients = this->Gradients.As<float>();
-  FieldGradients out; // device pointers, laid out as the field
-  out.Means = gradients;
-  out.LogScales = gradients + 3 * n;
-  out.Quaternions = gradients + 6 * n;
-  out.Reflectivities = gradients + 10 * n;
+  FieldGradients out = FieldGradientsAt(gradients, n); // device pointers, laid out as the field
   out.Attribution = this->Attribution.As<float>();
   out.VisibleCount = this->Seen.As<int>();
-  if (!Check(cudaMemsetAsync(gradients, 0, sizeof(float) * Parameters * n, stream), "clearing gradients", error) ||
+  if (!Check(cudaMemsetAsync(gradients, 0, sizeof(float) * FieldParameters * n, stream), "clearing gradients", error) ||
     (poses &&
       !Check(cudaMemsetAsync(this->PoseTotals.Data, 0, sizeof(double) * 6 * request.Count, stream),
         "clearing pose gradients", error)))
@@ -441,16 +354,7 @@ StepStatus CudaTrainingEngine::Step(const StepRequest& request, double* loss, st
       TrainingFrameError(f, error);
       return StepStatus::Failed;
     }
-    const ImageLossTerms terms = ComputeImageLoss(this->I.data(), &data.Frames[pixels * f], data.MaskOf(f),
-      data.Width, data.Height, request.Loss, this->LossGradient.data(), false, &this->LossWorkspace);
-    total += terms.Total;
-    if (request.Count > 1)
-    {
-      for (float& g : this->LossGradient)
-      {
-        g /= static_cast<float>(request.Count);
-      }
-    }
+    total += FrameLoss(data, f, this->I.data(), request, this->LossGradient.data(), &this->LossWorkspace);
     if (!Check(cudaMemcpyAsync(dI, this->LossGradient.data(), sizeof(float) * pixels, cudaMemcpyHostToDevice, stream),
           "copying dL/dI to the device", error) ||
       !this->Device.Backward(field, prepared[b], request.Options, dS, dI, false, dI + pixels, out,
@@ -476,14 +380,12 @@ StepStatus CudaTrainingEngine::Step(const StepRequest& request, double* loss, st
   {
     return StepStatus::NonFinite;
   }
-  const int t = request.Iteration + 1;
   AdamStep a;
-  a.C1 = 1 - std::pow(AdamBeta1, t);
-  a.C2 = 1 - std::pow(AdamBeta2, t);
-  a.Rate[0] = request.MeanRate;
-  a.Rate[1] = request.LogScaleRate;
-  a.Rate[2] = request.QuaternionRate;
-  a.Rate[3] = request.ReflectivityRate;
+  a.Bias = AdamBiasAt(request.Iteration + 1);
+  for (int q = 0; q < FieldGroups; ++q)
+  {
+    a.Rate[q] = request.Rate(q);
+  }
   a.MinimumLogScale = static_cast<float>(request.MinimumLogScale);
   a.MaximumLogScale = static_cast<float>(request.MaximumLogScale);
   a.Sparse = request.SparseAdam;
@@ -510,10 +412,6 @@ StepStatus CudaTrainingEngine::Step(const StepRequest& request, double* loss, st
 bool CudaTrainingEngine::Render(const SliceGeometry* slices, int count, const RenderOptions& options, float* S,
   float* I, std::string* error)
 {
-  if (this->Host)
-  {
-    return this->Host->Render(slices, count, options, S, I, error);
-  }
   std::vector<PreparedSlice> prepared;
   if (!PrepareSlices(slices, count, options, prepared, error) || !this->Reserve(prepared, false, false, error))
   {
@@ -538,10 +436,6 @@ bool CudaTrainingEngine::Render(const SliceGeometry* slices, int count, const Re
 bool CudaTrainingEngine::ApplyBasis(const float* r, const int* frames, int count, const RenderOptions& options,
   float* S, std::string* error)
 {
-  if (this->Host)
-  {
-    return this->Host->ApplyBasis(r, frames, count, options, S, error);
-  }
   const std::size_t pixels = std::size_t(this->Data->Width) * this->Data->Height;
   const RenderOptions linear = LinearBasisOptions(options);
   std::vector<PreparedSlice> prepared;
@@ -569,10 +463,6 @@ bool CudaTrainingEngine::ApplyBasis(const float* r, const int* frames, int count
 bool CudaTrainingEngine::ApplyBasisTranspose(const float* y, const int* frames, int count,
   const RenderOptions& options, double* out, std::string* error)
 {
-  if (this->Host)
-  {
-    return this->Host->ApplyBasisTranspose(y, frames, count, options, out, error);
-  }
   const std::int64_t n = this->N;
   const std::size_t pixels = std::size_t(this->Data->Width) * this->Data->Height;
   const RenderOptions linear = LinearBasisOptions(options);
@@ -624,10 +514,6 @@ bool CudaTrainingEngine::ApplyBasisTranspose(const float* y, const int* frames, 
 bool CudaTrainingEngine::BasisNorms(const float* weights, const int* frames, int count, const RenderOptions& options,
   double* out, std::string* error)
 {
-  if (this->Host)
-  {
-    return this->Host->BasisNorms(weights, frames, count, options, out, error);
-  }
   // Once per solve: on the host, over a copy of the field.
   if (!this->PullField(this->HostField, error))
   {

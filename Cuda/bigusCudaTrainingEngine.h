@@ -8,7 +8,7 @@
  * the batch: the forward pass on the device, I ([H, W]) to the host, the image loss there (the same
  * ComputeImageLoss as the CPU engine: L1, D-SSIM, FFL inside the frame's mask), dL/dI back to the device,
  * the backward pass into the device's gradients; then Adam on the device (Kingma and Ba 2015, algorithm 1;
- * the same double arithmetic per parameter as the CPU engine, unit quaternions and clamped log-scales after
+ * bigus::AdamUpdate, the CPU engine's function, per parameter, unit quaternions and clamped log-scales after
  * it, and a non-finite gradient or parameter reported as StepStatus::NonFinite). Pose gradients
  * (StepRequest::PoseGradients) are 6 doubles per frame copied back.
  *
@@ -16,9 +16,9 @@
  * reflectivities or images of the call uploaded; BasisNorms runs on the host over a copy of the field
  * (bigus::AccumulateBasisNorms), once per solve.
  *
- * Data-parallel runs (SetReduction with more than one process) switch the engine to the CPU engine's
- * host-side step over the CUDA renderer, which sums gradients through the host (a state pushed before moves
- * with it).
+ * Data-parallel runs do not use this engine: CreateTrainingEngine(..., dataParallel true) gives the CPU engine's
+ * host-side step over the CUDA renderer, which sums gradients through the host; this engine refuses a reduction
+ * of more than one process (TrainingEngine::SetReduction).
  *
  * Coarse steps (StepRequest::Data, the resolution schedule) render the request's frames instead of the
  * engine's own.

@@ -200,6 +200,15 @@ private:
 /// the field's), with footprint cutoff @p cutoff.
 BIGUSFILTERS_EXPORT RenderOptions RenderOptionsFor(const FieldModel& model, double elevationSigma, double cutoff);
 
+/// What a render filter has ready after the opening its renders share (vtkGaussianFieldRenderer::BeginRender).
+struct RenderSetup
+{
+  const FieldCache* Field = nullptr;          ///< the up-to-date converted field
+  Renderer* Backend = nullptr;                ///< the renderer of the filter's Backend
+  const TrainingCoverage* Coverage = nullptr; ///< null: no Coverage array (not wanted, or no training geometry)
+  RenderOptions Options;                      ///< RenderOptionsFor the field, ElevationSigma and Cutoff
+};
+
 /// The rendered image I ([0, 1] floats) as point-data scalars "Intensity": VTK_FLOAT as is, or
 /// VTK_UNSIGNED_CHAR as round(255 I).
 BIGUSFILTERS_EXPORT vtkSmartPointer<vtkDataArray> IntensityArray(const std::vector<float>& I, int scalarType);

@@ -130,80 +130,55 @@ bigus::SliceGeometry SliceAt(vtkMatrix4x4* axes, const double spacing[3], const 
   slice.PixelLowPass = pixelLowPass;
   return slice;
 }
+
+/**
+ * The output grid of @p self: its settings, an InformationInput's geometry over them, and for what is
+ * still unset the defaults of the field @p input holds (converted into @p field only then). Returns
+ * false when a default is needed and @p input holds no valid field.
+ */
+bool OutputGrid(vtkGaussianFieldReslice* self, bigus::FieldCache& field, vtkPolyData* input, Grid& g)
+{
+  const double* spacing = self->GetOutputSpacing();
+  const double* origin = self->GetOutputOrigin();
+  const int* extent = self->GetOutputExtent();
+  std::copy(spacing, spacing + 3, g.Spacing);
+  std::copy(origin, origin + 3, g.Origin);
+  std::copy(extent, extent + 6, g.Extent);
+  if (vtkImageData* reference = self->GetInformationInput())
+  {
+    reference->GetSpacing(g.Spacing);
+    reference->GetOrigin(g.Origin);
+    reference->GetExtent(g.Extent);
+  }
+  const bool planar = self->GetOutputDimensionality() == 2;
+  if (NeedsField(g, planar))
+  {
+    if (!field.Update(input, nullptr))
+    {
+      return false;
+    }
+    FillDefaults(g, field, self->GetResliceAxes(), planar);
+  }
+  if (planar)
+  {
+    g.Extent[5] = g.Extent[4];
+    g.Spacing[2] = g.Spacing[2] == Unset ? 1.0 : g.Spacing[2];
+  }
+  return true;
+}
 }
 
-/// What the filter keeps between executes (see "Interactive use" in the class description).
-class vtkGaussianFieldReslice::vtkInternals
-{
-public:
-  bigus::FieldCache Field;
-  bigus::RendererCache Renderer;
-
-  /**
-   * The output grid: the settings, an InformationInput's geometry over them, and for what is still
-   * unset the defaults of the field @p input holds (converted only then). Returns false when a default
-   * is needed and @p input holds no valid field.
-   */
-  static bool OutputGrid(vtkGaussianFieldReslice* self, vtkPolyData* input, Grid& g)
-  {
-    std::copy(self->OutputSpacing, self->OutputSpacing + 3, g.Spacing);
-    std::copy(self->OutputOrigin, self->OutputOrigin + 3, g.Origin);
-    std::copy(self->OutputExtent, self->OutputExtent + 6, g.Extent);
-    if (self->InformationInput)
-    {
-      self->InformationInput->GetSpacing(g.Spacing);
-      self->InformationInput->GetOrigin(g.Origin);
-      self->InformationInput->GetExtent(g.Extent);
-    }
-    const bool planar = self->OutputDimensionality == 2;
-    if (NeedsField(g, planar))
-    {
-      bigus::FieldCache& field = self->Internals->Field;
-      if (!field.Update(input, nullptr))
-      {
-        return false;
-      }
-      FillDefaults(g, field, self->ResliceAxes, planar);
-    }
-    if (planar)
-    {
-      g.Extent[5] = g.Extent[4];
-      g.Spacing[2] = g.Spacing[2] == Unset ? 1.0 : g.Spacing[2];
-    }
-    return true;
-  }
-};
-
 vtkGaussianFieldReslice::vtkGaussianFieldReslice()
-  : Internals(new vtkInternals)
 {
   this->SetOutputSpacingToDefault();
   this->SetOutputOriginToDefault();
   this->SetOutputExtentToDefault();
-  this->SetBackend("auto");
 }
 
 vtkGaussianFieldReslice::~vtkGaussianFieldReslice()
 {
   this->SetResliceAxes(nullptr);
   this->SetInformationInput(nullptr);
-  this->SetBackend(nullptr);
-  delete this->Internals;
-}
-
-void vtkGaussianFieldReslice::SetOutputScalarType(int type)
-{
-  std::string error;
-  if (!bigus::IsIntensityScalarType(type, &error))
-  {
-    vtkErrorMacro("OutputScalarType: " << error << "; keeping " << vtkImageScalarTypeNameMacro(this->OutputScalarType));
-    return;
-  }
-  if (type != this->OutputScalarType)
-  {
-    this->OutputScalarType = type;
-    this->Modified();
-  }
 }
 
 void vtkGaussianFieldReslice::SetOutputSpacingToDefault()
@@ -267,12 +242,6 @@ vtkMTimeType vtkGaussianFieldReslice::GetMTime()
   return t;
 }
 
-int vtkGaussianFieldReslice::FillInputPortInformation(int, vtkInformation* info)
-{
-  info->Set(vtkAlgorithm::INPUT_REQUIRED_DATA_TYPE(), "vtkPolyData");
-  return 1;
-}
-
 int vtkGaussianFieldReslice::RequestInformation(
   vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector* outputVector)
 {
@@ -281,7 +250,7 @@ int vtkGaussianFieldReslice::RequestInformation(
   Grid grid;
   vtkInformation* outInfo = outputVector->GetInformationObject(0);
   vtkDataObject::SetPointDataActiveScalarInfo(outInfo, this->OutputScalarType, 1);
-  if (!vtkInternals::OutputGrid(this, vtkPolyData::GetData(inputVector[0], 0), grid))
+  if (!OutputGrid(this, this->GetFieldCache(), vtkPolyData::GetData(inputVector[0], 0), grid))
   {
     // No field yet (its producer has not run): nothing to announce until RequestData knows the grid.
     const int empty[6] = { 0, -1, 0, -1, 0, -1 };
@@ -302,44 +271,20 @@ int vtkGaussianFieldReslice::RequestInformation(
   return 1;
 }
 
-int vtkGaussianFieldReslice::RequestUpdateExtent(vtkInformation*, vtkInformationVector**, vtkInformationVector*)
-{
-  return 1; // the whole field is needed for any part of the output
-}
-
 int vtkGaussianFieldReslice::RequestData(
   vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector* outputVector)
 {
   vtkInformation* outInfo = outputVector->GetInformationObject(0);
   vtkImageData* output = vtkImageData::GetData(outputVector, 0);
-  vtkPolyData* input = vtkPolyData::GetData(inputVector[0], 0);
-  bigus::FieldCache& field = this->Internals->Field;
-  std::string error, notice;
-  if (!field.Update(input, &error))
+  bigus::RenderSetup render;
+  if (!this->BeginRender(inputVector, render))
   {
-    vtkErrorMacro(<< error);
     return 0;
   }
-  bigus::Renderer* renderer = this->Internals->Renderer.Get(this->Backend ? this->Backend : "auto", &error, &notice);
-  if (!renderer)
-  {
-    vtkErrorMacro("Backend: " << error);
-    return 0;
-  }
-  if (!notice.empty())
-  {
-    vtkWarningMacro("Backend: " << notice);
-  }
-
-  const bigus::TrainingCoverage* coverage = nullptr; // null: no Coverage array (see the class description)
-  if (!field.GetOutputCoverage(this->OutputCoverage, coverage, &error))
-  {
-    vtkErrorMacro(<< error << " (OutputCoverage off renders without the coverage image)");
-    return 0;
-  }
+  const bigus::TrainingCoverage* coverage = render.Coverage;
 
   Grid grid;
-  vtkInternals::OutputGrid(this, input, grid);
+  OutputGrid(this, this->GetFieldCache(), vtkPolyData::GetData(inputVector[0], 0), grid);
   if (grid.IsEmpty())
   {
     vtkErrorMacro("empty output extent " << grid.ExtentText());
@@ -374,8 +319,9 @@ int vtkGaussianFieldReslice::RequestData(
   {
     axes->DeepCopy(this->ResliceAxes);
   }
-  const bigus::RenderOptions options = bigus::RenderOptionsFor(field.GetModel(), this->ElevationSigma, this->Cutoff);
-  const bigus::FieldView view = field.GetField().View();
+  const bigus::RenderOptions& options = render.Options;
+  const bigus::FieldView view = render.Field->GetField().View();
+  std::string error;
   // S is kept whole only when it is an output; otherwise one slice of scratch.
   std::vector<float> I(pixels), S(this->OutputScatteringField ? pixels : slicePixels), C(coverage ? pixels : 0);
   for (int k = 0; k < depth; ++k)
@@ -387,7 +333,7 @@ int vtkGaussianFieldReslice::RequestData(
     }
     const bigus::SliceGeometry slice = SliceAt(axes, grid.Spacing, grid.Origin, extent, k, this->PixelLowPass);
     float* s = S.data() + (this->OutputScatteringField ? k * slicePixels : 0);
-    if (!renderer->Forward(view, &slice, 1, options, s, I.data() + k * slicePixels, nullptr, &error))
+    if (!render.Backend->Forward(view, &slice, 1, options, s, I.data() + k * slicePixels, nullptr, &error))
     {
       vtkErrorMacro("ResliceAxes: " << error);
       return 0;
@@ -452,12 +398,6 @@ void vtkGaussianFieldReslice::PrintSelf(ostream& os, vtkIndent indent)
   }
   os << indent << "OutputDimensionality: " << this->OutputDimensionality << "\n";
   os << indent << "InformationInput: " << (this->InformationInput ? "set" : "(none)") << "\n";
-  os << indent << "ElevationSigma: " << this->ElevationSigma << (this->ElevationSigma < 0 ? " (the field's)" : "")
-     << "\n";
-  os << indent << "Cutoff: " << this->Cutoff << "\n";
   os << indent << "PixelLowPass: " << this->PixelLowPass << "\n";
   os << indent << "OutputScatteringField: " << this->OutputScatteringField << "\n";
-  os << indent << "OutputCoverage: " << this->OutputCoverage << "\n";
-  os << indent << "OutputScalarType: " << vtkImageScalarTypeNameMacro(this->OutputScalarType) << "\n";
-  os << indent << "Backend: " << (this->Backend ? this->Backend : "auto") << "\n";
 }

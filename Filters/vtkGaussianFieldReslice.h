@@ -10,22 +10,8 @@
  * for vtkImageReslice or a volume mapper. SetInformationInput copies spacing, origin and extent from a
  * reference image.
  *
- * Scalars "Intensity": I = 1 - exp(-gamma max(S, 0)) as float in [0, 1] or unsigned char (x 255,
- * rounded); with OutputScatteringField on, a second point-data array "ScatteringField" holds S (float).
- * ElevationSigma (mm) and gamma default to the field's (field data); Cutoff is the renderer's k.
- *
- * Point data "Coverage" (float, dimensionless; OutputCoverage, default on) says how much training
- * data supports each voxel, so that a viewer can tell data from interpolation: for a voxel at x (mm),
- *   Coverage(x) = sum over training frames t of [x projects inside t's fan mask] exp(-d_t(x)^2 / (2 sigma_E^2)),
- * d_t(x) the distance (mm) from x to frame t's plane, the projection made with frame t's
- * ImageToReference, sigma_E the ElevationSigma of the render (mm). A voxel on a training frame inside
- * its fan has about 1 (plus its neighbours' share), a voxel in a gap wider than the beam about 0.
- * Frames further than 4 sigma_E are left out (less than 3.4e-4 each); details in
- * bigus::TrainingCoverage (bigusGaussianFieldData.h). It needs the field's training geometry (field
- * data TrainingPoses, TrainingFrameSize, TrainingFanMask, written by vtkGaussianFieldTrainer): a field
- * without those arrays (an older file, a hand-made field) renders as before, with no Coverage array;
- * a field whose arrays are malformed fails the request with an error naming the array (turn
- * OutputCoverage off to render it without coverage).
+ * Point data (vtkGaussianFieldRenderer): scalars "Intensity", with OutputScatteringField on a second
+ * array "ScatteringField" holding the signed scattering field S (float), and "Coverage" (OutputCoverage).
  *
  * Defaults when nothing is set: identity axes; spacing = the field's PixelSpacing (its training frames'
  * pixel spacing) or 0.5 mm; origin and extent = the field's bounds in the reslice frame (points, padded
@@ -43,29 +29,27 @@
  * default grid -> vtkImageReslice, first Update): set the grid, or update this filter before the
  * downstream one.
  *
- * Interactive use: the renderer and the field converted to the renderer's form are kept between
- * executes, rebuilt only when Backend changes or the input (object or MTime) changes, so moving the
- * plane (ResliceAxes) re-renders without converting the field again. A stack (OutputDimensionality 3)
- * reports progress after every slice and stops at the next slice when AbortExecute is set, leaving an
- * empty output (the next Update renders again).
+ * Interactive use: the renderer and the converted field are kept between executes
+ * (vtkGaussianFieldRenderer), so moving the plane (ResliceAxes) re-renders without converting the
+ * field again. A stack (OutputDimensionality 3) reports progress after every slice and stops at the
+ * next slice when AbortExecute is set, leaving an empty output (the next Update renders again).
  *
- * Errors (no field, a malformed field or, with OutputCoverage on, malformed training geometry, an
- * unavailable backend, a singular or sheared ResliceAxes, an empty extent) fail the request with
- * vtkErrorMacro and leave the output empty.
+ * Errors (those of vtkGaussianFieldRenderer, a singular or sheared ResliceAxes, an empty extent) fail
+ * the request with vtkErrorMacro and leave the output empty.
  */
 #ifndef vtkGaussianFieldReslice_h
 #define vtkGaussianFieldReslice_h
 
 #include "bigusFiltersModule.h" // For export macro
-#include "vtkImageAlgorithm.h"
+#include "vtkGaussianFieldRenderer.h"
 
 class vtkMatrix4x4;
 
-class BIGUSFILTERS_EXPORT vtkGaussianFieldReslice : public vtkImageAlgorithm
+class BIGUSFILTERS_EXPORT vtkGaussianFieldReslice : public vtkGaussianFieldRenderer
 {
 public:
   static vtkGaussianFieldReslice* New();
-  vtkTypeMacro(vtkGaussianFieldReslice, vtkImageAlgorithm);
+  vtkTypeMacro(vtkGaussianFieldReslice, vtkGaussianFieldRenderer);
   void PrintSelf(ostream& os, vtkIndent indent) override;
 
   ///@{
@@ -111,23 +95,6 @@ public:
 
   ///@{
   /**
-   * Elevation beam sigma (mm); negative (default) = the field's ElevationSigma.
-   */
-  vtkSetMacro(ElevationSigma, double);
-  vtkGetMacro(ElevationSigma, double);
-  ///@}
-
-  ///@{
-  /**
-   * Footprint cutoff k (standard deviations, clamped to [1, 20]). Default 5 (float error in I below
-   * 1e-5).
-   */
-  vtkSetClampMacro(Cutoff, double, 1.0, 20.0);
-  vtkGetMacro(Cutoff, double);
-  ///@}
-
-  ///@{
-  /**
    * Variance (output pixels^2, along each output axis; clamped to [0, 1e6]) of a Gaussian low-pass that every
    * Gaussian is convolved with before it is sampled at the output pixel centres (bigus::SliceGeometry::
    * PixelLowPass). 1/12 makes each pixel the average over its own area (the variance of a box of one pixel):
@@ -147,40 +114,6 @@ public:
   vtkBooleanMacro(OutputScatteringField, bool);
   ///@}
 
-  ///@{
-  /**
-   * Also output float point data "Coverage", the training data's support of each voxel (see the class
-   * description), when the field carries its training geometry. Default on.
-   */
-  vtkSetMacro(OutputCoverage, bool);
-  vtkGetMacro(OutputCoverage, bool);
-  vtkBooleanMacro(OutputCoverage, bool);
-  ///@}
-
-  ///@{
-  /**
-   * Scalar type of "Intensity": VTK_FLOAT (default, I in [0, 1]) or VTK_UNSIGNED_CHAR
-   * (round(255 I)). Any other type is refused with vtkErrorMacro and the previous type kept, so the
-   * scalar type announced in the pipeline information is the one produced.
-   */
-  virtual void SetOutputScalarType(int type);
-  vtkGetMacro(OutputScalarType, int);
-  void SetOutputScalarTypeToFloat() { this->SetOutputScalarType(VTK_FLOAT); }
-  void SetOutputScalarTypeToUnsignedChar() { this->SetOutputScalarType(VTK_UNSIGNED_CHAR); }
-  ///@}
-
-  ///@{
-  /**
-   * Rendering backend, by name in the backend registry (bigusBackend.h): "auto" (default: the
-   * available backend of highest priority, CUDA where it is built and a device is usable, else the
-   * CPU, with a warning that says why a backend was skipped), "cpu", "cuda". A backend that cannot
-   * run here fails the request with an error naming it and the available ones; no silent fallback.
-   * The renderer is kept between executes and created again only when this name changes.
-   */
-  vtkSetStringMacro(Backend);
-  vtkGetStringMacro(Backend);
-  ///@}
-
   /**
    * Includes the ResliceAxes matrix and the information input.
    */
@@ -190,9 +123,7 @@ protected:
   vtkGaussianFieldReslice();
   ~vtkGaussianFieldReslice() override;
 
-  int FillInputPortInformation(int port, vtkInformation* info) override;
   int RequestInformation(vtkInformation*, vtkInformationVector**, vtkInformationVector*) override;
-  int RequestUpdateExtent(vtkInformation*, vtkInformationVector**, vtkInformationVector*) override;
   int RequestData(vtkInformation*, vtkInformationVector**, vtkInformationVector*) override;
 
   vtkMatrix4x4* ResliceAxes = nullptr;
@@ -201,18 +132,10 @@ protected:
   double OutputOrigin[3];
   int OutputExtent[6];
   int OutputDimensionality = 2;
-  double ElevationSigma = -1;
-  double Cutoff = 5.0;
   double PixelLowPass = 0.0;
   bool OutputScatteringField = false;
-  bool OutputCoverage = true;
-  int OutputScalarType = VTK_FLOAT;
-  char* Backend = nullptr;
 
 private:
-  class vtkInternals;
-  vtkInternals* Internals;
-
   vtkGaussianFieldReslice(const vtkGaussianFieldReslice&) = delete;
   void operator=(const vtkGaussianFieldReslice&) = delete;
 };

@@ -13,8 +13,6 @@
 #include "vtkNew.h"
 #include "vtkObjectFactory.h"
 #include "vtkPointData.h"
-#include "vtkPolyData.h"
-#include "vtkStreamingDemandDrivenPipeline.h"
 
 #include <chrono>
 #include <cmath>
@@ -23,47 +21,14 @@
 vtkStandardNewMacro(vtkGaussianFieldSequenceRenderer);
 vtkCxxSetObjectMacro(vtkGaussianFieldSequenceRenderer, FrameList, vtkIdList);
 
-/// What the filter keeps between executes.
-class vtkGaussianFieldSequenceRenderer::vtkInternals
-{
-public:
-  bigus::FieldCache Field;
-  bigus::RendererCache Renderer;
-};
-
 vtkGaussianFieldSequenceRenderer::vtkGaussianFieldSequenceRenderer()
-  : Internals(new vtkInternals)
 {
   this->SetNumberOfInputPorts(2);
-  this->SetBackend("auto");
 }
 
 vtkGaussianFieldSequenceRenderer::~vtkGaussianFieldSequenceRenderer()
 {
   this->SetFrameList(nullptr);
-  this->SetBackend(nullptr);
-  delete this->Internals;
-}
-
-void vtkGaussianFieldSequenceRenderer::SetOutputScalarType(int type)
-{
-  std::string error;
-  if (!bigus::IsIntensityScalarType(type, &error))
-  {
-    vtkErrorMacro("OutputScalarType: " << error << "; keeping " << vtkImageScalarTypeNameMacro(this->OutputScalarType));
-    return;
-  }
-  if (type != this->OutputScalarType)
-  {
-    this->OutputScalarType = type;
-    this->Modified();
-  }
-}
-
-int vtkGaussianFieldSequenceRenderer::FillInputPortInformation(int port, vtkInformation* info)
-{
-  info->Set(vtkAlgorithm::INPUT_REQUIRED_DATA_TYPE(), port == 0 ? "vtkPolyData" : "vtkImageData");
-  return 1;
 }
 
 int vtkGaussianFieldSequenceRenderer::RequestInformation(
@@ -74,45 +39,18 @@ int vtkGaussianFieldSequenceRenderer::RequestInformation(
   return 1;
 }
 
-int vtkGaussianFieldSequenceRenderer::RequestUpdateExtent(
-  vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector*)
-{
-  // Only the poses are needed, but they come with the whole sequence.
-  vtkInformation* poseInfo = inputVector[1]->GetInformationObject(0);
-  poseInfo->Set(vtkStreamingDemandDrivenPipeline::UPDATE_EXTENT(),
-    poseInfo->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT()), 6);
-  return 1;
-}
-
 int vtkGaussianFieldSequenceRenderer::RequestData(
   vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector* outputVector)
 {
-  vtkPolyData* input = vtkPolyData::GetData(inputVector[0], 0);
   vtkImageData* sequence = vtkImageData::GetData(inputVector[1], 0);
   vtkImageData* output = vtkImageData::GetData(outputVector, 0);
-  bigus::FieldCache& field = this->Internals->Field;
-  std::string error, notice;
-  if (!field.Update(input, &error))
+  bigus::RenderSetup render;
+  if (!this->BeginRender(inputVector, render))
   {
-    vtkErrorMacro(<< error);
     return 0;
   }
-  bigus::Renderer* renderer = this->Internals->Renderer.Get(this->Backend ? this->Backend : "auto", &error, &notice);
-  if (!renderer)
-  {
-    vtkErrorMacro("Backend: " << error);
-    return 0;
-  }
-  if (!notice.empty())
-  {
-    vtkWarningMacro("Backend: " << notice);
-  }
-  const bigus::TrainingCoverage* coverage = nullptr; // null: no Coverage array (see the class description)
-  if (!field.GetOutputCoverage(this->OutputCoverage, coverage, &error))
-  {
-    vtkErrorMacro(<< error << " (OutputCoverage off renders without the coverage image)");
-    return 0;
-  }
+  const bigus::TrainingCoverage* coverage = render.Coverage;
+  std::string error;
   int dims[3];
   sequence->GetDimensions(dims);
   vtkDataArray* poses = sequence->GetFieldData()->GetArray("ImageToReference");
@@ -135,7 +73,8 @@ int vtkGaussianFieldSequenceRenderer::RequestData(
     slices[k].Width = dims[0];
     slices[k].Height = dims[1];
   }
-  const bigus::RenderOptions options = bigus::RenderOptionsFor(field.GetModel(), this->ElevationSigma, this->Cutoff);
+  const bigus::RenderOptions& options = render.Options;
+  const bigus::FieldView view = render.Field->GetField().View();
   const std::size_t framePixels = std::size_t(dims[0]) * dims[1];
   std::vector<float> S(framePixels), I(framePixels * count), C(coverage ? framePixels * count : 0);
   double renderSeconds = 0;
@@ -147,8 +86,7 @@ int vtkGaussianFieldSequenceRenderer::RequestData(
       return 1;
     }
     const auto start = std::chrono::steady_clock::now();
-    if (!renderer->Forward(
-          field.GetField().View(), &slices[k], 1, options, S.data(), I.data() + k * framePixels, nullptr, &error))
+    if (!render.Backend->Forward(view, &slices[k], 1, options, S.data(), I.data() + k * framePixels, nullptr, &error))
     {
       vtkErrorMacro("frame " << frames[k] << ": " << error);
       return 0;
@@ -178,11 +116,5 @@ void vtkGaussianFieldSequenceRenderer::PrintSelf(ostream& os, vtkIndent indent)
 {
   this->Superclass::PrintSelf(os, indent);
   os << indent << "FrameList: " << (this->FrameList ? this->FrameList->GetNumberOfIds() : 0) << " frames\n";
-  os << indent << "ElevationSigma: " << this->ElevationSigma << (this->ElevationSigma < 0 ? " (the field's)" : "")
-     << "\n";
-  os << indent << "Cutoff: " << this->Cutoff << "\n";
-  os << indent << "OutputCoverage: " << this->OutputCoverage << "\n";
-  os << indent << "OutputScalarType: " << vtkImageScalarTypeNameMacro(this->OutputScalarType) << "\n";
-  os << indent << "Backend: " << (this->Backend ? this->Backend : "auto") << "\n";
   os << indent << "SecondsPerFrame: " << this->SecondsPerFrame << "\n";
 }

@@ -1,6 +1,7 @@
 #include "vtkGaussianFieldTrainer.h"
 
 #include "bigusGaussianFieldData.h"
+#include "bigusPipeline.h"
 #include "bigusTrainer.h"
 #include "bigusTrainingEngine.h"
 #include "vtkUltrasoundFanMask.h"
@@ -27,6 +28,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <vector>
 
 vtkStandardNewMacro(vtkGaussianFieldTrainer);
@@ -207,70 +209,74 @@ vtkGaussianFieldTrainer::~vtkGaussianFieldTrainer()
 
 // The settings' setters and getters: each reads and writes its field of the one bigus::TrainerSettings, whose
 // defaults are the filter's (a clamped one keeps a value in [lo, hi], as vtkSetClampMacro does).
-#define bigusTrainerSettingMacro(name, type, member)                                                                  \
+namespace
+{
+/// @p member = @p value; whether it changed (the setter then calls Modified).
+template <typename Member, typename Value>
+bool Assign(Member& member, const Value& value)
+{
+  if (member == value)
+  {
+    return false;
+  }
+  member = value;
+  return true;
+}
+}
+#define bigusTrainerSettingMacro(name, type, member, lo, hi)                                                          \
   void vtkGaussianFieldTrainer::Set##name(type value)                                                                  \
   {                                                                                                                    \
-    if (this->Settings->member != value)                                                                               \
+    if (Assign(this->Settings->member, std::min<type>(std::max<type>(value, lo), hi)))                                 \
     {                                                                                                                  \
-      this->Settings->member = value;                                                                                  \
       this->Modified();                                                                                                \
     }                                                                                                                  \
   }                                                                                                                    \
   type vtkGaussianFieldTrainer::Get##name() const { return static_cast<type>(this->Settings->member); }
-#define bigusTrainerClampedSettingMacro(name, type, member, lo, hi)                                                   \
-  void vtkGaussianFieldTrainer::Set##name(type value)                                                                  \
-  {                                                                                                                    \
-    value = std::min<type>(std::max<type>(value, lo), hi);                                                             \
-    if (this->Settings->member != value)                                                                               \
-    {                                                                                                                  \
-      this->Settings->member = value;                                                                                  \
-      this->Modified();                                                                                                \
-    }                                                                                                                  \
-  }                                                                                                                    \
-  type vtkGaussianFieldTrainer::Get##name() const { return static_cast<type>(this->Settings->member); }
-bigusTrainerClampedSettingMacro(ElevationSigma, double, ElevationSigma, 0.0, 1000.0)
-bigusTrainerSettingMacro(BeamIntegration, bool, BeamIntegration)
-bigusTrainerSettingMacro(NonNegativeReflectivity, bool, NonNegativeReflectivity)
-bigusTrainerSettingMacro(HarrisInitialisation, bool, HarrisInitialisation)
-bigusTrainerSettingMacro(Densify, bool, Densify)
-bigusTrainerSettingMacro(ReflectivitySolve, bool, ReflectivitySolve)
-bigusTrainerClampedSettingMacro(SolveIterations, int, Solve.MaximumIterations, 1, 100000)
-bigusTrainerClampedSettingMacro(SolveL1, double, Solve.L1, 0.0, 1.0)
-bigusTrainerSettingMacro(DenseInitialisation, bool, DenseInitialisation)
-bigusTrainerSettingMacro(PixelGridFit, bool, PixelGridFit)
-bigusTrainerClampedSettingMacro(PoseSmoothness, double, Poses.Smoothness, 0.0, 1e12)
-bigusTrainerClampedSettingMacro(PoseRefinementStart, double, Poses.Start, -1.0, 1.0)
-bigusTrainerSettingMacro(RefineTimeOffset, bool, Poses.RefineTimeOffset)
-bigusTrainerSettingMacro(RefineImageToProbe, bool, Poses.RefineImageToProbe)
-bigusTrainerSettingMacro(SparseAdam, bool, SparseAdam)
-bigusTrainerClampedSettingMacro(Iterations, int, Iterations, 0, 100000000)
-bigusTrainerClampedSettingMacro(TimeBudget, double, TimeBudget, 0.0, 1e9)
-bigusTrainerClampedSettingMacro(ConvergenceTolerance, double, ConvergenceTolerance, 0.0, 1.0)
-bigusTrainerClampedSettingMacro(InitialGaussians, vtkIdType, InitialGaussians, 0, VTK_ID_MAX)
-bigusTrainerClampedSettingMacro(MaximumGaussians, vtkIdType, MaximumGaussians, 1, VTK_ID_MAX)
-bigusTrainerSettingMacro(DensifyStart, int, DensifyStart)
-bigusTrainerSettingMacro(DensifyEnd, int, DensifyEnd)
-bigusTrainerClampedSettingMacro(DensifyInterval, int, DensifyInterval, 1, VTK_INT_MAX)
-bigusTrainerClampedSettingMacro(DensifyPercentile, double, DensifyPercentile, 0.0, 100.0)
-bigusTrainerClampedSettingMacro(ResidualSeedShare, double, ResidualSeedShare, 0.0, 100.0)
-bigusTrainerClampedSettingMacro(GrowthMargin, double, GrowthMargin, 0.0, 1.0)
-bigusTrainerClampedSettingMacro(GrowthPatience, int, GrowthPatience, 1, VTK_INT_MAX)
-bigusTrainerSettingMacro(FillGaps, bool, FillGaps)
-bigusTrainerClampedSettingMacro(MergeTolerance, double, Merge.Tolerance, 0.0, 1.0)
-bigusTrainerSettingMacro(Seed, unsigned int, Seed)
-bigusTrainerClampedSettingMacro(FramesPerStep, int, FramesPerStep, 1, 4096)
-bigusTrainerClampedSettingMacro(CoarseFraction, double, CoarseFraction, 0.0, 1.0)
-bigusTrainerSettingMacro(CoarseLowPass, bool, CoarseLowPass)
-bigusTrainerClampedSettingMacro(CheckpointInterval, int, CheckpointInterval, 0, VTK_INT_MAX)
+#define bigusAnyValue(type) std::numeric_limits<type>::lowest(), std::numeric_limits<type>::max()
+// (expands bigusAnyValue before the setting macro counts its arguments)
+#define bigusTrainerSetting(name, type, member, ...) bigusTrainerSettingMacro(name, type, member, __VA_ARGS__)
+bigusTrainerSetting(ElevationSigma, double, ElevationSigma, 0.0, 1000.0)
+bigusTrainerSetting(BeamIntegration, bool, BeamIntegration, bigusAnyValue(bool))
+bigusTrainerSetting(NonNegativeReflectivity, bool, NonNegativeReflectivity, bigusAnyValue(bool))
+bigusTrainerSetting(HarrisInitialisation, bool, Seeding.HarrisInitialisation, bigusAnyValue(bool))
+bigusTrainerSetting(Densify, bool, Densification.Enabled, bigusAnyValue(bool))
+bigusTrainerSetting(ReflectivitySolve, bool, ReflectivitySolve, bigusAnyValue(bool))
+bigusTrainerSetting(SolveIterations, int, Solve.MaximumIterations, 1, 100000)
+bigusTrainerSetting(SolveL1, double, Solve.L1, 0.0, 1.0)
+bigusTrainerSetting(DenseInitialisation, bool, Seeding.DenseInitialisation, bigusAnyValue(bool))
+bigusTrainerSetting(PixelGridFit, bool, Seeding.PixelGridFit, bigusAnyValue(bool))
+bigusTrainerSetting(PoseSmoothness, double, Poses.Smoothness, 0.0, 1e12)
+bigusTrainerSetting(PoseRefinementStart, double, Poses.Start, -1.0, 1.0)
+bigusTrainerSetting(RefineTimeOffset, bool, Poses.RefineTimeOffset, bigusAnyValue(bool))
+bigusTrainerSetting(RefineImageToProbe, bool, Poses.RefineImageToProbe, bigusAnyValue(bool))
+bigusTrainerSetting(SparseAdam, bool, SparseAdam, bigusAnyValue(bool))
+bigusTrainerSetting(Iterations, int, Iterations, 0, 100000000)
+bigusTrainerSetting(TimeBudget, double, TimeBudget, 0.0, 1e9)
+bigusTrainerSetting(ConvergenceTolerance, double, ConvergenceTolerance, 0.0, 1.0)
+bigusTrainerSetting(InitialGaussians, vtkIdType, Seeding.InitialGaussians, 0, VTK_ID_MAX)
+bigusTrainerSetting(MaximumGaussians, vtkIdType, MaximumGaussians, 1, VTK_ID_MAX)
+bigusTrainerSetting(DensifyStart, int, Densification.Start, bigusAnyValue(int))
+bigusTrainerSetting(DensifyEnd, int, Densification.End, bigusAnyValue(int))
+bigusTrainerSetting(DensifyInterval, int, Densification.Interval, 1, VTK_INT_MAX)
+bigusTrainerSetting(DensifyPercentile, double, Densification.Percentile, 0.0, 100.0)
+bigusTrainerSetting(ResidualSeedShare, double, Densification.ResidualSeedShare, 0.0, 100.0)
+bigusTrainerSetting(GrowthMargin, double, Densification.GrowthMargin, 0.0, 1.0)
+bigusTrainerSetting(GrowthPatience, int, Densification.GrowthPatience, 1, VTK_INT_MAX)
+bigusTrainerSetting(FillGaps, bool, FillGaps, bigusAnyValue(bool))
+bigusTrainerSetting(MergeTolerance, double, Merge.Tolerance, 0.0, 1.0)
+bigusTrainerSetting(Seed, unsigned int, Seed, bigusAnyValue(unsigned int))
+bigusTrainerSetting(FramesPerStep, int, FramesPerStep, 1, 4096)
+bigusTrainerSetting(CoarseFraction, double, CoarseFraction, 0.0, 1.0)
+bigusTrainerSetting(CoarseLowPass, bool, CoarseLowPass, bigusAnyValue(bool))
+bigusTrainerSetting(CheckpointInterval, int, CheckpointInterval, 0, VTK_INT_MAX)
+#undef bigusTrainerSetting
 #undef bigusTrainerSettingMacro
-#undef bigusTrainerClampedSettingMacro
+#undef bigusAnyValue
 
 void vtkGaussianFieldTrainer::SetRefinePoses(int mode)
 {
-  const auto value = static_cast<bigus::PoseRefinement>(std::min(std::max(mode, 0), 2));
-  if (this->Settings->Poses.RefinePoses != value)
+  if (Assign(this->Settings->Poses.RefinePoses, static_cast<bigus::PoseRefinement>(std::min(std::max(mode, 0), 2))))
   {
-    this->Settings->Poses.RefinePoses = value;
     this->Modified();
   }
 }
@@ -283,11 +289,8 @@ int vtkGaussianFieldTrainer::GetRefinePoses() const
 void vtkGaussianFieldTrainer::SetLossWeights(double l1, double dssim, double ffl)
 {
   bigus::ImageLossWeights& w = this->Settings->Loss;
-  if (w.L1 != l1 || w.DSSIM != dssim || w.FFL != ffl)
+  if (Assign(w.L1, l1) | Assign(w.DSSIM, dssim) | Assign(w.FFL, ffl))
   {
-    w.L1 = l1;
-    w.DSSIM = dssim;
-    w.FFL = ffl;
     this->Modified();
   }
 }
@@ -302,10 +305,8 @@ void vtkGaussianFieldTrainer::GetLossWeights(double weights[3]) const
 
 void vtkGaussianFieldTrainer::SetCheckpointFile(const char* file)
 {
-  const std::string value = file ? file : "";
-  if (this->Settings->CheckpointFile != value)
+  if (Assign(this->Settings->CheckpointFile, std::string(file ? file : "")))
   {
-    this->Settings->CheckpointFile = value;
     this->Modified();
   }
 }
@@ -346,18 +347,7 @@ int vtkGaussianFieldTrainer::RequestUpdateExtent(
 {
   // The trainer needs every frame whatever a consumer of the field asks for (as the other sequence
   // filters here do); the default would copy the output's update request upstream.
-  for (int port = 0; port < 2; ++port)
-  {
-    for (int c = 0; c < inputVector[port]->GetNumberOfInformationObjects(); ++c)
-    {
-      vtkInformation* inInfo = inputVector[port]->GetInformationObject(c);
-      if (inInfo->Has(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT()))
-      {
-        inInfo->Set(vtkStreamingDemandDrivenPipeline::UPDATE_EXTENT(),
-          inInfo->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT()), 6);
-      }
-    }
-  }
+  bigus::RequestWholeExtent(inputVector, 2);
   return 1;
 }
 
@@ -386,7 +376,9 @@ int vtkGaussianFieldTrainer::RequestData(
   std::unique_ptr<bigus::TrainingEngine> engine;
   if (ready)
   {
-    engine = bigus::CreateTrainingEngine(this->Backend ? this->Backend : "auto", &error, &notice);
+    // Data-parallel runs sum on the host: the factory gives the CPU engine over the backend's renderer.
+    engine = bigus::CreateTrainingEngine(this->Backend ? this->Backend : "auto", &error, &notice,
+      this->Controller && this->Controller->GetNumberOfProcesses() > 1);
     ready = engine != nullptr;
     error = ready ? error : "Backend: " + error;
   }

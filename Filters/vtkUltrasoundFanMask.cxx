@@ -1,5 +1,6 @@
 #include "vtkUltrasoundFanMask.h"
 
+#include "bigusPipeline.h"
 #include "vtkUltrasoundCalibration.h"
 
 #include "vtkDataArray.h"
@@ -47,9 +48,7 @@ int vtkUltrasoundFanMask::RequestUpdateExtent(
   vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector*)
 {
   // Every frame contributes to the estimate, whatever part of the mask is asked for.
-  vtkInformation* inInfo = inputVector[0]->GetInformationObject(0);
-  inInfo->Set(vtkStreamingDemandDrivenPipeline::UPDATE_EXTENT(),
-    inInfo->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT()), 6);
+  bigus::RequestWholeExtent(inputVector[0]);
   return 1;
 }
 

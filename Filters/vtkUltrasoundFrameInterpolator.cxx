@@ -1,6 +1,7 @@
 #include "vtkUltrasoundFrameInterpolator.h"
 
 #include "bigusGaussianFieldData.h"
+#include "bigusPipeline.h"
 
 #include "vtkDataArray.h"
 #include "vtkDoubleArray.h"
@@ -120,9 +121,7 @@ int vtkUltrasoundFrameInterpolator::RequestUpdateExtent(
   vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector*)
 {
   // Any frame may be a source, so the whole sequence is needed.
-  vtkInformation* inInfo = inputVector[0]->GetInformationObject(0);
-  inInfo->Set(vtkStreamingDemandDrivenPipeline::UPDATE_EXTENT(),
-    inInfo->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT()), 6);
+  bigus::RequestWholeExtent(inputVector[0]);
   return 1;
 }
 

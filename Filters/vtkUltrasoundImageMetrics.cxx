@@ -1,6 +1,7 @@
 #include "vtkUltrasoundImageMetrics.h"
 
 #include "bigusImageMetrics.h"
+#include "bigusPipeline.h"
 
 #include "vtkDataArray.h"
 #include "vtkDoubleArray.h"
@@ -12,7 +13,6 @@
 #include "vtkNew.h"
 #include "vtkObjectFactory.h"
 #include "vtkPointData.h"
-#include "vtkStreamingDemandDrivenPipeline.h"
 #include "vtkTable.h"
 
 #include <algorithm>
@@ -126,18 +126,7 @@ int vtkUltrasoundImageMetrics::RequestUpdateExtent(
     return 0;
   }
   // Every frame and the whole mask are compared, whatever part of the table is asked for.
-  for (int port = 0; port < this->GetNumberOfInputPorts(); ++port)
-  {
-    for (int c = 0; c < inputVector[port]->GetNumberOfInformationObjects(); ++c)
-    {
-      vtkInformation* inInfo = inputVector[port]->GetInformationObject(c);
-      if (inInfo->Has(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT()))
-      {
-        inInfo->Set(vtkStreamingDemandDrivenPipeline::UPDATE_EXTENT(),
-          inInfo->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT()), 6);
-      }
-    }
-  }
+  bigus::RequestWholeExtent(inputVector, this->GetNumberOfInputPorts());
   return 1;
 }
 

@@ -1,6 +1,7 @@
 #include "vtkUltrasoundSequenceReslice.h"
 
 #include "bigusGaussianFieldData.h"
+#include "bigusPipeline.h"
 
 #include "vtkDataArray.h"
 #include "vtkFieldData.h"
@@ -13,7 +14,6 @@
 #include "vtkObjectFactory.h"
 #include "vtkPointData.h"
 #include "vtkSMPTools.h"
-#include "vtkStreamingDemandDrivenPipeline.h"
 #include "vtkUnsignedCharArray.h"
 
 #include <algorithm>
@@ -225,12 +225,7 @@ int vtkUltrasoundSequenceReslice::RequestUpdateExtent(
   vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector*)
 {
   // Any frame may reach any voxel; the poses come with the whole sequence.
-  for (int port = 0; port < 2; ++port)
-  {
-    vtkInformation* inInfo = inputVector[port]->GetInformationObject(0);
-    inInfo->Set(vtkStreamingDemandDrivenPipeline::UPDATE_EXTENT(),
-      inInfo->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT()), 6);
-  }
+  bigus::RequestWholeExtent(inputVector, 2);
   return 1;
 }
 

@@ -1,6 +1,7 @@
 #include "vtkUltrasoundVolumeCompounder.h"
 
 #include "bigusGaussianFieldData.h"
+#include "bigusPipeline.h"
 
 #include "vtkAlgorithmOutput.h"
 #include "vtkDataArray.h"
@@ -767,15 +768,7 @@ int vtkUltrasoundVolumeCompounder::RequestUpdateExtent(
   vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector*)
 {
   // Every frame and the whole mask are needed, whatever part of the volume is asked for.
-  for (int port = 0; port < 2; ++port)
-  {
-    for (int k = 0; k < inputVector[port]->GetNumberOfInformationObjects(); ++k)
-    {
-      vtkInformation* inInfo = inputVector[port]->GetInformationObject(k);
-      inInfo->Set(vtkStreamingDemandDrivenPipeline::UPDATE_EXTENT(),
-        inInfo->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT()), 6);
-    }
-  }
+  bigus::RequestWholeExtent(inputVector, 2);
   return 1;
 }
 

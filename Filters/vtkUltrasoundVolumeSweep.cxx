@@ -1,5 +1,6 @@
 #include "vtkUltrasoundVolumeSweep.h"
 
+#include "bigusPipeline.h"
 #include "vtkUltrasoundSequenceReslice.h"
 
 #include "vtkCallbackCommand.h"
@@ -307,9 +308,8 @@ int vtkUltrasoundVolumeSweep::RequestInformation(
 int vtkUltrasoundVolumeSweep::RequestUpdateExtent(
   vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector*)
 {
-  vtkInformation* inInfo = inputVector[0]->GetInformationObject(0);
-  inInfo->Set(vtkStreamingDemandDrivenPipeline::UPDATE_EXTENT(),
-    inInfo->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT()), 6);
+  // Every slice of the volume may be sampled, whatever part of the sweep is asked for.
+  bigus::RequestWholeExtent(inputVector[0]);
   return 1;
 }
 

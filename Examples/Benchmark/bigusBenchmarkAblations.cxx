@@ -27,8 +27,9 @@ struct Ablation
 std::vector<Ablation> Ablations()
 {
   return {
-    { "no EA-D (no densification)", [](TrainerSettings& s, std::int64_t) { s.Densify = false; }, "lower (EA-D helps)" },
-    { "random initialisation (not Harris)", [](TrainerSettings& s, std::int64_t) { s.HarrisInitialisation = false; },
+    { "no EA-D (no densification)", [](TrainerSettings& s, std::int64_t) { s.Densification.Enabled = false; },
+      "lower (EA-D helps)" },
+    { "random initialisation (not Harris)", [](TrainerSettings& s, std::int64_t) { s.Seeding.HarrisInitialisation = false; },
       "lower (Harris initialisation helps)" },
     { "thin plane (no beam integration, UltraGauss)", [](TrainerSettings& s, std::int64_t) { s.BeamIntegration = false; },
       "lower (beam integration helps)" },
@@ -39,7 +40,7 @@ std::vector<Ablation> Ablations()
     { "L1 + D-SSIM + FFL (0.1)", [](TrainerSettings& s, std::int64_t) { s.Loss.FFL = 0.1; }, "higher (FFL helps speckle)",
       +1 },
     { "capacity cap at the seed count", [](TrainerSettings& s, std::int64_t seeds) {
-        s.InitialGaussians = seeds;
+        s.Seeding.InitialGaussians = seeds;
         s.MaximumGaussians = seeds;
       },
       "lower (adaptive capacity helps)" },
@@ -201,7 +202,7 @@ bool AblationSection(BenchmarkContext& context, std::string* error)
     // The switches are those of training from Harris seeds: the pixel-grid fit, which the defaults take on
     // the volume protocol, takes no step (the volume section reports it).
     TrainerSettings timed;
-    timed.PixelGridFit = false;
+    timed.Seeding.PixelGridFit = false;
     timed.Iterations = 0;
     timed.TimeBudget = e.Seconds;
     // The full method at equal time first: its steps set the equal-iteration schedule, its seeds the cap.
@@ -233,7 +234,7 @@ bool AblationSection(BenchmarkContext& context, std::string* error)
       return false;
     }
     TrainerSettings counted;
-    counted.PixelGridFit = false;
+    counted.Seeding.PixelGridFit = false;
     counted.Iterations = std::max(1, static_cast<int>(std::lround(fullTimed.Steps().Mean)));
     if (!runCell(counted, nullptr, 0, fullIterations))
     {

@@ -20,9 +20,9 @@ bool CapacitySection(BenchmarkContext& context, std::string* error)
     TrainerSettings s;
     s.ElevationSigma = liver.ElevationSigma;
     s.Iterations = liver.Iterations;
-    s.InitialGaussians = cap / 2;
+    s.Seeding.InitialGaussians = cap / 2;
     s.MaximumGaussians = cap;
-    s.GrowthMargin = 0; // grow while it improves at all, up to the cap
+    s.Densification.GrowthMargin = 0; // grow while it improves at all, up to the cap
     const bool ok = TrainWithMarks(liver.Data, s, { capacitySeconds }, liver.HeldOut,
       "cap " + std::to_string(cap) + " (start at " + std::to_string(cap / 2) + ")",
       [&](double, const Row& r, Trainer&) {
@@ -37,7 +37,8 @@ bool CapacitySection(BenchmarkContext& context, std::string* error)
     }
   }
   Row adaptive = full;
-  adaptive.Method = "adaptive stop (default: automatic seeds, margin " + Format("%.1f", 100 * defaults.GrowthMargin) +
+  adaptive.Method = "adaptive stop (default: automatic seeds, margin " +
+    Format("%.1f", 100 * defaults.Densification.GrowthMargin) +
     " %, cap " + std::to_string(defaults.MaximumGaussians) + ")";
   rows.push_back(adaptive);
   md << "\n## Quality against the number of Gaussians (liver, " << Format("%.0f", capacitySeconds)

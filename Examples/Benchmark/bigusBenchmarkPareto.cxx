@@ -89,7 +89,7 @@ bool ParetoSection(BenchmarkContext& context, std::string* error)
       for (double budget : budgets)
       {
         TrainerSettings s;
-        s.PixelGridFit = false; // the trainers themselves: the grid has its own rows
+        s.Seeding.PixelGridFit = false; // the trainers themselves: the grid has its own rows
         s.Iterations = 0;
         s.TimeBudget = budget;
         s.ReflectivitySolve = solve;
@@ -112,9 +112,9 @@ bool ParetoSection(BenchmarkContext& context, std::string* error)
         continue;
       }
       TrainerSettings s;
-      s.DenseInitialisation = true;
+      s.Seeding.DenseInitialisation = true;
       s.ReflectivitySolve = true;
-      s.InitialGaussians = count;
+      s.Seeding.InitialGaussians = count;
       ParetoRun p;
       p.Method = grid;
       p.Requested = count;

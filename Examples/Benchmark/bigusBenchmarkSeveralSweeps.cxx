@@ -191,7 +191,7 @@ bool SeveralSweepsSection(BenchmarkContext& context, std::string* error)
   }
   const std::vector<double> marks = quick ? std::vector<double>{ 4 } : std::vector<double>{ 60, 300, 600 };
   TrainerSettings adam;
-  adam.PixelGridFit = false;
+  adam.Seeding.PixelGridFit = false;
   adam.Iterations = 0;
   adam.TimeBudget = marks.back();
   if (!TrainWithMarks(both, adam, marks, {}, "BIGUS on both sweeps, Harris seeds and Adam",

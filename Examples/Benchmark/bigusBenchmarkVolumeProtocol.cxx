@@ -129,7 +129,7 @@ bool VolumeProtocolSection(BenchmarkContext& context, std::string* error)
   std::printf("volume protocol: %s\n", vp.Description.c_str());
   TrainerSettings s;
   s.ElevationSigma = vp.ElevationSigma;
-  s.PixelGridFit = false; // training from Harris seeds, measured along the way; the defaults' fit is below
+  s.Seeding.PixelGridFit = false; // training from Harris seeds, measured along the way; the defaults' fit is below
   s.Iterations = quick ? 300 : 15000;
   std::vector<Row> bigusRows[3];
   const bool ok = TrainWithMarks(vp.TrainData, s, marks, {}, "BIGUS, Harris seeds and Adam",

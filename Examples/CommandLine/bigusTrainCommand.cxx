@@ -451,19 +451,19 @@ Command AddTrainCommand(CLI::App& app)
   trainCommand->add_option("--max-gaussians", settings.MaximumGaussians, "Hard maximum of Gaussians (gap filling's copies included)")
     ->capture_default_str()
     ->check(CLI::PositiveNumber);
-  trainCommand->add_option("--initial-gaussians", settings.InitialGaussians,
+  trainCommand->add_option("--initial-gaussians", settings.Seeding.InitialGaussians,
     "Seeds (0: chosen from the training frames' fan pixels; the InitialGaussians setting line says how)")
     ->capture_default_str()
     ->check(CLI::NonNegativeNumber);
-  trainCommand->add_option("--growth-margin", settings.GrowthMargin,
+  trainCommand->add_option("--growth-margin", settings.Densification.GrowthMargin,
     "Growth stops when the validation loss improves by less than this (relative) on the best so far ...")
     ->capture_default_str()
     ->check(CLI::Range(0.0, 1.0));
-  trainCommand->add_option("--growth-patience", settings.GrowthPatience,
+  trainCommand->add_option("--growth-patience", settings.Densification.GrowthPatience,
     "... over this many densification intervals in a row")
     ->capture_default_str()
     ->check(CLI::PositiveNumber);
-  trainCommand->add_option("--residual-seeds", settings.ResidualSeedShare,
+  trainCommand->add_option("--residual-seeds", settings.Densification.ResidualSeedShare,
     "New Gaussians where the residual is largest at each densification, as a share of those split or cloned, "
     "their reflectivity the residual (Image-GS; 0: off)")
     ->capture_default_str()
@@ -484,10 +484,10 @@ Command AddTrainCommand(CLI::App& app)
   trainCommand->add_flag("--dense-adam{false}", settings.SparseAdam,
     "Adam moves every Gaussian every step on its momentum (the ablation; default: only the Gaussians a step "
     "touched, the others keep their parameters and moments)");
-  trainCommand->add_flag("--dense-start", settings.DenseInitialisation,
+  trainCommand->add_flag("--dense-start", settings.Seeding.DenseInitialisation,
     "Start from Gaussians on the training frames' pixel grid (--initial-gaussians of them, default half of "
     "--max-gaussians) instead of Harris seeds");
-  trainCommand->add_flag("--no-pixel-grid-fit{false}", settings.PixelGridFit,
+  trainCommand->add_flag("--no-pixel-grid-fit{false}", settings.Seeding.PixelGridFit,
     "Train from Harris seeds even when the training frames hold at most twice --max-gaussians fan pixels (default: "
     "there, a pixel grid of at most --max-gaussians, its reflectivities solved, and no geometry steps)");
   CLI::Option* refine = trainCommand->add_flag_callback("--refine-poses",

@@ -156,7 +156,7 @@ public:
   }
 
 private:
-  /// Adam (Kingma and Ba 2015, algorithm 1) on every Gaussian in one pass that also keeps each
+  /// Adam (Kingma and Ba 2015, algorithm 1: bigus::AdamUpdate) on every Gaussian in one pass that also keeps each
   /// parameter in its meaningful range (unit quaternions, clamped log-scales); false when a gradient
   /// or an updated parameter is not finite.
   bool Adam(const StepRequest& request);
@@ -205,15 +205,11 @@ StepStatus CpuTrainingEngine::Step(const StepRequest& request, double* loss, std
   this->S.resize(pixels);
   this->I.resize(pixels);
   this->LossGradient.resize(pixels);
-  // [N, 3] means, [N, 3] log-scales, [N, 4] quaternions, [N] r; with several processes then this step's
+  // The field's gradients in its packed layout (bigusFieldLayout.h); with several processes then this step's
   // attribution [N] and seen counts [N] (as float: exact to 2^24 frames), all summed in one reduction.
-  this->Gradients.assign((this->Reduction ? 13 : 11) * n, 0.f);
-  FieldGradients grads;
-  grads.Means = this->Gradients.data();
-  grads.LogScales = this->Gradients.data() + 3 * n;
-  grads.Quaternions = this->Gradients.data() + 6 * n;
-  grads.Reflectivities = this->Gradients.data() + 10 * n;
-  grads.Attribution = this->Reduction ? this->Gradients.data() + 11 * n : this->State.Attribution.data();
+  this->Gradients.assign((this->Reduction ? FieldParameters + 2 : FieldParameters) * n, 0.f);
+  FieldGradients grads = FieldGradientsAt(this->Gradients.data(), n);
+  grads.Attribution = this->Reduction ? this->Gradients.data() + FieldParameters * n : this->State.Attribution.data();
   this->Seen.assign(this->Reduction ? n : 0, 0);
   grads.VisibleCount = this->Reduction ? this->Seen.data() : this->State.SeenCount.data();
   if (request.PoseGradients)
@@ -235,16 +231,7 @@ StepStatus CpuTrainingEngine::Step(const StepRequest& request, double* loss, std
       TrainingFrameError(f, error);
       return this->Reduction ? this->Reduce(request, total, false, error) : StepStatus::Failed;
     }
-    const ImageLossTerms terms = ComputeImageLoss(this->I.data(), &data.Frames[pixels * f], data.MaskOf(f), data.Width,
-      data.Height, request.Loss, this->LossGradient.data(), false, &this->LossWorkspace);
-    total += terms.Total;
-    if (request.Count > 1)
-    {
-      for (float& g : this->LossGradient)
-      {
-        g /= static_cast<float>(request.Count);
-      }
-    }
+    total += FrameLoss(data, f, this->I.data(), request, this->LossGradient.data(), &this->LossWorkspace);
     if (request.PoseGradients)
     {
       grads.SlicePoses = request.PoseGradients + 6 * b;
@@ -280,15 +267,20 @@ StepStatus CpuTrainingEngine::Reduce(const StepRequest& request, double& total, 
   std::vector<double> small(1 + (request.PoseGradients ? 6 * request.Count : 0));
   small[0] = total;
   std::copy(request.PoseGradients, request.PoseGradients + (small.size() - 1), small.begin() + 1);
-  float* seen = this->Gradients.data() + 12 * n;
+  float* seen = this->Gradients.data() + (FieldParameters + 1) * n;
   // A step's frames touch the Gaussians near their planes only, and every other entry is 0 on every process. So
   // first which Gaussians any process touched (one byte each, a maximum), then the 13 values of those alone: the
   // bytes summed follow the step's frames, not the field, and the sums are the same numbers (x + 0 = x).
   std::vector<unsigned char> touched(n);
-  // Each block of the gradient buffer as (first entry in units of N, values per Gaussian): means, log-scales,
-  // quaternions, reflectivities, attribution, seen counts.
-  const std::array<std::pair<int, int>, 6> blocks = { { { 0, 3 }, { 3, 3 }, { 6, 4 }, { 10, 1 }, { 11, 1 },
-    { 12, 1 } } };
+  // Each block of the gradient buffer as (first entry in units of N, values per Gaussian): the field's groups,
+  // then the attribution and the seen counts.
+  std::array<std::pair<int, int>, FieldGroups + 2> blocks;
+  for (int q = 0; q < FieldGroups; ++q)
+  {
+    blocks[q] = { FieldGroupFirst(q), FieldGroupWidth(q) };
+  }
+  blocks[FieldGroups] = { FieldParameters, 1 };
+  blocks[FieldGroups + 1] = { FieldParameters + 1, 1 };
   for (std::int64_t i = 0; i < n; ++i)
   {
     seen[i] = static_cast<float>(this->Seen[i]);
@@ -315,15 +307,16 @@ StepStatus CpuTrainingEngine::Reduce(const StepRequest& request, double& total, 
       touchedIndices.push_back(i);
     }
   }
-  // [M, 13] per touched Gaussian: mean gradient 3, log-scale 3, quaternion 4, reflectivity 1, attribution 1, seen 1.
+  // [M, 13] per touched Gaussian: the field's 11 gradients (bigusFieldLayout.h), attribution 1, seen 1.
+  constexpr int values = FieldParameters + 2;
   const std::size_t m = touchedIndices.size();
-  std::vector<float> packed(13 * m);
+  std::vector<float> packed(values * m);
   auto packOrUnpack = [&](bool pack) {
     vtkSMPTools::For(0, static_cast<std::int64_t>(m), 8192, [&](std::int64_t begin, std::int64_t end) {
       for (std::int64_t k = begin; k < end; ++k)
       {
         const std::int64_t i = touchedIndices[k];
-        float* entry = packed.data() + 13 * k;
+        float* entry = packed.data() + values * k;
         for (const auto& [first, width] : blocks)
         {
           for (int c = 0; c < width; ++c, ++entry)
@@ -350,7 +343,7 @@ StepStatus CpuTrainingEngine::Reduce(const StepRequest& request, double& total, 
   packOrUnpack(false);
   total = small[0];
   std::copy(small.begin() + 1, small.end(), request.PoseGradients);
-  const float* attribution = this->Gradients.data() + 11 * n;
+  const float* attribution = this->Gradients.data() + FieldParameters * n;
   for (const std::int64_t i : touchedIndices)
   {
     this->State.Attribution[i] += attribution[i];
@@ -362,43 +355,39 @@ StepStatus CpuTrainingEngine::Reduce(const StepRequest& request, double& total, 
 bool CpuTrainingEngine::Adam(const StepRequest& request)
 {
   const std::int64_t n = this->State.Count();
-  const int t = request.Iteration + 1;
-  const double c1 = 1 - std::pow(AdamBeta1, t), c2 = 1 - std::pow(AdamBeta2, t);
+  const AdamBias bias = AdamBiasAt(request.Iteration + 1);
   const float lo = static_cast<float>(request.MinimumLogScale), hi = static_cast<float>(request.MaximumLogScale);
-  const float* gMeans = this->Gradients.data();
-  const float* gLogScales = gMeans + 3 * n;
-  const float* gQuaternions = gMeans + 6 * n;
-  const float* gReflectivities = gMeans + 10 * n;
+  const float* g = this->Gradients.data(); // the field's packed layout
   GaussianField& F = this->State.Field;
-  GaussianField& M = this->State.FirstMoment;
-  GaussianField& V = this->State.SecondMoment;
+  float* p[FieldGroups];
+  float* m[FieldGroups];
+  float* v[FieldGroups];
+  double rate[FieldGroups];
+  for (int q = 0; q < FieldGroups; ++q)
+  {
+    p[q] = F.Group(q).data();
+    m[q] = this->State.FirstMoment.Group(q).data();
+    v[q] = this->State.SecondMoment.Group(q).data();
+    rate[q] = request.Rate(q);
+  }
   std::atomic<bool> finite(true);
   vtkSMPTools::For(0, n, 4096, [&](std::int64_t begin, std::int64_t end) {
     bool ok = true;
-    auto adam = [&](std::vector<float>& p, std::vector<float>& m, std::vector<float>& v, const float* g,
-                  std::int64_t first, int count, double lr) {
-      for (std::int64_t k = first; k < first + count; ++k)
-      {
-        const double gk = g[k];
-        ok = ok && std::isfinite(g[k]);
-        m[k] = static_cast<float>(AdamBeta1 * m[k] + (1 - AdamBeta1) * gk);
-        v[k] = static_cast<float>(AdamBeta2 * v[k] + (1 - AdamBeta2) * gk * gk);
-        p[k] -= static_cast<float>(lr * (m[k] / c1) / (std::sqrt(v[k] / c2) + AdamEpsilon));
-      }
-    };
     for (std::int64_t i = begin; i < end; ++i)
     {
-      if (request.SparseAdam && gReflectivities[i] == 0.f &&
-        std::all_of(gMeans + 3 * i, gMeans + 3 * i + 3, [](float g) { return g == 0.f; }) &&
-        std::all_of(gLogScales + 3 * i, gLogScales + 3 * i + 3, [](float g) { return g == 0.f; }) &&
-        std::all_of(gQuaternions + 4 * i, gQuaternions + 4 * i + 4, [](float g) { return g == 0.f; }))
+      if (request.SparseAdam && !FieldGradientTouched(g, n, i))
       {
         continue;
       }
-      adam(F.Means, M.Means, V.Means, gMeans, 3 * i, 3, request.MeanRate);
-      adam(F.LogScales, M.LogScales, V.LogScales, gLogScales, 3 * i, 3, request.LogScaleRate);
-      adam(F.Quaternions, M.Quaternions, V.Quaternions, gQuaternions, 4 * i, 4, request.QuaternionRate);
-      adam(F.Reflectivities, M.Reflectivities, V.Reflectivities, gReflectivities, i, 1, request.ReflectivityRate);
+      for (int q = 0; q < FieldGroups; ++q)
+      {
+        for (int c = 0, w = FieldGroupWidth(q); c < w; ++c)
+        {
+          const float gk = g[FieldEntry(n, i, q, c)];
+          ok = ok && std::isfinite(gk);
+          AdamUpdate(p[q][w * i + c], m[q][w * i + c], v[q][w * i + c], gk, rate[q], bias);
+        }
+      }
       float* q = &F.Quaternions[4 * i];
       const float norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
       if (norm > 1e-12f)
@@ -409,11 +398,11 @@ bool CpuTrainingEngine::Adam(const StepRequest& request)
         }
       }
       float* l = &F.LogScales[3 * i];
-      const float* m = &F.Means[3 * i];
+      const float* mean = &F.Means[3 * i];
       for (int k = 0; k < 3; ++k)
       {
         l[k] = std::min(hi, std::max(lo, l[k]));
-        ok = ok && std::isfinite(m[k]) && std::isfinite(l[k]);
+        ok = ok && std::isfinite(mean[k]) && std::isfinite(l[k]);
       }
       ok = ok && std::isfinite(q[0]) && std::isfinite(q[1]) && std::isfinite(q[2]) && std::isfinite(q[3]) &&
         std::isfinite(F.Reflectivities[i]);

@@ -5,6 +5,10 @@
 #include "bigusSliceFrame.h"
 
 #include "vtkSMPTools.h"
+#include <vtk_fmt.h>
+// clang-format off
+#include VTK_FMT(fmt/printf.h)
+// clang-format on
 
 #include <algorithm>
 #include <cmath>
@@ -160,6 +164,45 @@ std::int64_t FinalPrune(OptimizerState& G, const TrainingData& data, const Rende
     G.Compact(keep);
   }
   return removed;
+}
+
+std::string DescribeDensification(const DensificationSettings& s, std::int64_t maximumGaussians)
+{
+  if (!s.Enabled)
+  {
+    return "Densification = off";
+  }
+  return vtkfmt::sprintf("Densification = every %d steps from step %d to ", s.Interval, s.Start) +
+    (s.End >= 0 ? vtkfmt::sprintf("step %d", s.End)
+                : vtkfmt::sprintf("%.0f %% of the schedule", 100 * DensifyEndFraction)) +
+    vtkfmt::sprintf(", top %.3g %% by attribution", s.Percentile) +
+    (s.ResidualSeedShare > 0 ? vtkfmt::sprintf(" and %.3g as many seeds where the residual of %d frames is largest",
+                                 s.ResidualSeedShare, s.ResidualSeedFrames)
+                             : std::string()) +
+    vtkfmt::sprintf(", at most %lld Gaussians", static_cast<long long>(maximumGaussians)) +
+    vtkfmt::sprintf("; growth stops when the validation loss improves by less than %.3g %%", 100 * s.GrowthMargin) +
+    vtkfmt::sprintf(" over %d intervals", s.GrowthPatience);
+}
+
+std::string UpdateGrowth(TrainingState& state, double validation, const DensificationSettings& s)
+{
+  if (!state.Growing)
+  {
+    return std::string();
+  }
+  if (state.BestValidationLoss < 0 || validation < state.BestValidationLoss * (1 - s.GrowthMargin))
+  {
+    state.BestValidationLoss = validation;
+    state.StalledGrowthSteps = 0;
+    return std::string();
+  }
+  if (++state.StalledGrowthSteps < s.GrowthPatience)
+  {
+    return std::string();
+  }
+  state.Growing = false;
+  return vtkfmt::sprintf("validation loss improved by less than %.2g %% over %d densification intervals (iteration %d)",
+    100 * s.GrowthMargin, s.GrowthPatience, state.Iteration);
 }
 
 } // namespace bigus

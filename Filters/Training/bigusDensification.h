@@ -11,9 +11,49 @@
 #include "bigusTrainingModule.h" // For export macro
 
 #include <cstdint>
+#include <string>
 
 namespace bigus
 {
+
+/// Where DensificationSettings::End is -1, densification stops at this share of the schedule.
+constexpr double DensifyEndFraction = 0.6;
+
+/**
+ * The densification stage's settings (TrainerSettings::Densification): EA-D every Interval steps from step Start
+ * to End, growth stopped by the validation loss (UpdateGrowth). Why each default: docs/FINDINGS.md, "The
+ * trainer's defaults, measured" and the sections it points to.
+ */
+struct DensificationSettings
+{
+  bool Enabled = true;     ///< EA-D on (off: the seeds are the field, the ablation)
+  int Start = 200;         ///< first step that densifies
+  int End = -1;            ///< last step that densifies; -1: DensifyEndFraction of the schedule
+  int Interval = 200;      ///< steps between densifications (and validations)
+  double Percentile = 5.0; ///< top share (%) of the attribution score densified each time
+  /// New Gaussians where the residual is largest at each densification, as a share of those split or cloned
+  /// (0 = off): seeds on ResidualSeedFrames training frames drawn at random, in proportion to |residual|, each
+  /// taking the residual as its reflectivity (bigus::SeedResidual; Image-GS, Zhang et al. 2025).
+  double ResidualSeedShare = 0;
+  int ResidualSeedFrames = 4;
+  double SplitScalePixels = 3.0;   ///< pixels: largest scale above which a Gaussian is split, not cloned
+  double PruneReflectivity = 1e-3; ///< |r| below this is pruned (after the first densification)
+  double GrowthMargin = 0.005;     ///< growth stops when the validation loss improves by less (relative) ...
+  int GrowthPatience = 4;          ///< ... than the best so far over this many densification intervals in a row
+};
+
+/// The stage's `setting` line ("Densification = every 200 steps from step 200 to ...").
+BIGUSTRAINING_EXPORT std::string DescribeDensification(
+  const DensificationSettings& settings, std::int64_t maximumGaussians);
+
+/**
+ * Growth control, at a densification with validation loss @p validation: while @p state is Growing, a loss below
+ * the best so far by more than GrowthMargin (relative) becomes the best, and GrowthPatience intervals in a row
+ * without one stop growth (state.Growing false). Returns why growth stopped at this call, or "" (it goes on, or had
+ * stopped before).
+ */
+BIGUSTRAINING_EXPORT std::string UpdateGrowth(
+  TrainingState& state, double validation, const DensificationSettings& settings);
 
 /**
  * EA-D densification of Gaussian @p i (DESIGN section 4): appends one child and returns its index.
@@ -22,10 +62,9 @@ namespace bigus
  * with r / 2 each. A clone keeps the scales, so the pair renders as the parent did and the offset only
  * keeps the copies from getting identical gradients. A split divides every scale by 1.6, as 3D
  * Gaussian splatting does (Kerbl et al. 2023): smaller children resolve finer detail and render
- * faster; the render loses part of the parent's integral, which the next steps restore. (A
- * moment-matched split, r / sqrt(3) each and only the major scale times sqrt(3/4), keeps the render
- * but gave 37.3 against 37.6 dB held-out PSNR after 10 minutes on the liver sweep, one run each: its
- * larger children made steps 10 % slower.)
+ * faster; the render loses part of the parent's integral, which the next steps restore (a moment-matched
+ * split keeps the render, but its larger children made steps slower: docs/FINDINGS.md, "The trainer's defaults,
+ * measured").
  */
 BIGUSTRAINING_EXPORT std::int64_t DensifyGaussian(GaussianField& field, std::int64_t i, double splitScale);
 

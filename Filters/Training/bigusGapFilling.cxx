@@ -4,6 +4,10 @@
 #include "bigusSliceFrame.h"
 
 #include <Eigen/Geometry>
+#include <vtk_fmt.h>
+// clang-format off
+#include VTK_FMT(fmt/printf.h)
+// clang-format on
 
 #include <algorithm>
 #include <cmath>
@@ -310,6 +314,22 @@ std::string DescribeGapFilling(const GapFillingReport& report, const GapFillingS
     line += text;
   }
   return line;
+}
+
+std::string DescribeGapFillingSettings(bool fill, bool beamIntegration, const GapFillingSettings& s)
+{
+  if (!fill)
+  {
+    return "FillGaps = off";
+  }
+  if (!beamIntegration)
+  {
+    return "FillGaps = off (BeamIntegration is off: the thin plane has no beam to bridge gaps with)";
+  }
+  return vtkfmt::sprintf("FillGaps = on (after training, gaps between training frames over %.3g typical spacings are "
+                         "bridged by blended copies of the frames on either side as rendered, %.3g beam widths clear "
+                         "of them, each frame alone within %.3g beam widths of it)",
+    s.MinimumGapSpacings, s.ClearanceSigmas, s.BlendMarginSigmas);
 }
 
 } // namespace bigus

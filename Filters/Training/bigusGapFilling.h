@@ -100,6 +100,10 @@ BIGUSTRAINING_EXPORT GapFillingReport FillElevationGaps(GaussianField& field, co
 /// One line: "2 gaps bridged (widest 4.51 mm; typical spacing 0.645 mm), 31210 Gaussians added (...)", and
 /// the gaps thinned or left empty by the maximum of Gaussians, if any.
 BIGUSTRAINING_EXPORT std::string DescribeGapFilling(const GapFillingReport& report, const GapFillingSettings& settings);
+/// The gap-filling stage's `setting` line: on (@p fill) with @p settings, or off and why (no beam without
+/// @p beamIntegration).
+BIGUSTRAINING_EXPORT std::string DescribeGapFillingSettings(
+  bool fill, bool beamIntegration, const GapFillingSettings& settings);
 
 } // namespace bigus
 

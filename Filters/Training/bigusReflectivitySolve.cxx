@@ -1,7 +1,13 @@
 // The reflectivity solve: preconditioned CGLS over the engine's basis products (see bigusReflectivitySolve.h).
 #include "bigusReflectivitySolve.h"
 
+#include "bigusDensification.h"
+
 #include "vtkSMPTools.h"
+#include <vtk_fmt.h>
+// clang-format off
+#include VTK_FMT(fmt/printf.h)
+// clang-format on
 
 #include <algorithm>
 #include <chrono>
@@ -447,6 +453,63 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
   reflectivities.swap(solved);
   r.Seconds = Now() - start;
   return true;
+}
+
+bool SolveFieldReflectivities(TrainingEngine& engine, const TrainingData& data, const RenderOptions& options,
+  const ReflectivitySolveSettings& settings, const std::function<double()>& timeLimit, double gamma,
+  OptimizerState& G, FieldSolveReport& report, std::string* error, ProcessReduction* reduction)
+{
+  const bool relaxed = settings.L1 > 0;
+  for (int part = 0; part < (relaxed ? 2 : 1); ++part)
+  {
+    ReflectivitySolveSettings solve = settings;
+    solve.L1 = part == 0 ? solve.L1 : 0.0;
+    if (solve.TimeLimit <= 0 && timeLimit)
+    {
+      solve.TimeLimit = timeLimit();
+    }
+    std::vector<float> r = G.Field.Reflectivities;
+    if (!SolveReflectivities(engine, data, data.TrainFrames, options, solve, r, &report.Last, error, reduction))
+    {
+      if (error)
+      {
+        *error = "reflectivity solve: " + *error;
+      }
+      return false;
+    }
+    G.Field.Reflectivities.swap(r);
+    std::fill(G.FirstMoment.Reflectivities.begin(), G.FirstMoment.Reflectivities.end(), 0.f);
+    std::fill(G.SecondMoment.Reflectivities.begin(), G.SecondMoment.Reflectivities.end(), 0.f);
+    if (solve.L1 > 0)
+    {
+      report.L1Part = report.Last;
+      report.L1Removed = FinalPrune(G, data, options, gamma, 0.0);
+      if (!engine.Push(G, error)) // the refit solves the pruned field
+      {
+        return false;
+      }
+    }
+  }
+  report.Last.Seconds += relaxed ? report.L1Part.Seconds : 0.0;
+  return true;
+}
+
+std::string DescribeReflectivitySolve(
+  bool on, bool nonNegative, const ReflectivitySolveSettings& s, int interval)
+{
+  if (!on)
+  {
+    return "ReflectivitySolve = off (Adam alone)";
+  }
+  if (nonNegative)
+  {
+    return "ReflectivitySolve = off (NonNegativeReflectivity: the model is not linear in r)";
+  }
+  return vtkfmt::sprintf("ReflectivitySolve = on (%s, at most %d iterations, ridge %.3g, after seeding, after every "
+                         "densification",
+           s.L1 > 0 ? vtkfmt::sprintf("FISTA with L1 %.3g", s.L1) : std::string("CGLS"), s.MaximumIterations,
+           s.Ridge) +
+    (interval > 0 ? vtkfmt::sprintf(" and every %d steps)", interval) : std::string(")"));
 }
 
 } // namespace bigus

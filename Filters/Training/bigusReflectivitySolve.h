@@ -37,6 +37,7 @@
 #include "bigusTrainingModule.h" // For export macro
 
 #include <string>
+#include <functional>
 #include <vector>
 
 namespace bigus
@@ -93,6 +94,32 @@ BIGUSTRAINING_EXPORT bool SolveReflectivities(TrainingEngine& engine, const Trai
   const std::vector<int>& frames, const RenderOptions& options, const ReflectivitySolveSettings& settings,
   std::vector<float>& reflectivities, ReflectivitySolveReport* report, std::string* error,
   ProcessReduction* reduction = nullptr);
+
+/// What SolveFieldReflectivities did.
+struct FieldSolveReport
+{
+  ReflectivitySolveReport Last;   ///< the last solve (the refit with an L1 term); its Seconds cover both parts
+  ReflectivitySolveReport L1Part; ///< with an L1 term: the L1 solve (FISTA)
+  std::int64_t L1Removed = 0;     ///< with an L1 term: the Gaussians it set to 0, removed before the refit
+};
+
+/**
+ * The solve stage: the reflectivities of @p G's field (which @p engine holds) by least squares on every training
+ * frame of @p data (SolveReflectivities with @p settings), Adam's moments of the reflectivities reset. With an L1
+ * term, one solve in two parts, the relaxed lasso (Meinshausen, Comput. Stat. Data Anal. 52(1), 2007): the L1 solve
+ * chooses the Gaussians; the others (r = 0, and any no training pixel sees) are removed (FinalPrune with tolerance
+ * 0; @p engine takes the pruned field) and least squares refits the kept ones' reflectivities without the L1 term's
+ * shrinkage. @p timeLimit() gives each part's time limit (s; 0 or less: none), asked when the part starts, where
+ * @p settings have none. Returns false with @p error ("reflectivity solve: ...") as SolveReflectivities does.
+ */
+BIGUSTRAINING_EXPORT bool SolveFieldReflectivities(TrainingEngine& engine, const TrainingData& data,
+  const RenderOptions& options, const ReflectivitySolveSettings& settings, const std::function<double()>& timeLimit,
+  double gamma, OptimizerState& G, FieldSolveReport& report, std::string* error, ProcessReduction* reduction);
+
+/// The solve stage's `setting` line: variable projection @p on or off (and why: @p nonNegative), @p settings, and
+/// the steps between solves (@p interval, 0: after seeding and densification only).
+BIGUSTRAINING_EXPORT std::string DescribeReflectivitySolve(
+  bool on, bool nonNegative, const ReflectivitySolveSettings& settings, int interval);
 
 } // namespace bigus
 

@@ -5,6 +5,10 @@
 #include "bigusSliceFrame.h"
 
 #include <opencv2/imgproc.hpp>
+#include <vtk_fmt.h>
+// clang-format off
+#include VTK_FMT(fmt/printf.h)
+// clang-format on
 
 #include <algorithm>
 #include <cmath>
@@ -15,10 +19,9 @@ namespace bigus
 {
 namespace
 {
-/// Uniform double in [0, 1) from the generator's raw output (identical on every platform).
 double Uniform(std::mt19937_64& rng)
 {
-  return (rng() >> 11) * (1.0 / 9007199254740992.0);
+  return UniformDouble(rng);
 }
 
 /// A pixel drawn from @p cumulative, the running sum of per-pixel weights whose last entry is @p total (> 0).
@@ -310,4 +313,165 @@ std::string SeedGrid(const TrainingData& data, const GridPlanes& selected, std::
     stride, inPlane);
   return line + text;
 }
+double UniformDouble(std::mt19937_64& rng)
+{
+  return (rng() >> 11) * (1.0 / 9007199254740992.0);
+}
+
+bool PlanSeeding(const TrainingData& data, const SeedingSettings& s, std::int64_t maximumGaussians, bool nonNegative,
+  const SeedShape& shape, std::int64_t fanPixels, SeedingPlan& plan, std::string* error)
+{
+  plan = SeedingPlan();
+  plan.FanPixels = fanPixels;
+  if (s.InitialGaussians > maximumGaussians)
+  {
+    if (error)
+    {
+      *error = vtkfmt::sprintf("InitialGaussians (%lld) exceeds MaximumGaussians (%lld)",
+        static_cast<long long>(s.InitialGaussians), static_cast<long long>(maximumGaussians));
+    }
+    return false;
+  }
+  // The planes are selected (a pass over the training frames' masks) only where the pixel-grid fit may apply.
+  const bool gridMayApply =
+    s.PixelGridFit && !s.DenseInitialisation && s.InitialGaussians <= 0 && s.HarrisInitialisation && !nonNegative;
+  if (gridMayApply)
+  {
+    plan.Planes = SelectGridPlanes(data, shape);
+    plan.PixelGrid = plan.Planes.FanPixels <= PixelGridFanPixelsPerGaussian * maximumGaussians;
+  }
+  if (plan.PixelGrid)
+  {
+    plan.Count = std::min<std::int64_t>(plan.Planes.FanPixels, maximumGaussians);
+  }
+  else if (s.DenseInitialisation)
+  {
+    plan.Count = s.InitialGaussians > 0 ? s.InitialGaussians : maximumGaussians / 2;
+  }
+  else
+  {
+    // Capacity follows the data: more fan pixels to explain, more seeds (docs/FINDINGS.md, "The trainer's defaults,
+    // measured").
+    plan.Count = s.InitialGaussians > 0 ? s.InitialGaussians
+                                        : std::max<std::int64_t>(std::min<std::int64_t>(20000, maximumGaussians / 2),
+                                            std::min<std::int64_t>(fanPixels / 200, maximumGaussians / 2));
+  }
+  return true;
+}
+
+std::string SeedField(const TrainingData& data, const SeedingPlan& plan, const SeedingSettings& s,
+  const SeedShape& shape, unsigned seed, double solveL1, GaussianField& field)
+{
+  const auto gaussians = [&]() { return static_cast<long long>(field.Count()); };
+  if (plan.PixelGrid)
+  {
+    const std::string grid = SeedGrid(data, plan.Planes, plan.Count, shape, field);
+    return vtkfmt::sprintf("InitialGaussians = %lld (the pixel-grid fit: the %lld fan pixels of the dense start's "
+                           "planes %s; ",
+             gaussians(), static_cast<long long>(plan.Planes.FanPixels),
+             plan.Count < plan.Planes.FanPixels ? "are at most twice MaximumGaussians, a grid of that many"
+                                                : "fit under MaximumGaussians") +
+      grid + "; reflectivities solved" +
+      (solveL1 > 0 ? vtkfmt::sprintf(" with an L1 term of %.3g (FISTA)", solveL1) : std::string()) +
+      ", no geometry steps)";
+  }
+  if (s.DenseInitialisation)
+  {
+    const std::string grid = SeedGrid(data, plan.Count, shape, field);
+    return vtkfmt::sprintf("InitialGaussians = %lld (dense start: ", gaussians()) + grid + ")";
+  }
+  const std::string line = vtkfmt::sprintf("InitialGaussians = %lld (", static_cast<long long>(plan.Count)) +
+    (s.InitialGaussians > 0
+        ? std::string("given")
+        : vtkfmt::sprintf("chosen: one per 200 of the %lld fan pixels of the training frames, 20,000 to half the "
+                          "maximum",
+            static_cast<long long>(plan.FanPixels))) +
+    (s.HarrisInitialisation ? "; Harris seeding)" : "; uniform random seeding)");
+  std::mt19937_64 rng(seed * 7919ULL + 17);
+  if (s.HarrisInitialisation)
+  {
+    SeedHarris(data, plan.Count, rng, shape, field);
+  }
+  else
+  {
+    SeedUniform(data, plan.Count, rng, shape, field);
+  }
+  return line;
+}
+
+bool ScaleSeedReflectivities(TrainingEngine& engine, const TrainingData& data, const RenderOptions& options,
+  double gamma, GaussianField& field, bool& scaled, std::string* error)
+{
+  scaled = false;
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
+  const int frames = static_cast<int>(data.TrainFrames.size());
+  std::vector<float> S(pixels);
+  double num = 0, den = 0;
+  for (int n = 0; n < std::min(frames, 5); ++n)
+  {
+    const int f = data.TrainFrames[(n * frames) / std::min(frames, 5)];
+    const SliceGeometry slice = data.Slice(f);
+    if (!engine.Render(&slice, 1, options, S.data(), nullptr, error))
+    {
+      return false;
+    }
+    const float* frame = &data.Frames[pixels * f];
+    const unsigned char* mask = data.MaskOf(f);
+    for (std::size_t p = 0; p < pixels; ++p)
+    {
+      if (mask[p])
+      {
+        num += S[p] * ScatteringOfIntensity(frame[p], gamma);
+        den += double(S[p]) * S[p];
+      }
+    }
+  }
+  const double c = den > 0 ? num / den : 1.0;
+  if (!std::isfinite(c) || c <= 0)
+  {
+    return true;
+  }
+  for (float& r : field.Reflectivities)
+  {
+    r = static_cast<float>(r * c);
+  }
+  scaled = true;
+  return true;
+}
+
+bool RenderResiduals(TrainingEngine& engine, const TrainingData& data, const RenderOptions& options, double gamma,
+  int count, std::mt19937_64& rng, std::vector<int>& frames, std::vector<float>& residuals, std::string* error)
+{
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
+  residuals.resize(pixels * count);
+  for (int k = 0; k < count; ++k)
+  {
+    const int f = data.TrainFrames[static_cast<std::size_t>(UniformDouble(rng) * data.TrainFrames.size())];
+    frames.push_back(f);
+    const SliceGeometry slice = data.Slice(f);
+    float* S = &residuals[pixels * k];
+    if (!engine.Render(&slice, 1, options, S, nullptr, error))
+    {
+      return false;
+    }
+    const float* frame = &data.Frames[pixels * f];
+    for (std::size_t p = 0; p < pixels; ++p)
+    {
+      S[p] = static_cast<float>(ScatteringOfIntensity(frame[p], gamma) - S[p]);
+    }
+  }
+  return true;
+}
+
+void SeedResiduals(const TrainingData& data, const std::vector<int>& frames, const std::vector<float>& residuals,
+  std::int64_t count, std::mt19937_64& rng, const SeedShape& shape, GaussianField& field)
+{
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
+  const std::int64_t n = static_cast<std::int64_t>(frames.size());
+  for (std::int64_t k = 0; k < n; ++k)
+  {
+    SeedResidual(data, frames[k], &residuals[pixels * k], count / n + (k < count % n ? 1 : 0), rng, shape, field);
+  }
+}
+
 } // namespace bigus

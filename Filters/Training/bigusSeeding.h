@@ -12,6 +12,7 @@
 #define bigusSeeding_h
 
 #include "bigusTrainingEngine.h"
+#include "bigusTrainingModule.h" // For export macro
 
 #include <cstdint>
 #include <random>
@@ -20,6 +21,44 @@
 
 namespace bigus
 {
+
+/**
+ * The seeding stage's settings (TrainerSettings::Seeding): which first field a run starts from. Why each default:
+ * docs/FINDINGS.md, "The trainer's defaults, measured".
+ */
+struct SeedingSettings
+{
+  /// Harris seeds (false: uniform random in the sweep's bounding box, the ablation).
+  bool HarrisInitialisation = true;
+  /// Seeds; 0 = chosen (PlanSeeding): one per 200 masked pixels of the training frames, at least 20,000 and at most
+  /// half of MaximumGaussians.
+  std::int64_t InitialGaussians = 0;
+  /// A dense start instead of Harris seeds: Gaussians on the pixel grid of the training frames (every frame at least
+  /// sigma_E from the previous one kept) at the real-valued stride that gives at most InitialGaussians, short of it
+  /// by less than a row and a column of the grid (0 = half of MaximumGaussians), in-plane scale 0.6 strides,
+  /// elevation scale 0.45 of the spacing of the planes kept (SeedGrid).
+  bool DenseInitialisation = false;
+  /// The fit when the data are few: when the dense start's planes (SelectGridPlanes) hold at most
+  /// PixelGridFanPixelsPerGaussian x MaximumGaussians fan pixels, the field is a pixel grid (SeedGrid: every fan
+  /// pixel, or MaximumGaussians of them at a stride of up to 1.41) with its reflectivities solved, and no geometry
+  /// step follows, whatever Iterations and TimeBudget: 11 parameters per Gaussian would outnumber the pixels, and
+  /// Adam overfits them. Applies with the default start only (Harris seeding, InitialGaussians 0, no
+  /// DenseInitialisation, signed reflectivities).
+  bool PixelGridFit = true;
+  double UniformShare = 0.1;       ///< share of Harris seeds drawn uniformly inside the mask
+  double InitialScalePixels = 1.5; ///< pixels: in-plane standard deviation of a Harris or uniform seed
+};
+
+/**
+ * The pixel-grid fit (SeedingSettings::PixelGridFit) applies while the dense start's planes hold at most this many
+ * fan pixels per Gaussian of MaximumGaussians: every fan pixel when they fit, otherwise a grid of MaximumGaussians
+ * points (a stride of up to sqrt(2) pixels; the grid loses to Adam from a stride of about 1.45: docs/FINDINGS.md,
+ * "Several sweeps into one field").
+ */
+constexpr double PixelGridFanPixelsPerGaussian = 2.0;
+
+/// Uniform double in [0, 1) from the generator's raw output (identical on every platform).
+BIGUSTRAINING_EXPORT double UniformDouble(std::mt19937_64& rng);
 
 /// How seeds are shaped.
 struct SeedShape
@@ -76,6 +115,56 @@ GridPlanes SelectGridPlanes(const TrainingData& data, const SeedShape& shape);
 std::string SeedGrid(const TrainingData& data, std::int64_t total, const SeedShape& shape, GaussianField& field);
 /// The same on planes already selected (SelectGridPlanes of the same data and shape).
 std::string SeedGrid(const TrainingData& data, const GridPlanes& planes, std::int64_t total, const SeedShape& shape,
+  GaussianField& field);
+
+/// What the seeding stage will make (PlanSeeding), decided before any seed is: the route and the count.
+struct SeedingPlan
+{
+  bool PixelGrid = false;     ///< the pixel-grid fit (SeedingSettings::PixelGridFit): no geometry step follows
+  std::int64_t Count = 0;     ///< seeds (Harris, uniform), points wanted (dense start) or grid points (pixel grid)
+  GridPlanes Planes;          ///< the pixel grid's planes
+  std::int64_t FanPixels = 0; ///< masked pixels of the training frames (given to PlanSeeding)
+};
+
+/**
+ * The seeding stage's choices for @p data: the pixel-grid fit where it applies (the default start, signed
+ * reflectivities: @p nonNegative false) and the planes hold at most PixelGridFanPixelsPerGaussian x
+ * @p maximumGaussians fan pixels, else the count of seeds (InitialGaussians, or one per 200 of the training frames'
+ * @p fanPixels, 20,000 to half of @p maximumGaussians). False with @p error when InitialGaussians exceeds
+ * @p maximumGaussians.
+ */
+BIGUSTRAINING_EXPORT bool PlanSeeding(const TrainingData& data, const SeedingSettings& settings,
+  std::int64_t maximumGaussians, bool nonNegative, const SeedShape& shape, std::int64_t fanPixels, SeedingPlan& plan,
+  std::string* error);
+
+/**
+ * Seeds @p field (replaced) as @p plan says, drawing with a generator seeded from @p seed; returns the stage's
+ * `setting` line ("InitialGaussians = ... (why)"). @p solveL1 > 0 is said on the pixel grid's line.
+ */
+BIGUSTRAINING_EXPORT std::string SeedField(const TrainingData& data, const SeedingPlan& plan,
+  const SeedingSettings& settings, const SeedShape& shape, unsigned seed, double solveL1, GaussianField& field);
+
+/**
+ * Overlapping seeds add up: one least-squares factor c on every reflectivity of @p field makes the scattering field
+ * rendered by @p engine (which holds @p field) match -ln(1 - I) / gamma on up to 5 training frames spread over
+ * @p data. @p field's reflectivities are multiplied by c where c is finite and positive (@p scaled then true).
+ * False with @p error when a frame cannot be rendered.
+ */
+BIGUSTRAINING_EXPORT bool ScaleSeedReflectivities(TrainingEngine& engine, const TrainingData& data,
+  const RenderOptions& options, double gamma, GaussianField& field, bool& scaled, std::string* error);
+
+/**
+ * The S-space residuals t - S ([count, H, W]) of @p count training frames drawn with @p rng (their indices into
+ * @p frames), rendered by @p engine: the targets of SeedResidual (DensificationSettings::ResidualSeedShare).
+ */
+BIGUSTRAINING_EXPORT bool RenderResiduals(TrainingEngine& engine, const TrainingData& data,
+  const RenderOptions& options, double gamma, int count, std::mt19937_64& rng, std::vector<int>& frames,
+  std::vector<float>& residuals, std::string* error);
+
+/// SeedResidual on each of @p frames with its residual ([frames, H, W], RenderResiduals'), @p count seeds shared
+/// evenly among them (the first count % frames one more).
+BIGUSTRAINING_EXPORT void SeedResiduals(const TrainingData& data, const std::vector<int>& frames,
+  const std::vector<float>& residuals, std::int64_t count, std::mt19937_64& rng, const SeedShape& shape,
   GaussianField& field);
 
 } // namespace bigus

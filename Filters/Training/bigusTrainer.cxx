@@ -7,7 +7,10 @@
 
 #include "vtkSMPTools.h"
 
-#include <opencv2/imgproc.hpp>
+#include <vtk_fmt.h>
+// clang-format off
+#include VTK_FMT(fmt/printf.h)
+// clang-format on
 
 #include <algorithm>
 #include <atomic>
@@ -26,7 +29,6 @@ namespace
 {
 constexpr int SnapshotInterval = 100;
 constexpr int DefaultIterations = 3000;         // the schedule when neither iterations nor a time budget is given
-constexpr double DensifyEndFraction = 0.6;     // densification stops at this fraction of the schedule
 // Variable projection with a TimeBudget: a solve may take this share of the budget left when it starts. The
 // liver, 30 s (docs/FINDINGS.md): the first solve took the whole budget before (0 steps, 18.04 dB held out);
 // shares 0.25 / 0.1 / 0.03 gave 23.58 / 22.64 / 22.44 dB (a solve costs at least its setup and one iteration,
@@ -34,23 +36,6 @@ constexpr double DensifyEndFraction = 0.6;     // densification stops at this fr
 constexpr double SolveShareOfRemainingBudget = 0.25;
 constexpr double MinimumScaleMm = 1e-3;
 constexpr double MaximumScaleMm = 100.0;
-
-/// printf into a std::string.
-template <typename... Args>
-std::string Format(const char* format, Args... args)
-{
-  const int length = std::snprintf(nullptr, 0, format, args...);
-  std::string text(static_cast<std::size_t>(std::max(length, 0)) + 1, '\0');
-  std::snprintf(text.data(), text.size(), format, args...);
-  text.resize(text.size() - 1);
-  return text;
-}
-
-/// Uniform double in [0, 1) from the generator's raw output (identical on every platform).
-double Uniform(std::mt19937_64& rng)
-{
-  return (rng() >> 11) * (1.0 / 9007199254740992.0);
-}
 
 double Seconds()
 {
@@ -101,54 +86,31 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
   };
   if (this->Settings.ElevationSigma > 0)
   {
-    this->Report.Settings.push_back(Format("ElevationSigma = %.4g mm (given)", this->Settings.ElevationSigma));
+    this->Report.Settings.push_back(vtkfmt::sprintf("ElevationSigma = %.4g mm (given)", this->Settings.ElevationSigma));
   }
   else
   {
     const ElevationSigmaChoice choice = ChooseElevationSigma(measuredSweeps());
     this->Settings.ElevationSigma = choice.Sigma;
-    this->Report.Settings.push_back(Format("ElevationSigma = %.4g mm (chosen: ", choice.Sigma) + choice.Reason + ")");
+    this->Report.Settings.push_back(vtkfmt::sprintf("ElevationSigma = %.4g mm (chosen: ", choice.Sigma) + choice.Reason + ")");
   }
   this->Report.ElevationSigma = this->Settings.ElevationSigma;
   const TrainerSettings& s = this->Settings;
-  std::string schedule = s.Iterations > 0 ? Format("Iterations = %d", s.Iterations) : "Iterations = no limit";
+  std::string schedule = s.Iterations > 0 ? vtkfmt::sprintf("Iterations = %d", s.Iterations) : "Iterations = no limit";
   if (s.TimeBudget > 0)
   {
-    schedule += Format(", TimeBudget = %.4g s (", s.TimeBudget) +
+    schedule += vtkfmt::sprintf(", TimeBudget = %.4g s (", s.TimeBudget) +
       (s.Iterations > 0 ? "whichever ends first; " : "") + "the schedule follows the one further along)";
   }
   this->Report.Settings.push_back(schedule);
-  this->Report.Settings.push_back(s.Densify
-      ? Format("Densification = every %d steps from step %d to ", s.DensifyInterval, s.DensifyStart) +
-        (s.DensifyEnd >= 0 ? Format("step %d", s.DensifyEnd)
-                           : Format("%.0f %% of the schedule", 100 * DensifyEndFraction)) +
-        Format(", top %.3g %% by attribution", s.DensifyPercentile) +
-        (s.ResidualSeedShare > 0 ? Format(" and %.3g as many seeds where the residual of %d frames is largest",
-                                     s.ResidualSeedShare, s.ResidualSeedFrames)
-                                 : std::string()) +
-        Format(", at most %lld Gaussians", static_cast<long long>(s.MaximumGaussians)) +
-        Format("; growth stops when the validation loss improves by less than %.3g %%", 100 * s.GrowthMargin) +
-        Format(" over %d intervals", s.GrowthPatience)
-      : "Densification = off");
-  this->Report.Settings.push_back(s.FillGaps && s.BeamIntegration
-      ? Format("FillGaps = on (after training, gaps between training frames over %.3g typical spacings ",
-          s.GapFilling.MinimumGapSpacings) +
-        Format("are bridged by blended copies of the frames on either side as rendered, %.3g beam widths clear of them, ",
-          s.GapFilling.ClearanceSigmas) +
-        Format("each frame alone within %.3g beam widths of it)", s.GapFilling.BlendMarginSigmas)
-      : s.FillGaps ? "FillGaps = off (BeamIntegration is off: the thin plane has no beam to bridge gaps with)"
-                   : "FillGaps = off");
-  this->Report.Settings.push_back(!s.ReflectivitySolve ? "ReflectivitySolve = off (Adam alone)"
-      : s.NonNegativeReflectivity
-      ? "ReflectivitySolve = off (NonNegativeReflectivity: the model is not linear in r)"
-      : Format("ReflectivitySolve = on (%s, at most %d iterations, ridge %.3g, after seeding, after every "
-               "densification", s.Solve.L1 > 0 ? Format("FISTA with L1 %.3g", s.Solve.L1).c_str() : "CGLS",
-          s.Solve.MaximumIterations, s.Solve.Ridge) +
-        (s.SolveInterval > 0 ? Format(" and every %d steps)", s.SolveInterval) : std::string(")")));
-  this->Report.Settings.push_back(Format("Seed = %u, FramesPerStep = %d, Cutoff = %.3g, SparseAdam = %s%s", s.Seed,
+  this->Report.Settings.push_back(DescribeDensification(s.Densification, s.MaximumGaussians));
+  this->Report.Settings.push_back(DescribeGapFillingSettings(s.FillGaps, s.BeamIntegration, s.GapFilling));
+  this->Report.Settings.push_back(
+    DescribeReflectivitySolve(s.ReflectivitySolve, s.NonNegativeReflectivity, s.Solve, s.SolveInterval));
+  this->Report.Settings.push_back(vtkfmt::sprintf("Seed = %u, FramesPerStep = %d, Cutoff = %.3g, SparseAdam = %s%s", s.Seed,
     s.FramesPerStep, s.Cutoff, s.SparseAdam ? "on" : "off",
     s.CoarseFraction > 0
-      ? Format(", CoarseFraction = %.3g (a quarter of the pixels per step until then, %s)", s.CoarseFraction,
+      ? vtkfmt::sprintf(", CoarseFraction = %.3g (a quarter of the pixels per step until then, %s)", s.CoarseFraction,
           s.CoarseLowPass ? "2 x 2 averages through the pixel's low-pass" : "point samples").c_str()
       : ""));
   this->Poses.Configure(this->Data.get(), s.Poses, measuredSweeps, this->State, this->Report.Settings);
@@ -215,57 +177,12 @@ bool Trainer::Initialize(std::string* error)
 bool Trainer::PrepareInitialField(std::string* error)
 {
   const TrainingData& data = *this->Data;
-  const std::size_t pixels = std::size_t(data.Width) * data.Height;
-  if (data.TrainFrames.empty() || pixels == 0 ||
-    (data.Mask.size() != pixels && data.Mask.size() != pixels * data.Poses.size()) ||
-    data.Frames.size() != pixels * data.Poses.size())
-  {
-    if (error)
-    {
-      *error = "no training frames, or frames, poses and mask of inconsistent sizes";
-    }
-    return false;
-  }
-  // Every training pose must be one the renderer accepts, or the run would stop at its first step.
-  const double shearLimit = RenderOptions().MaximumShearAngle;
-  for (int f : data.TrainFrames)
-  {
-    SliceFrame frame;
-    const PoseStatus status = ComputeSliceFrame(data.Poses[f].data(), shearLimit, frame);
-    if (status != PoseStatus::Ok)
-    {
-      if (error)
-      {
-        char detail[120] = "";
-        if (status == PoseStatus::Sheared)
-        {
-          std::snprintf(detail, sizeof(detail), " by %.2f degrees; the renderer accepts at most %.2f",
-            frame.shearDegrees, shearLimit);
-        }
-        *error = "training frame " + std::to_string(f) + ": ImageToReference " + PoseStatusText(status) + detail;
-      }
-      return false;
-    }
-  }
-  if (!this->Poses.Prepare(error))
+  std::int64_t count = 0;
+  if (!CheckTrainingData(data, error) || !this->Poses.Prepare(error))
   {
     return false;
   }
-  double sum = 0;
-  long count = 0;
-  for (int f : data.TrainFrames)
-  {
-    const float* frame = &data.Frames[pixels * f];
-    const unsigned char* mask = data.MaskOf(f);
-    for (std::size_t p = 0; p < pixels; ++p)
-    {
-      if (mask[p])
-      {
-        sum += frame[p];
-        ++count;
-      }
-    }
-  }
+  const double mean = MeanFanIntensity(data, count);
   if (count == 0)
   {
     if (error)
@@ -274,96 +191,37 @@ bool Trainer::PrepareInitialField(std::string* error)
     }
     return false;
   }
-  this->Gamma = GammaFromMeanIntensity(sum / count);
+  this->Gamma = GammaFromMeanIntensity(mean);
   this->Report.Settings.push_back(
-    Format("Gamma = %.5g (from the mean fan intensity %.4f of the training frames)", this->Gamma, sum / count));
-  // Capacity follows the data: more fan pixels to explain, more seeds (measured on the liver at 120 s
-  // of training: 20k seeds 32.5 dB held-out PSNR, 60k 33.0, 100k 33.3, 200k 33.7).
-  const std::int64_t seeds = this->Settings.InitialGaussians > 0
-    ? this->Settings.InitialGaussians
-    : std::max<std::int64_t>(std::min<std::int64_t>(20000, this->Settings.MaximumGaussians / 2),
-        std::min<std::int64_t>(count / 200, this->Settings.MaximumGaussians / 2));
-  if (this->Settings.InitialGaussians > this->Settings.MaximumGaussians)
+    vtkfmt::sprintf("Gamma = %.5g (from the mean fan intensity %.4f of the training frames)", this->Gamma, mean));
+  const SeedShape shape = this->SeedShapeOf();
+  SeedingPlan plan;
+  if (!PlanSeeding(data, this->Settings.Seeding, this->Settings.MaximumGaussians, this->Settings.NonNegativeReflectivity,
+        shape, count, plan, error))
   {
-    if (error)
-    {
-      *error = Format("InitialGaussians (%lld) exceeds MaximumGaussians (%lld)",
-        static_cast<long long>(this->Settings.InitialGaussians), static_cast<long long>(this->Settings.MaximumGaussians));
-    }
     return false;
   }
-  const SeedShape shape = this->SeedShapeOf();
-  // The planes are selected (a pass over the training frames' masks) only where the pixel-grid fit may apply.
-  const bool gridMayApply = this->Settings.PixelGridFit && !this->Settings.DenseInitialisation &&
-    this->Settings.InitialGaussians <= 0 && this->Settings.HarrisInitialisation &&
-    !this->Settings.NonNegativeReflectivity;
-  const GridPlanes planes = gridMayApply ? SelectGridPlanes(data, shape) : GridPlanes();
-  this->PixelGrid = gridMayApply &&
-    planes.FanPixels <= PixelGridFanPixelsPerGaussian * this->Settings.MaximumGaussians;
+  this->PixelGrid = plan.PixelGrid;
   // A field that could not grow to MaximumGaussians in this machine's memory is refused before any seed is
   // made (the training frames are already held).
-  const std::int64_t trainingPixels =
-    std::int64_t(this->Data->Width) * this->Data->Height * std::int64_t(this->Data->TrainFrames.size());
-  const double needed = this->Settings.MaximumGaussians * TrainingBytesPerGaussian +
-    (this->SolvesReflectivities() ? ReflectivitySolveBytes(this->Settings.MaximumGaussians, trainingPixels) : 0.0);
-  const double physical = PhysicalMemoryBytes();
-  if (physical > 0 && needed > physical)
+  const std::int64_t trainingPixels = std::int64_t(data.Width) * data.Height * std::int64_t(data.TrainFrames.size());
+  const std::int64_t maximum = this->Settings.MaximumGaussians;
+  if (!CheckTrainingMemory(
+        maximum, this->SolvesReflectivities() ? ReflectivitySolveBytes(maximum, trainingPixels) : 0.0, error))
   {
-    if (error)
-    {
-      *error = Format("MaximumGaussians (%lld) needs %.0f MB of training state (%.0f bytes per Gaussian%s) and this "
-                      "machine has %.0f MB",
-        static_cast<long long>(this->Settings.MaximumGaussians), needed / 1e6, TrainingBytesPerGaussian,
-        this->SolvesReflectivities() ? " and the reflectivity solve's vectors" : "", physical / 1e6);
-    }
     return false;
   }
   GaussianField& field = this->State.Gaussians.Field;
-  if (this->PixelGrid)
+  this->Report.Settings.push_back(
+    SeedField(data, plan, this->Settings.Seeding, shape, this->Settings.Seed, this->Settings.Solve.L1, field));
+  this->Report.InitialGaussians =
+    plan.PixelGrid || this->Settings.Seeding.DenseInitialisation ? field.Count() : plan.Count;
+  if (plan.PixelGrid)
   {
-    const std::int64_t count = std::min<std::int64_t>(planes.FanPixels, this->Settings.MaximumGaussians);
-    const std::string grid = SeedGrid(data, planes, count, shape, field);
-    this->Report.InitialGaussians = field.Count();
-    this->Report.Settings.push_back(Format("InitialGaussians = %lld (the pixel-grid fit: the %lld fan pixels of the "
-                                           "dense start's planes %s; ",
-                                      static_cast<long long>(field.Count()), static_cast<long long>(planes.FanPixels),
-                                      count < planes.FanPixels
-                                        ? "are at most twice MaximumGaussians, a grid of that many"
-                                        : "fit under MaximumGaussians") +
-      grid + "; reflectivities solved" +
-      (this->Settings.Solve.L1 > 0 ? Format(" with an L1 term of %.3g (FISTA)", this->Settings.Solve.L1)
-                                   : std::string()) +
-      ", no geometry steps)");
     // No step, so no pose correction: the tracked poses stay, and the field says so (no RefinedPoses).
     this->Poses.TurnOffCorrections(
       this->State, this->Report.Settings, "the pixel-grid fit takes no step to refine the poses with");
     this->Settings.Poses = this->Poses.GetSettings();
-    return true;
-  }
-  if (this->Settings.DenseInitialisation)
-  {
-    const std::int64_t wanted = this->Settings.InitialGaussians > 0 ? this->Settings.InitialGaussians
-                                                                    : this->Settings.MaximumGaussians / 2;
-    const std::string grid = SeedGrid(data, wanted, shape, field);
-    this->Report.InitialGaussians = field.Count();
-    this->Report.Settings.push_back(Format("InitialGaussians = %lld (dense start: ", static_cast<long long>(field.Count())) +
-      grid + ")");
-    return true;
-  }
-  this->Report.InitialGaussians = seeds;
-  this->Report.Settings.push_back(Format("InitialGaussians = %lld (", static_cast<long long>(seeds)) +
-    (this->Settings.InitialGaussians > 0
-        ? std::string("given")
-        : Format("chosen: one per 200 of the %ld fan pixels of the training frames, 20,000 to half the maximum", count)) +
-    (this->Settings.HarrisInitialisation ? "; Harris seeding)" : "; uniform random seeding)"));
-  std::mt19937_64 rng(this->Settings.Seed * 7919ULL + 17);
-  if (this->Settings.HarrisInitialisation)
-  {
-    SeedHarris(data, seeds, rng, shape, field);
-  }
-  else
-  {
-    SeedUniform(data, seeds, rng, shape, field);
   }
   return true;
 }
@@ -407,7 +265,7 @@ bool Trainer::SetProcessReduction(ProcessReduction* reduction, std::string* erro
   this->Reduction = reduction && reduction->Size() > 1 ? reduction : nullptr;
   if (this->Reduction)
   {
-    this->Report.Settings.push_back(Format("Processes = %d (data-parallel: each renders its share of the %d frames "
+    this->Report.Settings.push_back(vtkfmt::sprintf("Processes = %d (data-parallel: each renders its share of the %d frames "
                                            "of a step, FramesPerStep %d per process; gradients summed every step)",
       reduction->Size(), reduction->Size() * this->Settings.FramesPerStep, this->Settings.FramesPerStep));
   }
@@ -420,48 +278,29 @@ bool Trainer::SolveFieldReflectivities(std::string* error)
   {
     return false;
   }
-  OptimizerState& G = this->State.Gaussians;
-  // With an L1 term, one solve in two parts, the relaxed lasso (Meinshausen, Comput. Stat. Data Anal. 52(1), 2007):
-  // the L1 solve chooses the Gaussians; the others (r = 0, and any no training pixel sees) are removed, and least
-  // squares refits the kept ones' reflectivities without the L1 term's shrinkage. On the volume protocol the refit
-  // gained 2.9 dB at L1 0.01 over the L1 solve alone (docs/FINDINGS.md, "An L1 term in the reflectivity solve").
-  const bool relaxed = this->Settings.Solve.L1 > 0;
-  for (int part = 0; part < (relaxed ? 2 : 1); ++part)
-  {
-    ReflectivitySolveSettings solve = this->Settings.Solve;
-    solve.L1 = part == 0 ? solve.L1 : 0.0;
-    if (this->Settings.TimeBudget > 0 && solve.TimeLimit <= 0)
-    {
-      // The pixel-grid fit is the whole run; variable projection leaves the rest to the steps between solves.
-      solve.TimeLimit = (this->PixelGrid ? 1.0 : SolveShareOfRemainingBudget) *
+  // With a TimeBudget: the pixel-grid fit is the whole run; variable projection leaves the rest to the steps
+  // between solves.
+  const auto timeLimit = [this]() {
+    return this->Settings.TimeBudget <= 0 ? 0.0
+                                          : (this->PixelGrid ? 1.0 : SolveShareOfRemainingBudget) *
         std::max(1e-3, this->Settings.TimeBudget - this->TrainingSeconds());
-    }
-    std::vector<float> r = G.Field.Reflectivities;
-    if (!SolveReflectivities(*this->Engine, *this->Data, this->Data->TrainFrames, this->Options(), solve, r,
-          &this->Report.LastSolve, error, this->Reduction))
-    {
-      if (error)
-      {
-        *error = "reflectivity solve: " + *error;
-      }
-      return false;
-    }
-    G.Field.Reflectivities.swap(r);
-    std::fill(G.FirstMoment.Reflectivities.begin(), G.FirstMoment.Reflectivities.end(), 0.f);
-    std::fill(G.SecondMoment.Reflectivities.begin(), G.SecondMoment.Reflectivities.end(), 0.f);
-    this->Report.SolveSeconds += this->Report.LastSolve.Seconds;
-    if (solve.L1 > 0)
-    {
-      this->Report.LastL1Solve = this->Report.LastSolve;
-      this->Report.LastL1Removed = bigus::FinalPrune(G, *this->Data, this->Options(), this->Gamma, 0.0);
-      if (!this->PushState(error)) // the refit solves the pruned field
-      {
-        return false;
-      }
-    }
+  };
+  FieldSolveReport solved;
+  TrainerReport& r = this->Report;
+  solved.L1Part = r.LastL1Solve;
+  solved.L1Removed = r.LastL1Removed;
+  const bool ok = bigus::SolveFieldReflectivities(*this->Engine, *this->Data, this->Options(), this->Settings.Solve,
+    timeLimit, this->Gamma, this->State.Gaussians, solved, error, this->Reduction);
+  this->HostCurrent = true; // the engine holds the host's field, or the step that failed left nothing to pull
+  if (!ok)
+  {
+    return false;
   }
-  this->Report.Solves += 1;
-  this->Report.LastSolve.Seconds += relaxed ? this->Report.LastL1Solve.Seconds : 0.0;
+  r.LastSolve = solved.Last;
+  r.LastL1Solve = solved.L1Part;
+  r.LastL1Removed = solved.L1Removed;
+  r.SolveSeconds += solved.Last.Seconds;
+  r.Solves += 1;
   return this->PushState(error);
 }
 
@@ -480,53 +319,20 @@ SeedShape Trainer::SeedShapeOf() const
 {
   SeedShape shape;
   shape.PixelSpacing = this->PixelSpacing;
-  shape.InPlaneScale = this->Settings.InitialScalePixels * this->PixelSpacing;
+  shape.InPlaneScale = this->Settings.Seeding.InitialScalePixels * this->PixelSpacing;
   shape.ElevationSigma = this->Settings.BeamIntegration ? this->Settings.ElevationSigma : 0.0;
   shape.ElevationScale = shape.ElevationSigma > 0 ? shape.ElevationSigma : this->PixelSpacing;
-  shape.UniformShare = this->Settings.UniformShare;
+  shape.UniformShare = this->Settings.Seeding.UniformShare;
   shape.Gamma = this->Gamma;
   return shape;
 }
 
 bool Trainer::FitReflectivityScale(std::string* error)
 {
-  // Overlapping seeds add up: one least-squares factor c on every reflectivity makes the rendered
-  // scattering field match -ln(1 - I) / gamma of a few training frames.
-  const TrainingData& data = *this->Data;
-  const std::size_t pixels = std::size_t(data.Width) * data.Height;
-  const int frames = static_cast<int>(data.TrainFrames.size());
-  const RenderOptions o = this->Options();
-  std::vector<float> S(pixels);
-  double num = 0, den = 0;
-  for (int n = 0; n < std::min(frames, 5); ++n)
-  {
-    const int f = data.TrainFrames[(n * frames) / std::min(frames, 5)];
-    const SliceGeometry slice = data.Slice(f);
-    if (!this->Engine->Render(&slice, 1, o, S.data(), nullptr, error))
-    {
-      return false;
-    }
-    const float* frame = &data.Frames[pixels * f];
-    const unsigned char* mask = data.MaskOf(f);
-    for (std::size_t p = 0; p < pixels; ++p)
-    {
-      if (mask[p])
-      {
-        num += S[p] * ScatteringOfIntensity(frame[p], this->Gamma);
-        den += double(S[p]) * S[p];
-      }
-    }
-  }
-  const double c = den > 0 ? num / den : 1.0;
-  if (!std::isfinite(c) || c <= 0)
-  {
-    return true;
-  }
-  for (float& r : this->State.Gaussians.Field.Reflectivities)
-  {
-    r = static_cast<float>(r * c);
-  }
-  return this->PushState(error);
+  bool scaled = false;
+  return ScaleSeedReflectivities(*this->Engine, *this->Data, this->Options(), this->Gamma,
+           this->State.Gaussians.Field, scaled, error) &&
+    (!scaled || this->PushState(error));
 }
 
 double Trainer::TrainingSeconds() const
@@ -556,7 +362,8 @@ double Trainer::MeanLearningRateAt(double fraction) const
 bool Trainer::InDensificationWindow() const
 {
   const TrainerSettings& s = this->Settings;
-  return s.DensifyEnd >= 0 ? this->State.Iteration <= s.DensifyEnd : this->ScheduleFraction() <= DensifyEndFraction;
+  return s.Densification.End >= 0 ? this->State.Iteration <= s.Densification.End
+                                  : this->ScheduleFraction() <= DensifyEndFraction;
 }
 
 StepStatus Trainer::Step(double* loss, std::string* error)
@@ -566,7 +373,7 @@ StepStatus Trainer::Step(double* loss, std::string* error)
   std::vector<int> frames(this->Settings.FramesPerStep * (this->Reduction ? this->Reduction->Size() : 1));
   for (int& f : frames)
   {
-    f = train[static_cast<std::size_t>(Uniform(state.Random) * train.size())];
+    f = train[static_cast<std::size_t>(UniformDouble(state.Random) * train.size())];
   }
   StepRequest request;
   request.Frames = frames.data();
@@ -592,7 +399,7 @@ StepStatus Trainer::Step(double* loss, std::string* error)
   int phase = 0;
   if (coarse)
   {
-    phase = static_cast<int>(Uniform(state.Random) * 4);
+    phase = static_cast<int>(UniformDouble(state.Random) * 4);
     decimated =
       DecimateFrames(*this->Data, frames.data(), request.Count, phase & 1, phase >> 1, this->Settings.CoarseLowPass);
     request.Data = &decimated;
@@ -636,41 +443,8 @@ StepStatus Trainer::Step(double* loss, std::string* error)
 
 bool Trainer::ValidationLoss(double& loss, std::string* error)
 {
-  // Every 8th training frame (at most 8): the growth decision must not depend on one lucky frame.
-  const TrainingData& data = *this->Data;
-  const std::size_t pixels = std::size_t(data.Width) * data.Height;
-  const RenderOptions o = this->Options();
-  std::vector<float> S(pixels), I(pixels);
-  ImageLossWorkspace workspace;
-  double total = 0;
-  int used = 0;
-  bool ok = true;
-  const int frames = static_cast<int>(data.TrainFrames.size());
-  const int stride = std::max(1, frames / 8);
-  for (int n = 0; n < frames && used < 8 && ok; n += stride, ++used)
-  {
-    // Data-parallel: each process renders its share of the frames, and the losses are summed, so that the
-    // growth and early-stopping decisions are taken from one agreed value on every process.
-    if (this->Reduction && used % this->Reduction->Size() != this->Reduction->Rank())
-    {
-      continue;
-    }
-    const int f = data.TrainFrames[n];
-    const SliceGeometry slice = data.Slice(f);
-    ok = this->Engine->Render(&slice, 1, o, S.data(), I.data(), error);
-    if (ok)
-    {
-      total += ComputeImageLoss(I.data(), &data.Frames[pixels * f], data.MaskOf(f), data.Width, data.Height,
-        this->Settings.Loss, nullptr, false, &workspace)
-                 .Total;
-    }
-  }
-  if (!this->Agree(ok, error) || (this->Reduction && !this->Reduction->Sum(&total, 1, error)))
-  {
-    return false;
-  }
-  loss = total / std::max(1, used);
-  return true;
+  return bigus::ValidationLoss(*this->Engine, *this->Data, ValidationFrames(*this->Data), this->Options(),
+    this->Settings.Loss, this->Reduction, loss, error);
 }
 
 bool Trainer::CheckValidation(double& loss, std::string* error)
@@ -694,52 +468,33 @@ bool Trainer::CheckValidation(double& loss, std::string* error)
 bool Trainer::DensifyAndPrune(double validation, std::string* error)
 {
   TrainingState& state = this->State;
-  if (state.Growing)
+  const DensificationSettings& d = this->Settings.Densification;
+  const std::string stopped = UpdateGrowth(state, validation, d);
+  if (!stopped.empty())
   {
-    if (state.BestValidationLoss < 0 || validation < state.BestValidationLoss * (1 - this->Settings.GrowthMargin))
-    {
-      state.BestValidationLoss = validation;
-      state.StalledGrowthSteps = 0;
-    }
-    else if (++state.StalledGrowthSteps >= this->Settings.GrowthPatience)
-    {
-      state.Growing = false;
-      char why[200];
-      std::snprintf(why, sizeof(why),
-        "validation loss improved by less than %.2g %% over %d densification intervals (iteration %d)",
-        100 * this->Settings.GrowthMargin, this->Settings.GrowthPatience, state.Iteration);
-      this->Report.GrowthStopReason = why;
-    }
+    this->Report.GrowthStopReason = stopped;
   }
   if (!this->PullState(error))
   {
     return false;
   }
   // Image-GS's new Gaussians from the residual: rendered before densification changes the field.
-  const double residualShare = this->Settings.ResidualSeedShare;
-  const int residualFrames = this->Settings.ResidualSeedFrames;
-  std::vector<int> residualFrameList;
+  std::vector<int> residualFrames;
   std::vector<float> residuals;
-  if (residualShare > 0 && residualFrames > 0 && state.Growing &&
-    !this->RenderResiduals(residualFrames, residualFrameList, residuals, error))
+  if (d.ResidualSeedShare > 0 && d.ResidualSeedFrames > 0 && state.Growing &&
+    !RenderResiduals(*this->Engine, *this->Data, this->Options(), this->Gamma, d.ResidualSeedFrames, state.Random,
+      residualFrames, residuals, error))
   {
     return false;
   }
-  const DensificationResult result = bigus::DensifyAndPrune(state.Gaussians, state.Growing,
-    this->Settings.DensifyPercentile, this->Settings.MaximumGaussians,
-    this->Settings.SplitScalePixels * this->PixelSpacing, this->Settings.PruneReflectivity);
-  if (!residualFrameList.empty() && result.Added > 0)
+  const DensificationResult result = bigus::DensifyAndPrune(state.Gaussians, state.Growing, d.Percentile,
+    this->Settings.MaximumGaussians, d.SplitScalePixels * this->PixelSpacing, d.PruneReflectivity);
+  if (!residualFrames.empty() && result.Added > 0)
   {
     const std::int64_t room = this->Settings.MaximumGaussians - state.Gaussians.Count();
-    const std::int64_t count = std::min<std::int64_t>(room, std::llround(residualShare * result.Added));
-    const SeedShape shape = this->SeedShapeOf();
-    const std::size_t pixels = std::size_t(this->Data->Width) * this->Data->Height;
-    for (std::size_t k = 0; k < residualFrameList.size(); ++k)
-    {
-      const std::int64_t share = count / residualFrames + (std::int64_t(k) < count % residualFrames ? 1 : 0);
-      SeedResidual(*this->Data, residualFrameList[k], &residuals[pixels * k], share, state.Random, shape,
-        state.Gaussians.Field);
-    }
+    SeedResiduals(*this->Data, residualFrames, residuals,
+      std::min<std::int64_t>(room, std::llround(d.ResidualSeedShare * result.Added)), state.Random,
+      this->SeedShapeOf(), state.Gaussians.Field);
     state.Gaussians.ResizeToField();
   }
   if (state.Growing && result.MaximumReached)
@@ -749,31 +504,6 @@ bool Trainer::DensifyAndPrune(double validation, std::string* error)
       " Gaussians reached (iteration " + std::to_string(state.Iteration) + ")";
   }
   return this->PushState(error);
-}
-
-bool Trainer::RenderResiduals(int count, std::vector<int>& frames, std::vector<float>& residuals, std::string* error)
-{
-  const TrainingData& data = *this->Data;
-  const std::size_t pixels = std::size_t(data.Width) * data.Height;
-  const RenderOptions o = this->Options();
-  residuals.resize(pixels * count);
-  for (int k = 0; k < count; ++k)
-  {
-    const int f = data.TrainFrames[static_cast<std::size_t>(Uniform(this->State.Random) * data.TrainFrames.size())];
-    frames.push_back(f);
-    const SliceGeometry slice = data.Slice(f);
-    float* S = &residuals[pixels * k];
-    if (!this->Engine->Render(&slice, 1, o, S, nullptr, error))
-    {
-      return false;
-    }
-    const float* frame = &data.Frames[pixels * f];
-    for (std::size_t p = 0; p < pixels; ++p)
-    {
-      S[p] = static_cast<float>(ScatteringOfIntensity(frame[p], this->Gamma) - S[p]);
-    }
-  }
-  return true;
 }
 
 void Trainer::PlaceUntrainedFrames()
@@ -922,12 +652,13 @@ bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>
     }
     const int it = state.Iteration;
     double validation = 0;
-    if (it % s.DensifyInterval == 0 && !this->CheckValidation(validation, error))
+    const DensificationSettings& d = s.Densification;
+    if (it % d.Interval == 0 && !this->CheckValidation(validation, error))
     {
       ok = false;
       break;
     }
-    const bool densify = s.Densify && it >= s.DensifyStart && it % s.DensifyInterval == 0 && this->InDensificationWindow();
+    const bool densify = d.Enabled && it >= d.Start && it % d.Interval == 0 && this->InDensificationWindow();
     if (densify && !this->DensifyAndPrune(validation, error))
     {
       ok = false;
@@ -987,9 +718,9 @@ bool Trainer::Finish(std::string* error)
 {
   const double start = Seconds();
   const TrainerSettings& s = this->Settings;
-  if (this->Report.GrowthStopReason.empty() && (!s.Densify || this->DensificationEnded))
+  if (this->Report.GrowthStopReason.empty() && (!s.Densification.Enabled || this->DensificationEnded))
   {
-    this->Report.GrowthStopReason = s.Densify ? "densification schedule ended" : "densification off";
+    this->Report.GrowthStopReason = s.Densification.Enabled ? "densification schedule ended" : "densification off";
   }
   // Early stopping: keep the best field seen when the last one scores worse on the validation frames.
   double last = 0;

@@ -25,6 +25,7 @@
 #include "bigusSeeding.h"
 #include "bigusRenderer.h"
 #include "bigusTrainingEngine.h"
+#include "bigusValidation.h"
 
 #include <array>
 #include <cstdint>
@@ -38,56 +39,35 @@
 namespace bigus
 {
 
+/**
+ * Every setting of a run, one struct per stage where a stage has its own (Seeding, Solve, Densification, Poses,
+ * GapFilling, Merge), the loop's and the schedule's here. The defaults are the project's (vtkGaussianFieldTrainer,
+ * `bigus train` and the ParaView plugin take theirs from a default-constructed TrainerSettings); what each default
+ * was measured against is in docs/FINDINGS.md, "The trainer's defaults, measured". A rule that chooses a setting
+ * from the data lives in the stage that applies it, and the run's `setting` lines (TrainerReport::Settings) say
+ * what it chose and why.
+ */
 struct TrainerSettings
 {
   // Model
   /// mm; 0 = chosen from the training frames (bigus::ChooseElevationSigma, bigusElevationSigma.h)
   double ElevationSigma = 0;
-  // The switches below follow the ablations of docs/BENCHMARKS_ablations.md (bigus benchmark --section
-  // ablations: each against the defaults at equal time and equal iterations, 3 seeds) and docs/FINDINGS.md.
-  /// Beam integration (false: the thin plane, UltraGauss): on; at equal time it pays on the spine
-  /// phantom (+12.8 dB) and the N-wire phantom (+1.8 dB), costs 0.5 dB on the liver (fewer steps).
+  /// Beam integration (false: the thin plane, UltraGauss; the ablation).
   bool BeamIntegration = true;
-  /// Signed reflectivity (true: clamped to >= 0): off; signed pays 0.5 dB on the liver at equal time.
+  /// Signed reflectivity (true: clamped to >= 0; the ablation).
   bool NonNegativeReflectivity = false;
-  double Cutoff = 4.0;                ///< renderer cutoff k while training (Evaluate renders at the filters' 5):
-                                      ///< a liver step is 1.6 times faster than at 5, max |delta I| ~1e-3
-  // Initialisation
-  /// false: uniform random in the sweep's bounding box; Harris pays on every sweep at equal time
-  /// (liver +2.7 dB, spine +1.3, N-wire +0.4, volume protocol +1.1).
-  bool HarrisInitialisation = true;
-  /// Seeds; 0 = automatic: one per 200 masked pixels of the training frames, at least 20,000 and at
-  /// most half of MaximumGaussians (liver sweep, 105 frames of ~280k fan pixels: 147k seeds).
-  std::int64_t InitialGaussians = 0;
-  /// A dense start instead of Harris seeds: Gaussians on the pixel grid of the training frames (every
-  /// frame at least sigma_E from the previous one kept) at the real-valued stride that gives at most
-  /// InitialGaussians, short of it by less than a row and a column of the grid (0 = automatic: half of MaximumGaussians), in-plane scale 0.6 strides, elevation
-  /// scale half the spacing of the planes kept; reflectivities from the solve (InitializeGrid).
-  bool DenseInitialisation = false;
-  /// The fit when the data are few: when the dense start's planes (SelectGridPlanes) hold at most
-  /// PixelGridFanPixelsPerGaussian x MaximumGaussians fan pixels, the field is a pixel grid (SeedGrid: every
-  /// fan pixel, or MaximumGaussians of them at a stride of up to 1.41) with its reflectivities solved, and no
-  /// geometry step follows, whatever Iterations and TimeBudget:
-  /// 11 parameters per Gaussian would outnumber the pixels, and Adam overfits them. On the volume protocol
-  /// (352k fan pixels) 40.52 dB in between in 14 s, against 37.85 for Harris seeds and Adam in 120 s; on the
-  /// cropped N-wire phantom (22k) 19.81 dB held out in 0.7 s against 20.00 in 60 s (docs/FINDINGS.md,
-  /// "The fit when the data are few"). Applies with the default start only (Harris seeding,
-  /// InitialGaussians 0, no DenseInitialisation, signed reflectivities); every bundled real sweep has more
-  /// fan pixels than this and trains as before.
-  bool PixelGridFit = true;
-  double UniformShare = 0.1;         ///< share of Harris seeds drawn uniformly inside the mask
-  double InitialScalePixels = 1.5;   ///< in-plane standard deviation of a seed, pixels
-  // Variable projection (DESIGN section 4, "Solve what is linear")
+  /// Renderer cutoff k while training (Evaluate renders at the filters' 5): a step is faster, and the rendered
+  /// intensity changes by about 1e-3.
+  double Cutoff = 4.0;
+  // The first field (bigusSeeding.h)
+  SeedingSettings Seeding;
+  // Variable projection (DESIGN section 4, "Solve what is linear"; bigusReflectivitySolve.h)
   /// On: the reflectivities are solved by least squares (bigus::SolveReflectivities over every training
   /// frame) after seeding, after every densification and every SolveInterval steps, and Adam moves every
-  /// parameter between the solves. Off (default): one least-squares scale of the seeds' reflectivities,
-  /// then Adam alone. At 120 s Adam alone measured better on every sweep (docs/BENCHMARKS_pareto.md:
-  /// liver 36.55 against 32.58 dB held out, spine phantom 21.06 against 20.49, volume protocol 37.44
-  /// against 34.54): a liver solve costs 30 to 100 s on 2 cores, and on 1.5-pixel Harris seeds it fits
-  /// the frames to 18 dB only (docs/FINDINGS.md).
-  /// Ignored (off) with NonNegativeReflectivity, whose model is not linear in r. With a TimeBudget (and no
-  /// Solve.TimeLimit given) each solve may take a quarter of the budget left when it starts, the pixel-grid fit's
-  /// all of it (ReflectivitySolveSettings::TimeLimit).
+  /// parameter between the solves. Off (default): one least-squares scale of the seeds' reflectivities
+  /// (ScaleSeedReflectivities), then Adam alone. Ignored (off) with NonNegativeReflectivity, whose model is not
+  /// linear in r. With a TimeBudget (and no Solve.TimeLimit given) each solve may take a quarter of the budget
+  /// left when it starts, the pixel-grid fit's all of it (ReflectivitySolveSettings::TimeLimit).
   bool ReflectivitySolve = false;
   ReflectivitySolveSettings Solve;
   int SolveInterval = 0; ///< steps between solves besides those after densification; 0 = none
@@ -98,99 +78,48 @@ struct TrainerSettings
   /// Seconds of training of the run, 0 = no limit: every Train call counts, and a run resumed from a
   /// checkpoint counts the seconds trained before it (TrainingState::TrainingSeconds).
   double TimeBudget = 0;
-  int FramesPerStep = 1;             ///< training frames rendered per step (the batch); losses are averaged
+  int FramesPerStep = 1; ///< training frames rendered per step (the batch); losses are averaged
   /// The resolution schedule: steps in the first CoarseFraction of the schedule see their frames on every second
   /// pixel and row, from a pixel drawn at random among the first 2 x 2 every step (DecimateFrames: a quarter of
   /// the pixels, point samples as the renderer's pixels are), later steps the whole frames; 0 = off. After
   /// DashGaussian's coarse-to-fine schedule (Chen et al. 2025); its low-pass images are CoarseLowPass. A coarse
-  /// step's pose gradients are moved to the source frame's pivot (DecimatedPoseGradientToSource). Default 0.5:
-  /// the liver's held-out PSNR +0.7 dB at 120 s (2
-  /// seeds) and +0.24 at the main job's 300 s (38.46 against 38.22 dB), the spine phantom -0.05 dB at 120 s (2
-  /// seeds, within their spread), the N-wire phantom unchanged at 60 s (0.9 measured); docs/FINDINGS.md, "The
-  /// resolution schedule".
+  /// step's pose gradients are moved to the source frame's pivot (DecimatedPoseGradientToSource).
   double CoarseFraction = 0.5;
   /// The coarse steps' frames as 2 x 2 averages rendered through the pixel's low-pass (DecimateFrames with
   /// average, SliceGeometry::PixelLowPass: each footprint convolved with the 2 x 2 box's extra variance, as
-  /// DashGaussian's and Mip-Splatting's low-pass filter does) instead of point samples. Off: on the liver at 120 s
-  /// -0.05 to -0.17 dB held out (2 seeds; CoarseFraction 0.5 and 0.9), the spine phantom +0.03 (docs/FINDINGS.md,
-  /// "The pixel low-pass on the coarse steps"): a random phase makes the point samples an unbiased sample of the
-  /// whole frame's loss, the averages a blurred one.
+  /// DashGaussian's and Mip-Splatting's low-pass filter does) instead of point samples. Off: a random phase makes the
+  /// point samples an unbiased sample of the whole frame's loss, the averages a blurred one.
   bool CoarseLowPass = false;
-  /// Adam over the Gaussians a step touched only (StepRequest::SparseAdam): on. At 120 s it pays on the
-  /// liver (+1.1 dB held out, 3 seeds each), the volume protocol (+1.0 dB) and the N-wire phantom (+0.2 dB,
-  /// 60 s), within noise on the spine phantom (docs/FINDINGS.md, "Sparse Adam"). Off: every Gaussian's
-  /// moments decay and its parameters move every step (the ablation).
+  /// Adam over the Gaussians a step touched only (StepRequest::SparseAdam). Off: every Gaussian's moments decay and
+  /// its parameters move every step (the ablation).
   bool SparseAdam = true;
-  double MeanLearningRate = 0.02;    ///< mm per step at the start ...
+  double MeanLearningRate = 0.02;       ///< mm per step at the start ...
   double MeanLearningRateFinal = 0.002; ///< ... decaying exponentially to this at the end of the schedule
   double LogScaleLearningRate = 0.01;
   double QuaternionLearningRate = 0.005;
   double ReflectivityLearningRate = 0.01;
-  /// L1 0.8 + D-SSIM 0.2 (D-SSIM pays 0.6 dB on the liver at equal time, costs 0.3 dB on the spine);
-  /// FFL 0: at equal time it costs on every sweep (liver -1.6 dB: its DFTs take a fifth of the steps).
+  /// L1 0.8 + D-SSIM 0.2 (3D Gaussian splatting's balance); the focal frequency loss off (its two DFTs cost about as
+  /// much as the rest of the loss).
   ImageLossWeights Loss;
-  double ConvergenceTolerance = 0;   ///< stop when the mean loss of the last 200 steps improved by less (relative); 0 = off
-  // Densification (EA-D)
-  /// On: within noise in the 15 to 40 s ablations (two densifications at most), but at the main job's
-  /// 300 s on the liver 36.88 dB against 36.19 without (2 seeds; about 4,000 steps against 5,100;
-  /// docs/FINDINGS.md).
-  bool Densify = true;
-  int DensifyStart = 200, DensifyEnd = -1, DensifyInterval = 200; ///< End -1: 60 % of the schedule
-  double DensifyPercentile = 5.0;    ///< top share (%) of the attribution score densified each time
-  /// New Gaussians where the residual is largest at each densification, as a share of those split or cloned
-  /// (0 = off): seeds on ResidualSeedFrames training frames drawn at random, in proportion to |residual|, each
-  /// taking the residual as its reflectivity (bigus::SeedResidual; Image-GS, Zhang et al. 2025). The liver at
-  /// 120 s, 2 seeds (docs/FINDINGS.md): 0.25 and 0.5 gave +0.23 / +0.22 dB held out, 1.0 nothing; 8 % more
-  /// Gaussians by a larger DensifyPercentile instead +0.02; but at 300 s nothing on the main job and -1.8 dB on
-  /// the 8-frame block hold-out (29.66 against 31.48), so off by default.
-  double ResidualSeedShare = 0;
-  int ResidualSeedFrames = 4;
-  double SplitScalePixels = 3.0;     ///< largest scale above which a Gaussian is split, not cloned
-  double PruneReflectivity = 1e-3;   ///< |r| below this is pruned (after the first densification)
-  double GrowthMargin = 0.005;       ///< growth stops when the validation loss improves by less (relative) ...
-  int GrowthPatience = 4;            ///< ... than the best so far over this many densification intervals in a row
-  /// Hard maximum, gap filling's copies included (GapFillingSettings). 500,000 (was 400,000): room for a Gaussian per
-  /// fan pixel of the volume protocol's two sweeps (docs/FINDINGS.md, "Several sweeps"); the liver main job and
-  /// block hold-outs measured within noise of 400,000.
+  double ConvergenceTolerance = 0; ///< stop when the mean loss of the last 200 steps improved by less (relative); 0 = off
+  // Densification (EA-D; bigusDensification.h)
+  DensificationSettings Densification;
+  /// Hard maximum, gap filling's copies included (GapFillingSettings): room for a Gaussian per fan pixel of the
+  /// volume protocol's two sweeps.
   std::int64_t MaximumGaussians = 500000;
   double FinalPruneTolerance = 1.0 / 512; ///< final prune: max change of any training pixel's I
   /// After the final prune, bridge gaps between training frames wider than the beam (FillElevationGaps).
   bool FillGaps = true;
   GapFillingSettings GapFilling;
   /// Last, merge neighbouring Gaussians that one Gaussian represents (bigus::MergeGaussians; Tolerance 0: off).
-  /// 0.001 by default: on fields trained for the README's jobs it took the N-wire phantom from 13,425 to 3,912
-  /// Gaussians and the liver main job's from 325,190 to 281,737, with held-out PSNR within 0.02 dB
-  /// (docs/FINDINGS.md, "Merging").
   GaussianMergeSettings Merge{ 1e-3 };
   // Pose refinement (bigusPoseRefinement.h)
   PoseRefinementSettings Poses;
   // Run
   unsigned Seed = 1;
-  int CheckpointInterval = 0;        ///< steps between checkpoints (0 = none)
+  int CheckpointInterval = 0; ///< steps between checkpoints (0 = none)
   std::string CheckpointFile;
 };
-
-/**
- * Host memory of a training run per Gaussian, bytes, with the CPU engine (the documented table is in
- * docs/FINDINGS.md, "Memory"): the trainer's optimiser state (the field 44: means, log-scales,
- * quaternions, reflectivity in float; Adam's two moments 88; attribution and visibility count 8), the
- * engine's copy of it (140), the engine's last known-good field and moments (132) and its gradients
- * (44), and the best field kept for early stopping (44). The reflectivity solve adds
- * ReflectivitySolveBytes while it runs. The training frames (4 bytes per pixel, 1 per mask pixel)
- * come on top.
- */
-constexpr double TrainingBytesPerGaussian = 140 + 140 + 132 + 44 + 44;
-
-/**
- * The pixel-grid fit (TrainerSettings::PixelGridFit) applies while the dense start's planes hold at most
- * this many fan pixels per Gaussian of MaximumGaussians: every fan pixel when they fit, otherwise a grid
- * of MaximumGaussians points (a stride of up to sqrt(2) pixels). Measured on the volume protocol's parallel
- * sweep (352k fan pixels; oblique / in-between PSNR, dB): stride 1 40.78 / 40.52, stride 1.33 (200k
- * Gaussians) 39.25 / 38.18, stride 1.89 (100k) 37.55 / 36.34, where Harris seeds and Adam for 120 s score
- * 38.07 / 37.80 (docs/FINDINGS.md, "Several sweeps into one field"): the grid loses to Adam from a stride
- * of about 1.45.
- */
-constexpr double PixelGridFanPixelsPerGaussian = 2.0;
 
 /// What a run did.
 struct TrainerReport
@@ -380,9 +309,6 @@ private:
     return (this->Settings.ReflectivitySolve || this->PixelGrid) && !this->Settings.NonNegativeReflectivity;
   }
   bool DensifyAndPrune(double validation, std::string* error);
-  /// The S-space residuals t - S ([count, H, W]) of @p count training frames drawn from the run's generator, of
-  /// the engine's field (ResidualSeedShare).
-  bool RenderResiduals(int count, std::vector<int>& frames, std::vector<float>& residuals, std::string* error);
   bool ValidationLoss(double& loss, std::string* error);
   /// Measures the validation loss; keeps a copy of the field when it is the best so far.
   bool CheckValidation(double& loss, std::string* error);

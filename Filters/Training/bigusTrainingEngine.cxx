@@ -4,6 +4,8 @@
 #include "bigusBackend.h"
 #include "bigusSliceFrame.h"
 
+#include <vtksys/SystemInformation.hxx>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -27,11 +29,27 @@ bool TrainingEngine::SetReduction(ProcessReduction* reduction, std::string* erro
     if (error)
     {
       *error = std::string("the ") + this->GetName() + " training engine does not train data-parallel (sums across " +
-        "processes); use the cpu backend with several processes";
+        "processes); make the engine with CreateTrainingEngine(..., dataParallel true)";
     }
     return false;
   }
   return true;
+}
+
+double FrameLoss(const TrainingData& data, int frame, const float* I, const StepRequest& request, float* gradient,
+  ImageLossWorkspace* workspace)
+{
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
+  const ImageLossTerms terms = ComputeImageLoss(I, &data.Frames[pixels * frame], data.MaskOf(frame), data.Width,
+    data.Height, request.Loss, gradient, false, workspace);
+  if (request.Count > 1)
+  {
+    for (std::size_t p = 0; p < pixels; ++p)
+    {
+      gradient[p] /= static_cast<float>(request.Count);
+    }
+  }
+  return terms.Total;
 }
 
 ProcessReduction::~ProcessReduction() = default;
@@ -64,10 +82,89 @@ bool ProcessReduction::AllSucceeded(bool ok, std::string* error)
   return true;
 }
 
+bool CheckTrainingData(const TrainingData& data, std::string* error)
+{
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
+  if (data.TrainFrames.empty() || pixels == 0 ||
+    (data.Mask.size() != pixels && data.Mask.size() != pixels * data.Poses.size()) ||
+    data.Frames.size() != pixels * data.Poses.size())
+  {
+    if (error)
+    {
+      *error = "no training frames, or frames, poses and mask of inconsistent sizes";
+    }
+    return false;
+  }
+  // Every training pose must be one the renderer accepts, or the run would stop at its first step.
+  const double shearLimit = RenderOptions().MaximumShearAngle;
+  for (int f : data.TrainFrames)
+  {
+    SliceFrame frame;
+    const PoseStatus status = ComputeSliceFrame(data.Poses[f].data(), shearLimit, frame);
+    if (status != PoseStatus::Ok)
+    {
+      if (error)
+      {
+        char detail[120] = "";
+        if (status == PoseStatus::Sheared)
+        {
+          std::snprintf(detail, sizeof(detail), " by %.2f degrees; the renderer accepts at most %.2f",
+            frame.shearDegrees, shearLimit);
+        }
+        *error = "training frame " + std::to_string(f) + ": ImageToReference " + PoseStatusText(status) + detail;
+      }
+      return false;
+    }
+  }
+  return true;
+}
+
+bool CheckTrainingMemory(std::int64_t maximumGaussians, double solveBytes, std::string* error)
+{
+  const double needed = maximumGaussians * TrainingBytesPerGaussian + solveBytes;
+  const double physical = PhysicalMemoryBytes();
+  if (physical <= 0 || needed <= physical)
+  {
+    return true;
+  }
+  if (error)
+  {
+    char text[300];
+    std::snprintf(text, sizeof(text),
+      "MaximumGaussians (%lld) needs %.0f MB of training state (%.0f bytes per Gaussian%s) and this machine has %.0f MB",
+      static_cast<long long>(maximumGaussians), needed / 1e6, TrainingBytesPerGaussian,
+      solveBytes > 0 ? " and the reflectivity solve's vectors" : "", physical / 1e6);
+    *error = text;
+  }
+  return false;
+}
+
+double MeanFanIntensity(const TrainingData& data, std::int64_t& fanPixels)
+{
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
+  double sum = 0;
+  fanPixels = 0;
+  for (int f : data.TrainFrames)
+  {
+    const float* frame = &data.Frames[pixels * f];
+    const unsigned char* mask = data.MaskOf(f);
+    for (std::size_t p = 0; p < pixels; ++p)
+    {
+      if (mask[p])
+      {
+        sum += frame[p];
+        ++fanPixels;
+      }
+    }
+  }
+  return fanPixels > 0 ? sum / fanPixels : 0.0;
+}
+
 double PhysicalMemoryBytes()
 {
-  const long pages = sysconf(_SC_PHYS_PAGES), size = sysconf(_SC_PAGE_SIZE);
-  return pages > 0 && size > 0 ? double(pages) * double(size) : 0.0;
+  vtksys::SystemInformation info;
+  info.RunMemoryCheck();
+  return double(info.GetTotalPhysicalMemory()) * 1024.0 * 1024.0; // MiB
 }
 
 SliceGeometry TrainingData::Slice(int frame) const
@@ -525,7 +622,8 @@ void RegisterTrainingEngine(const std::string& name, TrainingEngineFactory facto
   EngineFactories(lock)[name] = factory;
 }
 
-std::unique_ptr<TrainingEngine> CreateTrainingEngine(const std::string& name, std::string* error, std::string* notice)
+std::unique_ptr<TrainingEngine> CreateTrainingEngine(
+  const std::string& name, std::string* error, std::string* notice, bool dataParallel)
 {
   // Every backend comes from the one registry; its renderer says which one "auto" chose.
   std::unique_ptr<Renderer> renderer = CreateRenderer(name, error, notice);
@@ -535,6 +633,7 @@ std::unique_ptr<TrainingEngine> CreateTrainingEngine(const std::string& name, st
   }
   const std::string backend = renderer->GetName();
   TrainingEngineFactory factory = nullptr;
+  if (!dataParallel) // data-parallel: the CPU engine's step, which sums through the host, over this renderer
   {
     std::unique_lock<std::mutex> lock;
     const auto& factories = EngineFactories(lock);

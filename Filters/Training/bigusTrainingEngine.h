@@ -14,6 +14,7 @@
 #define bigusTrainingEngine_h
 
 #include "bigusAdam.h"
+#include "bigusFieldLayout.h"
 #include "bigusImageLoss.h"
 #include "bigusRenderer.h"
 #include "bigusTrainingModule.h" // For export macro
@@ -106,6 +107,14 @@ struct BIGUSTRAINING_EXPORT GaussianField
 {
   std::vector<float> Means, LogScales, Quaternions, Reflectivities; ///< [N,3] mm, [N,3], [N,4], [N]
   std::int64_t Count() const { return static_cast<std::int64_t>(this->Reflectivities.size()); }
+  /// The array of parameter group @p q (bigusFieldLayout.h: MeanGroup, LogScaleGroup, ...).
+  std::vector<float>& Group(int q)
+  {
+    return q == MeanGroup ? this->Means
+      : q == LogScaleGroup ? this->LogScales
+      : q == QuaternionGroup ? this->Quaternions
+                             : this->Reflectivities;
+  }
   FieldView View() const;
   void Resize(std::int64_t n);
   /// Keeps the Gaussians whose flag is non-zero, in order.
@@ -192,6 +201,14 @@ struct StepRequest
   int Count = 0;               ///< batch size; the loss and its gradient are the batch means
   int Iteration = 0;           ///< Adam's bias correction uses t = Iteration + 1
   double MeanRate = 0, LogScaleRate = 0, QuaternionRate = 0, ReflectivityRate = 0; ///< Adam learning rates
+  /// The learning rate of parameter group @p q (bigusFieldLayout.h).
+  double Rate(int q) const
+  {
+    return q == MeanGroup ? this->MeanRate
+      : q == LogScaleGroup ? this->LogScaleRate
+      : q == QuaternionGroup ? this->QuaternionRate
+                             : this->ReflectivityRate;
+  }
   double MinimumLogScale = 0, MaximumLogScale = 0; ///< log-scales are clamped to this range after the update
   /// Adam over the Gaussians the step touched only: one whose gradients are all zero keeps its parameters
   /// and moments (Mallick et al. 2024, Taming 3DGS; gsplat's sparse gradients). False: every Gaussian's
@@ -228,9 +245,46 @@ inline bool TrainingFrameError(int frame, std::string* error)
   return false;
 }
 
-/// This machine's physical memory, bytes (sysconf); 0 when unknown. Sizes are checked against it
+/**
+ * For engines: the image loss (ComputeImageLoss, inside the frame's mask) of @p I ([H, W]) rendered at frame
+ * @p frame of @p data, returned undivided, and its gradient dL/dI into @p gradient ([H, W]) divided by the batch
+ * size @p request.Count (a step's loss is the batch mean).
+ */
+BIGUSTRAINING_EXPORT double FrameLoss(const TrainingData& data, int frame, const float* I, const StepRequest& request,
+  float* gradient, ImageLossWorkspace* workspace);
+
+/// This machine's physical memory, bytes (vtksys::SystemInformation, to the MiB); 0 when unknown. Sizes are checked against it
 /// before large allocations (the reflectivity solve, a trainer's MaximumGaussians).
 BIGUSTRAINING_EXPORT double PhysicalMemoryBytes();
+
+/**
+ * Whether @p data can be trained on: training frames, frames, poses and mask of consistent sizes, and every training
+ * pose one the renderer accepts (false with @p error: "training frame 12: ImageToReference is sheared ... by 7.20
+ * degrees; the renderer accepts at most 5.00": bigus::DefaultMaximumShearAngle, also the reader's default limit).
+ */
+BIGUSTRAINING_EXPORT bool CheckTrainingData(const TrainingData& data, std::string* error);
+
+/// The mean intensity of the training frames' pixels inside their masks; @p fanPixels receives how many (0: none,
+/// and the mean is 0).
+BIGUSTRAINING_EXPORT double MeanFanIntensity(const TrainingData& data, std::int64_t& fanPixels);
+
+/**
+ * Host memory of a training run per Gaussian, bytes, with the CPU engine (the documented table is in
+ * docs/FINDINGS.md, "Memory"): the trainer's optimiser state (the field 44: means, log-scales,
+ * quaternions, reflectivity in float; Adam's two moments 88; attribution and visibility count 8), the
+ * engine's copy of it (140), the engine's last known-good field and moments (132) and its gradients
+ * (44), and the best field kept for early stopping (44). The reflectivity solve adds
+ * ReflectivitySolveBytes while it runs. The training frames (4 bytes per pixel, 1 per mask pixel)
+ * come on top.
+ */
+constexpr double TrainingBytesPerGaussian = 140 + 140 + 132 + 44 + 44;
+
+/**
+ * Whether a field of @p maximumGaussians Gaussians can be trained in this machine's memory (PhysicalMemoryBytes):
+ * TrainingBytesPerGaussian each, plus @p solveBytes (the reflectivity solve's vectors, ReflectivitySolveBytes, where
+ * the run solves). False with @p error naming the megabytes needed and present.
+ */
+BIGUSTRAINING_EXPORT bool CheckTrainingMemory(std::int64_t maximumGaussians, double solveBytes, std::string* error);
 
 /**
  * Sums across the processes of a data-parallel run (one per MPI rank; DESIGN section 5). Each process renders
@@ -302,8 +356,10 @@ public:
    * frames and sums the gradients over the processes; the operators of the solve take this process's frames
    * (the caller splits them: bigus::SolveReflectivities), ApplyBasis keeps their images here, and
    * ApplyBasisTranspose and BasisNorms sum their N-vectors over the processes; Render stays local. Every call
-   * agrees on success first (ProcessReduction::AllSucceeded). Null: one process. The base class refuses (false with @p error naming the engine) any
-   * reduction of more than one process; an engine that sums across processes overrides it.
+   * agrees on success first (ProcessReduction::AllSucceeded). Null: one process. The base class refuses (false
+   * with @p error naming the engine) any reduction of more than one process; an engine that sums across processes
+   * overrides it. The CPU engine does, over any backend's renderer: CreateTrainingEngine(..., dataParallel true)
+   * gives it.
    */
   virtual bool SetReduction(ProcessReduction* reduction, std::string* error);
 
@@ -358,9 +414,12 @@ BIGUSTRAINING_EXPORT void RegisterTrainingEngine(const std::string& name, Traini
  * the backend's renderer. Returns null with @p error when the backend is unknown, not built, cannot
  * run here, or its registered engine cannot be made (for an explicit name; "auto" then falls back to
  * the CPU engine over its renderer and says so in @p notice); @p notice as for CreateRenderer.
+ * @p dataParallel (the engine will be given a reduction of several processes, SetReduction): the CPU engine,
+ * which sums its gradients through the host, over the backend's renderer (the CUDA renderer for "cuda"),
+ * never a registered engine.
  */
 BIGUSTRAINING_EXPORT std::unique_ptr<TrainingEngine> CreateTrainingEngine(
-  const std::string& name, std::string* error, std::string* notice = nullptr);
+  const std::string& name, std::string* error, std::string* notice = nullptr, bool dataParallel = false);
 
 } // namespace bigus
 

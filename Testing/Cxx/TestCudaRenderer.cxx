@@ -168,7 +168,7 @@ TEST(CudaRenderer, MatchesTheCpuOnALiverField)
   ASSERT_GT(data.Count(), 100);
   TrainerSettings settings;
   settings.ElevationSigma = 0.3;
-  settings.InitialGaussians = 200000;
+  settings.Seeding.InitialGaussians = 200000;
   Trainer trainer(data, settings);
   std::string error;
   ASSERT_TRUE(trainer.Initialize(&error)) << error;
@@ -482,7 +482,7 @@ TEST(CudaRenderer, AWholeTrainingStepThroughTheCudaEngine)
   TrainingData data = LiverData();
   data.TrainFrames = { 0, 4, 8 };
   TrainerSettings settings;
-  settings.InitialGaussians = 3000;
+  settings.Seeding.InitialGaussians = 3000;
   settings.Iterations = 1;
   settings.ElevationSigma = 0.3;
   settings.Poses.RefinePoses = bigus::PoseRefinement::On;
@@ -545,7 +545,7 @@ struct EngineCase
   EngineCase()
   {
     TrainerSettings settings;
-    settings.InitialGaussians = 3000;
+    settings.Seeding.InitialGaussians = 3000;
     settings.ElevationSigma = 0.3;
     Trainer trainer(this->Data, settings);
     std::string error;

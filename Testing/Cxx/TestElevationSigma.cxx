@@ -59,7 +59,7 @@ double HeldOutPsnr(const TrainingData& data, const std::vector<int>& heldOut, do
   TrainerSettings s;
   s.ElevationSigma = sigma;
   s.Poses.RefinePoses = PoseRefinement::Off; // exact poses: the sigma alone is compared
-  s.InitialGaussians = 4000;
+  s.Seeding.InitialGaussians = 4000;
   s.Iterations = 1500;
   Trainer trainer(data, s);
   std::string error;
@@ -235,8 +235,8 @@ TEST(PoseRefinementChoice, TheTrainerRefinesTheSweepsTheRuleChooses)
     TwoSweeps(Sweep(truth, 0.6, 0.2, 30, heldOut), Sweep(truth, 0.3, 1.5, 6, heldOut));
   TrainerSettings s;
   s.ElevationSigma = 0.5;
-  s.PixelGridFit = false;
-  s.InitialGaussians = 2000;
+  s.Seeding.PixelGridFit = false;
+  s.Seeding.InitialGaussians = 2000;
   s.Iterations = 100;
   ASSERT_EQ(s.Poses.RefinePoses, PoseRefinement::Auto);
   Trainer trainer(data, s);

@@ -1,6 +1,8 @@
 // Pose refinement's shared corrections: the inverse of a pose correction, the tracked path's velocity
 // (bigus::PoseTimeline), and a known field rendered at the liver sweep's tracked poses, recorded with a
 // tracker-to-video time offset of 30 ms and a tracker error of 0.5 degrees and 0.5 mm per frame (issue 33).
+// Per-frame refinement on the trainer's synthetic sweep (bigus::synthetic): held-out poses refined with the field
+// frozen, and training poses perturbed at random brought back towards the truth.
 #include "bigusPoseTimeline.h"
 #include "bigusSliceFrame.h"
 #include "bigusTrainer.h"
@@ -23,11 +25,10 @@
 #include <random>
 
 using namespace bigus;
+using namespace bigus::synthetic;
 
 namespace
 {
-constexpr int W = 64, H = 64;
-
 /// A pose of pixel spacing 0.3 mm: rotated about a tilted axis, away from the origin.
 std::array<double, 16> TiltedPose()
 {
@@ -425,8 +426,8 @@ LiverPathResult LiverPathCase(const LiverPathErrors& e)
 
   TrainerSettings s;
   s.ElevationSigma = sigma;
-  s.PixelGridFit = false;
-  s.InitialGaussians = 6000;
+  s.Seeding.PixelGridFit = false;
+  s.Seeding.InitialGaussians = 6000;
   s.Iterations = e.Iterations;
   s.Poses.Start = e.PoseRefinementStart;
   auto train = [&](const TrainingData& data, bool refine) {
@@ -660,8 +661,8 @@ TEST(PoseTimeline, ThePoseRefinementStartsAtOnceWhereACorrectedSweepsPathJitters
 
   // The trainer resolves a negative start (the default) and keeps one given.
   TrainerSettings s;
-  s.PixelGridFit = false;
-  s.InitialGaussians = 50;
+  s.Seeding.PixelGridFit = false;
+  s.Seeding.InitialGaussians = 50;
   s.Iterations = 1;
   s.Poses.RefinePoses = PoseRefinement::On;
   EXPECT_EQ(Trainer(jittered, s).GetSettings().Poses.Start, 0.0);
@@ -670,3 +671,133 @@ TEST(PoseTimeline, ThePoseRefinementStartsAtOnceWhereACorrectedSweepsPathJitters
   EXPECT_EQ(Trainer(jittered, s).GetSettings().Poses.Start, 0.5);
 }
 
+TEST(Trainer, HeldOutPosesRefinedWithTheFieldFrozenComeBackToTheTruth)
+{
+  // The fair score of held-out frames: the known field that rendered the sweep, frozen; each held-out frame's
+  // pose moved by 0.5 degrees and 0.5 mm at random, then refined against its recorded frame. The poses come back
+  // towards the ones that rendered the frames (the truth), and the frames rendered at them match better.
+  const GaussianField field = KnownField(200, 7);
+  std::vector<int> heldOut;
+  const TrainingData truth = SyntheticSweep(field, 0.5, heldOut);
+  TrainingData data = PerturbedPoses(truth, heldOut, 0.5, 0.5, 5, W, H);
+  RenderOptions options;
+  options.ElevationSigma = 0.5;
+  options.Gamma = 1.0;
+  auto psnrAt = [&](const TrainingData& d) {
+    auto renderer = CreateCpuRenderer();
+    std::vector<float> S(W * H), I(W * H);
+    double total = 0;
+    for (int f : heldOut)
+    {
+      const SliceGeometry g = d.Slice(f);
+      EXPECT_TRUE(renderer->Forward(field.View(), &g, 1, options, S.data(), I.data(), nullptr, nullptr));
+      total += Psnr(I.data(), &truth.Frames[std::size_t(W) * H * f], W * H);
+    }
+    return total / heldOut.size();
+  };
+  const double before = CornerError(data, truth, heldOut, W, H), psnrBefore = psnrAt(data);
+  TrainerSettings s;
+  std::vector<std::array<double, 6>> corrections;
+  std::string error;
+  ASSERT_TRUE(
+    RefinePosesWithFieldFrozen(field, data, heldOut, options, s.Poses, s.Loss, 100, "cpu", corrections, &error))
+    << error;
+  ASSERT_EQ(corrections.size(), heldOut.size());
+  const double after = CornerError(data, truth, heldOut, W, H), psnrAfter = psnrAt(data);
+  std::printf("held-out poses refined with the field frozen (100 steps): corner error %.3f -> %.3f mm, PSNR %.2f -> "
+              "%.2f dB\n", before, after, psnrBefore, psnrAfter);
+  EXPECT_LT(after, 0.5 * before);
+  EXPECT_GT(psnrAfter, psnrBefore + 3.0);
+  for (int f : truth.TrainFrames)
+  {
+    EXPECT_EQ(data.Poses[f], truth.Poses[f]) << "a frame not listed keeps its pose";
+  }
+}
+
+// Pose refinement on synthetic truth: the known field rendered at the true poses, the training frames'
+// poses then moved by a random rigid motion of 0.5 degrees and 0.5 mm each (about the frame's centre, in
+// its own axes). Training with RefinePoses brings the poses back towards the truth: the mean distance of
+// the frames' corners from where they truly lie falls by more than half (the error a tracker would leave
+// in a volume), and the held-out frames (at their true poses, never refined) come out better.
+TEST(Trainer, RefiningPosesBringsPerturbedTrainingPosesTowardsTheTruth)
+{
+  std::vector<int> heldOut;
+  TrainingData truth = SyntheticSweep(KnownField(200, 7), 0.5, heldOut);
+  const TrainingData perturbed = PerturbedPoses(truth, truth.TrainFrames, 0.5, 0.5, 21, W, H);
+  const double before = CornerError(perturbed, truth, truth.TrainFrames, W, H);
+  TrainerSettings s;
+  s.ElevationSigma = 0.5;
+  s.Seeding.PixelGridFit = false;
+  s.Seeding.InitialGaussians = 3000;
+  s.Iterations = 1500;
+  s.Poses.RefinePoses = PoseRefinement::On;
+  Trainer trainer(perturbed, s);
+  std::string error;
+  ASSERT_TRUE(trainer.Initialize(&error)) << error;
+  ASSERT_TRUE(trainer.Run(nullptr, nullptr, &error)) << error;
+  const double after = CornerError(trainer.GetData(), truth, truth.TrainFrames, W, H);
+  s.Poses.RefinePoses = PoseRefinement::Off;
+  Trainer trusting(perturbed, s);
+  ASSERT_TRUE(trusting.Initialize(&error)) << error;
+  ASSERT_TRUE(trusting.Run(nullptr, nullptr, &error)) << error;
+  Trainer onTruth(truth, s);
+  ASSERT_TRUE(onTruth.Initialize(&error)) << error;
+  ASSERT_TRUE(onTruth.Run(nullptr, nullptr, &error)) << error;
+  std::printf("corner error: %.3f mm tracked, %.3f mm refined; held-out PSNR %.2f dB refined, %.2f dB trusting the "
+              "tracked poses, %.2f dB on the true poses\n", before, after, HeldOutPsnr(trainer, heldOut),
+    HeldOutPsnr(trusting, heldOut), HeldOutPsnr(onTruth, heldOut));
+  ASSERT_EQ(trainer.GetReport().PoseCorrections.size(), truth.TrainFrames.size());
+  // Measured: 0.505 -> 0.187 mm; held-out 38.80 dB refined, 34.89 trusting the tracked poses, 52.25 on the
+  // true poses (scored at the true poses the issue's aim of 0.5 dB from the true poses is far; fairly, below).
+  EXPECT_LT(after, 0.5 * before) << "the pose error falls by at least half";
+  EXPECT_GT(HeldOutPsnr(trainer, heldOut), HeldOutPsnr(trusting, heldOut) + 2.0);
+  // The fair score: a field trained on refined poses lives in the sweep's refined frame, which one sweep fixes
+  // only up to a motion of the whole sweep (and smooth warps along it), so its held-out frames are scored at
+  // their true poses refined with the field frozen, as view-synthesis papers score test views.
+  const double aligned = AlignedCornerError(trainer.GetData(), truth, truth.TrainFrames, W, H);
+  const double fairRefined = FairPsnr(trainer.GetField(), trainer.Options(), truth, heldOut, s);
+  const double fairTrusting = FairPsnr(trusting.GetField(), trusting.Options(), truth, heldOut, s);
+  const double fairTruth = FairPsnr(onTruth.GetField(), onTruth.Options(), truth, heldOut, s);
+  std::printf("aligned corner error %.3f mm; fair held-out PSNR %.2f dB refined, %.2f trusting, %.2f on the true "
+              "poses\n", aligned, fairRefined, fairTrusting, fairTruth);
+  // Measured: 0.161 mm; 48.00, 38.49, 52.44 dB (4,000 steps: 0.109 mm; 53.49 against 54.81).
+  EXPECT_LT(aligned, 0.4 * before);
+  EXPECT_GT(fairRefined, fairTrusting + 5.0);
+
+  // The smoothness prior: the corrections of consecutive training frames differ less.
+  auto roughness = [](const TrainerReport& report) {
+    double sum = 0;
+    for (std::size_t k = 1; k < report.PoseCorrections.size(); ++k)
+    {
+      for (int c = 0; c < 6; ++c)
+      {
+        const double d = report.PoseCorrections[k].Xi[c] - report.PoseCorrections[k - 1].Xi[c];
+        sum += d * d * (c < 3 ? 1.0 / (0.0175 * 0.0175) : 1.0); // per degree-sized and mm-sized unit
+      }
+    }
+    return std::sqrt(sum / (report.PoseCorrections.size() - 1));
+  };
+  s.Poses.RefinePoses = PoseRefinement::On;
+  s.Poses.Smoothness = 10;
+  Trainer smooth(perturbed, s);
+  ASSERT_TRUE(smooth.Initialize(&error)) << error;
+  ASSERT_TRUE(smooth.Train(nullptr, nullptr, &error)) << error;
+  // Scored before Finish (bigus train --evaluate-every), the held-out frames are already placed among their
+  // refined neighbours (Trainer::PlaceUntrainedFrames), as Finish places them.
+  EXPECT_EQ(CornerError(smooth.GetData(), truth, heldOut, W, H), 0);
+  ImageMetrics midRun;
+  ASSERT_TRUE(smooth.Evaluate(heldOut, midRun, &error)) << error;
+  EXPECT_GT(CornerError(smooth.GetData(), truth, heldOut, W, H), 0);
+  EXPECT_EQ(smooth.GetReport().UntrainedCorrections.Frames, static_cast<int>(heldOut.size()));
+  ASSERT_TRUE(smooth.Finish(&error)) << error;
+  std::printf("roughness of the corrections along the sweep: %.4f without the smoothness prior, %.4f with\n",
+    roughness(trainer.GetReport()), roughness(smooth.GetReport()));
+  EXPECT_LT(roughness(smooth.GetReport()), 0.5 * roughness(trainer.GetReport()));
+  // The held-out frames (at their true poses here): the training frames' corrections, independent from frame to
+  // frame, predict none of them, so they stay (bigus::CorrectUntrainedFrames); the smoothed ones do, and move them
+  // by little (measured: 0.049 mm at the corners, held out 34.97 dB at the moved poses, 34.87 at the true ones).
+  EXPECT_EQ(trainer.GetReport().UntrainedCorrections.Bandwidth, 0);
+  EXPECT_EQ(CornerError(trainer.GetData(), truth, heldOut, W, H), 0);
+  EXPECT_GT(smooth.GetReport().UntrainedCorrections.Bandwidth, 0);
+  EXPECT_EQ(smooth.GetReport().UntrainedCorrections.Frames, static_cast<int>(heldOut.size()));
+}

@@ -1,5 +1,6 @@
-// Test helpers of the renderer tests (TestCpuRenderer, TestCudaRenderer; TestTrainer for pose gradients): slice
-// poses, central differences of a pose correction, random fields and their float copies. Header only.
+// Test helpers of the renderer tests (TestCpuRenderer, TestCudaRenderer; TestResolutionSchedule for pose
+// gradients): slice poses, central differences of a pose correction, random fields and their float copies. Header
+// only.
 #ifndef bigusRendererTestUtilities_h
 #define bigusRendererTestUtilities_h
 

@@ -1,5 +1,8 @@
-// Test helper for the trainer's tests: a sweep rendered from a known field (header only, so that the
-// tests that do not link BIGUS::Training keep bigusTestUtilities free of it).
+// Test helpers for the trainer's tests: a sweep rendered from a known field (header only, so that the
+// tests that do not link BIGUS::Training keep bigusTestUtilities free of it), and in bigus::synthetic the
+// synthetic sweep that the tests of the trainer and its stages share (TestTrainer, TestSeeding,
+// TestDensification, TestCheckpoints, TestResolutionSchedule, TestDataParallel, TestGaussianFieldTrainer,
+// TestPoseRefinement): a file that uses it says `using namespace bigus::synthetic;`.
 #ifndef bigusTrainingTestUtilities_h
 #define bigusTrainingTestUtilities_h
 
@@ -203,6 +206,93 @@ inline double FairPsnr(const GaussianField& field, const RenderOptions& options,
     << error;
   return PsnrAt(field, options, scored, frames);
 }
+
+/// The synthetic sweep of the trainer's tests: a known field of random Gaussians and 60 frames of W x H pixels
+/// rendered from it, frames with k mod 4 == 2 held out.
+namespace synthetic
+{
+constexpr int W = 64, H = 64;
+constexpr double Spacing = 0.3;
+
+/// Pose of frame k of a synthetic sweep: elevation steps of 0.2 mm with a slow +-4 degree rock.
+inline std::array<double, 16> SweepPose(int k)
+{
+  const double tilt = 4.0 * std::sin(0.3 * k) * M_PI / 180.0;
+  const double c = std::cos(tilt), s = std::sin(tilt);
+  // Columns: u = x axis, v = (0, c, s) rotated about x, origin moving along z.
+  return { Spacing, 0, 0, 0.0, 0, c * Spacing, 0, 0.0, 0, s * Spacing, 0, -6.0 + 0.2 * k, 0, 0, 0, 1 };
+}
+
+/// @p n random Gaussians (generator seeded with @p seed) in the box the sweep passes through: means in 19.2 x 19.2 x
+/// 13 mm, scales 0.4 to 1.2 mm, random rotations, reflectivities 0.25 +- 0.2.
+inline GaussianField KnownField(int n, unsigned seed)
+{
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u01(0, 1);
+  std::normal_distribution<double> normal(0, 1);
+  GaussianField f;
+  for (int i = 0; i < n; ++i)
+  {
+    f.Means.push_back(static_cast<float>(19.2 * u01(rng)));
+    f.Means.push_back(static_cast<float>(19.2 * u01(rng)));
+    f.Means.push_back(static_cast<float>(-6.5 + 13.0 * u01(rng)));
+    for (int k = 0; k < 3; ++k)
+    {
+      f.LogScales.push_back(static_cast<float>(std::log(0.4 + 0.8 * u01(rng))));
+    }
+    AppendRandomRotation(f, rng, normal);
+    f.Reflectivities.push_back(static_cast<float>(0.25 + 0.2 * normal(rng)));
+  }
+  return f;
+}
+
+/// 60 frames rendered from the known field; frames with k mod 4 == 2 are held out.
+inline TrainingData SyntheticSweep(const GaussianField& truth, double sigmaE, std::vector<int>& heldOut)
+{
+  std::vector<std::array<double, 16>> poses;
+  for (int k = 0; k < 60; ++k)
+  {
+    poses.push_back(SweepPose(k));
+  }
+  return RenderedSweep(truth, poses, W, H, sigmaE, heldOut);
+}
+
+/// Mean PSNR (dB) of @p trainer's field rendered at its data's poses of @p heldOut against their frames.
+inline double HeldOutPsnr(const Trainer& trainer, const std::vector<int>& heldOut)
+{
+  return PsnrAt(trainer.GetField(), trainer.Options(), trainer.GetData(), heldOut);
+}
+
+/// A short run on the synthetic sweep: sigma_E 0.5 mm, 800 seeds, 200 steps, one densification (step 100).
+inline TrainerSettings ShortSettings()
+{
+  TrainerSettings s;
+  s.ElevationSigma = 0.5;
+  s.Seeding.InitialGaussians = 800;
+  s.Iterations = 200;
+  s.Densification.Start = 100;
+  s.Densification.Interval = 100;
+  s.Densification.End = 150;
+  s.Poses.RefinePoses = PoseRefinement::Off; // exact synthetic poses: the tests of pose refinement switch it on
+  return s;
+}
+
+/// Every parameter of @p f finite.
+inline bool AllFinite(const GaussianField& f)
+{
+  for (const std::vector<float>* v : { &f.Means, &f.LogScales, &f.Quaternions, &f.Reflectivities })
+  {
+    for (float x : *v)
+    {
+      if (!std::isfinite(x))
+      {
+        return false;
+      }
+    }
+  }
+  return true;
+}
+} // namespace synthetic
 }
 
 #endif

@@ -1,0 +1,40 @@
+/**
+ * @file bigusValidation.h
+ * @brief The validation stage of training (DESIGN section 4): the frames a run scores itself on while it trains, and
+ *        their loss, which decides when growth stops (bigus::UpdateGrowth) and which field early stopping keeps.
+ *
+ * Part of BIGUS::Training (public, not wrapped for Python).
+ */
+#ifndef bigusValidation_h
+#define bigusValidation_h
+
+#include "bigusImageLoss.h"
+#include "bigusTrainingEngine.h"
+#include "bigusTrainingModule.h" // For export macro
+
+#include <string>
+#include <vector>
+
+namespace bigus
+{
+
+/**
+ * The validation frames of @p data: every max(1, n / 8)-th training frame from the first (n = TrainFrames.size()),
+ * at most 8, so that a decision does not depend on one lucky frame. They are training frames: the field is fitted
+ * to them too, and the end of a sweep is not always among them.
+ */
+BIGUSTRAINING_EXPORT std::vector<int> ValidationFrames(const TrainingData& data);
+
+/**
+ * The mean image loss (@p weights; bigus::ComputeImageLoss inside each frame's mask) of @p engine's field on
+ * @p frames of @p data, rendered with @p options, into @p loss. Data-parallel (@p reduction of several processes):
+ * each process renders the frames k with k mod P == rank and the losses are summed, so that every process takes
+ * its decisions from one agreed value. False with @p error when a frame cannot be rendered (on any process).
+ */
+BIGUSTRAINING_EXPORT bool ValidationLoss(TrainingEngine& engine, const TrainingData& data,
+  const std::vector<int>& frames, const RenderOptions& options, const ImageLossWeights& weights,
+  ProcessReduction* reduction, double& loss, std::string* error);
+
+} // namespace bigus
+
+#endif

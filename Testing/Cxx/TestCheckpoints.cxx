@@ -1,0 +1,249 @@
+// Checkpoints (bigus::TrainingState::Save, Load; Trainer::SaveCheckpoint, LoadCheckpoint): a resumed run is the
+// run that went straight through, with its pose corrections and its time budget; the file holds the whole state;
+// files of earlier formats load, bad and truncated ones are refused.
+#include "bigusTrainer.h"
+#include "bigusTrainingTestUtilities.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <fstream>
+#include <iterator>
+#include <string>
+#include <vector>
+
+using namespace bigus;
+using namespace bigus::synthetic;
+
+TEST(Trainer, ResumingFromACheckpointGivesTheSameField)
+{
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(200, 6), 0.5, heldOut);
+  std::string error;
+  Trainer straight(data, ShortSettings());
+  ASSERT_TRUE(straight.Initialize(&error));
+  ASSERT_TRUE(straight.Run(nullptr, nullptr, &error)) << error;
+
+  const std::string checkpoint = std::string(BIGUS_TEST_OUTPUT) + "/trainer.ckpt";
+  TrainerSettings s = ShortSettings();
+  s.CheckpointFile = checkpoint;
+  s.CheckpointInterval = 110; // after the first densification, so its state is in the file too
+  Trainer first(data, s);
+  ASSERT_TRUE(first.Initialize(&error));
+  ASSERT_TRUE(first.Run(nullptr, [&]() { return first.GetIteration() >= 110; }, &error)) << error;
+  EXPECT_EQ(first.GetReport().StopReason, "aborted");
+
+  Trainer second(data, ShortSettings());
+  ASSERT_TRUE(second.Initialize(&error));
+  ASSERT_TRUE(second.LoadCheckpoint(checkpoint, &error)) << error;
+  EXPECT_EQ(second.GetIteration(), 110);
+  ASSERT_TRUE(second.Run(nullptr, nullptr, &error)) << error;
+  ExpectSameField(straight.GetField(), second.GetField());
+
+  std::ofstream(checkpoint + ".bad") << "not a checkpoint";
+  EXPECT_FALSE(second.LoadCheckpoint(checkpoint + ".bad", &error));
+  EXPECT_NE(error.find("bad magic"), std::string::npos) << error;
+}
+
+TEST(Trainer, AResumedRunGoesOnWithThePoseCorrectionsOfItsCheckpoint)
+{
+  // With pose refinement, the corrections and their Adam moments are part of the state: a run stopped at step
+  // 110 and resumed ends with the field, the corrections and the corrected poses of the run that went straight
+  // through. A checkpoint without corrections is refused by a run that refines poses, and the other way round.
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(200, 6), 0.5, heldOut);
+  TrainerSettings s = ShortSettings();
+  s.Poses.RefinePoses = PoseRefinement::On;
+  s.Poses.Start = 0.25; // the corrections move from step 50, well before the checkpoint
+  std::string error;
+  Trainer straight(data, s);
+  ASSERT_TRUE(straight.Initialize(&error));
+  ASSERT_TRUE(straight.Run(nullptr, nullptr, &error)) << error;
+
+  const std::string checkpoint = std::string(BIGUS_TEST_OUTPUT) + "/poses.ckpt";
+  Trainer first(data, s);
+  ASSERT_TRUE(first.Initialize(&error));
+  ASSERT_TRUE(first.Train(nullptr, [&]() { return first.GetIteration() >= 110; }, &error)) << error;
+  ASSERT_TRUE(first.SaveCheckpoint(checkpoint, &error)) << error;
+  double moved = 0;
+  for (const auto& xi : first.GetState().PoseCorrections)
+  {
+    for (double v : xi)
+    {
+      moved = std::max(moved, std::abs(v));
+    }
+  }
+  EXPECT_GT(moved, 0) << "the corrections moved before the checkpoint";
+
+  Trainer second(data, s);
+  ASSERT_TRUE(second.Initialize(&error));
+  ASSERT_TRUE(second.LoadCheckpoint(checkpoint, &error)) << error;
+  EXPECT_EQ(second.GetData().Poses, first.GetData().Poses) << "the corrected poses are restored";
+  ASSERT_TRUE(second.Run(nullptr, nullptr, &error)) << error;
+  ExpectSameField(straight.GetField(), second.GetField());
+  const auto& a = straight.GetReport().PoseCorrections;
+  const auto& b = second.GetReport().PoseCorrections;
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t k = 0; k < a.size(); ++k)
+  {
+    EXPECT_EQ(a[k].Frame, b[k].Frame);
+    for (int c = 0; c < 6; ++c)
+    {
+      EXPECT_DOUBLE_EQ(a[k].Xi[c], b[k].Xi[c]) << "frame " << a[k].Frame << " component " << c;
+    }
+  }
+  EXPECT_EQ(straight.GetData().Poses, second.GetData().Poses);
+
+  TrainerSettings trusted = ShortSettings();
+  Trainer other(data, trusted);
+  ASSERT_TRUE(other.Initialize(&error));
+  EXPECT_FALSE(other.LoadCheckpoint(checkpoint, &error));
+  EXPECT_NE(error.find("pose corrections of"), std::string::npos) << error;
+}
+
+TEST(Trainer, AResumedRunCountsTheSecondsBeforeItsCheckpointTowardsItsTimeBudget)
+{
+  // The budget is the run's schedule: a run stopped at 70 % of it and resumed trains for the rest, with
+  // the densification window (60 % of the schedule) already closed, instead of a fresh budget.
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(150, 4), 0.5, heldOut);
+  TrainerSettings s = ShortSettings();
+  s.Iterations = 0;
+  s.TimeBudget = 2.0;
+  s.Densification.End = -1;
+  const std::string checkpoint = std::string(BIGUS_TEST_OUTPUT) + "/budget.ckpt";
+  std::string error;
+  Trainer first(data, s);
+  ASSERT_TRUE(first.Initialize(&error)) << error;
+  const auto start = std::chrono::steady_clock::now();
+  auto since = [](std::chrono::steady_clock::time_point t) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+  };
+  ASSERT_TRUE(first.Train(nullptr, [&]() { return since(start) >= 0.7 * s.TimeBudget + 0.05; }, &error)) << error;
+  ASSERT_TRUE(first.SaveCheckpoint(checkpoint, &error)) << error;
+  const double saved = first.GetState().TrainingSeconds;
+  EXPECT_GE(saved, 0.7 * s.TimeBudget);
+  EXPECT_LT(saved, s.TimeBudget);
+
+  Trainer second(data, s);
+  ASSERT_TRUE(second.Initialize(&error)) << error;
+  ASSERT_TRUE(second.LoadCheckpoint(checkpoint, &error)) << error;
+  EXPECT_EQ(second.GetState().TrainingSeconds, saved);
+  const std::int64_t loaded = second.GetField().Count();
+  const int iteration = second.GetIteration();
+  const auto resumed = std::chrono::steady_clock::now();
+  ASSERT_TRUE(second.Train(nullptr, nullptr, &error)) << error;
+  EXPECT_EQ(second.GetReport().StopReason, "time budget");
+  EXPECT_GE(second.GetState().TrainingSeconds, s.TimeBudget);
+  EXPECT_LT(since(resumed), s.TimeBudget - 0.25) << "the resumed run took a fresh budget";
+  EXPECT_GT(second.GetIteration(), iteration);
+  EXPECT_EQ(second.GetField().Count(), loaded) << "densified after the window had closed";
+
+  // Checkpoints of the previous formats still load: version 4 (no shared pose correction: the file ends with
+  // it, 3 x 7 doubles and a step count, then the best field's corrections, here a count 0 and 7 doubles),
+  // version 3 (no pose corrections; this run has none, so its file then
+  // ends with their count 0) with the training seconds, version 2 (no training seconds either) with none.
+  std::ifstream in(checkpoint, std::ios::binary);
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_EQ(bytes.compare(0, 8, "BIGUSCK5"), 0);
+  bytes = bytes.substr(
+    0, bytes.size() - 28 * sizeof(double) - sizeof(std::int32_t) - sizeof(std::int64_t));
+  bytes[7] = '4';
+  std::ofstream(checkpoint + ".v4", std::ios::binary) << bytes;
+  TrainingState old;
+  double gamma = 0;
+  ASSERT_TRUE(old.Load(checkpoint + ".v4", gamma, &error)) << error;
+  EXPECT_EQ(old.TrainingSeconds, saved);
+  EXPECT_EQ(old.SharedPoseSteps, 0);
+  bytes = bytes.substr(0, bytes.size() - sizeof(std::int64_t));
+  bytes[7] = '3';
+  std::ofstream(checkpoint + ".v3", std::ios::binary) << bytes;
+  ASSERT_TRUE(old.Load(checkpoint + ".v3", gamma, &error)) << error;
+  EXPECT_EQ(old.TrainingSeconds, saved);
+  EXPECT_TRUE(old.PoseCorrections.empty());
+  bytes[7] = '2';
+  std::ofstream(checkpoint + ".v2", std::ios::binary) << bytes.substr(0, bytes.size() - sizeof(double));
+  ASSERT_TRUE(old.Load(checkpoint + ".v2", gamma, &error)) << error;
+  EXPECT_EQ(old.TrainingSeconds, 0);
+  EXPECT_EQ(old.Iteration, iteration);
+  std::remove(checkpoint.c_str());
+  std::remove((checkpoint + ".v2").c_str());
+  std::remove((checkpoint + ".v4").c_str());
+}
+
+TEST(Trainer, CheckpointHoldsTheWholeTrainingState)
+{
+  // Save and Load are inverse: every member of the state survives the file, bit for bit, and a
+  // truncated file is refused without touching the state it was read into.
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(200, 7), 0.5, heldOut);
+  TrainerSettings settings = ShortSettings();
+  settings.Poses.RefineImageToProbe = true; // the shared pose correction moves from the start
+  settings.Poses.Start = 0;
+  Trainer trainer(data, settings);
+  std::string error;
+  ASSERT_TRUE(trainer.Initialize(&error)) << error;
+  ASSERT_TRUE(trainer.Train(nullptr, [&]() { return trainer.GetIteration() >= 150; }, &error)) << error;
+  ASSERT_GT(trainer.GetState().SharedPoseSteps, 0);
+  const std::string file = std::string(BIGUS_TEST_OUTPUT) + "/state.ckpt";
+  ASSERT_TRUE(trainer.SaveCheckpoint(file, &error)) << error;
+  const TrainingState& saved = trainer.GetState();
+  ASSERT_GT(
+    std::count_if(saved.Gaussians.SeenCount.begin(), saved.Gaussians.SeenCount.end(), [](int c) { return c > 0; }), 0)
+    << "the accumulators must hold something for the test to mean anything";
+
+  TrainingState loaded;
+  double gamma = 0;
+  ASSERT_TRUE(loaded.Load(file, gamma, &error)) << error;
+  EXPECT_EQ(gamma, trainer.GetGamma());
+  EXPECT_EQ(loaded.Iteration, saved.Iteration);
+  EXPECT_EQ(loaded.LearningRateScale, saved.LearningRateScale);
+  EXPECT_EQ(loaded.Growing, saved.Growing);
+  EXPECT_EQ(loaded.BestValidationLoss, saved.BestValidationLoss);
+  EXPECT_EQ(loaded.StalledGrowthSteps, saved.StalledGrowthSteps);
+  EXPECT_EQ(loaded.RolledBackSteps, saved.RolledBackSteps);
+  EXPECT_EQ(loaded.LossHistory, saved.LossHistory);
+  EXPECT_TRUE(loaded.Random == saved.Random);
+  EXPECT_EQ(loaded.TrainingSeconds, saved.TrainingSeconds);
+  EXPECT_GT(saved.TrainingSeconds, 0);
+  for (const auto& pair : { std::make_pair(&loaded.Gaussians.Field, &saved.Gaussians.Field),
+         std::make_pair(&loaded.Gaussians.FirstMoment, &saved.Gaussians.FirstMoment),
+         std::make_pair(&loaded.Gaussians.SecondMoment, &saved.Gaussians.SecondMoment) })
+  {
+    ExpectSameField(*pair.first, *pair.second);
+  }
+  EXPECT_EQ(loaded.Gaussians.Attribution, saved.Gaussians.Attribution);
+  EXPECT_EQ(loaded.Gaussians.SeenCount, saved.Gaussians.SeenCount);
+  EXPECT_EQ(loaded.SharedPoseCorrection, saved.SharedPoseCorrection);
+  EXPECT_EQ(loaded.SharedPoseFirstMoment, saved.SharedPoseFirstMoment);
+  EXPECT_EQ(loaded.SharedPoseSecondMoment, saved.SharedPoseSecondMoment);
+  EXPECT_EQ(loaded.SharedPoseSteps, saved.SharedPoseSteps);
+  EXPECT_EQ(loaded.BestPoseCorrections, saved.BestPoseCorrections);
+  EXPECT_EQ(loaded.BestSharedPoseCorrection, saved.BestSharedPoseCorrection);
+  // A run with the same settings resumes at the same poses; one that does not refine the shared correction
+  // refuses the checkpoint.
+  Trainer resumed(data, settings);
+  ASSERT_TRUE(resumed.Initialize(&error)) << error;
+  ASSERT_TRUE(resumed.LoadCheckpoint(file, &error)) << error;
+  EXPECT_EQ(resumed.GetData().Poses, trainer.GetData().Poses);
+  EXPECT_NE(resumed.GetData().Poses, data.Poses) << "the shared correction moved the poses";
+  Trainer without(data, ShortSettings());
+  ASSERT_TRUE(without.Initialize(&error)) << error;
+  EXPECT_FALSE(without.LoadCheckpoint(file, &error));
+  EXPECT_NE(error.find("an ImageToProbe correction that this run does not refine"), std::string::npos) << error;
+
+  // Truncated: refused, and the state read into stays as it was.
+  std::ifstream in(file, std::ios::binary);
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::ofstream(file + ".cut", std::ios::binary) << bytes.substr(0, bytes.size() / 2);
+  const int before = loaded.Iteration;
+  EXPECT_FALSE(loaded.Load(file + ".cut", gamma, &error));
+  EXPECT_NE(error.find("truncated"), std::string::npos) << error;
+  EXPECT_EQ(loaded.Iteration, before);
+  std::remove(file.c_str());
+  std::remove((file + ".cut").c_str());
+}

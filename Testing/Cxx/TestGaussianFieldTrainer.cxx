@@ -1,0 +1,212 @@
+// The filter vtkGaussianFieldTrainer: a tracked frame sequence in, the trained field of the data model out, with
+// its settings, progress, abort and errors; and its place in a pipeline with a slice downstream.
+#include "bigusElevationSigma.h"
+#include "bigusTestUtilities.h"
+#include "bigusTrainingTestUtilities.h"
+
+#include "vtkCallbackCommand.h"
+#include "vtkDataArray.h"
+#include "vtkDoubleArray.h"
+#include "vtkFieldData.h"
+#include "vtkGaussianFieldReslice.h"
+#include "vtkGaussianFieldTrainer.h"
+#include "vtkIdList.h"
+#include "vtkImageData.h"
+#include "vtkInformation.h"
+#include "vtkNew.h"
+#include "vtkPointData.h"
+#include "vtkPolyData.h"
+#include "vtkStreamingDemandDrivenPipeline.h"
+#include "vtkStringArray.h"
+#include "vtkUltrasoundSequenceReader.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+using namespace bigus;
+using namespace bigus::synthetic;
+
+TEST(GaussianFieldTrainer, PipelineOutputsTheFieldOfTheDataModel)
+{
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(150, 9), 0.5, heldOut);
+  // The synthetic sweep as a tracked frame sequence (unsigned char, as a reader gives it).
+  vtkNew<vtkImageData> sequence;
+  sequence->SetDimensions(W, H, data.Count());
+  sequence->AllocateScalars(VTK_UNSIGNED_CHAR, 1);
+  auto* pixels = static_cast<unsigned char*>(sequence->GetScalarPointer());
+  for (std::size_t p = 0; p < data.Frames.size(); ++p)
+  {
+    pixels[p] = static_cast<unsigned char>(std::lround(255 * data.Frames[p]));
+  }
+  vtkNew<vtkDoubleArray> poses;
+  poses->SetName("ImageToReference");
+  poses->SetNumberOfComponents(16);
+  for (const auto& m : data.Poses)
+  {
+    poses->InsertNextTuple(m.data());
+  }
+  sequence->GetFieldData()->AddArray(poses);
+
+  vtkNew<vtkGaussianFieldTrainer> trainer;
+  trainer->SetInputData(sequence);
+  trainer->SetIterations(150);
+  trainer->SetInitialGaussians(500);
+  trainer->SetHoldOutEvery(4);
+  trainer->SetHoldOutOffset(2);
+  int progressEvents = 0;
+  vtkNew<vtkCallbackCommand> counter;
+  counter->SetClientData(&progressEvents);
+  counter->SetCallback([](vtkObject*, unsigned long, void* client, void*) { ++*static_cast<int*>(client); });
+  trainer->AddObserver(vtkCommand::ProgressEvent, counter);
+  // The settings are announced once, before any step.
+  struct Announced
+  {
+    int Count = 0, IterationThen = -1;
+    std::string Text;
+  } announced;
+  vtkNew<vtkCallbackCommand> settingsObserver;
+  settingsObserver->SetClientData(&announced);
+  settingsObserver->SetCallback([](vtkObject* caller, unsigned long, void* client, void*) {
+    auto* a = static_cast<Announced*>(client);
+    auto* t = static_cast<vtkGaussianFieldTrainer*>(caller);
+    ++a->Count;
+    a->IterationThen = t->GetCurrentIteration();
+    a->Text = t->GetSettingsText();
+  });
+  trainer->AddObserver(vtkGaussianFieldTrainer::SettingsChosenEvent, settingsObserver);
+  trainer->Update();
+  vtkPolyData* field = trainer->GetOutput();
+  const vtkIdType n = field->GetNumberOfPoints();
+  EXPECT_EQ(n, trainer->GetNumberOfGaussians());
+  // The merge (on by default) says what it took: "M pairs merged of N Gaussians ...", N - M = n.
+  auto* merge = vtkStringArray::SafeDownCast(field->GetFieldData()->GetAbstractArray("GaussianMerge"));
+  ASSERT_NE(merge, nullptr);
+  long long merged = -1, before = -1;
+  ASSERT_EQ(std::sscanf(merge->GetValue(0).c_str(), "%lld pairs merged of %lld Gaussians", &merged, &before), 2)
+    << merge->GetValue(0);
+  EXPECT_EQ(before - merged, n);
+  EXPECT_GT(before, 400);
+  EXPECT_GT(n, 200);
+  EXPECT_EQ(field->GetNumberOfVerts(), n) << "one vertex per Gaussian, so it shows as a point cloud";
+  for (const char* name : { "Scale", "Rotation", "Reflectivity" })
+  {
+    ASSERT_NE(field->GetPointData()->GetArray(name), nullptr) << name;
+  }
+  vtkDataArray* rotation = field->GetPointData()->GetArray("Rotation");
+  for (vtkIdType i = 0; i < n; i += 37)
+  {
+    double q[4];
+    rotation->GetTuple(i, q);
+    EXPECT_NEAR(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3], 1.0, 1e-5);
+  }
+  // ElevationSigma 0 (the default): chosen from the frames, stored and reported with the rule used.
+  TrainingData trained = data;
+  trained.TrainFrames.clear();
+  for (int k = 0; k < data.Count(); ++k)
+  {
+    if (k % 4 != 2)
+    {
+      trained.TrainFrames.push_back(k);
+    }
+  }
+  const ElevationSigmaChoice chosen = ChooseElevationSigma(trained);
+  // (the filter measures the 8-bit frames inside the estimated fan mask, this the float frames)
+  EXPECT_NEAR(field->GetFieldData()->GetArray("ElevationSigma")->GetTuple1(0), chosen.Sigma, 0.01 * chosen.Sigma);
+  EXPECT_EQ(announced.Count, 1);
+  EXPECT_EQ(announced.IterationThen, 0);
+  auto* settings = vtkStringArray::SafeDownCast(field->GetFieldData()->GetAbstractArray("TrainingSettings"));
+  ASSERT_NE(settings, nullptr);
+  std::string stored;
+  for (vtkIdType k = 0; k < settings->GetNumberOfValues(); ++k)
+  {
+    stored += settings->GetValue(k) + "\n";
+  }
+  EXPECT_EQ(stored, announced.Text);
+  for (const char* line : { "FanMask = estimated from the frames", "ElevationSigma = ", "(chosen: ", "Gamma = ",
+         "InitialGaussians = 500 (given", "Iterations = 150", "Densification = every 200 steps" })
+  {
+    EXPECT_NE(stored.find(line), std::string::npos) << line << " not in\n" << stored;
+  }
+  vtkDataArray* frames = field->GetFieldData()->GetArray("TrainingFrames");
+  ASSERT_NE(frames, nullptr);
+  EXPECT_EQ(frames->GetNumberOfTuples(), 45);
+  for (vtkIdType k = 0; k < frames->GetNumberOfTuples(); ++k)
+  {
+    EXPECT_NE(static_cast<int>(frames->GetTuple1(k)) % 4, 2) << "held-out frames are never trained on";
+  }
+  EXPECT_STREQ(trainer->GetStopReason(), "iterations");
+  EXPECT_GT(progressEvents, 5);
+
+  // AbortExecute stops a run early and still leaves a valid field.
+  vtkNew<vtkGaussianFieldTrainer> aborted;
+  aborted->SetInputData(sequence);
+  aborted->SetIterations(100000);
+  aborted->SetInitialGaussians(300);
+  vtkNew<vtkCallbackCommand> stopper;
+  stopper->SetCallback([](vtkObject* caller, unsigned long, void*, void*) {
+    static_cast<vtkAlgorithm*>(caller)->SetAbortExecute(1);
+  });
+  aborted->AddObserver(vtkCommand::ProgressEvent, stopper);
+  aborted->Update();
+  EXPECT_STREQ(aborted->GetStopReason(), "aborted");
+  EXPECT_LT(aborted->GetCompletedIterations(), 100);
+
+  // An explicit frame list with a frame the input does not have fails the request and names the frame.
+  vtkNew<vtkGaussianFieldTrainer> listed;
+  listed->SetInputData(sequence);
+  listed->SetIterations(5);
+  vtkNew<vtkIdList> list;
+  list->InsertNextId(0);
+  list->InsertNextId(data.Count());
+  listed->SetTrainingFrameList(list);
+  vtkNew<bigus_test::MessageCollector> messages;
+  messages->Watch(listed);
+  listed->Update();
+  EXPECT_EQ(listed->GetOutput()->GetNumberOfPoints(), 0);
+  ASSERT_EQ(messages->Errors.size(), 1u);
+  EXPECT_NE(messages->Errors[0].find("frame " + std::to_string(data.Count()) + " is outside"), std::string::npos)
+    << messages->Errors[0];
+}
+
+// A slice downstream of the trainer asks for its own small extent: the reader still reads every frame,
+// and the field, being points, does not carry the sequence's WHOLE_EXTENT (the executive copies it by
+// default; an image filter after the field that fails its RequestInformation kept it, and ParaView then
+// rendered the next valid slice on the sequence's 200 x 150 x 20 grid).
+TEST(GaussianFieldTrainer, ASliceDownstreamDoesNotCropTheSequence)
+{
+  const std::string dir = std::string(BIGUS_TEST_DATA) + "/nwire-phantom/";
+  vtkNew<vtkUltrasoundSequenceReader> reader;
+  reader->SetFileName((dir + "NwirePhantomFreehandCropped.igs.mha").c_str());
+  reader->SetCalibrationFileName((dir + "PlusDeviceSet_NwirePhantomFreehand_vtkVolumeReconstructorTest2.xml").c_str());
+  vtkNew<vtkGaussianFieldTrainer> trainer;
+  trainer->SetInputConnection(reader->GetOutputPort());
+  trainer->SetIterations(20);
+  trainer->SetInitialGaussians(300);
+  trainer->SetElevationSigma(0.5);
+  trainer->SetHoldOutEvery(4);
+  trainer->SetHoldOutOffset(2);
+  vtkNew<vtkGaussianFieldReslice> reslice;
+  reslice->SetInputConnection(trainer->GetOutputPort());
+  reslice->SetOutputSpacing(0.1, 0.1, 1);
+  reslice->SetOutputOrigin(0, 0, 0);
+  reslice->SetOutputExtent(0, 9, 0, 7, 0, 0);
+  reslice->Update();
+
+  int dims[3];
+  reader->GetOutput()->GetDimensions(dims);
+  EXPECT_EQ(dims[0], 200);
+  EXPECT_EQ(dims[1], 150);
+  EXPECT_EQ(dims[2], 20);
+  vtkDataArray* poses = trainer->GetOutput()->GetFieldData()->GetArray("TrainingPoses");
+  ASSERT_NE(poses, nullptr);
+  EXPECT_EQ(poses->GetNumberOfTuples(), 15); // 20 frames, k mod 4 == 2 held out
+  EXPECT_FALSE(trainer->GetOutputInformation(0)->Has(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT()));
+  reslice->GetOutput()->GetDimensions(dims);
+  EXPECT_EQ(dims[0], 10);
+  EXPECT_EQ(dims[1], 8);
+}
