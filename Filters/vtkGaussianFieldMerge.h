@@ -10,7 +10,7 @@
  * Maybeck 2003) stays below Tolerance, over at most MaximumPasses passes. The field data of the input (training
  * geometry, ElevationSigma, Gamma, ...) is passed on, with the string array `GaussianMerge` saying what was merged.
  * vtkGaussianFieldTrainer merges at 0.001 at the end of every run; larger tolerances trade PSNR for fewer
- * Gaussians (liver, 120 s field: 229,298 -> 138,530 Gaussians for -0.19 dB held out at 0.01; docs/FINDINGS.md).
+ * Gaussians (docs/FINDINGS.md, "Merging").
  * A malformed field fails the request with vtkErrorMacro naming the array and leaves the output empty.
  */
 #ifndef vtkGaussianFieldMerge_h

@@ -107,9 +107,8 @@ public:
   virtual bool GetDensify() const;
   ///@}
   ///@{ Variable projection: the reflectivities solved by least squares after seeding and after every
-  /// densification, Adam between the solves (default off: Adam alone measured better at 120 s on the
-  /// liver, the spine phantom and the volume protocol, docs/BENCHMARKS_pareto.md). See
-  /// bigus::TrainerSettings::ReflectivitySolve.
+  /// densification, Adam between the solves (default off: Adam alone scores better at equal time;
+  /// docs/FINDINGS.md, "The trainer's defaults, measured"). See bigus::TrainerSettings::ReflectivitySolve.
   virtual void SetReflectivitySolve(bool value);
   virtual bool GetReflectivitySolve() const;
   vtkBooleanMacro(ReflectivitySolve, bool);
@@ -235,7 +234,8 @@ public:
   virtual double GetDensifyPercentile() const;
   ///@}
   ///@{ New Gaussians where the residual is largest at each densification, as a share of those densified
-  /// (default 0 = off; 0.25 measured): their reflectivity is the residual (Image-GS; bigus::TrainerSettings::ResidualSeedShare).
+  /// (default 0 = off): their reflectivity is the residual (Image-GS; bigus::TrainerSettings::ResidualSeedShare;
+  /// why off: docs/FINDINGS.md, "The trainer's defaults, measured").
   virtual void SetResidualSeedShare(double value);
   virtual double GetResidualSeedShare() const;
   ///@}

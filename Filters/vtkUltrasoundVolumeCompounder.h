@@ -55,9 +55,9 @@
  *   r = 1, 2, ..., (HoleFillingMaximumKernelSize - 1) / 2 are tried in turn, with sigma =
  *   HoleFillingSigma * r. Defaults: kernels 3^3, 5^3 and 7^3, sigma 1, 2 and 3 voxels, known
  *   ratio 0.25 (see the setters for why). PLUS's own spine-phantom configuration used STICK filling
- *   (sticks of up to 9 voxels); against that reconstruction these defaults agree on filled / empty in
- *   94.1 % of the voxels, the best of maximum kernel sizes 5, 7, 9 and ratios 0.2 to 0.35, with a
- *   voxel-wise correlation of 0.992 (Testing/Cxx/TestUltrasoundVolumeCompounder.cxx).
+ *   (sticks of up to 9 voxels); these defaults were chosen as the kernel sizes and ratio whose result
+ *   agrees best with that reconstruction (Testing/Cxx/TestUltrasoundVolumeCompounder.cxx; the agreement:
+ *   docs/FINDINGS.md, "The trainer's defaults, measured").
  *
  * Multi-threaded with vtkSMPTools (pixel positions of a frame, hole filling); the result does not
  * depend on the number of threads. Progress is reported per frame and per hole-filling kernel, and

@@ -18,14 +18,13 @@
  *     relative to the Gaussian's own gradient, so a small Gaussian's wrong gradient is not hidden by a
  *     large one's. Not against the CPU itself: two float renderers that sum a footprint in different
  *     orders differ by both their errors, and where a gradient is small by cancellation (a log-scale
- *     gradient over a footprint of random dL/dI) that is about 1e-3 of it on either: on this field the
- *     CPU renderer's own worst error is 2.0e-3; on the first GPU run (an H200) the CUDA renderer was
- *     1.1e-3 from the CPU's, and on TestCudaRenderer's grid within 1.5e-3 of the reference where the CPU
- *     was within 1.2e-3;
+ *     gradient over a footprint of random dL/dI) float rounding of the per-pixel terms does not cancel
+ *     and is a visible share of it on either (the errors measured: docs/FINDINGS.md,
+ *     "The CUDA renderer on a GPU");
  *   - the visible counts agree in total (a Gaussian at the cull's edge may tie differently), and
  *     nothing is NaN or infinite.
- * The CPU and reference renders take about 20 ms (2 cores); it runs once per backend and process
- * (CheckBackend caches it).
+ * It runs once per backend and process (CheckBackend caches it); its cost:
+ * docs/FINDINGS.md, "The trainer's defaults, measured".
  */
 #ifndef bigusBackendCheck_h
 #define bigusBackendCheck_h

@@ -481,13 +481,13 @@ Command AddTrainCommand(CLI::App& app)
     "least squares; default 0: none, CGLS)")
     ->capture_default_str()
     ->check(CLI::Range(0.0, 1.0));
-  trainCommand->add_flag("--dense-adam{false}", settings.SparseAdam,
+  trainCommand->add_flag_callback("--dense-adam", [&settings] { settings.SparseAdam = false; },
     "Adam moves every Gaussian every step on its momentum (the ablation; default: only the Gaussians a step "
     "touched, the others keep their parameters and moments)");
   trainCommand->add_flag("--dense-start", settings.Seeding.DenseInitialisation,
     "Start from Gaussians on the training frames' pixel grid (--initial-gaussians of them, default half of "
     "--max-gaussians) instead of Harris seeds");
-  trainCommand->add_flag("--no-pixel-grid-fit{false}", settings.Seeding.PixelGridFit,
+  trainCommand->add_flag_callback("--no-pixel-grid-fit", [&settings] { settings.Seeding.PixelGridFit = false; },
     "Train from Harris seeds even when the training frames hold at most twice --max-gaussians fan pixels (default: "
     "there, a pixel grid of at most --max-gaussians, its reflectivities solved, and no geometry steps)");
   CLI::Option* refine = trainCommand->add_flag_callback("--refine-poses",
@@ -520,7 +520,7 @@ Command AddTrainCommand(CLI::App& app)
     ->capture_default_str()
     ->excludes("--no-refine-poses")
     ->check(CLI::Range(-1.0, 1.0));
-  trainCommand->add_flag("--no-fill-gaps{false}", settings.FillGaps,
+  trainCommand->add_flag_callback("--no-fill-gaps", [&settings] { settings.FillGaps = false; },
     "Leave gaps between training frames wider than the beam empty (default: bridged, as bigus fill-gaps does)");
   trainCommand
     ->add_option("--merge-tolerance", settings.Merge.Tolerance,

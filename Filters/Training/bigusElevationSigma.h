@@ -87,28 +87,22 @@ struct BIGUSTRAINING_EXPORT ElevationSigmaChoice
 /**
  * The elevation sigma for @p data's training frames (TrainerSettings::ElevationSigma 0).
  * - Where the speckle of neighbouring frames still correlates (the first bin's correlation is at
- *   least 0.3 and at least three bins fall before it halves): sigma = 0.4 x DecorrelationSigma. The
- *   measured decorrelation is that of the beam and of the scatterers' own extent along the elevation
- *   axis together (sigma_measured^2 = sigma^2 + s^2); a Gaussian field supplies the second through its
- *   scales, so the beam takes a sixth of the variance and the Gaussians keep the freedom to be
- *   thinner where the data changes faster. Measured (docs/FINDINGS.md, TestElevationSigma): on a sweep
- *   rendered with sigma 0.6 mm (frames 0.2 mm apart; decorrelation sigma measured 0.645) training with
- *   0.32 mm gave a higher held-out PSNR than with the true 0.6 (49.4 against 47.1 dB; 0.45: 49.3, 0.2:
- *   48.2, 0.12: 45.6); the liver sweep (decorrelation sigma 0.81 mm; hold-out i mod 4 == 2, 3,600
- *   steps) gave 36.98 dB at 0.3 mm, 36.83 at 0.324 (0.4 x) and 36.68 at 0.405 (0.5 x).
+ *   least 0.3 and at least three bins fall before it halves): sigma = ElevationSigmaDecorrelationFactor
+ *   (0.4) x DecorrelationSigma. The measured decorrelation is that of the beam and of the scatterers' own
+ *   extent along the elevation axis together (sigma_measured^2 = sigma^2 + s^2); a Gaussian field supplies
+ *   the second through its scales, so the beam takes a sixth of the variance and the Gaussians keep the
+ *   freedom to be thinner where the data changes faster (a beam thinner than the data's trains better than
+ *   the true one).
  * - Otherwise (the frames are farther apart than the speckle's correlation length):
- *   sigma = NeighbourSpacing, so that a frame rendered midway between two training frames still meets
- *   the Gaussians fitted to both (beam weight exp(-1/8) = 0.88 there). Measured: the spine phantom
- *   (frames 1.59 mm apart, speckle uncorrelated between them; hold-out i mod 4 == 2, 2,000 steps)
- *   gave 17.15 dB held out at 0.5 mm, 20.41 at 1.0, 20.89 at 1.5; a sweep rendered with sigma 0.3 mm,
- *   frames 0.6 mm apart, is insensitive (26.76 dB with the true sigma, 26.70 at 0.36, 26.90 at 0.6,
- *   26.61 at 0.9).
+ *   sigma = ElevationSigmaSpacingFactor (1) x NeighbourSpacing, so that a frame rendered midway between two
+ *   training frames still meets the Gaussians fitted to both (beam weight exp(-1/8) = 0.88 there).
+ * The factors and the measurements behind them: docs/FINDINGS.md, "The trainer's defaults, measured"
+ * (ElevationSigma).
  * Several sweeps (TrainingData::Sweeps): each sweep is measured alone and the choice is that of the sweep
  * whose neighbouring frames lie closest (the median NeighbourSpacing), among those that can be measured:
  * a beam is one probe's, and a sweep whose frames lie farther apart than its speckle's correlation length
  * cannot see it. Pooled, the pairs of a sparse sweep sit in the far bins of the dense one's curve and
- * flatten it (the volume protocol's parallel sweep, 0.65 mm apart, alone: decorrelation sigma 0.70 mm; with
- * an orthogonal sweep 1.84 mm apart pooled: 1.9 mm).
+ * flatten it (docs/FINDINGS.md, "What depends on the frame spacing, measured within each sweep").
  * Falls back to 0.5 mm, saying so in Reason, when the frames cannot be measured (fewer than two
  * training frames, or none overlapping).
  */
@@ -145,11 +139,9 @@ struct BIGUSTRAINING_EXPORT PoseRefinementChoice
  * PoseRefinementMinimumCorrelation; each sweep measured alone, MeasureElevationDecorrelation). A frame's pose
  * is found by what its image shares with its neighbours' through the field; frames farther apart than the
  * speckle's correlation length share nothing, and their corrections fit the field's error instead of the
- * tracker's. Measured (docs/FINDINGS.md, "Held-out frames between refined ones" and "Pose refinement where
- * the frames correlate"): the liver sweep (correlation 0.77 at 0.51 mm) gained 0.40 dB held out with
- * refinement in 300 s, the N-wire phantom (0.59 at 0.49 mm) 0.95 dB in 60 s, while the spine phantom
- * (0.09 at 1.59 mm) lost 0.19 dB on the mean of three seeds. A sweep that cannot be measured (fewer than two
- * training frames, none overlapping) is not refined.
+ * tracker's. Refinement pays on the sweeps whose frames correlate and costs on those whose frames do not:
+ * docs/FINDINGS.md, "Pose refinement where the frames correlate" and "Held-out frames between refined ones".
+ * A sweep that cannot be measured (fewer than two training frames, none overlapping) is not refined.
  */
 BIGUSTRAINING_EXPORT PoseRefinementChoice ChoosePoseRefinement(const TrainingData& data);
 /// The same from measurements already taken (MeasureSweeps).

@@ -5,12 +5,11 @@
  *
  * A trained field holds Gaussians only within a few elevation sigmas of its training frames: nothing
  * in the data asks for more. A plane in the middle of a gap wider than the beam therefore renders
- * almost nothing (issue 19: 13.9 dB on a brain sweep with 8 frames out, against 20 dB for the blend
- * of the bracketing frames). FillElevationGaps extrudes, across each gap between two consecutive
- * training frames whose planes lie further apart than a few typical frame spacings, each of the two
- * frames as the field renders it, and blends them linearly. Seen through the beam, a Gaussian's profile
- * across a frame is exp(-(z - z_i)^2 / (2 v)), z_i its mean's distance from the plane (mm), v = sigma_E^2
- * + its variance along the normal (P2[z,z] of bigusGaussianMath.h). Every Gaussian within
+ * almost nothing, less than the blend of the bracketing frames (issue 19). FillElevationGaps extrudes,
+ * across each gap between two consecutive training frames whose planes lie further apart than a few typical
+ * frame spacings, each of the two frames as the field renders it, and blends them linearly. Seen through the
+ * beam, a Gaussian's profile across a frame is exp(-(z - z_i)^2 / (2 v)), z_i its mean's distance from the
+ * plane (mm), v = sigma_E^2 + its variance along the normal (P2[z,z] of bigusGaussianMath.h). Every Gaussian within
  * ReachSigmas sqrt(v) of the frame's plane (not only those nearest to it: the Gaussians between frames
  * render in both) is taken onto the plane (z_i = 0) with reflectivity r exp(-z_i^2 / (2 v)), what it
  * renders there, and copied across the gap: copies 1.5 sqrt(v) apart, each with weight 1.5 / sqrt(2 pi),
@@ -20,24 +19,15 @@
  * (first frame) or t (second), except near the frames: within BlendMarginSigmas sqrt(v) of its own
  * frame a copy carries that frame alone, and within that margin of the other frame it is left out,
  * the share falling linearly in between, so that the copies of one frame do not spill onto the other
- * (a linear blend leaves the copies nearest the far frame a share d / gap at distance d: on the liver
- * with frames 66 to 73 out they made the bracketing training frames 5 % too bright, see below).
+ * (a linear blend leaves the copies nearest the far frame a share d / gap at distance d, which renders
+ * onto that frame and makes it too bright).
  * Rendered in the gap, the field then shows the linear blend of the two
  * frames' scattering, which is what the temporal blend baseline and compounding with hole filling show
  * there. What the copies add at the frame they were taken from (relative to their Gaussian's own
  * contribution there, the sum of weight x exp(-z^2 / (2 v)) over the copies, whatever z_i) is taken off
  * that Gaussian's reflectivity, so that the frame renders as before to first order.
- * Measured (docs/FINDINGS.md; liver, 1,618 steps, frames 66 to 73 held out, a 3.8 mm gap, mean PSNR of
- * the held-out frames): 25.28 dB without filling; copying only the Gaussians whose nearest training
- * plane is the bracketing frame, at full weight, 26.34 dB (clearance 1.5 widths); every Gaussian within
- * reach, with what it renders there, 29.62 dB (clearance 0), 29.39 (0.5). The bracketing training frames
- * 65 and 74 rose from 31.35 / 34.21 dB (no filling) to 33.38 / 34.74. At 3,600 steps the fit is better
- * and the spill showed: no filling 28.61 dB in the gap (frames 65 / 74: 39.50 / 35.59 dB), a linear
- * blend 30.91 (36.21 / 34.41, both frames 5 % too bright), the margin of 2 widths 31.24 (38.05 /
- * 35.12); the blend of the unfilled field's own renders of frames 65 and 74, the most the copies can
- * show, scores 31.57. What remains on the bracketing frames comes from Gaussians wider than a quarter
- * of the gap (the margin is capped there): leaving them out keeps frame 65 at 39.25 dB but the gap
- * falls to 30.47.
+ * Why every Gaussian within reach and not only the nearest plane's, and why the blend margin: docs/FINDINGS.md,
+ * "The trainer's defaults, measured" (FillGaps, and the paragraph bigusGapFilling.h below the table).
  */
 #ifndef bigusGapFilling_h
 #define bigusGapFilling_h

@@ -69,7 +69,7 @@ struct GaussianMergeReport
  * of the field is kept otherwise); passes repeat while a pass merges at least 1 % of the field, up to
  * MaximumPasses. Deterministic. Errors accumulate over passes: a Gaussian merged in k passes may be off by
  * up to about k times the tolerance. Memory while it runs: about 140 bytes per Gaussian (each one's best merge
- * and partner) besides the locator's; time: the liver main job's 325,750 Gaussians took 7.4 s on 2 cores.
+ * and partner) besides the locator's; its time on the README jobs' fields: docs/FINDINGS.md, "Merging".
  */
 BIGUSTRAINING_EXPORT GaussianMergeReport MergeGaussians(GaussianField& field, const GaussianMergeSettings& settings);
 

@@ -81,10 +81,8 @@ BIGUSTRAINING_EXPORT UntrainedCorrection CorrectUntrainedFrames(
  * path's second difference), divided by sqrt(3/2). Independent errors of each frame's pose whose displacement at the
  * corners has root mean square e give e in expectation (the second difference of independent errors has variance
  * (1 + 1/4 + 1/4) e^2); motion smooth over three frames gives half the corners' acceleration times the frame interval
- * squared. Measured (docs/FINDINGS.md, "The pose refinement's start chosen from the tracked path"): the liver 0.247 mm,
- * the spine phantom 0.224, the N-wire phantom 0.247; TestPoseRefinement's sweeps along the liver's path (a 64 x 64
- * window of 0.315 mm pixels, every 2nd frame) 0.186, and 0.508 and 0.482 with 0.5 degrees and 0.5 mm of independent
- * error per frame. Returns -1 where the sweep has fewer than three such frames.
+ * squared. Returns -1 where the sweep has fewer than three such frames. The bundled sweeps' and the synthetic
+ * sweeps' values: docs/FINDINGS.md, "The pose refinement's start chosen from the tracked path".
  */
 BIGUSTRAINING_EXPORT double TrackedPathJitter(const TrainingData& data, int sweep);
 
@@ -102,14 +100,12 @@ constexpr double PoseRefinementEarlyJitter = 0.35;
 /**
  * The pose refinement's start for @p data: 0 (the corrections move from the first step) where the tracked path of
  * a sweep in @p sweeps ([sweeps] 1 where the sweep's poses are corrected; empty: every sweep) jitters by more than
- * PoseRefinementEarlyJitter, else 0.2 (the first fifth of the schedule on the tracked poses). Measured
- * (docs/FINDINGS.md, "When pose refinement starts"): from the first step the issue's synthetic case (0.5 degrees
- * and 0.5 mm per frame at random) halves its pose error and scores 0.9 dB above training on the true poses by the
- * fair score (3,000 steps: 40.54 dB against 39.42 from 0.2), while the liver loses 0.41 and 0.42 dB held out (two
- * seeds, 120 s) and the N-wire phantom gains 0.11 and 0.10 (60 s): both their tracked paths jitter by 0.25 mm, so
- * the rule keeps 0.2 for both (the jitter does not tell them apart; the liver's loss is the larger).
+ * PoseRefinementEarlyJitter, else 0.2 (the first fifth of the schedule on the tracked poses).
  * Where the poses are far off, a field that takes shape on them fits their errors before the corrections move;
- * where they are nearly right, early corrections chase a field not yet formed.
+ * where they are nearly right, early corrections chase a field not yet formed. The bundled real sweeps jitter
+ * alike whether an early start helps or costs them, so the rule keeps 0.2 for them (the larger effect is a
+ * loss); the issue's synthetic case starts at 0. The measurements: docs/FINDINGS.md, "When pose refinement starts"
+ * and "The pose refinement's start chosen from the tracked path".
  */
 BIGUSTRAINING_EXPORT PoseRefinementStartChoice ChoosePoseRefinementStart(
   const TrainingData& data, const std::vector<char>& sweeps);

@@ -110,7 +110,8 @@ GridPlanes SelectGridPlanes(const TrainingData& data, const SeedShape& shape);
 /**
  * The dense start: Gaussians on the pixel grid of the planes SelectGridPlanes keeps, about @p total of
  * them (never more), in-plane scale 0.6 stride, elevation scale 0.45 of the spacing of the plane's sweep's
- * planes (measured on the volume protocol: docs/FINDINGS.md). Returns one line that says what was made.
+ * planes (chosen on the volume protocol: docs/FINDINGS.md, "The dense start's elevation scale"). Returns one line
+ * that says what was made.
  */
 std::string SeedGrid(const TrainingData& data, std::int64_t total, const SeedShape& shape, GaussianField& field);
 /// The same on planes already selected (SelectGridPlanes of the same data and shape).

@@ -270,7 +270,7 @@ BIGUSTRAINING_EXPORT double MeanFanIntensity(const TrainingData& data, std::int6
 
 /**
  * Host memory of a training run per Gaussian, bytes, with the CPU engine (the documented table is in
- * docs/FINDINGS.md, "Memory"): the trainer's optimiser state (the field 44: means, log-scales,
+ * docs/FINDINGS.md, "Memory per Gaussian"): the trainer's optimiser state (the field 44: means, log-scales,
  * quaternions, reflectivity in float; Adam's two moments 88; attribution and visibility count 8), the
  * engine's copy of it (140), the engine's last known-good field and moments (132) and its gradients
  * (44), and the best field kept for early stopping (44). The reflectivity solve adds
