@@ -1,4 +1,5 @@
-// CUDA renderer, backward: dL/dS, then one warp per Gaussian (see bigusCudaKernels.h). The maths is bigusGaussianMath.h and bigusRasterGeometry.h, as on the CPU.
+// CUDA renderer, backward: dL/dS, then one warp per Gaussian (see bigusCudaKernels.h). The maths is bigusGaussianMath.h
+// and bigusRasterGeometry.h, as on the CPU.
 #include "bigusCudaKernels.h"
 
 #include "bigusGaussianMath.h"
@@ -10,8 +11,8 @@ namespace cuda
 namespace
 {
 /// dL/dS of every pixel: @p dL itself, or dL/dI times dI/dS (in double, as on the CPU).
-__global__ void ScatteringGradientKernel(const float* S, const float* dL, std::int64_t pixels, bool withRespectToS,
-  double gamma, float* gS)
+__global__ void ScatteringGradientKernel(
+  const float* S, const float* dL, std::int64_t pixels, bool withRespectToS, double gamma, float* gS)
 {
   const std::int64_t p = std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (p < pixels)
@@ -125,15 +126,15 @@ __global__ void PoseShareSumKernel(const double* shares, std::int64_t count, dou
 
 }
 
-void LaunchScatteringGradient(const float* S, const float* dL, std::int64_t pixels, bool withRespectToS,
-  double gamma, float* gS, cudaStream_t stream)
+void LaunchScatteringGradient(const float* S, const float* dL, std::int64_t pixels, bool withRespectToS, double gamma,
+  float* gS, cudaStream_t stream)
 {
-  ScatteringGradientKernel<<<Blocks(pixels, SetupBlock), SetupBlock, 0, stream>>>(S, dL, pixels, withRespectToS, gamma, gS);
+  ScatteringGradientKernel<<<Blocks(pixels, SetupBlock), SetupBlock, 0, stream>>>(
+    S, dL, pixels, withRespectToS, gamma, gS);
 }
 
-void LaunchBackward(const DeviceField& field, const PreparedSlice& s, double sigmaE, double cutoff,
-  bool nonNegative, const float* gS, FieldGradients out, const PoseShares& pose, Counters* counters,
-  cudaStream_t stream)
+void LaunchBackward(const DeviceField& field, const PreparedSlice& s, double sigmaE, double cutoff, bool nonNegative,
+  const float* gS, FieldGradients out, const PoseShares& pose, Counters* counters, cudaStream_t stream)
 {
   BackwardKernel<<<Blocks(field.Count * WarpSize, BackwardBlock), BackwardBlock, 0, stream>>>(
     field, s, sigmaE, cutoff, nonNegative, gS, out, pose, counters);

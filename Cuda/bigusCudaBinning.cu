@@ -1,4 +1,5 @@
-// CUDA renderer, binning: phase 1 footprints, (tile, Gaussian) entries, tile ranges (see bigusCudaKernels.h). The maths is bigusGaussianMath.h and bigusRasterGeometry.h, as on the CPU.
+// CUDA renderer, binning: phase 1 footprints, (tile, Gaussian) entries, tile ranges (see bigusCudaKernels.h). The maths
+// is bigusGaussianMath.h and bigusRasterGeometry.h, as on the CPU.
 #include "bigusCudaKernels.h"
 
 #include "bigusGaussianMath.h"
@@ -37,8 +38,8 @@ __global__ void SetupKernel(DeviceField field, PreparedSlice s, double sigmaE, d
 }
 
 /// Binning: Gaussian i writes (tile, i) for every tile it touches, at its offset of the inclusive scan.
-__global__ void EmitKernel(const Splat* splats, const unsigned long long* touched,
-  const unsigned long long* inclusive, std::int64_t count, int tilesX, std::uint32_t* keys, std::uint32_t* values)
+__global__ void EmitKernel(const Splat* splats, const unsigned long long* touched, const unsigned long long* inclusive,
+  std::int64_t count, int tilesX, std::uint32_t* keys, std::uint32_t* values)
 {
   const std::int64_t i = std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i >= count || touched[i] == 0)
@@ -89,7 +90,8 @@ void LaunchSetup(const DeviceField& field, const PreparedSlice& s, double sigmaE
 void LaunchEmit(const Splat* splats, const unsigned long long* touched, const unsigned long long* inclusive,
   std::int64_t count, int tilesX, std::uint32_t* keys, std::uint32_t* values, cudaStream_t stream)
 {
-  EmitKernel<<<Blocks(count, SetupBlock), SetupBlock, 0, stream>>>(splats, touched, inclusive, count, tilesX, keys, values);
+  EmitKernel<<<Blocks(count, SetupBlock), SetupBlock, 0, stream>>>(
+    splats, touched, inclusive, count, tilesX, keys, values);
 }
 
 void LaunchTileRange(const std::uint32_t* keys, std::int64_t entries, int* start, int* end, cudaStream_t stream)

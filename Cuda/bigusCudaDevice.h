@@ -21,10 +21,10 @@ namespace cuda
 /// Description of the GPU the backend would use.
 struct DeviceInfo
 {
-  int Count = 0;              ///< number of CUDA devices visible
-  std::string Name;           ///< name of device 0
-  int ComputeCapability = 0;  ///< e.g. 90 for sm_90
-  double MemoryGiB = 0;       ///< global memory of device 0
+  int Count = 0;             ///< number of CUDA devices visible
+  std::string Name;          ///< name of device 0
+  int ComputeCapability = 0; ///< e.g. 90 for sm_90
+  double MemoryGiB = 0;      ///< global memory of device 0
 };
 
 /**

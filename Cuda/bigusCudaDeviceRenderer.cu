@@ -48,8 +48,8 @@ CallExtent Extent(std::int64_t gaussians, const std::vector<PreparedSlice>& slic
     e.Pixels = std::max(e.Pixels, std::int64_t(s.Width) * s.Height);
     e.Tiles = std::max(e.Tiles, std::int64_t(s.TilesX) * s.TilesY);
   }
-  e.What = "a field of " + std::to_string(gaussians) + " Gaussians and slices of " + std::to_string(e.Pixels) +
-    " pixels";
+  e.What =
+    "a field of " + std::to_string(gaussians) + " Gaussians and slices of " + std::to_string(e.Pixels) + " pixels";
   return e;
 }
 
@@ -147,8 +147,8 @@ bool DeviceRenderer::Reserve(bool backward, bool poses, std::int64_t n, std::int
   std::int64_t ownHeld, const std::string& what, std::string* error)
 {
   const std::int64_t slots = std::max<std::int64_t>(1, n);
-  const std::int64_t bytes = backward ? (poses ? n * PoseBytesPerGaussian : 0)
-                                      : n * BinningBytes + 2 * tiles * std::int64_t(sizeof(int));
+  const std::int64_t bytes =
+    backward ? (poses ? n * PoseBytesPerGaussian : 0) : n * BinningBytes + 2 * tiles * std::int64_t(sizeof(int));
   const std::int64_t held = backward
     ? (poses ? this->PoseShareData.Bytes : 0)
     : this->Splats.Bytes + this->Touched.Bytes + this->TileStart.Bytes + this->TileEnd.Bytes;
@@ -158,8 +158,7 @@ bool DeviceRenderer::Reserve(bool backward, bool poses, std::int64_t n, std::int
   }
   if (backward)
   {
-    return !poses ||
-      this->PoseShareData.Reserve(slots * PoseBytesPerGaussian, "allocating pose shares", error);
+    return !poses || this->PoseShareData.Reserve(slots * PoseBytesPerGaussian, "allocating pose shares", error);
   }
   return this->Splats.Reserve(slots * std::int64_t(sizeof(Splat)), "allocating footprints", error) &&
     this->Touched.Reserve(2 * slots * std::int64_t(sizeof(unsigned long long)), "allocating tile counts", error) &&
@@ -174,8 +173,8 @@ bool DeviceRenderer::ReadCounters(Counters& counters, const char* what, std::str
     Check(cudaStreamSynchronize(this->Stream), what, error);
 }
 
-bool DeviceRenderer::Forward(const DeviceField& field, const PreparedSlice& s, const RenderOptions& options,
-  float* S, float* I, RenderStats* stats, std::string* error)
+bool DeviceRenderer::Forward(const DeviceField& field, const PreparedSlice& s, const RenderOptions& options, float* S,
+  float* I, RenderStats* stats, std::string* error)
 {
   const double t0 = Now();
   std::int64_t entries = 0;
@@ -208,8 +207,8 @@ bool DeviceRenderer::Backward(const DeviceField& field, const PreparedSlice& s, 
   std::string* error)
 {
   const std::int64_t n = field.Count;
-  LaunchScatteringGradient(S, dL, std::int64_t(s.Width) * s.Height, withRespectToS, options.Gamma, scratch,
-    this->Stream);
+  LaunchScatteringGradient(
+    S, dL, std::int64_t(s.Width) * s.Height, withRespectToS, options.Gamma, scratch, this->Stream);
   PoseShares pose = { poseTotal ? this->PoseShareData.As<double>() : nullptr, { 0, 0, 0 } };
   if (poseTotal)
   {
@@ -221,8 +220,8 @@ bool DeviceRenderer::Backward(const DeviceField& field, const PreparedSlice& s, 
   }
   if (n > 0)
   {
-    LaunchBackward(field, s, EffectiveElevationSigma(options), options.Cutoff, options.NonNegativeReflectivity,
-      scratch, out, pose, this->Count.As<Counters>() + 1, this->Stream);
+    LaunchBackward(field, s, EffectiveElevationSigma(options), options.Cutoff, options.NonNegativeReflectivity, scratch,
+      out, pose, this->Count.As<Counters>() + 1, this->Stream);
     if (poseTotal)
     {
       LaunchPoseShareSum(pose.Shares, n, poseTotal, this->Stream);
@@ -250,8 +249,8 @@ bool DeviceRenderer::Synchronize(RenderStats* stats, const char* what, std::stri
   return true;
 }
 
-bool DeviceRenderer::Bin(const DeviceField& field, const PreparedSlice& s, double sigmaE,
-  const RenderOptions& options, std::int64_t& entries, std::string* error)
+bool DeviceRenderer::Bin(const DeviceField& field, const PreparedSlice& s, double sigmaE, const RenderOptions& options,
+  std::int64_t& entries, std::string* error)
 {
   const std::int64_t n = field.Count;
   const int tiles = s.TilesX * s.TilesY;
@@ -272,7 +271,8 @@ bool DeviceRenderer::Bin(const DeviceField& field, const PreparedSlice& s, doubl
     this->Count.As<Counters>(), this->Stream);
   std::size_t scanBytes = 0;
   if (!Check(cudaGetLastError(), "setup kernel", error) ||
-    !Check(cub::DeviceScan::InclusiveSum(nullptr, scanBytes, touched, inclusive, n, this->Stream), "scan size", error) ||
+    !Check(
+      cub::DeviceScan::InclusiveSum(nullptr, scanBytes, touched, inclusive, n, this->Stream), "scan size", error) ||
     !this->Temporary.Reserve(static_cast<std::int64_t>(scanBytes), "allocating the scan", error) ||
     !Check(cub::DeviceScan::InclusiveSum(this->Temporary.Data, scanBytes, touched, inclusive, n, this->Stream),
       "scan of tile counts", error))
@@ -334,8 +334,8 @@ bool DeviceRenderer::Bin(const DeviceField& field, const PreparedSlice& s, doubl
   {
     return false;
   }
-  LaunchTileRange(this->SortedKeys.As<std::uint32_t>(), entries, this->TileStart.As<int>(), this->TileEnd.As<int>(),
-    this->Stream);
+  LaunchTileRange(
+    this->SortedKeys.As<std::uint32_t>(), entries, this->TileStart.As<int>(), this->TileEnd.As<int>(), this->Stream);
   return Check(cudaGetLastError(), "tile range kernel", error);
 }
 

@@ -1,4 +1,5 @@
-// CUDA renderer, forward: phase 2, one block per tile (see bigusCudaKernels.h). The maths is bigusGaussianMath.h and bigusRasterGeometry.h, as on the CPU.
+// CUDA renderer, forward: phase 2, one block per tile (see bigusCudaKernels.h). The maths is bigusGaussianMath.h and
+// bigusRasterGeometry.h, as on the CPU.
 #include "bigusCudaKernels.h"
 
 #include "bigusGaussianMath.h"
@@ -24,8 +25,8 @@ __device__ unsigned long long WarpSum(unsigned long long v)
  * RasterThreads at a time and every pixel adds them in Gaussian index order, as the CPU backend does,
  * with offsets relative to the tile's first pixel.
  */
-__global__ void RasterKernel(const Splat* splats, const std::uint32_t* values, const int* start,
-  const int* end, PreparedSlice s, float gamma, float* S, float* I, Counters* counters)
+__global__ void RasterKernel(const Splat* splats, const std::uint32_t* values, const int* start, const int* end,
+  PreparedSlice s, float gamma, float* S, float* I, Counters* counters)
 {
   __shared__ Splat staged[RasterThreads];
   const int tile = blockIdx.x;

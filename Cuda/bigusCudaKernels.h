@@ -64,8 +64,7 @@ void LaunchSetup(const DeviceField& field, const PreparedSlice& s, double sigmaE
 void LaunchEmit(const Splat* splats, const unsigned long long* touched, const unsigned long long* inclusive,
   std::int64_t count, int tilesX, std::uint32_t* keys, std::uint32_t* values, cudaStream_t stream);
 /// Tile t's entries are [start[t], end[t]) of the @p entries sorted @p keys (@p start, @p end zeroed before).
-void LaunchTileRange(
-  const std::uint32_t* keys, std::int64_t entries, int* start, int* end, cudaStream_t stream);
+void LaunchTileRange(const std::uint32_t* keys, std::int64_t entries, int* start, int* end, cudaStream_t stream);
 
 // Forward (bigusCudaForward.cu).
 
@@ -77,20 +76,19 @@ void LaunchRaster(int tiles, const Splat* splats, const std::uint32_t* values, c
 // Backward (bigusCudaBackward.cu).
 
 /// dL/dS of @p pixels pixels into @p gS: @p dL itself (@p withRespectToS) or dL/dI dI/dS.
-void LaunchScatteringGradient(const float* S, const float* dL, std::int64_t pixels, bool withRespectToS,
-  double gamma, float* gS, cudaStream_t stream);
+void LaunchScatteringGradient(const float* S, const float* dL, std::int64_t pixels, bool withRespectToS, double gamma,
+  float* gS, cudaStream_t stream);
 /// Where the backward pass puts each Gaussian's share of a slice's pose gradient (FieldGradients::SlicePoses).
 struct PoseShares
 {
-  double* Shares;   // [N, 6] dL/dxi of each Gaussian (zeroed before), or null: no pose gradient
-  double Pivot[3];  // the pivot of the correction, the slice's centre pixel in its plane (SliceCentre), mm
+  double* Shares;  // [N, 6] dL/dxi of each Gaussian (zeroed before), or null: no pose gradient
+  double Pivot[3]; // the pivot of the correction, the slice's centre pixel in its plane (SliceCentre), mm
 };
 
 /// Accumulates every Gaussian's gradients (and attribution, visible count) from @p gS of slice @p s, and
 /// with @p pose.Shares its share of the slice's pose gradient.
-void LaunchBackward(const DeviceField& field, const PreparedSlice& s, double sigmaE, double cutoff,
-  bool nonNegative, const float* gS, FieldGradients out, const PoseShares& pose, Counters* counters,
-  cudaStream_t stream);
+void LaunchBackward(const DeviceField& field, const PreparedSlice& s, double sigmaE, double cutoff, bool nonNegative,
+  const float* gS, FieldGradients out, const PoseShares& pose, Counters* counters, cudaStream_t stream);
 /// Adds the sum over the @p count Gaussians of @p shares [N, 6] to @p total [6], in a fixed order.
 void LaunchPoseShareSum(const double* shares, std::int64_t count, double* total, cudaStream_t stream);
 

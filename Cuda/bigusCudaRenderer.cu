@@ -42,8 +42,8 @@ public:
 
   const char* GetName() const override { return "cuda"; }
 
-  bool Forward(const FieldView& field, const SliceGeometry* slices, int count, const RenderOptions& options,
-    float* S, float* I, RenderStats* stats, std::string* error) override
+  bool Forward(const FieldView& field, const SliceGeometry* slices, int count, const RenderOptions& options, float* S,
+    float* I, RenderStats* stats, std::string* error) override
   {
     std::vector<PreparedSlice> prepared;
     if (!PrepareSlices(slices, count, options, prepared, error) || !this->UploadField(field, false, prepared, error))
@@ -102,8 +102,8 @@ public:
       if (slots[k].Host)
       {
         *outputs[k] = base + slots[k].Offset * n;
-        if (!Check(cudaMemcpyAsync(*outputs[k], slots[k].Host, sizeof(float) * slots[k].Width * n,
-                     cudaMemcpyHostToDevice, stream),
+        if (!Check(cudaMemcpyAsync(
+                     *outputs[k], slots[k].Host, sizeof(float) * slots[k].Width * n, cudaMemcpyHostToDevice, stream),
               "copying gradients to the device", error))
         {
           return false;
@@ -113,8 +113,8 @@ public:
     if (gradients.VisibleCount)
     {
       out.VisibleCount = reinterpret_cast<int*>(base + 12 * n);
-      if (!Check(cudaMemcpyAsync(out.VisibleCount, gradients.VisibleCount, sizeof(int) * n, cudaMemcpyHostToDevice,
-                   stream),
+      if (!Check(
+            cudaMemcpyAsync(out.VisibleCount, gradients.VisibleCount, sizeof(int) * n, cudaMemcpyHostToDevice, stream),
             "copying visibility counts to the device", error))
       {
         return false;
@@ -142,8 +142,8 @@ public:
     for (int k = 0; k < 5; ++k)
     {
       if (slots[k].Host &&
-        !Check(cudaMemcpyAsync(slots[k].Host, *outputs[k], sizeof(float) * slots[k].Width * n, cudaMemcpyDeviceToHost,
-                 stream),
+        !Check(cudaMemcpyAsync(
+                 slots[k].Host, *outputs[k], sizeof(float) * slots[k].Width * n, cudaMemcpyDeviceToHost, stream),
           "copying gradients to the host", error))
       {
         return false;
@@ -155,8 +155,8 @@ public:
                    cudaMemcpyDeviceToHost, stream),
             "copying pose gradients to the host", error)) ||
       (gradients.VisibleCount &&
-        !Check(cudaMemcpyAsync(gradients.VisibleCount, out.VisibleCount, sizeof(int) * n, cudaMemcpyDeviceToHost,
-                 stream),
+        !Check(
+          cudaMemcpyAsync(gradients.VisibleCount, out.VisibleCount, sizeof(int) * n, cudaMemcpyDeviceToHost, stream),
           "copying visibility counts to the host", error)) ||
       !this->Device.Synchronize(stats, "backward", error))
     {

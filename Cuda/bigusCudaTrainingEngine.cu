@@ -25,7 +25,7 @@ namespace
 // the step's gradients, E and seen count.
 constexpr std::int64_t StateBytes = 6 * FieldParameters * sizeof(float);
 constexpr std::int64_t StepBytes = FieldParameters * sizeof(float) + sizeof(float) + sizeof(int);
-constexpr std::int64_t ImageBytes = 3 * sizeof(float); // per pixel: S, I (then dL/dI), dL/dS
+constexpr std::int64_t ImageBytes = 3 * sizeof(float);                  // per pixel: S, I (then dL/dI), dL/dS
 constexpr std::int64_t SolveBytes = 2 * sizeof(float) + sizeof(double); // r or dL/dr of one frame, their sum
 
 /// One Adam step's constants (StepRequest).
@@ -81,8 +81,8 @@ __global__ void AdamKernel(float* field, float* m, float* v, const float* g, std
     l = fminf(a.MaximumLogScale, fmaxf(a.MinimumLogScale, l));
     ok = ok && isfinite(field[FieldEntry(n, i, MeanGroup, c)]) && isfinite(l);
   }
-  ok = ok && isfinite(quaternion[0]) && isfinite(quaternion[1]) && isfinite(quaternion[2]) &&
-    isfinite(quaternion[3]) && isfinite(field[FieldEntry(n, i, ReflectivityGroup, 0)]);
+  ok = ok && isfinite(quaternion[0]) && isfinite(quaternion[1]) && isfinite(quaternion[2]) && isfinite(quaternion[3]) &&
+    isfinite(field[FieldEntry(n, i, ReflectivityGroup, 0)]);
   if (!ok)
   {
     *finite = 0;
@@ -136,8 +136,8 @@ public:
   StepStatus Step(const StepRequest& request, double* loss, std::string* error) override;
   bool Render(const SliceGeometry* slices, int count, const RenderOptions& options, float* S, float* I,
     std::string* error) override;
-  bool ApplyBasis(const float* r, const int* frames, int count, const RenderOptions& options, float* S,
-    std::string* error) override;
+  bool ApplyBasis(
+    const float* r, const int* frames, int count, const RenderOptions& options, float* S, std::string* error) override;
   bool ApplyBasisTranspose(const float* y, const int* frames, int count, const RenderOptions& options, double* out,
     std::string* error) override;
   bool BasisNorms(const float* weights, const int* frames, int count, const RenderOptions& options, double* out,
@@ -163,24 +163,23 @@ private:
   /// Copies @p bytes from the device to the host and waits.
   bool Download(void* host, const void* device, std::size_t bytes, const char* what, std::string* error)
   {
-    return Check(cudaMemcpyAsync(host, device, bytes, cudaMemcpyDeviceToHost, this->Device.GetStream()), what,
-             error) &&
+    return Check(cudaMemcpyAsync(host, device, bytes, cudaMemcpyDeviceToHost, this->Device.GetStream()), what, error) &&
       Check(cudaStreamSynchronize(this->Device.GetStream()), what, error);
   }
 
   DeviceRenderer Device;
   const TrainingData* Data = nullptr;
   std::int64_t N = 0;
-  Buffer State;      // [3, N, 11] floats: field, Adam m, Adam v, each laid out as the field (Field)
-  Buffer Saved;      // [3, N, 11] floats: the last known-good State (Snapshot)
-  Buffer Gradients;  // [N, 11] floats: the step's gradients, laid out as the field
+  Buffer State;       // [3, N, 11] floats: field, Adam m, Adam v, each laid out as the field (Field)
+  Buffer Saved;       // [3, N, 11] floats: the last known-good State (Snapshot)
+  Buffer Gradients;   // [N, 11] floats: the step's gradients, laid out as the field
   Buffer Attribution; // [N] float: the EA-D attribution since the last Push
-  Buffer Seen;       // [N] int: the visible counts since the last Push
-  Buffer Images;     // [3, H, W] floats: S, I (then dL/dI), dL/dS
-  Buffer PoseTotals; // [count, 6] doubles: a step's pose gradients
-  Buffer Finite;     // int: 0 when Adam met a non-finite value
+  Buffer Seen;        // [N] int: the visible counts since the last Push
+  Buffer Images;      // [3, H, W] floats: S, I (then dL/dI), dL/dS
+  Buffer PoseTotals;  // [count, 6] doubles: a step's pose gradients
+  Buffer Finite;      // int: 0 when Adam met a non-finite value
   Buffer SolveValues; // [N] float: the reflectivities of ApplyBasis, one frame's dL/dr in ApplyBasisTranspose
-  Buffer SolveSum;   // [N] double: ApplyBasisTranspose's sum over frames
+  Buffer SolveSum;    // [N] double: ApplyBasisTranspose's sum over frames
   // Host scratch, kept between steps
   std::vector<float> I, LossGradient;
   ImageLossWorkspace LossWorkspace;
@@ -201,10 +200,10 @@ bool CudaTrainingEngine::Push(const OptimizerState& input, std::string* error)
     return false;
   }
   const std::int64_t slots = std::max<std::int64_t>(1, n);
-  const std::int64_t held = this->State.Bytes + this->Saved.Bytes + this->Gradients.Bytes + this->Attribution.Bytes +
-    this->Seen.Bytes;
-  if (!this->Device.Fits(n * TrainingBytesPerGaussian(), held,
-        "the training state of " + std::to_string(n) + " Gaussians", error) ||
+  const std::int64_t held =
+    this->State.Bytes + this->Saved.Bytes + this->Gradients.Bytes + this->Attribution.Bytes + this->Seen.Bytes;
+  if (!this->Device.Fits(
+        n * TrainingBytesPerGaussian(), held, "the training state of " + std::to_string(n) + " Gaussians", error) ||
     !this->State.Reserve(slots * 3 * FieldParameters * sizeof(float), "allocating the training state", error) ||
     !this->Saved.Reserve(slots * 3 * FieldParameters * sizeof(float), "allocating the training state", error) ||
     !this->Gradients.Reserve(slots * FieldParameters * sizeof(float), "allocating gradients", error) ||
@@ -225,8 +224,8 @@ bool CudaTrainingEngine::Push(const OptimizerState& input, std::string* error)
     }
   }
   if (n > 0 &&
-    (!Check(cudaMemcpyAsync(this->Attribution.Data, state.Attribution.data(), sizeof(float) * n,
-              cudaMemcpyHostToDevice, stream),
+    (!Check(cudaMemcpyAsync(
+              this->Attribution.Data, state.Attribution.data(), sizeof(float) * n, cudaMemcpyHostToDevice, stream),
        "copying the attribution to the device", error) ||
       !Check(cudaMemcpyAsync(this->Seen.Data, state.SeenCount.data(), sizeof(int) * n, cudaMemcpyHostToDevice, stream),
         "copying visible counts to the device", error)))
@@ -251,11 +250,11 @@ bool CudaTrainingEngine::Pull(OptimizerState& state, std::string* error)
   state.ResizeToField();
   const cudaStream_t stream = this->Device.GetStream();
   return n == 0 ||
-    (Check(cudaMemcpyAsync(state.Attribution.data(), this->Attribution.Data, sizeof(float) * n,
-             cudaMemcpyDeviceToHost, stream),
+    (Check(cudaMemcpyAsync(
+             state.Attribution.data(), this->Attribution.Data, sizeof(float) * n, cudaMemcpyDeviceToHost, stream),
        "copying the attribution to the host", error) &&
-      this->Download(state.SeenCount.data(), this->Seen.Data, sizeof(int) * n, "copying visible counts to the host",
-        error));
+      this->Download(
+        state.SeenCount.data(), this->Seen.Data, sizeof(int) * n, "copying visible counts to the host", error));
 }
 
 bool CudaTrainingEngine::PullField(GaussianField& field, std::string* error)
@@ -391,8 +390,8 @@ StepStatus CudaTrainingEngine::Step(const StepRequest& request, double* loss, st
   a.Sparse = request.SparseAdam;
   const int one = 1;
   int finite = 1;
-  if (!Check(cudaMemcpyAsync(this->Finite.Data, &one, sizeof(int), cudaMemcpyHostToDevice, stream),
-        "setting a flag", error))
+  if (!Check(
+        cudaMemcpyAsync(this->Finite.Data, &one, sizeof(int), cudaMemcpyHostToDevice, stream), "setting a flag", error))
   {
     return StepStatus::Failed;
   }
@@ -409,8 +408,8 @@ StepStatus CudaTrainingEngine::Step(const StepRequest& request, double* loss, st
   return finite ? StepStatus::Done : StepStatus::NonFinite;
 }
 
-bool CudaTrainingEngine::Render(const SliceGeometry* slices, int count, const RenderOptions& options, float* S,
-  float* I, std::string* error)
+bool CudaTrainingEngine::Render(
+  const SliceGeometry* slices, int count, const RenderOptions& options, float* S, float* I, std::string* error)
 {
   std::vector<PreparedSlice> prepared;
   if (!PrepareSlices(slices, count, options, prepared, error) || !this->Reserve(prepared, false, false, error))
@@ -433,8 +432,8 @@ bool CudaTrainingEngine::Render(const SliceGeometry* slices, int count, const Re
   return true;
 }
 
-bool CudaTrainingEngine::ApplyBasis(const float* r, const int* frames, int count, const RenderOptions& options,
-  float* S, std::string* error)
+bool CudaTrainingEngine::ApplyBasis(
+  const float* r, const int* frames, int count, const RenderOptions& options, float* S, std::string* error)
 {
   const std::size_t pixels = std::size_t(this->Data->Width) * this->Data->Height;
   const RenderOptions linear = LinearBasisOptions(options);
@@ -442,8 +441,8 @@ bool CudaTrainingEngine::ApplyBasis(const float* r, const int* frames, int count
   if (!PrepareFrames(*this->Data, frames, count, linear, prepared, error) ||
     !this->Reserve(prepared, false, false, error) || !this->PrepareSolve(error) ||
     (this->N > 0 &&
-      !Check(cudaMemcpyAsync(this->SolveValues.Data, r, sizeof(float) * this->N, cudaMemcpyHostToDevice,
-               this->Device.GetStream()),
+      !Check(cudaMemcpyAsync(
+               this->SolveValues.Data, r, sizeof(float) * this->N, cudaMemcpyHostToDevice, this->Device.GetStream()),
         "copying reflectivities to the device", error)))
   {
     return false;
@@ -460,8 +459,8 @@ bool CudaTrainingEngine::ApplyBasis(const float* r, const int* frames, int count
   return true;
 }
 
-bool CudaTrainingEngine::ApplyBasisTranspose(const float* y, const int* frames, int count,
-  const RenderOptions& options, double* out, std::string* error)
+bool CudaTrainingEngine::ApplyBasisTranspose(
+  const float* y, const int* frames, int count, const RenderOptions& options, double* out, std::string* error)
 {
   const std::int64_t n = this->N;
   const std::size_t pixels = std::size_t(this->Data->Width) * this->Data->Height;
@@ -484,15 +483,15 @@ bool CudaTrainingEngine::ApplyBasisTranspose(const float* y, const int* frames, 
     if (!Check(cudaMemsetAsync(gradient.Reflectivities, 0, sizeof(float) * n, stream), "clearing dL/dr", error) ||
       !Check(cudaMemcpyAsync(dY, y + pixels * k, sizeof(float) * pixels, cudaMemcpyHostToDevice, stream),
         "copying y to the device", error) ||
-      !this->Device.Backward(this->Field(), prepared[k], linear, dY, dY, true, dY + 2 * pixels, gradient, nullptr,
-        error))
+      !this->Device.Backward(
+        this->Field(), prepared[k], linear, dY, dY, true, dY + 2 * pixels, gradient, nullptr, error))
     {
       return TrainingFrameError(frames[k], error);
     }
     if (n > 0)
     {
-      AddToSumKernel<<<Blocks(n, SetupBlock), SetupBlock, 0, stream>>>(gradient.Reflectivities, n,
-        this->SolveSum.As<double>());
+      AddToSumKernel<<<Blocks(n, SetupBlock), SetupBlock, 0, stream>>>(
+        gradient.Reflectivities, n, this->SolveSum.As<double>());
     }
     if (!Check(cudaGetLastError(), "sum kernel", error) || !this->Device.Synchronize(nullptr, "backward", error))
     {
@@ -511,8 +510,8 @@ bool CudaTrainingEngine::ApplyBasisTranspose(const float* y, const int* frames, 
   return true;
 }
 
-bool CudaTrainingEngine::BasisNorms(const float* weights, const int* frames, int count, const RenderOptions& options,
-  double* out, std::string* error)
+bool CudaTrainingEngine::BasisNorms(
+  const float* weights, const int* frames, int count, const RenderOptions& options, double* out, std::string* error)
 {
   // Once per solve: on the host, over a copy of the field.
   if (!this->PullField(this->HostField, error))

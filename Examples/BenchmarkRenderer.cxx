@@ -193,8 +193,7 @@ const Field& GetField(std::int64_t n)
     {
       for (int k = 0; k < 3; ++k)
       {
-        f.Means[3 * i + k] =
-          static_cast<float>(scene.BoxMin[k] + unit(rng) * (scene.BoxMax[k] - scene.BoxMin[k]));
+        f.Means[3 * i + k] = static_cast<float>(scene.BoxMin[k] + unit(rng) * (scene.BoxMax[k] - scene.BoxMin[k]));
         f.LogScales[3 * i + k] = static_cast<float>(std::log(scale(rng)));
       }
       double q[4], norm2 = 0;
@@ -284,8 +283,8 @@ __attribute__((noinline, target("arch=x86-64-v3"))) void PeakAvx2(
   PeakBody(s, l, acc, reps, P1, P2, k2);
 }
 
-__attribute__((noinline, target("arch=x86-64-v4,prefer-vector-width=512"))) void
-PeakAvx512(const PeakSplat* s, const float* l, float* acc, int reps, float P1, float P2, float k2)
+__attribute__((noinline, target("arch=x86-64-v4,prefer-vector-width=512"))) void PeakAvx512(
+  const PeakSplat* s, const float* l, float* acc, int reps, float P1, float P2, float k2)
 {
   PeakBody(s, l, acc, reps, P1, P2, k2);
 }
@@ -313,7 +312,14 @@ double MeasurePeak(PeakKernel kernel)
         for (int s = 0; s < PeakSplats; ++s)
         {
           // Footprints a few mm wide centred in the block: forms from 0 to a few tens.
-          splats[s] = { 0.05f + 0.001f * s, 0.01f, 0.08f, 0.1f, 9.0f + 0.05f * s, 2.4f, };
+          splats[s] = {
+            0.05f + 0.001f * s,
+            0.01f,
+            0.08f,
+            0.1f,
+            9.0f + 0.05f * s,
+            2.4f,
+          };
         }
         kernel(splats, local, acc, reps, 0.0f, 0.3f, 16.0f);
         double total = 0;
@@ -648,10 +654,8 @@ void PrintSummary()
     scene.Frames, scene.ValidFrames, scene.FrameWidth, scene.FrameHeight);
   std::printf("  [%.1f, %.1f] x [%.1f, %.1f] x [%.1f, %.1f] mm; slice = pose of frame %d, W x W pixels over the\n"
               "  frame's field of view; sigma_E 0.5 mm, gamma 1, scales U[0.3, 2] mm, r ~ N(0.05, 0.3^2)\n",
-    scene.BoxMin[0], scene.BoxMax[0], scene.BoxMin[1], scene.BoxMax[1], scene.BoxMin[2], scene.BoxMax[2],
-    PoseFrame);
-  std::printf("Threads (vtkSMPTools %s): %d\n", vtkSMPTools::GetBackend(),
-    vtkSMPTools::GetEstimatedNumberOfThreads());
+    scene.BoxMin[0], scene.BoxMax[0], scene.BoxMin[1], scene.BoxMax[1], scene.BoxMin[2], scene.BoxMax[2], PoseFrame);
+  std::printf("Threads (vtkSMPTools %s): %d\n", vtkSMPTools::GetBackend(), vtkSMPTools::GetEstimatedNumberOfThreads());
   std::printf("\nPeak of phase 2's arithmetic (FastExp + conic form, L1-resident, all threads):\n");
   std::printf("  baseline x86-64 (SSE2, the library's 'default' clone): %s evals/s\n", Count(peak.Baseline).c_str());
   if (peak.Avx2 > 0)
@@ -676,8 +680,7 @@ void PrintSummary()
 
   std::printf("\nForward and backward, cutoff k = 4 (per slice):\n");
   std::printf("%8s %4s | %9s %8s %9s %8s %8s %10s %10s %7s %7s | %9s %9s %7s | %9s\n", "N", "W", "fwd ms", "setup",
-    "raster", "kept", "kept%", "pix evals", "evals/s", "ph2 %pk", "%libpk", "bwd ms", "evals/s", "bwd/fwd",
-    "vs naive");
+    "raster", "kept", "kept%", "pix evals", "evals/s", "ph2 %pk", "%libpk", "bwd ms", "evals/s", "bwd/fwd", "vs naive");
   for (std::int64_t n : Sizes)
   {
     for (std::int64_t w : Widths)
@@ -717,7 +720,8 @@ void PrintSummary()
       if (f != ForwardResults.end() && naive256 > 0)
       {
         const double naive = naive256 * (double(n) * w * w) / (10000.0 * 256 * 256);
-        std::printf(" %8.0fx%s", naive / (1e-3 * f->second.Ms), (n == 10000 && w == 256) ? " (measured)" : " (extrap.)");
+        std::printf(
+          " %8.0fx%s", naive / (1e-3 * f->second.Ms), (n == 10000 && w == 256) ? " (measured)" : " (extrap.)");
       }
       std::printf("\n");
     }
@@ -725,7 +729,8 @@ void PrintSummary()
   std::printf("  kept = Gaussians left after culling (RenderStats.GaussiansVisible); pix evals = Gaussian-pixel pairs\n"
               "  evaluated; evals/s = pix evals / whole-slice time; ph2 %%pk = (pix evals / RasterSeconds) / machine\n"
               "  peak, %%libpk the same against the peak of the ISA the library runs here. Backward's kept / evals\n"
-              "  are forward's (the backward pass evaluates the same boxes). 'vs naive' = naive time / CPU forward time; the naive time\n"
+              "  are forward's (the backward pass evaluates the same boxes). 'vs naive' = naive time / CPU forward "
+              "time; the naive time\n"
               "  is measured at 10k / 256 only and extrapolated linearly in N * pixels for the other cases.\n");
 
   if (!EmptyResults.empty())

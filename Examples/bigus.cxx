@@ -35,8 +35,8 @@ int main(int argc, char** argv)
   app.require_subcommand(1);
   using namespace bigus::cli;
   const std::vector<Command> commands = { AddInfoCommand(app), AddTrainCommand(app), AddRenderCommand(app),
-    AddEvaluateCommand(app), AddSweepCommand(app), AddFillGapsCommand(app), AddMergeCommand(app),
-    AddBatchCommand(app), AddBenchmarkCommand(app, BIGUS_SOURCE_DIR) };
+    AddEvaluateCommand(app), AddSweepCommand(app), AddFillGapsCommand(app), AddMergeCommand(app), AddBatchCommand(app),
+    AddBenchmarkCommand(app, BIGUS_SOURCE_DIR) };
   try
   {
     app.parse(argc, argv);

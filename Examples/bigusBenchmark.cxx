@@ -101,11 +101,10 @@ int RunBenchmark(const BenchmarkOptions& options)
   const std::vector<Section> sections = Sections(context.Sweeps);
   const std::string& section = options.Section;
   const bool all = section == "all";
-  if (!all && std::none_of(sections.begin(), sections.end(),
-                [&](const Section& s) { return s.Alone && section == s.Alone; }))
+  if (!all &&
+    std::none_of(sections.begin(), sections.end(), [&](const Section& s) { return s.Alone && section == s.Alone; }))
   {
-    return Fail(
-      "--section " + section + ": expected all, main, defaults, volume, blocks, ablations, pareto or sweeps");
+    return Fail("--section " + section + ": expected all, main, defaults, volume, blocks, ablations, pareto or sweeps");
   }
   benchmark::Introduction(root, quick, report);
   std::string error;

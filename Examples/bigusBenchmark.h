@@ -8,9 +8,9 @@ namespace bigus
 {
 struct BenchmarkOptions
 {
-  std::string Output = "docs";  ///< folder of BENCHMARKS.md; plots and results.json go to Output/benchmarks
-  std::string SourceDirectory;  ///< project root holding Examples/Data and Testing/Data
-  bool Quick = false;           ///< a few minutes instead of about 3 hours (smoke test)
+  std::string Output = "docs"; ///< folder of BENCHMARKS.md; plots and results.json go to Output/benchmarks
+  std::string SourceDirectory; ///< project root holding Examples/Data and Testing/Data
+  bool Quick = false;          ///< a few minutes instead of about 3 hours (smoke test)
   /// "all" (written to Output/BENCHMARKS.md), or one section alone (Output/BENCHMARKS_<section>.md):
   /// "main" (the hold-out sections of the bundled sweeps, and the capacity and render-cutoff sections that
   /// read the liver's field), "defaults" (defaults against hand-tuned, without the fixed-schedule column),

@@ -102,8 +102,8 @@ bool WritePlot(const PlotSpec& spec, const std::string& path)
   const int W = 720, left = 70, right = 20, top = 40, bottom = 60 + 18 * count, H = 400 + 18 * count;
   const cv::Scalar black(0, 0, 0), grey(225, 225, 225);
   // BGR, distinguishable in print.
-  const cv::Scalar colours[] = { { 180, 90, 0 }, { 0, 120, 230 }, { 40, 160, 40 }, { 30, 30, 200 },
-    { 160, 60, 150 }, { 60, 110, 140 }, { 190, 120, 220 }, { 120, 120, 120 }, { 20, 170, 190 }, { 200, 190, 20 } };
+  const cv::Scalar colours[] = { { 180, 90, 0 }, { 0, 120, 230 }, { 40, 160, 40 }, { 30, 30, 200 }, { 160, 60, 150 },
+    { 60, 110, 140 }, { 190, 120, 220 }, { 120, 120, 120 }, { 20, 170, 190 }, { 200, 190, 20 } };
   cv::Mat plot(H, W, CV_8UC3, cv::Scalar(255, 255, 255));
   double x0 = 1e300, x1 = -1e300, y0 = 1e300, y1 = -1e300;
   for (const PlotSeries& s : spec.Series)

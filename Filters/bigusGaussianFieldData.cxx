@@ -268,8 +268,8 @@ void FieldToPolyData(const GaussianField& field, const FieldModel& model, vtkPol
   data->GetPointData()->AddArray(rotations);
   data->GetPointData()->AddArray(reflectivities);
   data->GetPointData()->SetActiveScalars("Reflectivity");
-  for (const auto& entry : { std::make_pair("ElevationSigma", model.ElevationSigma), std::make_pair("Gamma", model.Gamma),
-         std::make_pair("PixelSpacing", model.PixelSpacing) })
+  for (const auto& entry : { std::make_pair("ElevationSigma", model.ElevationSigma),
+         std::make_pair("Gamma", model.Gamma), std::make_pair("PixelSpacing", model.PixelSpacing) })
   {
     vtkNew<vtkDoubleArray> a;
     a->SetName(entry.first);
@@ -390,9 +390,8 @@ bool TrainingGeometryFromFieldData(vtkFieldData* in, TrainingGeometry& geometry,
   {
     widthHeight[v] = size->GetComponent(v / components, v % components);
   }
-  if (!(widthHeight[0] >= 1 && widthHeight[1] >= 1 && widthHeight[0] <= VTK_INT_MAX &&
-        widthHeight[1] <= VTK_INT_MAX && widthHeight[0] == std::floor(widthHeight[0]) &&
-        widthHeight[1] == std::floor(widthHeight[1])))
+  if (!(widthHeight[0] >= 1 && widthHeight[1] >= 1 && widthHeight[0] <= VTK_INT_MAX && widthHeight[1] <= VTK_INT_MAX &&
+        widthHeight[0] == std::floor(widthHeight[0]) && widthHeight[1] == std::floor(widthHeight[1])))
   {
     return fail("TrainingFrameSize must be a positive whole width and height (pixels); it is " +
       std::to_string(widthHeight[0]) + " x " + std::to_string(widthHeight[1]));
@@ -582,8 +581,8 @@ bool TrainingDataFromSequence(vtkImageData* sequence, vtkImageData* mask, Traini
   const vtkIdType maskPixels = maskValues ? maskValues->GetNumberOfTuples() : 0;
   if (maskPixels != framePixels && maskPixels != framePixels * dims[2])
   {
-    *error = "the fan mask must be a " + std::to_string(dims[0]) + " x " + std::to_string(dims[1]) +
-      " image or a " + std::to_string(dims[0]) + " x " + std::to_string(dims[1]) + " x " + std::to_string(dims[2]) +
+    *error = "the fan mask must be a " + std::to_string(dims[0]) + " x " + std::to_string(dims[1]) + " image or a " +
+      std::to_string(dims[0]) + " x " + std::to_string(dims[1]) + " x " + std::to_string(dims[2]) +
       " per-frame mask sequence";
     return false;
   }
@@ -652,7 +651,7 @@ bool TrainingDataFromSweeps(const std::vector<SweepInput>& sweeps, TrainingData&
   struct Loaded
   {
     TrainingData Data;
-    double Spacing = 0;                 // mm per pixel
+    double Spacing = 0;                      // mm per pixel
     double Bounds[6] = { 0, 0, 0, 0, 0, 0 }; // mm, the valid frames' corners
   };
   std::vector<Loaded> loaded(sweeps.size());
@@ -683,7 +682,8 @@ bool TrainingDataFromSweeps(const std::vector<SweepInput>& sweeps, TrainingData&
     for (int f = 0; f < l.Data.Count(); ++f)
     {
       const std::array<double, 16>& m = l.Data.Poses[f];
-      if ((valid && valid->GetTuple1(f) == 0) || !std::all_of(m.begin(), m.end(), [](double v) { return std::isfinite(v); }))
+      if ((valid && valid->GetTuple1(f) == 0) ||
+        !std::all_of(m.begin(), m.end(), [](double v) { return std::isfinite(v); }))
       {
         continue;
       }
@@ -735,7 +735,8 @@ bool TrainingDataFromSweeps(const std::vector<SweepInput>& sweeps, TrainingData&
         bool overlap = joined[b];
         for (int r = 0; r < 3 && overlap; ++r)
         {
-          overlap = loaded[a].Bounds[2 * r] <= loaded[b].Bounds[2 * r + 1] && loaded[b].Bounds[2 * r] <= loaded[a].Bounds[2 * r + 1];
+          overlap = loaded[a].Bounds[2 * r] <= loaded[b].Bounds[2 * r + 1] &&
+            loaded[b].Bounds[2 * r] <= loaded[a].Bounds[2 * r + 1];
         }
         if (overlap)
         {
@@ -751,8 +752,8 @@ bool TrainingDataFromSweeps(const std::vector<SweepInput>& sweeps, TrainingData&
       const double* b = loaded[s].Bounds;
       char text[300];
       std::snprintf(text, sizeof(text),
-        ": its frames (x %.1f to %.1f, y %.1f to %.1f, z %.1f to %.1f mm) share no region with the other sweeps'",
-        b[0], b[1], b[2], b[3], b[4], b[5]);
+        ": its frames (x %.1f to %.1f, y %.1f to %.1f, z %.1f to %.1f mm) share no region with the other sweeps'", b[0],
+        b[1], b[2], b[3], b[4], b[5]);
       *error = sweeps[s].Name + text;
       return false;
     }
@@ -820,8 +821,8 @@ bool ChosenFrames(vtkIdList* list, vtkIdType frameCount, std::vector<vtkIdType>&
     const vtkIdType f = list->GetId(k);
     if (f < 0 || f >= frameCount)
     {
-      *error = "frame " + std::to_string(f) + " is outside the " + std::to_string(frameCount) +
-        " frames of the pose sequence";
+      *error =
+        "frame " + std::to_string(f) + " is outside the " + std::to_string(frameCount) + " frames of the pose sequence";
       return false;
     }
     frames.push_back(f);

@@ -40,14 +40,15 @@ struct FieldModel
 {
   double ElevationSigma = 0.5; ///< mm
   double Gamma = 1.0;
-  double PixelSpacing = 0.0;   ///< mm, mean pixel spacing of the training frames (0 = unknown)
+  double PixelSpacing = 0.0; ///< mm, mean pixel spacing of the training frames (0 = unknown)
 };
 
 /**
  * Read a field. Returns false with @p error naming the missing or malformed array (no points, Scale
  * not 3 components, a non-positive or non-finite scale, missing Rotation or Reflectivity).
  */
-BIGUSFILTERS_EXPORT bool FieldFromPolyData(vtkPolyData* data, GaussianField& field, FieldModel& model, std::string* error);
+BIGUSFILTERS_EXPORT bool FieldFromPolyData(
+  vtkPolyData* data, GaussianField& field, FieldModel& model, std::string* error);
 
 /**
  * The geometry of the frames a field was trained on, kept with the field as field data so that a
@@ -226,10 +227,10 @@ BIGUSFILTERS_EXPORT void FieldToPolyData(const GaussianField& field, const Field
 
 /**
  * Frames, poses and mask of a tracked frame sequence (DESIGN section 2) as training data: intensities
- * scaled to [0, 1] (unsigned char / 255, float clamped), ImageToReference per frame, the field data Timestamp (s) and FrameValid when they have one per frame, and @p mask (a
- * W x H x 1 fan mask or a W x H x N per-frame mask; non-zero = imaged). TrainFrames is left empty.
- * Returns false with @p error when the sequence is not W x H x N one-component scalars with N
- * ImageToReference tuples of 16, or the mask has neither size.
+ * scaled to [0, 1] (unsigned char / 255, float clamped), ImageToReference per frame, the field data Timestamp (s) and
+ * FrameValid when they have one per frame, and @p mask (a W x H x 1 fan mask or a W x H x N per-frame mask; non-zero =
+ * imaged). TrainFrames is left empty. Returns false with @p error when the sequence is not W x H x N one-component
+ * scalars with N ImageToReference tuples of 16, or the mask has neither size.
  */
 BIGUSFILTERS_EXPORT bool TrainingDataFromSequence(
   vtkImageData* sequence, vtkImageData* mask, TrainingData& data, std::string* error);

@@ -114,14 +114,14 @@ MetaImageHeader ParseMetaImageHeader(std::istream& in, const std::string& where)
       line.push_back(c);
       if (line.size() > MaximumLineBytes)
       {
-        Fail(where, "header line " + std::to_string(lineNumber + 1) +
+        Fail(where,
+          "header line " + std::to_string(lineNumber + 1) +
             " is longer than 1 MiB (binary data before ElementDataFile?)");
       }
     }
     if (!gotNewline && line.empty())
     {
-      Fail(where, "header has no ElementDataFile field (file ends after " + std::to_string(lineNumber) +
-          " lines)");
+      Fail(where, "header has no ElementDataFile field (file ends after " + std::to_string(lineNumber) + " lines)");
     }
     ++lineNumber;
     offset += line.size() + (gotNewline ? 1 : 0);
@@ -137,7 +137,8 @@ MetaImageHeader ParseMetaImageHeader(std::istream& in, const std::string& where)
     const std::size_t eq = trimmed.find('=');
     if (eq == std::string::npos)
     {
-      Fail(where, "header line " + std::to_string(lineNumber) + " is not 'Key = Value': " + Excerpt(trimmed) +
+      Fail(where,
+        "header line " + std::to_string(lineNumber) + " is not 'Key = Value': " + Excerpt(trimmed) +
           " (binary data or a cut before the ElementDataFile field?)");
     }
     const std::string key = Trim(trimmed.substr(0, eq));
@@ -149,7 +150,8 @@ MetaImageHeader ParseMetaImageHeader(std::istream& in, const std::string& where)
     auto seen = seenAt.emplace(key, lineNumber);
     if (!seen.second)
     {
-      Fail(where, "field " + key + " appears twice (lines " + std::to_string(seen.first->second) + " and " +
+      Fail(where,
+        "field " + key + " appears twice (lines " + std::to_string(seen.first->second) + " and " +
           std::to_string(lineNumber) + ")");
     }
     int frame = 0;
@@ -169,8 +171,7 @@ MetaImageHeader ParseMetaImageHeader(std::istream& in, const std::string& where)
     }
     if (!gotNewline)
     {
-      Fail(where, "header has no ElementDataFile field (file ends after " + std::to_string(lineNumber) +
-          " lines)");
+      Fail(where, "header has no ElementDataFile field (file ends after " + std::to_string(lineNumber) + " lines)");
     }
   }
 }
@@ -210,8 +211,7 @@ MetaImageLayout InterpretMetaImageHeader(const MetaImageHeader& header, const st
   double dims[3] = { 0, 0, 1 };
   if (!ParseNumbers(dimText, dims, ndims))
   {
-    Fail(where, "field DimSize is " + Excerpt(dimText) + ", expected " + std::to_string(ndims) +
-        " positive integers");
+    Fail(where, "field DimSize is " + Excerpt(dimText) + ", expected " + std::to_string(ndims) + " positive integers");
   }
   for (int k = 0; k < 3; ++k)
   {
@@ -237,7 +237,8 @@ MetaImageLayout InterpretMetaImageHeader(const MetaImageHeader& header, const st
     double channels = 0;
     if (!ParseNumbers(*v, &channels, 1) || channels != 1)
     {
-      Fail(where, "field ElementNumberOfChannels is " + Excerpt(*v) + "; only single-channel (B-mode) frames are supported");
+      Fail(where,
+        "field ElementNumberOfChannels is " + Excerpt(*v) + "; only single-channel (B-mode) frames are supported");
     }
   }
   const std::string& type = require("ElementType");
@@ -304,7 +305,8 @@ MetaImageLayout InterpretMetaImageHeader(const MetaImageHeader& header, const st
   }
   if (Lower(dataFile) == "list" || dataFile.find('%') != std::string::npos)
   {
-    Fail(where, "field ElementDataFile is " + Excerpt(dataFile) +
+    Fail(where,
+      "field ElementDataFile is " + Excerpt(dataFile) +
         "; lists of data files are not supported, use LOCAL or one .raw/.zraw file");
   }
   layout.ElementDataFile = dataFile == "LOCAL" || dataFile == "Local" ? std::string("LOCAL") : dataFile;
@@ -314,12 +316,12 @@ MetaImageLayout InterpretMetaImageHeader(const MetaImageHeader& header, const st
     // PLUS codes: first letter M/U (image x axis towards the Marked/Unmarked side of the
     // transducer), second F/N (image y axis towards Far/Near), optional third for the frame axis.
     const std::string& o = *v;
-    const bool ok = (o.size() == 2 || (o.size() == 3 && o[2] == 'A')) && (o[0] == 'M' || o[0] == 'U') &&
-      (o[1] == 'F' || o[1] == 'N');
+    const bool ok =
+      (o.size() == 2 || (o.size() == 3 && o[2] == 'A')) && (o[0] == 'M' || o[0] == 'U') && (o[1] == 'F' || o[1] == 'N');
     if (!ok)
     {
-      Fail(where, "field UltrasoundImageOrientation is " + Excerpt(o) +
-          "; supported: MF, MN, UF, UN (optionally followed by A)");
+      Fail(where,
+        "field UltrasoundImageOrientation is " + Excerpt(o) + "; supported: MF, MN, UF, UN (optionally followed by A)");
     }
     layout.Orientation = o.substr(0, 2);
   }
@@ -327,9 +329,10 @@ MetaImageLayout InterpretMetaImageHeader(const MetaImageHeader& header, const st
   if (!header.FrameFields.empty() && header.FrameFields.rbegin()->first >= layout.Dimensions[2])
   {
     const int frame = header.FrameFields.rbegin()->first;
-    Fail(where, "frame " + std::to_string(frame) + ": field " +
-        FrameFieldName(frame, header.FrameFields.rbegin()->second.begin()->first) +
-        " is beyond the " + std::to_string(layout.Dimensions[2]) + " frames of DimSize");
+    Fail(where,
+      "frame " + std::to_string(frame) + ": field " +
+        FrameFieldName(frame, header.FrameFields.rbegin()->second.begin()->first) + " is beyond the " +
+        std::to_string(layout.Dimensions[2]) + " frames of DimSize");
   }
   return layout;
 }
@@ -388,9 +391,7 @@ std::vector<TransformTerm> ParseTransformChain(const std::string& chain)
   std::vector<TransformTerm> terms;
   std::stringstream stream(chain);
   std::string factor;
-  auto bad = [&](const std::string& why) {
-    throw MetaImageError("transform chain '" + chain + "': " + why);
-  };
+  auto bad = [&](const std::string& why) { throw MetaImageError("transform chain '" + chain + "': " + why); };
   while (std::getline(stream, factor, '*'))
   {
     std::string f = Trim(factor);
@@ -457,8 +458,8 @@ bool InvertAffine4x4(const double m[16], double out[16])
   const double a = m[0], b = m[1], c = m[2], d = m[4], e = m[5], f = m[6], g = m[8], h = m[9], k = m[10];
   const double c00 = e * k - f * h, c01 = c * h - b * k, c02 = b * f - c * e;
   const double det = a * c00 + d * c01 + g * c02;
-  const double scale = std::abs(a) + std::abs(b) + std::abs(c) + std::abs(d) + std::abs(e) + std::abs(f) +
-    std::abs(g) + std::abs(h) + std::abs(k);
+  const double scale = std::abs(a) + std::abs(b) + std::abs(c) + std::abs(d) + std::abs(e) + std::abs(f) + std::abs(g) +
+    std::abs(h) + std::abs(k);
   if (!std::isfinite(det) || std::abs(det) <= 1e-12 * scale * scale * scale)
   {
     return false;

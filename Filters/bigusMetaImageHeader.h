@@ -42,21 +42,21 @@ enum class MetaElementType
 /// The text header, split into global fields and per-frame (Seq_FrameNNNN_) fields.
 struct MetaImageHeader
 {
-  std::map<std::string, std::string> Fields;                       ///< global fields
-  std::map<int, std::map<std::string, std::string>> FrameFields;   ///< frame -> field -> value
-  std::uint64_t DataOffset = 0; ///< byte offset just after the ElementDataFile line
+  std::map<std::string, std::string> Fields;                     ///< global fields
+  std::map<int, std::map<std::string, std::string>> FrameFields; ///< frame -> field -> value
+  std::uint64_t DataOffset = 0;                                  ///< byte offset just after the ElementDataFile line
 };
 
 /// The interpreted geometry and storage of the pixel data.
 struct MetaImageLayout
 {
-  int Dimensions[3] = { 0, 0, 1 };      ///< columns, rows, frames
+  int Dimensions[3] = { 0, 0, 1 }; ///< columns, rows, frames
   MetaElementType ElementType = MetaElementType::UChar;
   bool Compressed = false;
   std::int64_t CompressedDataSize = -1; ///< -1 when the header does not say
   bool ByteOrderMSB = false;
-  std::string ElementDataFile;          ///< "LOCAL" or a path relative to the header file
-  std::string Orientation = "MF";       ///< PLUS UltrasoundImageOrientation, two letters
+  std::string ElementDataFile;    ///< "LOCAL" or a path relative to the header file
+  std::string Orientation = "MF"; ///< PLUS UltrasoundImageOrientation, two letters
 
   std::size_t BytesPerPixel() const { return this->ElementType == MetaElementType::UChar ? 1 : 4; }
   std::uint64_t FrameBytes() const

@@ -53,8 +53,8 @@ struct Grid
 /// Whether a default that only the field can give (bounds, pixel spacing) is still unset.
 bool NeedsField(const Grid& g, bool planar)
 {
-  return g.Spacing[0] == Unset || g.Spacing[1] == Unset || (!planar && g.Spacing[2] == Unset) ||
-    g.Origin[0] == Unset || g.Origin[1] == Unset || (!planar && g.Origin[2] == Unset) || g.Extent[0] == UnsetExtent;
+  return g.Spacing[0] == Unset || g.Spacing[1] == Unset || (!planar && g.Spacing[2] == Unset) || g.Origin[0] == Unset ||
+    g.Origin[1] == Unset || (!planar && g.Origin[2] == Unset) || g.Extent[0] == UnsetExtent;
 }
 
 /**
@@ -113,8 +113,8 @@ void FillDefaults(Grid& g, const bigus::FieldCache& field, vtkMatrix4x4* axes, b
 
 /// Pose of slice k of @p extent: pixel (i, j) -> axes * (origin + (extent[0] + i, extent[2] + j,
 /// extent[4] + k) * spacing), with the low-pass @p pixelLowPass (pixels^2).
-bigus::SliceGeometry SliceAt(vtkMatrix4x4* axes, const double spacing[3], const double origin[3],
-  const int extent[6], int k, double pixelLowPass)
+bigus::SliceGeometry SliceAt(
+  vtkMatrix4x4* axes, const double spacing[3], const double origin[3], const int extent[6], int k, double pixelLowPass)
 {
   vtkNew<vtkMatrix4x4> grid, pose;
   grid->SetElement(0, 0, spacing[0]);

@@ -60,8 +60,8 @@ public:
    */
   virtual void SetResliceAxes(vtkMatrix4x4*);
   vtkGetObjectMacro(ResliceAxes, vtkMatrix4x4);
-  void SetResliceAxesDirectionCosines(double x0, double x1, double x2, double y0, double y1, double y2, double z0,
-    double z1, double z2);
+  void SetResliceAxesDirectionCosines(
+    double x0, double x1, double x2, double y0, double y1, double y2, double z0, double z1, double z2);
   void SetResliceAxesOrigin(double x, double y, double z);
   ///@}
 

@@ -34,8 +34,8 @@ vtkGaussianFieldSequenceRenderer::~vtkGaussianFieldSequenceRenderer()
 int vtkGaussianFieldSequenceRenderer::RequestInformation(
   vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector* outputVector)
 {
-  bigus::SetFrameSequenceInformation(inputVector[1]->GetInformationObject(0), this->FrameList,
-    this->OutputScalarType, outputVector->GetInformationObject(0));
+  bigus::SetFrameSequenceInformation(inputVector[1]->GetInformationObject(0), this->FrameList, this->OutputScalarType,
+    outputVector->GetInformationObject(0));
   return 1;
 }
 

@@ -42,8 +42,7 @@ class ControllerReduction : public bigus::ProcessReduction
 public:
   explicit ControllerReduction(vtkMultiProcessController* controller)
     : Controller(controller)
-  {
-  }
+  {}
   int Rank() const override { return this->Controller->GetLocalProcessId(); }
   int Size() const override { return this->Controller->GetNumberOfProcesses(); }
   bool Sum(float* values, std::size_t count, std::string* error) override
@@ -223,7 +222,7 @@ bool Assign(Member& member, const Value& value)
   return true;
 }
 }
-#define bigusTrainerSettingMacro(name, type, member, lo, hi)                                                          \
+#define bigusTrainerSettingMacro(name, type, member, lo, hi)                                                           \
   void vtkGaussianFieldTrainer::Set##name(type value)                                                                  \
   {                                                                                                                    \
     if (Assign(this->Settings->member, std::min<type>(std::max<type>(value, lo), hi)))                                 \
@@ -231,7 +230,10 @@ bool Assign(Member& member, const Value& value)
       this->Modified();                                                                                                \
     }                                                                                                                  \
   }                                                                                                                    \
-  type vtkGaussianFieldTrainer::Get##name() const { return static_cast<type>(this->Settings->member); }
+  type vtkGaussianFieldTrainer::Get##name() const                                                                      \
+  {                                                                                                                    \
+    return static_cast<type>(this->Settings->member);                                                                  \
+  }
 #define bigusAnyValue(type) std::numeric_limits<type>::lowest(), std::numeric_limits<type>::max()
 // (expands bigusAnyValue before the setting macro counts its arguments)
 #define bigusTrainerSetting(name, type, member, ...) bigusTrainerSettingMacro(name, type, member, __VA_ARGS__)
@@ -365,8 +367,8 @@ int vtkGaussianFieldTrainer::RequestData(
   // (ProcessReduction::AllSucceeded), before the trainer's first sum, instead of leaving them waiting for it.
   TrainerInputs in;
   std::string error;
-  bool ready = ReadTrainerInputs(inputVector, this->HoldOutEvery, this->HoldOutOffset, this->HoldOutSweep,
-    this->TrainingFrameList, in, error);
+  bool ready = ReadTrainerInputs(
+    inputVector, this->HoldOutEvery, this->HoldOutOffset, this->HoldOutSweep, this->TrainingFrameList, in, error);
   bigus::TrainingData& data = in.Data;
   const int sweepCount = in.SweepCount, maskCount = in.MaskCount;
 
@@ -425,7 +427,8 @@ int vtkGaussianFieldTrainer::RequestData(
   std::vector<int> heldOut;
   for (int k = 0; k < trainer.GetData().Count(); ++k)
   {
-    if (in.Valid[k] && !std::binary_search(trainer.GetData().TrainFrames.begin(), trainer.GetData().TrainFrames.end(), k))
+    if (in.Valid[k] &&
+      !std::binary_search(trainer.GetData().TrainFrames.begin(), trainer.GetData().TrainFrames.end(), k))
     {
       heldOut.push_back(k);
     }
@@ -709,10 +712,11 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
   double weights[3];
   this->GetLossWeights(weights);
   os << indent << "LossWeights: " << weights[0] << " " << weights[1] << " " << weights[2] << "\n";
-  os << indent << "Densify schedule: start " << this->GetDensifyStart() << ", end " << this->GetDensifyEnd() << ", interval "
-     << this->GetDensifyInterval() << ", percentile " << this->GetDensifyPercentile()
+  os << indent << "Densify schedule: start " << this->GetDensifyStart() << ", end " << this->GetDensifyEnd()
+     << ", interval " << this->GetDensifyInterval() << ", percentile " << this->GetDensifyPercentile()
      << ", residual seeds " << this->GetResidualSeedShare() << "\n";
-  os << indent << "GrowthMargin: " << this->GetGrowthMargin() << ", GrowthPatience: " << this->GetGrowthPatience() << "\n";
+  os << indent << "GrowthMargin: " << this->GetGrowthMargin() << ", GrowthPatience: " << this->GetGrowthPatience()
+     << "\n";
   os << indent << "FillGaps: " << this->GetFillGaps() << "\n";
   os << indent << "MergeTolerance: " << this->GetMergeTolerance() << "\n";
   os << indent << "HoldOutEvery: " << this->HoldOutEvery << ", HoldOutOffset: " << this->HoldOutOffset
@@ -724,7 +728,7 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "CheckpointFile: " << (this->GetCheckpointFile() ? this->GetCheckpointFile() : "(none)") << " every "
      << this->GetCheckpointInterval() << " steps\n";
   os << indent << "ResumeFile: " << (this->ResumeFile ? this->ResumeFile : "(none)") << "\n";
-  os << indent << "Backend: " << (this->Backend ? this->Backend : "(none)") << " (last run: "
-     << (this->BackendInUse.empty() ? "none" : this->BackendInUse) << ")\n";
+  os << indent << "Backend: " << (this->Backend ? this->Backend : "(none)")
+     << " (last run: " << (this->BackendInUse.empty() ? "none" : this->BackendInUse) << ")\n";
   os << indent << "NumberOfGaussians: " << this->NumberOfGaussians << ", StopReason: " << this->StopReason << "\n";
 }

@@ -19,11 +19,12 @@
  * `StopReason`, `GrowthStopReason`, with several sweeps `TrainingSweeps` (2 components per training frame:
  * Sweep, Frame within it), early stopping's `BestIteration`, `BestValidationLoss` and
  * `LastValidationLoss`, `ValidationHistory` (3 components per validation: Iteration, Loss, Gaussians),
- * `GapFilling` (string: what FillGaps added, or "off"), `GaussianMerge` (string: what the merge did, or "off"), `ReflectivitySolves` (string, when the reflectivities were
- * solved: how many solves, their seconds, the last one's CGLS iterations and objective)
- * (bigus::TrainerReport), the training geometry `TrainingPoses`, `TrainingFrameSize`,
- * `TrainingFanMask` (what the render filters' Coverage array is computed from), `TrainingSettings` (strings: every setting the run chose or was
- * given, "name = value (why)", as bigus::TrainerReport::Settings, plus the fan mask's origin).
+ * `GapFilling` (string: what FillGaps added, or "off"), `GaussianMerge` (string: what the merge did, or "off"),
+ * `ReflectivitySolves` (string, when the reflectivities were solved: how many solves, their seconds, the last one's
+ * CGLS iterations and objective) (bigus::TrainerReport), the training geometry `TrainingPoses`, `TrainingFrameSize`,
+ * `TrainingFanMask` (what the render filters' Coverage array is computed from), `TrainingSettings` (strings: every
+ * setting the run chose or was given, "name = value (why)", as bigus::TrainerReport::Settings, plus the fan mask's
+ * origin).
  *
  * Events: SettingsChosenEvent (vtkCommand::UserEvent + 1) is invoked once per run, before the first
  * step, when the settings are chosen (GetSettingsText() then holds them, one per line); `bigus train`
@@ -61,7 +62,7 @@
 #define vtkGaussianFieldTrainer_h
 
 #include "bigusFiltersModule.h" // For export macro
-#include "vtkCommand.h" // For SettingsChosenEvent
+#include "vtkCommand.h"         // For SettingsChosenEvent
 #include "vtkPolyDataAlgorithm.h"
 
 #include <memory> // For std::unique_ptr
@@ -141,14 +142,14 @@ public:
   ///@{ Pose refinement: a rigid correction of each training frame's pose, optimised with the field
   /// (bigus::PoseRefinementSettings::RefinePoses): POSE_REFINEMENT_OFF (0, the tracked poses are trusted),
   /// POSE_REFINEMENT_ON (1, every sweep's training frames) or POSE_REFINEMENT_AUTO (2, the default: chosen sweep by
-  /// sweep, bigus::ChoosePoseRefinement; TrainingSettings says what was chosen and why). Where poses are refined, the output's field data holds PoseCorrections, one
-  /// tuple per refined training frame: Frame, rotation about the frame's u, v, n axes through its centre pixel
-  /// (degrees), translation along u, v, n (mm) (bigus::CorrectPose), TrainingPoses are the refined poses, and
-  /// RefinedPoses (16 components, one tuple per input frame, the sweeps' frames in turn) every frame's pose as
-  /// refined, TrackedPoses the same frames' poses as given (RefinedPoses' matching key for bigus evaluate)
-  /// (held-out frames take the shared corrections and the smooth part of their sweep's training
-  /// corrections, bigus::CorrectUntrainedFrames), and UntrainedPoseCorrection (one tuple: the held-out frames so
-  /// corrected, the kernel's width in training-frame intervals, 0 for none and infinity for the sweep's mean, and
+  /// sweep, bigus::ChoosePoseRefinement; TrainingSettings says what was chosen and why). Where poses are refined, the
+  /// output's field data holds PoseCorrections, one tuple per refined training frame: Frame, rotation about the frame's
+  /// u, v, n axes through its centre pixel (degrees), translation along u, v, n (mm) (bigus::CorrectPose),
+  /// TrainingPoses are the refined poses, and RefinedPoses (16 components, one tuple per input frame, the sweeps'
+  /// frames in turn) every frame's pose as refined, TrackedPoses the same frames' poses as given (RefinedPoses'
+  /// matching key for bigus evaluate) (held-out frames take the shared corrections and the smooth part of their sweep's
+  /// training corrections, bigus::CorrectUntrainedFrames), and UntrainedPoseCorrection (one tuple: the held-out frames
+  /// so corrected, the kernel's width in training-frame intervals, 0 for none and infinity for the sweep's mean, and
   /// the leave-one-out errors in mm of no correction and of the chosen width).
   enum
   {
@@ -301,7 +302,10 @@ public:
    * program that keeps its own (`bigus train` binds its options to one). What a run chose from the data is in
    * GetSettingsText(), not here.
    */
-  const bigus::TrainerSettings& GetTrainerSettings() const { return *this->Settings; }
+  const bigus::TrainerSettings& GetTrainerSettings() const
+  {
+    return *this->Settings;
+  }
   void SetTrainerSettings(const bigus::TrainerSettings& settings);
   ///@}
 #endif
@@ -368,10 +372,19 @@ public:
   vtkGetMacro(ReductionSeconds, double);
   vtkGetMacro(ReductionBytes, double);
   vtkGetMacro(Gamma, double);
-  const char* GetStopReason() const { return this->StopReason.c_str(); }
-  const char* GetGrowthStopReason() const { return this->GrowthStopReason.c_str(); }
+  const char* GetStopReason() const
+  {
+    return this->StopReason.c_str();
+  }
+  const char* GetGrowthStopReason() const
+  {
+    return this->GrowthStopReason.c_str();
+  }
   /// The settings of the last run (chosen or given), one per line; set before its first step.
-  const char* GetSettingsText() const { return this->SettingsText.c_str(); }
+  const char* GetSettingsText() const
+  {
+    return this->SettingsText.c_str();
+  }
   ///@}
 
   /// Invoked once per run when its settings are chosen, before the first step (see GetSettingsText).

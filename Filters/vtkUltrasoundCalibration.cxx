@@ -30,8 +30,7 @@ vtkStandardNewMacro(vtkUltrasoundCalibration);
 
 vtkUltrasoundCalibration::vtkUltrasoundCalibration()
   : Internals(new vtkInternals)
-{
-}
+{}
 
 vtkUltrasoundCalibration::~vtkUltrasoundCalibration()
 {
@@ -115,8 +114,8 @@ bool vtkUltrasoundCalibration::Parse()
     const char* from = t->GetAttribute("From");
     const char* to = t->GetAttribute("To");
     const char* matrix = t->GetAttribute("Matrix");
-    const std::string label = std::string("<Transform From=\"") + (from ? from : "?") + "\" To=\"" +
-      (to ? to : "?") + "\">";
+    const std::string label =
+      std::string("<Transform From=\"") + (from ? from : "?") + "\" To=\"" + (to ? to : "?") + "\">";
     if (!from || !to || !*from || !*to)
     {
       return fail(label + " needs both From and To attributes");
@@ -192,8 +191,7 @@ bool vtkUltrasoundCalibration::Parse()
     const int hasR0 = numbers("FanRadiusStartPixel", &r0, 1);
     const int hasR1 = numbers("FanRadiusStopPixel", &r1, 1);
     if (hasAngles < 0 || hasApex < 0 || hasR0 < 0 || hasR1 < 0 || hasAngles != hasApex ||
-      (hasAngles > 0 && !(angles[0] < angles[1] && angles[0] >= -90 && angles[1] <= 90)) || r0 < 0 ||
-      r1 < 0)
+      (hasAngles > 0 && !(angles[0] < angles[1] && angles[0] >= -90 && angles[1] <= 90)) || r0 < 0 || r1 < 0)
     {
       return fail("<VolumeReconstruction>: fan needs FanAnglesDeg (min < max, within -90..90) and "
                   "FanOriginPixel together; FanRadiusStartPixel/FanRadiusStopPixel must be >= 0");
@@ -274,9 +272,9 @@ void vtkUltrasoundCalibration::PrintSelf(ostream& os, vtkIndent indent)
     os << " " << t.Name;
   }
   os << "\n";
-  os << indent << "HasClipRectangle: " << this->HasClipRectangle << " origin " << this->ClipRectangleOrigin[0]
-     << " " << this->ClipRectangleOrigin[1] << " size " << this->ClipRectangleSize[0] << " "
-     << this->ClipRectangleSize[1] << "\n";
+  os << indent << "HasClipRectangle: " << this->HasClipRectangle << " origin " << this->ClipRectangleOrigin[0] << " "
+     << this->ClipRectangleOrigin[1] << " size " << this->ClipRectangleSize[0] << " " << this->ClipRectangleSize[1]
+     << "\n";
   os << indent << "HasFan: " << this->HasFan << " angles " << this->FanAngles[0] << " " << this->FanAngles[1]
      << " origin " << this->FanOrigin[0] << " " << this->FanOrigin[1] << " radius " << this->FanRadius[0] << " "
      << this->FanRadius[1] << "\n";

@@ -205,6 +205,5 @@ void vtkUltrasoundFanMask::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "BackgroundThreshold: " << this->BackgroundThreshold << "\n";
   os << indent << "OpeningRadius: " << this->OpeningRadius << "\n";
   os << indent << "ClosingRadius: " << this->ClosingRadius << "\n";
-  os << indent << "CalibrationFileName: " << (this->CalibrationFileName ? this->CalibrationFileName : "(none)")
-     << "\n";
+  os << indent << "CalibrationFileName: " << (this->CalibrationFileName ? this->CalibrationFileName : "(none)") << "\n";
 }

@@ -104,8 +104,7 @@ int vtkUltrasoundFrameInterpolator::RequestInformation(
   int extent[6];
   inInfo->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT(), extent);
   const vtkIdType frames = extent[5] - extent[4] + 1;
-  const vtkIdType targets =
-    static_cast<vtkIdType>(Targets(this->TrainingFrames, this->TargetFrames, frames).size());
+  const vtkIdType targets = static_cast<vtkIdType>(Targets(this->TrainingFrames, this->TargetFrames, frames).size());
   extent[4] = 0;
   extent[5] = static_cast<int>(std::max<vtkIdType>(targets, 1)) - 1;
   vtkInformation* outInfo = outputVector->GetInformationObject(0);
@@ -148,7 +147,8 @@ int vtkUltrasoundFrameInterpolator::RequestData(
   vtkDataArray* poses = fields ? fields->GetArray("ImageToReference") : nullptr;
   if (!poses || poses->GetNumberOfComponents() != 16 || poses->GetNumberOfTuples() != frames)
   {
-    vtkErrorMacro("the sequence needs ImageToReference field data of " << frames << " x 16 values (one pose per frame)");
+    vtkErrorMacro(
+      "the sequence needs ImageToReference field data of " << frames << " x 16 values (one pose per frame)");
     return 0;
   }
   vtkDataArray* stamps = fields->GetArray("Timestamp");

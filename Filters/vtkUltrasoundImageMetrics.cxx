@@ -150,8 +150,8 @@ int vtkUltrasoundImageMetrics::RequestData(
   truth->GetDimensions(truthDims);
   if (dims[0] != truthDims[0] || dims[1] != truthDims[1] || dims[2] != truthDims[2])
   {
-    vtkErrorMacro("rendered frames are " << SizeText(dims) << " but the ground-truth frames are "
-                                         << SizeText(truthDims) << " (W x H x frames)");
+    vtkErrorMacro("rendered frames are " << SizeText(dims) << " but the ground-truth frames are " << SizeText(truthDims)
+                                         << " (W x H x frames)");
     return 0;
   }
   vtkDataArray* scalars = rendered->GetPointData()->GetScalars();
@@ -194,8 +194,8 @@ int vtkUltrasoundImageMetrics::RequestData(
     if (maskDims[0] != width || maskDims[1] != height || (maskDims[2] != 1 && maskDims[2] != frames))
     {
       vtkErrorMacro("the mask is " << SizeText(maskDims) << " but the frames are " << SizeText(dims)
-                                   << "; the mask must be " << width << " x " << height << " x 1 or " << width
-                                   << " x " << height << " x " << frames);
+                                   << "; the mask must be " << width << " x " << height << " x 1 or " << width << " x "
+                                   << height << " x " << frames);
       return 0;
     }
     if (!maskScalars || maskScalars->GetNumberOfComponents() != 1)

@@ -231,9 +231,11 @@ int vtkUltrasoundSequenceReader::RequestInformation(
     }
     else
     {
-      return this->Fail(file + ": cannot choose ImageToReference automatically (no per-frame "
-                               "ImageToReferenceTransform, nor ProbeToTracker and ReferenceToTracker); "
-                               "set TransformChain. Per-frame transforms in the file: " + JoinNames(perFrame));
+      return this->Fail(file +
+        ": cannot choose ImageToReference automatically (no per-frame "
+        "ImageToReferenceTransform, nor ProbeToTracker and ReferenceToTracker); "
+        "set TransformChain. Per-frame transforms in the file: " +
+        JoinNames(perFrame));
     }
   }
   std::vector<bigus::TransformTerm> terms;
@@ -310,8 +312,8 @@ int vtkUltrasoundSequenceReader::RequestInformation(
     {
       if (*status != "OK" && *status != "INVALID")
       {
-        return this->Fail(file + ": frame " + std::to_string(k) + ": field " +
-          bigus::FrameFieldName(k, "ImageStatus") + " is '" + status->substr(0, 40) + "', expected OK or INVALID");
+        return this->Fail(file + ": frame " + std::to_string(k) + ": field " + bigus::FrameFieldName(k, "ImageStatus") +
+          " is '" + status->substr(0, 40) + "', expected OK or INVALID");
       }
       valid = *status == "OK";
     }
@@ -329,8 +331,8 @@ int vtkUltrasoundSequenceReader::RequestInformation(
         }
         if (!bigus::ParseNumbers(*value, m.data(), 16))
         {
-          return this->Fail(file + ": frame " + std::to_string(k) + ": field " + name +
-            " is not 16 numbers (row-major 4x4)");
+          return this->Fail(
+            file + ": frame " + std::to_string(k) + ": field " + name + " is not 16 numbers (row-major 4x4)");
         }
         bool transformValid = true;
         if (const std::string* status = in.FrameField(k, field + "Status"))
@@ -341,8 +343,8 @@ int vtkUltrasoundSequenceReader::RequestInformation(
           }
           else if (*status != "OK")
           {
-            return this->Fail(file + ": frame " + std::to_string(k) + ": field " + name +
-              "Status is '" + status->substr(0, 40) + "', expected OK or INVALID");
+            return this->Fail(file + ": frame " + std::to_string(k) + ": field " + name + "Status is '" +
+              status->substr(0, 40) + "', expected OK or INVALID");
           }
         }
         if (!transformValid)
@@ -359,8 +361,8 @@ int vtkUltrasoundSequenceReader::RequestInformation(
         }
         if (terms[t].Inverse && !bigus::InvertAffine4x4(m.data(), m.data()))
         {
-          return this->Fail(file + ": frame " + std::to_string(k) + ": field " + name +
-            " is singular and cannot be inverted");
+          return this->Fail(
+            file + ": frame " + std::to_string(k) + ": field " + name + " is singular and cannot be inverted");
         }
       }
       bigus::MultiplyMatrix4x4(pose.data(), m.data(), pose.data());
@@ -386,14 +388,14 @@ int vtkUltrasoundSequenceReader::RequestInformation(
     {
       if (!bigus::ParseNumbers(*stamp, &in.Timestamps[out], 1) || !std::isfinite(in.Timestamps[out]))
       {
-        return this->Fail(file + ": frame " + std::to_string(k) + ": field " +
-          bigus::FrameFieldName(k, "Timestamp") + " is not a finite number");
+        return this->Fail(file + ": frame " + std::to_string(k) + ": field " + bigus::FrameFieldName(k, "Timestamp") +
+          " is not a finite number");
       }
     }
     else
     {
-      return this->Fail(file + ": frame " + std::to_string(k) + ": field " +
-        bigus::FrameFieldName(k, "Timestamp") + " is missing");
+      return this->Fail(
+        file + ": frame " + std::to_string(k) + ": field " + bigus::FrameFieldName(k, "Timestamp") + " is missing");
     }
   }
   in.ChainInUse = chain;
@@ -443,8 +445,8 @@ int vtkUltrasoundSequenceReader::RequestData(
   std::ifstream data(dataPath, std::ios::binary | std::ios::ate);
   if (!data)
   {
-    return fail(file + ": field ElementDataFile names '" + layout.ElementDataFile +
-      "', which cannot be opened (" + dataPath + ")");
+    return fail(file + ": field ElementDataFile names '" + layout.ElementDataFile + "', which cannot be opened (" +
+      dataPath + ")");
   }
   const std::uint64_t fileSize = static_cast<std::uint64_t>(data.tellg());
   const std::uint64_t available = fileSize > offset ? fileSize - offset : 0;
@@ -547,8 +549,8 @@ int vtkUltrasoundSequenceReader::RequestData(
     std::vector<unsigned char> chunk(1 << 20);
     std::uint64_t consumed = 0;
     int status = Z_OK;
-    int k = 0;               // frame being inflated
-    bool probing = false;    // all frames done: any further byte is surplus
+    int k = 0;            // frame being inflated
+    bool probing = false; // all frames done: any further byte is surplus
     unsigned char spare = 0;
     std::string error;
     z.next_out = frame.data();
@@ -609,8 +611,8 @@ int vtkUltrasoundSequenceReader::RequestData(
     }
     if (error.empty() && k < frames)
     {
-      error = "compressed body holds " + std::to_string(inflatedSoFar()) +
-        " bytes of pixel data but DimSize " + dims + " needs " + std::to_string(expected);
+      error = "compressed body holds " + std::to_string(inflatedSoFar()) + " bytes of pixel data but DimSize " + dims +
+        " needs " + std::to_string(expected);
     }
     inflateEnd(&z);
     if (!error.empty())
@@ -653,8 +655,7 @@ void vtkUltrasoundSequenceReader::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "FileName: " << (this->FileName ? this->FileName : "(none)") << "\n";
   os << indent << "TransformChain: " << (this->TransformChain ? this->TransformChain : "(automatic)") << "\n";
   os << indent << "TransformChainInUse: " << this->Internals->ChainInUse << "\n";
-  os << indent << "CalibrationFileName: " << (this->CalibrationFileName ? this->CalibrationFileName : "(none)")
-     << "\n";
+  os << indent << "CalibrationFileName: " << (this->CalibrationFileName ? this->CalibrationFileName : "(none)") << "\n";
   os << indent << "StaticTransforms:";
   for (const auto& t : this->Internals->StaticTransforms)
   {

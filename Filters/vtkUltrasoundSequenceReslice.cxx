@@ -54,25 +54,25 @@ inline void Support(double x, int dim, int& i0, double& f)
 /// What the sampler needs besides the voxels (shared by every scalar type).
 struct SamplerSettings
 {
-  const unsigned char* Filled;   // [d2, d1, d0] non-zero = voxel holds data; null: non-zero scalars
-  int Dims[3];                   // d0, d1, d2 voxels
+  const unsigned char* Filled; // [d2, d1, d0] non-zero = voxel holds data; null: non-zero scalars
+  int Dims[3];                 // d0, d1, d2 voxels
   bool Linear;
   bool MaskEmpty;
-  double Lower;                  // lowest accepted continuous index (all axes)
-  double Upper[3];               // highest accepted continuous index per axis
-  double Scale;                  // volume units -> intensity
-  const double* Maps;            // [M, 3, 3] continuous index = map * (i, j, 1)
-  const unsigned char* Usable;   // [M] frame has a valid pose
+  double Lower;                // lowest accepted continuous index (all axes)
+  double Upper[3];             // highest accepted continuous index per axis
+  double Scale;                // volume units -> intensity
+  const double* Maps;          // [M, 3, 3] continuous index = map * (i, j, 1)
+  const unsigned char* Usable; // [M] frame has a valid pose
   int Width, Height;
-  float* Values;                 // [M, H, W] intensities
-  unsigned char* Mask;           // [M, H, W] FanMask
+  float* Values;       // [M, H, W] intensities
+  unsigned char* Mask; // [M, H, W] FanMask
 };
 
 /// Samples rows of frames; row r is row r % Height of output frame r / Height.
 template <typename T>
 struct FrameSampler : SamplerSettings
 {
-  const T* Scalars;              // [d2, d1, d0] volume scalars
+  const T* Scalars; // [d2, d1, d0] volume scalars
 
   void operator()(vtkIdType begin, vtkIdType end) const
   {
@@ -255,8 +255,8 @@ int vtkUltrasoundSequenceReslice::RequestData(
   if (!scalars || scalars->GetNumberOfComponents() != 1 ||
     scalars->GetNumberOfTuples() != vtkIdType(dims[0]) * dims[1] * dims[2])
   {
-    vtkErrorMacro("input 0 must have one-component point scalars for its "
-      << dims[0] << " x " << dims[1] << " x " << dims[2] << " voxels");
+    vtkErrorMacro("input 0 must have one-component point scalars for its " << dims[0] << " x " << dims[1] << " x "
+                                                                           << dims[2] << " voxels");
     return 0;
   }
   double indexToPhysical[16], physicalToIndex[16];
@@ -371,9 +371,8 @@ int vtkUltrasoundSequenceReslice::RequestData(
   bool sampled = false;
   switch (scalars->GetDataType())
   {
-    vtkTemplateMacro(
-      SampleFrames(settings, static_cast<const VTK_TT*>(scalars->GetVoidPointer(0)), count, this);
-      sampled = true);
+    vtkTemplateMacro(SampleFrames(settings, static_cast<const VTK_TT*>(scalars->GetVoidPointer(0)), count, this);
+                     sampled = true);
   }
   if (!sampled)
   {
@@ -398,8 +397,7 @@ void vtkUltrasoundSequenceReslice::PrintSelf(ostream& os, vtkIndent indent)
 {
   this->Superclass::PrintSelf(os, indent);
   os << indent << "FrameList: " << (this->FrameList ? this->FrameList->GetNumberOfIds() : 0) << " frames\n";
-  os << indent << "InterpolationMode: " << (this->InterpolationMode == LINEAR ? "Linear" : "NearestNeighbor")
-     << "\n";
+  os << indent << "InterpolationMode: " << (this->InterpolationMode == LINEAR ? "Linear" : "NearestNeighbor") << "\n";
   os << indent << "MaskEmptyVoxels: " << (this->MaskEmptyVoxels ? "On" : "Off") << "\n";
   os << indent << "ValidityArrayName: " << (this->ValidityArrayName ? this->ValidityArrayName : "(none)") << "\n";
   os << indent << "Border: " << (this->Border ? "On" : "Off") << "\n";

@@ -114,8 +114,8 @@ void vtkUltrasoundSequenceWriter::WriteData()
   vtkDataArray* valid = fd->GetArray("FrameValid");
   if ((stamps && stamps->GetNumberOfTuples() != frames) || (valid && valid->GetNumberOfTuples() != frames))
   {
-    return this->Fail(file + ": field data Timestamp and FrameValid must hold one value per frame (" +
-      std::to_string(frames) + ")");
+    return this->Fail(
+      file + ": field data Timestamp and FrameValid must hold one value per frame (" + std::to_string(frames) + ")");
   }
 
   const bool detached = EndsWith(file, ".mhd");
@@ -142,8 +142,8 @@ void vtkUltrasoundSequenceWriter::WriteData()
     dataFile = BaseName(dataPath);
   }
 
-  const std::string transform = std::string(this->TransformName ? this->TransformName : "ImageToReference") +
-    "Transform";
+  const std::string transform =
+    std::string(this->TransformName ? this->TransformName : "ImageToReference") + "Transform";
   std::ostringstream h;
   h << "ObjectType = Image\n"
     << "NDims = 3\n"
@@ -187,8 +187,8 @@ void vtkUltrasoundSequenceWriter::WriteData()
   bool ok = true;
   if (detached)
   {
-    ok = WriteFile(dataPath + suffix, std::string(), pixels, bodyBytes) &&
-      WriteFile(file + suffix, h.str(), nullptr, 0);
+    ok =
+      WriteFile(dataPath + suffix, std::string(), pixels, bodyBytes) && WriteFile(file + suffix, h.str(), nullptr, 0);
   }
   else
   {

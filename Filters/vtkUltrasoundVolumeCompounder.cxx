@@ -39,14 +39,14 @@ constexpr int UnsetExtent = VTK_INT_MIN;
 /// (automatic grid) and RequestData need.
 struct FramePlan
 {
-  int Input = 0;                               // the sweep: connection of input ports 0 and 1
+  int Input = 0; // the sweep: connection of input ports 0 and 1
   int Width = 0;
   int Height = 0;
-  int Frames = 0;                              // N of the sequence
-  std::vector<vtkIdType> Inserted;             // sequence indices, in insertion order
-  std::vector<std::array<double, 12>> Poses;   // [Inserted.size()] first three rows of ImageToReference
-  int Clip[4] = { 0, 0, 0, 0 };                // first and last column, first and last row (inclusive)
-  std::vector<vtkIdType> SkippedInvalid;       // listed frames with FrameValid = 0
+  int Frames = 0;                            // N of the sequence
+  std::vector<vtkIdType> Inserted;           // sequence indices, in insertion order
+  std::vector<std::array<double, 12>> Poses; // [Inserted.size()] first three rows of ImageToReference
+  int Clip[4] = { 0, 0, 0, 0 };              // first and last column, first and last row (inclusive)
+  std::vector<vtkIdType> SkippedInvalid;     // listed frames with FrameValid = 0
 };
 
 /// A pose that maps pixels to mm: finite, affine, with image axes of non-zero length that are not
@@ -77,8 +77,8 @@ std::string CheckPose(const double m[16])
   return "";
 }
 
-bool MakePlan(vtkImageData* input, vtkIdList* list, const int clipOrigin[2], const int clipSize[2],
-  FramePlan& plan, std::string& error)
+bool MakePlan(vtkImageData* input, vtkIdList* list, const int clipOrigin[2], const int clipSize[2], FramePlan& plan,
+  std::string& error)
 {
   vtkDataArray* scalars = input ? input->GetPointData()->GetScalars() : nullptr;
   if (!scalars || scalars->GetNumberOfTuples() == 0)
@@ -181,8 +181,8 @@ bool MakePlan(vtkImageData* input, vtkIdList* list, const int clipOrigin[2], con
     if (plan.Clip[0] > plan.Clip[1] || plan.Clip[2] > plan.Clip[3])
     {
       std::ostringstream text;
-      text << "the clip rectangle (origin " << clipOrigin[0] << " " << clipOrigin[1] << ", size " << clipSize[0]
-           << " " << clipSize[1] << ") lies outside the " << dims[0] << " x " << dims[1] << " frames";
+      text << "the clip rectangle (origin " << clipOrigin[0] << " " << clipOrigin[1] << ", size " << clipSize[0] << " "
+           << clipSize[1] << ") lies outside the " << dims[0] << " x " << dims[1] << " frames";
       error = text.str();
       return false;
     }
@@ -340,12 +340,12 @@ bool ComputeGrid(const std::vector<FramePlan>* plans, const double spacing[3], c
 struct Accumulator
 {
   int Dims[3];
-  int Start[3];                 // extent lower bounds
+  int Start[3]; // extent lower bounds
   double Origin[3];
   double Spacing[3];
   int Mode;
-  float* Value;                 // [voxels] sum (MEAN), maximum or latest value
-  unsigned int* Count;          // [voxels] pixels inserted
+  float* Value;        // [voxels] sum (MEAN), maximum or latest value
+  unsigned int* Count; // [voxels] pixels inserted
   vtkIdType Inserted = 0;
 
   /// Voxel index (or -1) of every pixel of the clip rectangle of one frame, row-major; masked-out
@@ -667,8 +667,8 @@ private:
   int Dims[3];
   float* Value;
   const unsigned int* Count;
-  std::vector<unsigned char> State;        // [voxels] 1 = inserted or already filled
-  std::vector<unsigned char> RowHasKnown;  // [nz * ny] rows with an inserted voxel
+  std::vector<unsigned char> State;       // [voxels] 1 = inserted or already filled
+  std::vector<unsigned char> RowHasKnown; // [nz * ny] rows with an inserted voxel
 };
 }
 
@@ -810,7 +810,8 @@ int vtkUltrasoundVolumeCompounder::RequestData(
   output->SetExtent(extent);
   output->SetOrigin(origin);
   output->SetSpacing(this->OutputSpacing);
-  const vtkIdType voxels = vtkIdType(extent[1] - extent[0] + 1) * (extent[3] - extent[2] + 1) * (extent[5] - extent[4] + 1);
+  const vtkIdType voxels =
+    vtkIdType(extent[1] - extent[0] + 1) * (extent[3] - extent[2] + 1) * (extent[5] - extent[4] + 1);
   vtkNew<vtkFloatArray> values;
   values->SetName("Intensity");
   vtkNew<vtkUnsignedIntArray> counts;
@@ -853,8 +854,8 @@ int vtkUltrasoundVolumeCompounder::RequestData(
       int maskDims[3];
       maskImage->GetDimensions(maskDims);
       vtkDataArray* maskScalars = maskImage->GetPointData()->GetScalars();
-      const bool sizeOk = maskDims[0] == plan.Width && maskDims[1] == plan.Height &&
-        (maskDims[2] == 1 || maskDims[2] == plan.Frames);
+      const bool sizeOk =
+        maskDims[0] == plan.Width && maskDims[1] == plan.Height && (maskDims[2] == 1 || maskDims[2] == plan.Frames);
       if (!maskScalars || maskScalars->GetNumberOfComponents() != 1 || !sizeOk ||
         maskScalars->GetNumberOfTuples() != vtkIdType(framePixels) * maskDims[2])
       {
@@ -884,8 +885,8 @@ int vtkUltrasoundVolumeCompounder::RequestData(
       acc.Locate(plan.Poses[k], plan.Clip, frameMask, plan.Width, target);
       switch (scalarType)
       {
-        vtkTemplateMacro(acc.Insert(static_cast<const VTK_TT*>(pixels) + std::size_t(f) * framePixels, plan.Clip,
-          plan.Width, target));
+        vtkTemplateMacro(
+          acc.Insert(static_cast<const VTK_TT*>(pixels) + std::size_t(f) * framePixels, plan.Clip, plan.Width, target));
         default:
           vtkErrorMacro("unsupported scalar type " << input->GetScalarTypeAsString());
           output->Initialize();

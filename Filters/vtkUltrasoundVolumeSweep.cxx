@@ -45,22 +45,22 @@ double Uniform(std::mt19937_64& rng)
 /// Frame layout of a sweep, from the volume's dimensions and spacing and the filter's settings.
 struct SweepGeometry
 {
-  int Axis = 2;             // a: the slice normal is volume axis a
-  int U = 0, V = 1;         // volume axes of the frame's columns and rows
+  int Axis = 2;     // a: the slice normal is volume axis a
+  int U = 0, V = 1; // volume axes of the frame's columns and rows
   int Width = 0, Height = 0;
   double PixelU = 0, PixelV = 0; // mm
-  double Delta = 0;         // slice spacing (mm), Parallel and Orthogonal
+  double Delta = 0;              // slice spacing (mm), Parallel and Orthogonal
 };
 
 /// Validates the settings and lays out the frames; an empty string on success, else the error.
-std::string LayOut(const int dims[3], const double spacing[3], int protocol, int sweepAxis, int frames,
-  double offset, double maximumTilt, double pixelSpacing, SweepGeometry& g)
+std::string LayOut(const int dims[3], const double spacing[3], int protocol, int sweepAxis, int frames, double offset,
+  double maximumTilt, double pixelSpacing, SweepGeometry& g)
 {
   std::ostringstream error;
   if (dims[0] < 2 || dims[1] < 2 || dims[2] < 2)
   {
-    error << "input must be a 3D volume with at least 2 voxels along every axis, not " << dims[0] << " x "
-          << dims[1] << " x " << dims[2];
+    error << "input must be a 3D volume with at least 2 voxels along every axis, not " << dims[0] << " x " << dims[1]
+          << " x " << dims[2];
   }
   else if (!(spacing[0] > 0 && spacing[1] > 0 && spacing[2] > 0))
   {
@@ -118,9 +118,9 @@ std::string LayOut(const int dims[3], const double spacing[3], int protocol, int
 std::array<double, 9> Rotation(const double w[3], double angle)
 {
   const double c = std::cos(angle), s = std::sin(angle), C = 1 - c;
-  return { c + C * w[0] * w[0], C * w[0] * w[1] - s * w[2], C * w[0] * w[2] + s * w[1],
-    C * w[1] * w[0] + s * w[2], c + C * w[1] * w[1], C * w[1] * w[2] - s * w[0],
-    C * w[2] * w[0] - s * w[1], C * w[2] * w[1] + s * w[0], c + C * w[2] * w[2] };
+  return { c + C * w[0] * w[0], C * w[0] * w[1] - s * w[2], C * w[0] * w[2] + s * w[1], C * w[1] * w[0] + s * w[2],
+    c + C * w[1] * w[1], C * w[1] * w[2] - s * w[0], C * w[2] * w[0] - s * w[1], C * w[2] * w[1] + s * w[0],
+    c + C * w[2] * w[2] };
 }
 
 /// Row-major ImageToReference of every frame (see the class description for the formula).
@@ -184,8 +184,8 @@ std::vector<std::array<double, 16>> Poses(vtkImageData* volume, const SweepGeome
     double t[3];
     for (int r = 0; r < 3; ++r)
     {
-      t[r] = (dims[r] - 1) * spacing[r] / 2 - (g.Width - 1) / 2.0 * columns[0][r] -
-        (g.Height - 1) / 2.0 * columns[1][r];
+      t[r] =
+        (dims[r] - 1) * spacing[r] / 2 - (g.Width - 1) / 2.0 * columns[0][r] - (g.Height - 1) / 2.0 * columns[1][r];
     }
     t[g.Axis] += slices[k].Z - length / 2;
     // From the volume's axes to the reference frame: x = o + D q.
@@ -231,9 +231,8 @@ vtkSmartPointer<vtkImageData> PoseSequence(const std::vector<std::array<double, 
     valid->SetValue(k, 1);
     index->SetValue(k, k);
   }
-  for (vtkDataArray* array :
-    { static_cast<vtkDataArray*>(imageToReference), static_cast<vtkDataArray*>(timestamp),
-      static_cast<vtkDataArray*>(valid), static_cast<vtkDataArray*>(index) })
+  for (vtkDataArray* array : { static_cast<vtkDataArray*>(imageToReference), static_cast<vtkDataArray*>(timestamp),
+         static_cast<vtkDataArray*>(valid), static_cast<vtkDataArray*>(index) })
   {
     sequence->GetFieldData()->AddArray(array);
   }
@@ -281,8 +280,8 @@ int vtkUltrasoundVolumeSweep::RequestInformation(
   }
   const int dims[3] = { extent[1] - extent[0] + 1, extent[3] - extent[2] + 1, extent[5] - extent[4] + 1 };
   SweepGeometry g;
-  const std::string error = LayOut(dims, spacing, this->Protocol, this->SweepAxis, this->NumberOfFrames,
-    this->Offset, this->MaximumTiltAngle, this->PixelSpacing, g);
+  const std::string error = LayOut(dims, spacing, this->Protocol, this->SweepAxis, this->NumberOfFrames, this->Offset,
+    this->MaximumTiltAngle, this->PixelSpacing, g);
   if (!error.empty())
   {
     vtkErrorMacro(<< error);
@@ -299,8 +298,7 @@ int vtkUltrasoundVolumeSweep::RequestInformation(
     outInfo->Set(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT(), outExtent, 6);
     outInfo->Set(vtkDataObject::SPACING(), unit, 3);
     outInfo->Set(vtkDataObject::ORIGIN(), zero, 3);
-    vtkDataObject::SetPointDataActiveScalarInfo(
-      outInfo, port == 0 ? this->OutputScalarType : VTK_UNSIGNED_CHAR, 1);
+    vtkDataObject::SetPointDataActiveScalarInfo(outInfo, port == 0 ? this->OutputScalarType : VTK_UNSIGNED_CHAR, 1);
   }
   return 1;
 }
@@ -323,8 +321,8 @@ int vtkUltrasoundVolumeSweep::RequestData(
   int dims[3];
   input->GetDimensions(dims);
   SweepGeometry g;
-  const std::string error = LayOut(dims, input->GetSpacing(), this->Protocol, this->SweepAxis,
-    this->NumberOfFrames, this->Offset, this->MaximumTiltAngle, this->PixelSpacing, g);
+  const std::string error = LayOut(dims, input->GetSpacing(), this->Protocol, this->SweepAxis, this->NumberOfFrames,
+    this->Offset, this->MaximumTiltAngle, this->PixelSpacing, g);
   if (!error.empty())
   {
     vtkErrorMacro(<< error);
@@ -370,8 +368,7 @@ void vtkUltrasoundVolumeSweep::PrintSelf(ostream& os, vtkIndent indent)
   static const char* const protocols[] = { "Parallel", "Oblique", "Orthogonal" };
   this->Superclass::PrintSelf(os, indent);
   os << indent << "Protocol: "
-     << (this->Protocol >= PARALLEL && this->Protocol <= ORTHOGONAL ? protocols[this->Protocol] : "(invalid)")
-     << "\n";
+     << (this->Protocol >= PARALLEL && this->Protocol <= ORTHOGONAL ? protocols[this->Protocol] : "(invalid)") << "\n";
   os << indent << "SweepAxis: " << this->SweepAxis << "\n";
   os << indent << "NumberOfFrames: " << this->NumberOfFrames << "\n";
   os << indent << "Offset: " << this->Offset << "\n";

@@ -90,7 +90,8 @@ void LoadBackendModules()
       }
     }
     using Registration = void (*)();
-    const Registration reg = handle ? reinterpret_cast<Registration>(dlsym(handle, "bigusCudaRegisterBackend")) : nullptr;
+    const Registration reg =
+      handle ? reinterpret_cast<Registration>(dlsym(handle, "bigusCudaRegisterBackend")) : nullptr;
     if (reg)
     {
       reg();

@@ -131,7 +131,8 @@ HostField HardCaseField(double sigmaE, const std::vector<double>& ratios)
           const double x = 2 + 4 * (cell % GridColumns), y = 2 + 4 * (cell / GridColumns);
           for (int k = 0; k < 3; ++k)
           {
-            f.Means.push_back(float(slice.ImageToReference[4 * k + 3] + x * F[k][0] + y * F[k][1] + elevation * F[k][2]));
+            f.Means.push_back(
+              float(slice.ImageToReference[4 * k + 3] + x * F[k][0] + y * F[k][1] + elevation * F[k][2]));
             f.LogScales.push_back(float(std::log(s[k])));
           }
           for (double c : q)
@@ -155,7 +156,8 @@ BackendCheck CheckRenderer(Renderer& renderer)
   SliceGeometry slices[2] = { HardCaseSlice(), HardCaseSlice(1.3) };
   slices[1].Width = 77;
   slices[1].Height = 45;
-  std::vector<float> dL(std::size_t(slices[0].Width) * slices[0].Height + std::size_t(slices[1].Width) * slices[1].Height);
+  std::vector<float> dL(
+    std::size_t(slices[0].Width) * slices[0].Height + std::size_t(slices[1].Width) * slices[1].Height);
   std::mt19937 rng(5);
   std::uniform_real_distribution<float> u(-1.f, 1.f);
   for (float& v : dL)
@@ -189,10 +191,10 @@ namespace
 /// The largest error of a renderer's gradients against the reference's, and where it is.
 struct GradientError
 {
-  double Worst = 0;        ///< relative to the Gaussian's own exact gradient in its group (NaN counts as infinite)
-  const char* Group = "";  ///< "dL/dmean", ...
+  double Worst = 0;       ///< relative to the Gaussian's own exact gradient in its group (NaN counts as infinite)
+  const char* Group = ""; ///< "dL/dmean", ...
   std::size_t Gaussian = 0;
-  bool Finite = true;      ///< every gradient of the renderer finite
+  bool Finite = true; ///< every gradient of the renderer finite
 };
 
 /// @p mine's gradients against @p exact's over the Gaussians and groups, each relative to the Gaussian's
@@ -206,8 +208,7 @@ GradientError WorstGradientError(const RenderedGradients& mine, const RenderedGr
     const std::vector<float>& Exact;
     int Width;
   } groups[] = { { "dL/dmean", mine.Means, exact.Means, 3 }, { "dL/dlog-scale", mine.LogScales, exact.LogScales, 3 },
-    { "dL/dq", mine.Quaternions, exact.Quaternions, 4 },
-    { "dL/dr", mine.Reflectivities, exact.Reflectivities, 1 },
+    { "dL/dq", mine.Quaternions, exact.Quaternions, 4 }, { "dL/dr", mine.Reflectivities, exact.Reflectivities, 1 },
     { "attribution", mine.Attribution, exact.Attribution, 1 } };
   GradientError e;
   for (const auto& g : groups)
@@ -276,8 +277,8 @@ bool RenderReference(const FieldView& field, const SliceGeometry* slices, int co
   return true;
 }
 
-BackendCheck CompareRenders(const RenderedGradients& mine, const RenderedGradients& cpu,
-  const RenderedGradients& exact, double imageTolerance, double gradientTolerance)
+BackendCheck CompareRenders(const RenderedGradients& mine, const RenderedGradients& cpu, const RenderedGradients& exact,
+  double imageTolerance, double gradientTolerance)
 {
   BackendCheck check;
   bool finite = true;

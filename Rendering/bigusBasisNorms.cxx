@@ -12,8 +12,8 @@
 namespace bigus
 {
 
-bool AccumulateBasisNorms(const FieldView& field, const SliceGeometry* slices, int count,
-  const RenderOptions& options, const float* weights, double* norms, std::string* error)
+bool AccumulateBasisNorms(const FieldView& field, const SliceGeometry* slices, int count, const RenderOptions& options,
+  const float* weights, double* norms, std::string* error)
 {
   std::vector<PreparedSlice> prepared;
   if (!PrepareSlices(slices, count, options, prepared, error))

@@ -57,7 +57,7 @@ struct CullBounds
         const float m = std::max(std::max(l[0], l[1]), l[2]);
         // NaN or huge log-scales keep the Gaussian as a candidate; SetupFootprint clamps them.
         this->MaxVariance[i] = (m == m && m < 40.f) ? std::exp(2.f * std::min(m, float(MaximumLogScale)))
-                                                  : std::numeric_limits<float>::infinity();
+                                                    : std::numeric_limits<float>::infinity();
       }
     });
   }
@@ -75,8 +75,8 @@ bool MayBeVisible(const FieldView& field, const CullBounds& bounds, std::int64_t
 }
 
 /// Phase 1 for one slice: the visible splats, in Gaussian index order.
-void SetupSlice(const FieldView& field, const CullBounds& bounds, const PreparedSlice& s,
-  const RenderOptions& o, std::vector<std::vector<Splat>>& perChunk, std::vector<Splat>& splats)
+void SetupSlice(const FieldView& field, const CullBounds& bounds, const PreparedSlice& s, const RenderOptions& o,
+  std::vector<std::vector<Splat>>& perChunk, std::vector<Splat>& splats)
 {
   const double sigmaE = EffectiveElevationSigma(o);
   const std::int64_t chunks = (field.Count + ChunkSize - 1) / ChunkSize;
@@ -183,8 +183,8 @@ struct TileFrame
  * size of the image. Returns the number of pixel evaluations. (Row spans, as in the backward pass,
  * cost more than they save on a 16-pixel tile row: measured 42 against 28 ms on a liver slice.)
  */
-BIGUS_TARGET_CLONES std::int64_t RasterTile(const Splat* splats, const std::int32_t* entries, std::int64_t count,
-  const TileFrame& t, float* acc)
+BIGUS_TARGET_CLONES std::int64_t RasterTile(
+  const Splat* splats, const std::int32_t* entries, std::int64_t count, const TileFrame& t, float* acc)
 {
   alignas(64) float column[TileSize];
   for (int k = 0; k < TileSize; ++k)
@@ -262,8 +262,8 @@ constexpr int Lanes = 8;
  * The per-Gaussian pixel sums of the backward pass over the row spans (RowSpan) of its bounding box
  * @p box (columns box[0..1], rows box[2..3]); @p gS points at row box[2] of dL/dS; @p fp is the
  * footprint relative to the box (MakeBoxFootprint). sum[q] is the sum over those pixels of
- * PixelWeightBackward's term q, with e from the principal-axes form and the cutoff, as in phase 2. Columns are processed in groups of Lanes with one
- * partial sum per lane (vectorisable without reassociation, deterministic order).
+ * PixelWeightBackward's term q, with e from the principal-axes form and the cutoff, as in phase 2. Columns are
+ * processed in groups of Lanes with one partial sum per lane (vectorisable without reassociation, deterministic order).
  * Returns the number of pixels in the row spans (RenderStats::PixelEvaluations).
  */
 BIGUS_TARGET_CLONES std::int64_t FootprintSums(
@@ -317,8 +317,8 @@ class CpuRenderer : public Renderer
 public:
   const char* GetName() const override { return "cpu"; }
 
-  bool Forward(const FieldView& field, const SliceGeometry* slices, int count, const RenderOptions& options,
-    float* S, float* I, RenderStats* stats, std::string* error) override
+  bool Forward(const FieldView& field, const SliceGeometry* slices, int count, const RenderOptions& options, float* S,
+    float* I, RenderStats* stats, std::string* error) override
   {
     std::vector<PreparedSlice> prepared;
     if (!PrepareSlices(slices, count, options, prepared, error))
@@ -416,8 +416,8 @@ public:
             continue;
           }
           double sum[7];
-          counter[1] += FootprintSums(gS.data() + std::int64_t(box[2]) * s.Width, s.Width, box,
-            MakeBoxFootprint(f, s, box, r), sum);
+          counter[1] += FootprintSums(
+            gS.data() + std::int64_t(box[2]) * s.Width, s.Width, box, MakeBoxFootprint(f, s, box, r), sum);
           counter[0] += 1;
           if (gradients.VisibleCount)
           {

@@ -107,33 +107,33 @@ BIGUS_HD GaussianParams LoadGaussian(
 /// Result of phase 1 for one Gaussian and one slice: the 2D footprint.
 struct Footprint
 {
-  double Center[2];   ///< c = m_xy + delta, mm in the slice plane
-  double Conic[3];    ///< inverse of cov2: a, b, c of q = a dx^2 + 2 b dx dy + c dy^2 (1/mm^2)
-  double Axes[4];     ///< cos, sin of the major axis; 1/sigma along the major and minor axes (1/mm):
-                      ///< q = ((cos dx + sin dy) / s1)^2 + ((cos dy - sin dx) / s2)^2, never negative
-  double Cov[3];      ///< cov2 (+ the slice's LowPass): xx, xy, yy (mm^2), for the footprint's extent
-  double Amplitude;   ///< amp (unitless, <= 1; times the low-pass's sqrt(det cov2 / det(cov2 + L)))
-  double Elevation;   ///< m_z, mm
-  double ElevationVar;///< P2[z,z], mm^2
+  double Center[2];     ///< c = m_xy + delta, mm in the slice plane
+  double Conic[3];      ///< inverse of cov2: a, b, c of q = a dx^2 + 2 b dx dy + c dy^2 (1/mm^2)
+  double Axes[4];       ///< cos, sin of the major axis; 1/sigma along the major and minor axes (1/mm):
+                        ///< q = ((cos dx + sin dy) / s1)^2 + ((cos dy - sin dx) / s2)^2, never negative
+  double Cov[3];        ///< cov2 (+ the slice's LowPass): xx, xy, yy (mm^2), for the footprint's extent
+  double Amplitude;     ///< amp (unitless, <= 1; times the low-pass's sqrt(det cov2 / det(cov2 + L)))
+  double Elevation;     ///< m_z, mm
+  double ElevationVar;  ///< P2[z,z], mm^2
   double CutoffSquared; ///< k^2 - m_z^2 / P2[z,z]: the footprint keeps the pixels p with
                         ///< (p - c)^T conic (p - c) <= CutoffSquared, i.e. within k of the centre in the
                         ///< 3D Mahalanobis distance of the beam-convolved Gaussian (DESIGN section 3)
-  bool Visible;       ///< false when culled in elevation or degenerate
+  bool Visible;         ///< false when culled in elevation or degenerate
 };
 
 /// Intermediate values of the setup that the backward pass needs.
 struct SetupCache
 {
-  double Scale[3];     ///< s_k = exp(clamped l_k)
+  double Scale[3]; ///< s_k = exp(clamped l_k)
   bool ScaleClamped[3];
-  double Qn[4];        ///< normalised quaternion
-  double QNorm;        ///< |q| (0 when treated as identity)
-  double Rp[3][3];     ///< R' = F R
-  double M[3][3];      ///< R' diag(s)
-  double m[3];         ///< mean in the slice frame
-  double P[3][3];      ///< P = M M^T (without the beam)
-  double Pzz2;         ///< P[z,z] + sigma_E^2
-  double LambdaZZ;     ///< (P^-1)[z,z]
+  double Qn[4];    ///< normalised quaternion
+  double QNorm;    ///< |q| (0 when treated as identity)
+  double Rp[3][3]; ///< R' = F R
+  double M[3][3];  ///< R' diag(s)
+  double m[3];     ///< mean in the slice frame
+  double P[3][3];  ///< P = M M^T (without the beam)
+  double Pzz2;     ///< P[z,z] + sigma_E^2
+  double LambdaZZ; ///< (P^-1)[z,z]
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -213,12 +213,15 @@ BIGUS_HD void QuaternionToMatrixBackward(const double q[4], const double G[3][3]
 {
   const double w = q[0], x = q[1], y = q[2], z = q[3];
   dq[0] = 2 * (-z * G[0][1] + y * G[0][2] + z * G[1][0] - x * G[1][2] - y * G[2][0] + x * G[2][1]);
-  dq[1] = 2 * (y * G[0][1] + z * G[0][2] + y * G[1][0] - 2 * x * G[1][1] - w * G[1][2] + z * G[2][0] +
-                w * G[2][1] - 2 * x * G[2][2]);
-  dq[2] = 2 * (-2 * y * G[0][0] + x * G[0][1] + w * G[0][2] + x * G[1][0] + z * G[1][2] - w * G[2][0] +
-                z * G[2][1] - 2 * y * G[2][2]);
-  dq[3] = 2 * (-2 * z * G[0][0] - w * G[0][1] + x * G[0][2] + w * G[1][0] - 2 * z * G[1][1] + y * G[1][2] +
-                x * G[2][0] + y * G[2][1]);
+  dq[1] = 2 *
+    (y * G[0][1] + z * G[0][2] + y * G[1][0] - 2 * x * G[1][1] - w * G[1][2] + z * G[2][0] + w * G[2][1] -
+      2 * x * G[2][2]);
+  dq[2] = 2 *
+    (-2 * y * G[0][0] + x * G[0][1] + w * G[0][2] + x * G[1][0] + z * G[1][2] - w * G[2][0] + z * G[2][1] -
+      2 * y * G[2][2]);
+  dq[3] = 2 *
+    (-2 * z * G[0][0] - w * G[0][1] + x * G[0][2] + w * G[1][0] - 2 * z * G[1][1] + y * G[1][2] + x * G[2][0] +
+      y * G[2][1]);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -329,7 +332,8 @@ BIGUS_HD Footprint SetupFootprint(
   {
     const double l = g.LogScale[k];
     const bool finite = l == l; // NaN test that survives fast-math
-    const double lc = !finite ? 0.0 : (l < MinimumLogScale ? MinimumLogScale : (l > MaximumLogScale ? MaximumLogScale : l));
+    const double lc =
+      !finite ? 0.0 : (l < MinimumLogScale ? MinimumLogScale : (l > MaximumLogScale ? MaximumLogScale : l));
     c.ScaleClamped[k] = !finite || l < MinimumLogScale || l > MaximumLogScale;
     c.Scale[k] = std::exp(lc);
   }
@@ -495,8 +499,8 @@ struct GaussianGrad
  * @p slice, if not null, receives G_m and G_R' (overwritten; zero when the footprint is not visible) for
  * the gradient with respect to the slice's pose (SlicePoseBackward).
  */
-BIGUS_HD void SetupFootprintBackward(const Footprint& f, const SetupCache& c, const SliceFrameD& frame,
-  double sigmaE, const FootprintGrad& gf, GaussianGrad& out, SliceFrameGrad* slice = nullptr)
+BIGUS_HD void SetupFootprintBackward(const Footprint& f, const SetupCache& c, const SliceFrameD& frame, double sigmaE,
+  const FootprintGrad& gf, GaussianGrad& out, SliceFrameGrad* slice = nullptr)
 {
   if (slice)
   {

@@ -34,7 +34,8 @@ struct PreparedSlice
  * is not between 1 and 65536 pixels per side", "slice 1: ImageToReference contains NaN or Inf") for a
  * bad grid or pose.
  */
-inline bool PrepareSlice(const SliceGeometry& g, const RenderOptions& o, int index, PreparedSlice& p, std::string* error)
+inline bool PrepareSlice(
+  const SliceGeometry& g, const RenderOptions& o, int index, PreparedSlice& p, std::string* error)
 {
   if (g.Width <= 0 || g.Height <= 0 || g.Width > 65536 || g.Height > 65536)
   {
@@ -199,8 +200,8 @@ BIGUS_HD double EffectiveReflectivity(double r, bool nonNegative)
  * the caller still tests every pixel. Returns [first, end) clipped to [lo, hi), empty when the row
  * misses the ellipse.
  */
-BIGUS_HD void RowSpan(float a, float b, float det, float k2, float dy, float x0, float P0, int lo, int hi, int& first,
-  int& end)
+BIGUS_HD void RowSpan(
+  float a, float b, float det, float k2, float dy, float x0, float P0, int lo, int hi, int& first, int& end)
 {
   const float disc = a * (k2 * 1.001f + 1e-6f) - det * dy * dy;
   if (!(disc >= 0))

@@ -28,8 +28,8 @@ struct FieldD
   std::int64_t Count() const { return static_cast<std::int64_t>(this->Reflectivities.size()); }
   GaussianParams Get(std::int64_t i) const
   {
-    return LoadGaussian(this->Means.data(), this->LogScales.data(), this->Quaternions.data(),
-      this->Reflectivities.data(), i);
+    return LoadGaussian(
+      this->Means.data(), this->LogScales.data(), this->Quaternions.data(), this->Reflectivities.data(), i);
   }
 };
 
@@ -54,8 +54,7 @@ struct GradD
     , Quaternions(4 * n, 0.0)
     , Reflectivities(n, 0.0)
     , Attribution(n, 0.0)
-  {
-  }
+  {}
 };
 
 inline bool Prepare(const SliceGeometry& slice, const RenderOptions& o, SliceFrameD& frame, double pixel[3])

@@ -91,12 +91,12 @@ inline double EffectiveElevationSigma(const RenderOptions& o)
 /// What one call did (summed over its slices).
 struct RenderStats
 {
-  std::int64_t GaussiansVisible = 0;  ///< Gaussians kept after elevation culling
-  std::int64_t TileEntries = 0;       ///< (Gaussian, tile) pairs after binning
-  std::int64_t PixelEvaluations = 0;  ///< Gaussian-pixel pairs evaluated: forward, inside the bounding boxes;
-                                      ///< backward, inside the row spans of the cutoff ellipses
-  double SetupSeconds = 0;            ///< phase 1 (transform, cull, set up) and binning
-  double RasterSeconds = 0;           ///< phase 2 (per-tile evaluation) and the image map, or the backward pass
+  std::int64_t GaussiansVisible = 0; ///< Gaussians kept after elevation culling
+  std::int64_t TileEntries = 0;      ///< (Gaussian, tile) pairs after binning
+  std::int64_t PixelEvaluations = 0; ///< Gaussian-pixel pairs evaluated: forward, inside the bounding boxes;
+                                     ///< backward, inside the row spans of the cutoff ellipses
+  double SetupSeconds = 0;           ///< phase 1 (transform, cull, set up) and binning
+  double RasterSeconds = 0;          ///< phase 2 (per-tile evaluation) and the image map, or the backward pass
 };
 
 class BIGUSRENDERING_EXPORT Renderer
@@ -117,9 +117,9 @@ public:
    * Accumulate gradients for @p count slices. @p S: the forward scattering field [count, H, W];
    * @p dL: dL/dI [count, H, W], or dL/dS when @p gradientIsWithRespectToS is true.
    */
-  virtual bool Backward(const FieldView& field, const SliceGeometry* slices, int count,
-    const RenderOptions& options, const float* S, const float* dL, bool gradientIsWithRespectToS,
-    FieldGradients& gradients, RenderStats* stats, std::string* error) = 0;
+  virtual bool Backward(const FieldView& field, const SliceGeometry* slices, int count, const RenderOptions& options,
+    const float* S, const float* dL, bool gradientIsWithRespectToS, FieldGradients& gradients, RenderStats* stats,
+    std::string* error) = 0;
 };
 
 /// The multi-threaded CPU backend (vtkSMPTools). Always available.

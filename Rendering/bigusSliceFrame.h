@@ -25,10 +25,10 @@ namespace bigus
 enum class PoseStatus
 {
   Ok = 0,
-  NotFinite,   ///< a NaN or Inf entry
-  NotAffine,   ///< the bottom row is not (0, 0, 0, 1)
-  Singular,    ///< an image axis has (almost) zero length or the two axes are parallel
-  Sheared      ///< the image axes are further from perpendicular than the tolerance
+  NotFinite, ///< a NaN or Inf entry
+  NotAffine, ///< the bottom row is not (0, 0, 0, 1)
+  Singular,  ///< an image axis has (almost) zero length or the two axes are parallel
+  Sheared    ///< the image axes are further from perpendicular than the tolerance
 };
 
 inline const char* PoseStatusText(PoseStatus s)
@@ -52,12 +52,12 @@ inline const char* PoseStatusText(PoseStatus s)
 /// Orthonormal frame of a slice. All lengths in mm.
 struct SliceFrame
 {
-  double u[3];          ///< unit image x axis (columns), reference frame
-  double v[3];          ///< unit image y axis (rows), reference frame
-  double n[3];          ///< unit slice normal u x v (elevation direction)
-  double origin[3];     ///< centre of pixel (0, 0), mm
-  double spacing[2];    ///< mm per pixel along u and v
-  double shearDegrees;  ///< |90 - angle between the two image axes|, degrees
+  double u[3];         ///< unit image x axis (columns), reference frame
+  double v[3];         ///< unit image y axis (rows), reference frame
+  double n[3];         ///< unit slice normal u x v (elevation direction)
+  double origin[3];    ///< centre of pixel (0, 0), mm
+  double spacing[2];   ///< mm per pixel along u and v
+  double shearDegrees; ///< |90 - angle between the two image axes|, degrees
 };
 
 /**

@@ -12,8 +12,7 @@ vtkStandardNewMacro(vtkUltrasoundSliceGeometry);
 
 vtkUltrasoundSliceGeometry::vtkUltrasoundSliceGeometry()
   : MaximumShearAngle(bigus::DefaultMaximumShearAngle)
-{
-}
+{}
 
 void vtkUltrasoundSliceGeometry::SetImageToReference(vtkMatrix4x4* imageToReference)
 {

@@ -29,17 +29,19 @@ std::vector<Ablation> Ablations()
   return {
     { "no EA-D (no densification)", [](TrainerSettings& s, std::int64_t) { s.Densification.Enabled = false; },
       "lower (EA-D helps)" },
-    { "random initialisation (not Harris)", [](TrainerSettings& s, std::int64_t) { s.Seeding.HarrisInitialisation = false; },
+    { "random initialisation (not Harris)",
+      [](TrainerSettings& s, std::int64_t) { s.Seeding.HarrisInitialisation = false; },
       "lower (Harris initialisation helps)" },
-    { "thin plane (no beam integration, UltraGauss)", [](TrainerSettings& s, std::int64_t) { s.BeamIntegration = false; },
-      "lower (beam integration helps)" },
+    { "thin plane (no beam integration, UltraGauss)",
+      [](TrainerSettings& s, std::int64_t) { s.BeamIntegration = false; }, "lower (beam integration helps)" },
     { "non-negative reflectivity", [](TrainerSettings& s, std::int64_t) { s.NonNegativeReflectivity = true; },
       "lower (signed reflectivity helps)" },
     { "L1 only (no D-SSIM)", [](TrainerSettings& s, std::int64_t) { s.Loss.DSSIM = 0; },
       "lower (D-SSIM helps structure)" },
-    { "L1 + D-SSIM + FFL (0.1)", [](TrainerSettings& s, std::int64_t) { s.Loss.FFL = 0.1; }, "higher (FFL helps speckle)",
-      +1 },
-    { "capacity cap at the seed count", [](TrainerSettings& s, std::int64_t seeds) {
+    { "L1 + D-SSIM + FFL (0.1)", [](TrainerSettings& s, std::int64_t) { s.Loss.FFL = 0.1; },
+      "higher (FFL helps speckle)", +1 },
+    { "capacity cap at the seed count",
+      [](TrainerSettings& s, std::int64_t seeds) {
         s.Seeding.InitialGaussians = seeds;
         s.MaximumGaussians = seeds;
       },
@@ -84,10 +86,22 @@ struct AblationCell
     }
     return Spread::Of(v);
   }
-  Spread PSNR() const { return this->Get([](const AblationRun& r) { return r.HeldOut.PSNR; }); }
-  Spread Fit() const { return this->Get([](const AblationRun& r) { return r.Fit; }); }
-  Spread Steps() const { return this->Get([](const AblationRun& r) { return r.Steps; }); }
-  Spread Gaussians() const { return this->Get([](const AblationRun& r) { return r.Gaussians; }); }
+  Spread PSNR() const
+  {
+    return this->Get([](const AblationRun& r) { return r.HeldOut.PSNR; });
+  }
+  Spread Fit() const
+  {
+    return this->Get([](const AblationRun& r) { return r.Fit; });
+  }
+  Spread Steps() const
+  {
+    return this->Get([](const AblationRun& r) { return r.Steps; });
+  }
+  Spread Gaussians() const
+  {
+    return this->Get([](const AblationRun& r) { return r.Gaussians; });
+  }
 };
 
 /**
@@ -96,7 +110,8 @@ struct AblationCell
  * spreads over seeds), and for a disagreement what was measured to differ: steps done, Gaussians at the
  * end, and the fit (training frames) against the held-out frames.
  */
-std::string AblationVerdict(const Ablation& a, const AblationCell& full, const AblationCell& variant, std::string& verdict)
+std::string AblationVerdict(
+  const Ablation& a, const AblationCell& full, const AblationCell& variant, std::string& verdict)
 {
   const Spread f = full.PSNR(), v = variant.PSNR();
   const double delta = v.Mean - f.Mean, noise = std::max(f.Range, v.Range);
@@ -187,8 +202,8 @@ bool AblationSection(BenchmarkContext& context, std::string* error)
   std::ostringstream& md = report.Markdown;
   md << "\n## Ablations at equal iterations and at equal time\n\n"
      << "The paper's Tables 3 and 4 compare its components at equal iterations. Each switch below is trained "
-     << "from the trainer's defaults (the full method) with that one change, with " << seeds.size()
-     << " seed" << (seeds.size() > 1 ? "s" : "") << " per cell: **equal time**, the time budget as the "
+     << "from the trainer's defaults (the full method) with that one change, with " << seeds.size() << " seed"
+     << (seeds.size() > 1 ? "s" : "") << " per cell: **equal time**, the time budget as the "
      << "schedule, and **equal iterations**, the mean number of steps the full method did in that time as "
      << "the schedule. Each cell gives the mean over seeds and, in brackets, the spread (largest minus "
      << "smallest). A difference is called real only when it exceeds the larger of the two spreads. Held-out: "
@@ -218,9 +233,11 @@ bool AblationSection(BenchmarkContext& context, std::string* error)
         AblationRun run;
         if (!RunAblation(e, s, run, error))
         {
-          return Failed("ablation " + e.Name + ", " + (a ? a->Name : std::string("full method")) + ": " + *error, error);
+          return Failed(
+            "ablation " + e.Name + ", " + (a ? a->Name : std::string("full method")) + ": " + *error, error);
         }
-        std::printf("  ablation %-16s %-44s seed %u  %6.1f s  %6.0f steps  held-out %6.2f dB  fit %6.2f dB  %8.0f Gaussians\n",
+        std::printf(
+          "  ablation %-16s %-44s seed %u  %6.1f s  %6.0f steps  held-out %6.2f dB  fit %6.2f dB  %8.0f Gaussians\n",
           e.Name.substr(0, 16).c_str(), a ? a->Name.c_str() : "full method", seed, run.Seconds, run.Steps,
           run.HeldOut.PSNR, run.Fit, run.Gaussians);
         std::fflush(stdout);
@@ -255,8 +272,9 @@ bool AblationSection(BenchmarkContext& context, std::string* error)
           return false;
         }
       }
-      md << "\n#### " << (equalTime ? "Equal time: " + Format("%.0f", e.Seconds) + " s"
-                                    : "Equal iterations: " + std::to_string(counted.Iterations) + " steps")
+      md << "\n#### "
+         << (equalTime ? "Equal time: " + Format("%.0f", e.Seconds) + " s"
+                       : "Equal iterations: " + std::to_string(counted.Iterations) + " steps")
          << "\n\n| variant | held-out PSNR (dB) | SSIM | NCC | speckle | fit PSNR (dB) | Gaussians | steps | "
             "time (s) | paper | ours |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
       std::ostringstream sentences;
@@ -284,8 +302,8 @@ bool AblationSection(BenchmarkContext& context, std::string* error)
         for (const AblationRun& r : cell.Runs)
         {
           jc["runs"].push_back({ { "psnr", r.HeldOut.PSNR }, { "ssim", r.HeldOut.SSIM }, { "ncc", r.HeldOut.NCC },
-            { "speckle", r.HeldOut.Speckle }, { "fit_psnr", r.Fit }, { "gaussians", r.Gaussians },
-            { "steps", r.Steps }, { "seconds", r.Seconds } });
+            { "speckle", r.HeldOut.Speckle }, { "fit_psnr", r.Fit }, { "gaussians", r.Gaussians }, { "steps", r.Steps },
+            { "seconds", r.Seconds } });
         }
         jt["cells"].push_back(jc);
       }

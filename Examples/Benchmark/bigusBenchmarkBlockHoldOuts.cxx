@@ -32,10 +32,12 @@ bool BlockHoldOutSection(BenchmarkContext& context, std::string* error)
     auto centre = [&](int k) {
       const std::array<double, 16>& m = liver.Data.Poses[k];
       const double u = 0.5 * liver.Data.Width, v = 0.5 * liver.Data.Height;
-      return std::array<double, 3>{ m[0] * u + m[1] * v + m[3], m[4] * u + m[5] * v + m[7], m[8] * u + m[9] * v + m[11] };
+      return std::array<double, 3>{ m[0] * u + m[1] * v + m[3], m[4] * u + m[5] * v + m[7],
+        m[8] * u + m[9] * v + m[11] };
     };
     const auto a = centre(valid[first - 1]), c = centre(valid[first + size]);
-    const double gap = std::sqrt((a[0] - c[0]) * (a[0] - c[0]) + (a[1] - c[1]) * (a[1] - c[1]) + (a[2] - c[2]) * (a[2] - c[2]));
+    const double gap =
+      std::sqrt((a[0] - c[0]) * (a[0] - c[0]) + (a[1] - c[1]) * (a[1] - c[1]) + (a[2] - c[2]) * (a[2] - c[2]));
     std::vector<Row> rows = Baselines(liver);
     TrainerSettings defaults;
     defaults.Iterations = 0;

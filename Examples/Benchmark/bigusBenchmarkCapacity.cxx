@@ -11,8 +11,8 @@ bool CapacitySection(BenchmarkContext& context, std::string* error)
   Report& report = context.Report;
   std::ostringstream& md = report.Markdown;
   const double capacitySeconds = CapacitySeconds(quick);
-  const std::vector<long long> caps = quick ? std::vector<long long>{ 2000, 4000 }
-                                            : std::vector<long long>{ 10000, 40000, 160000 };
+  const std::vector<long long> caps =
+    quick ? std::vector<long long>{ 2000, 4000 } : std::vector<long long>{ 10000, 40000, 160000 };
   const TrainerSettings defaults;
   std::vector<Row> rows;
   for (long long cap : caps)
@@ -23,7 +23,8 @@ bool CapacitySection(BenchmarkContext& context, std::string* error)
     s.Seeding.InitialGaussians = cap / 2;
     s.MaximumGaussians = cap;
     s.Densification.GrowthMargin = 0; // grow while it improves at all, up to the cap
-    const bool ok = TrainWithMarks(liver.Data, s, { capacitySeconds }, liver.HeldOut,
+    const bool ok = TrainWithMarks(
+      liver.Data, s, { capacitySeconds }, liver.HeldOut,
       "cap " + std::to_string(cap) + " (start at " + std::to_string(cap / 2) + ")",
       [&](double, const Row& r, Trainer&) {
         rows.push_back(r);
@@ -38,8 +39,8 @@ bool CapacitySection(BenchmarkContext& context, std::string* error)
   }
   Row adaptive = full;
   adaptive.Method = "adaptive stop (default: automatic seeds, margin " +
-    Format("%.1f", 100 * defaults.Densification.GrowthMargin) +
-    " %, cap " + std::to_string(defaults.MaximumGaussians) + ")";
+    Format("%.1f", 100 * defaults.Densification.GrowthMargin) + " %, cap " + std::to_string(defaults.MaximumGaussians) +
+    ")";
   rows.push_back(adaptive);
   md << "\n## Quality against the number of Gaussians (liver, " << Format("%.0f", capacitySeconds)
      << " s of training each)\n\n"

@@ -46,7 +46,8 @@ bool DefaultsSection(BenchmarkContext& context, std::string* error)
     TrainerSettings tuned = defaults;
     tuned.ElevationSigma = sweep.ElevationSigma;
     Row d, t;
-    if (!TrainToBudget(sweep, defaults, "defaults", d, error) || !TrainToBudget(sweep, tuned, "hand-tuned sigma", t, error))
+    if (!TrainToBudget(sweep, defaults, "defaults", d, error) ||
+      !TrainToBudget(sweep, tuned, "hand-tuned sigma", t, error))
     {
       return Failed(sweep.Name + " (defaults against hand-tuned): " + *error, error);
     }
@@ -76,8 +77,9 @@ bool DefaultsSection(BenchmarkContext& context, std::string* error)
   // The volume protocol's fixed schedule is read at marks below its budget: no column.
   addRow("volume protocol, in-between slices", volume.Budget, volume.Defaults[0], volume.Tuned[0], NaN);
   addRow("volume protocol, oblique slices", volume.Budget, volume.Defaults[1], volume.Tuned[1], NaN);
-  md << "\nThe volume protocol's baseline, the compounded volume resliced: " << Format("%.2f", volume.Compounded[0].Quality.PSNR)
-     << " dB on the in-between slices, " << Format("%.2f", volume.Compounded[1].Quality.PSNR) << " dB on the oblique.\n";
+  md << "\nThe volume protocol's baseline, the compounded volume resliced: "
+     << Format("%.2f", volume.Compounded[0].Quality.PSNR) << " dB on the in-between slices, "
+     << Format("%.2f", volume.Compounded[1].Quality.PSNR) << " dB on the oblique.\n";
   report.Json["defaults_against_hand_tuned_volume_compounded_psnr"] = { volume.Compounded[0].Quality.PSNR,
     volume.Compounded[1].Quality.PSNR };
   return true;

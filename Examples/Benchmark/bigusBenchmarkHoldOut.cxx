@@ -77,8 +77,7 @@ bool MeasureErrorSources(const Sweep& sweep, Trainer& trainer, const Row& bigusR
   blend->SetTargetFrames(IdList(sweep.HeldOut));
   blend->SetModeToTemporalBlend();
   blend->Update();
-  e.BlendedRenders =
-    Score(static_cast<float*>(blend->GetOutput()->GetScalarPointer()), 1.0, data, sweep.HeldOut);
+  e.BlendedRenders = Score(static_cast<float*>(blend->GetOutput()->GetScalarPointer()), 1.0, data, sweep.HeldOut);
   return true;
 }
 }
@@ -112,7 +111,8 @@ bool HoldOutSection(BenchmarkContext& context, std::size_t si, std::string* erro
   }
   std::vector<Row> bigus;
   std::vector<ErrorSources> sources;
-  const bool ok = TrainWithMarks(sweep.Data, s, marks, sweep.HeldOut, "BIGUS",
+  const bool ok = TrainWithMarks(
+    sweep.Data, s, marks, sweep.HeldOut, "BIGUS",
     [&](double mark, const Row& r, Trainer& trainer) {
       Print(sweep.Name, r);
       if (std::find(sweep.Marks.begin(), sweep.Marks.end(), mark) != sweep.Marks.end())
@@ -148,8 +148,7 @@ bool HoldOutSection(BenchmarkContext& context, std::size_t si, std::string* erro
   {
     results.LiverAtCapacityTime = bigus.back(); // the schedule ended before the capacity time
   }
-  md << "\n## " << sweep.Name << "\n\n`" << sweep.File.substr(root.size() + 1) << "`: " << sweep.Description
-     << ".\n\n"
+  md << "\n## " << sweep.Name << "\n\n`" << sweep.File.substr(root.size() + 1) << "`: " << sweep.Description << ".\n\n"
      << TableHeader();
   nlohmann::json j;
   j["description"] = sweep.Description;
@@ -177,8 +176,8 @@ bool HoldOutSection(BenchmarkContext& context, std::size_t si, std::string* erro
   const char* separator = " ";
   for (const auto& [sigma, q] : BlurredTruth(sweep, { 0.5, 1.0, 1.5, 2.0 }))
   {
-    md << std::exchange(separator, ", ") << Format("%.2f", q.PSNR) << " dB (SSIM " << Format("%.3f", q.SSIM)
-       << ") at " << Format("%.1f", sigma);
+    md << std::exchange(separator, ", ") << Format("%.2f", q.PSNR) << " dB (SSIM " << Format("%.3f", q.SSIM) << ") at "
+       << Format("%.1f", sigma);
     j["blurred_truth"].push_back({ { "sigma_pixels", sigma }, { "psnr", q.PSNR }, { "ssim", q.SSIM } });
   }
   md << ": a prediction at one of these scores is as close to the recording as the recording blurred that much.\n";

@@ -18,11 +18,11 @@ namespace
 struct ParetoRun
 {
   std::string Method;
-  double Budget = NaN;         ///< s: the trainer's time budget (NaN for the grid)
-  std::int64_t Requested = 0;  ///< the grid: the count asked for (the count an adaptive run ended with)
+  double Budget = NaN;        ///< s: the trainer's time budget (NaN for the grid)
+  std::int64_t Requested = 0; ///< the grid: the count asked for (the count an adaptive run ended with)
   AblationRun Run;
-  bool CountFront = false;     ///< no other run has at most its Gaussians and a higher held-out PSNR
-  bool TimeFront = false;      ///< no other run took at most its time and has a higher held-out PSNR
+  bool CountFront = false; ///< no other run has at most its Gaussians and a higher held-out PSNR
+  bool TimeFront = false;  ///< no other run took at most its time and has a higher held-out PSNR
 };
 
 /// Marks the runs on the front of held-out PSNR against @p cost (lower cost, higher PSNR).
@@ -143,14 +143,15 @@ bool ParetoSection(BenchmarkContext& context, std::string* error)
          << Format("%.0f", r.Gaussians) << " | " << Format("%.2f", r.HeldOut.PSNR) << " | "
          << Format("%.4f", r.HeldOut.SSIM) << " | " << Format("%.2f", r.Fit) << " | " << Format("%.0f", r.Steps)
          << " | " << (p.CountFront ? "yes" : "") << " | " << (p.TimeFront ? "yes" : "") << " |\n";
-      je["runs"].push_back({ { "method", p.Method }, { "budget", std::isfinite(p.Budget) ? nlohmann::json(p.Budget) : nlohmann::json(nullptr) },
+      je["runs"].push_back({ { "method", p.Method },
+        { "budget", std::isfinite(p.Budget) ? nlohmann::json(p.Budget) : nlohmann::json(nullptr) },
         { "requested", p.Requested }, { "seconds", r.Seconds }, { "gaussians", r.Gaussians }, { "seeds", r.Seeds },
         { "steps", r.Steps }, { "psnr", r.HeldOut.PSNR }, { "ssim", r.HeldOut.SSIM }, { "fit_psnr", r.Fit },
         { "count_front", p.CountFront }, { "time_front", p.TimeFront } });
       for (PlotSpec* spec : { &byCount, &byTime })
       {
-        auto series = std::find_if(spec->Series.begin(), spec->Series.end(),
-          [&](const PlotSeries& s) { return s.Name == p.Method; });
+        auto series = std::find_if(
+          spec->Series.begin(), spec->Series.end(), [&](const PlotSeries& s) { return s.Name == p.Method; });
         if (series == spec->Series.end())
         {
           series = spec->Series.insert(spec->Series.end(), PlotSeries{ p.Method, {} });
@@ -170,9 +171,10 @@ bool ParetoSection(BenchmarkContext& context, std::string* error)
     for (std::size_t a = 0; a < adaptiveRuns; ++a)
     {
       const ParetoRun& p = runs[a];
-      const auto g = std::min_element(runs.begin() + adaptiveRuns, runs.end(), [&](const ParetoRun& x, const ParetoRun& y) {
-        return std::abs(x.Requested - p.Run.Gaussians) < std::abs(y.Requested - p.Run.Gaussians);
-      });
+      const auto g =
+        std::min_element(runs.begin() + adaptiveRuns, runs.end(), [&](const ParetoRun& x, const ParetoRun& y) {
+          return std::abs(x.Requested - p.Run.Gaussians) < std::abs(y.Requested - p.Run.Gaussians);
+        });
       const double delta = p.Run.HeldOut.PSNR - g->Run.HeldOut.PSNR;
       const bool above = delta > 0;
       md << "- " << p.Method << ", " << Format("%.0f", p.Budget) << " s (" << Format("%.0f", p.Run.Gaussians)
@@ -181,16 +183,20 @@ bool ParetoSection(BenchmarkContext& context, std::string* error)
       if (!above)
       {
         md << "; fit of the training frames " << Format("%.2f", p.Run.Fit) << " dB against the grid's "
-           << Format("%.2f", g->Run.Fit) << " (" << (p.Run.Fit < g->Run.Fit ? "the adaptive field fits less: "
-              "its geometry is not yet where the budget's steps would take it" : "the adaptive field fits more "
-              "and generalises less between frames") << ")";
+           << Format("%.2f", g->Run.Fit) << " ("
+           << (p.Run.Fit < g->Run.Fit ? "the adaptive field fits less: "
+                                        "its geometry is not yet where the budget's steps would take it"
+                                      : "the adaptive field fits more "
+                                        "and generalises less between frames")
+           << ")";
       }
       md << ".\n";
       je["verdicts"].push_back({ { "method", p.Method }, { "budget", p.Budget }, { "grid_gaussians", g->Run.Gaussians },
         { "delta_psnr", delta }, { "above_grid", above } });
     }
     const std::string tag = std::to_string(&e - experiments.data());
-    if (!report.Plot(byCount, "pareto_gaussians_" + tag + ".png") || !report.Plot(byTime, "pareto_time_" + tag + ".png"))
+    if (!report.Plot(byCount, "pareto_gaussians_" + tag + ".png") ||
+      !report.Plot(byTime, "pareto_time_" + tag + ".png"))
     {
       return Failed("cannot write the Pareto plots to " + report.PlotFolder, error);
     }

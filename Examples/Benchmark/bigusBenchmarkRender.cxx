@@ -56,8 +56,8 @@ bool RenderSection(BenchmarkContext& context, std::string* error)
   md << "\n## Render speed against render error (liver field, " << results.LiverField.Count() << " Gaussians)\n\n"
      << "Time per " << W << " x " << H << " slice at the held-out poses (CPU renderer, float) and the largest "
      << "and RMS difference in intensity from the naive double-precision renderer (no cutoff) on a " << crop << " x "
-     << crop << " crop at the centre of a held-out frame (the naive renderer took "
-     << Format("%.1f", referenceSeconds) << " s for that crop).\n\n"
+     << crop << " crop at the centre of a held-out frame (the naive renderer took " << Format("%.1f", referenceSeconds)
+     << " s for that crop).\n\n"
      << "| cutoff k (standard deviations) | ms / slice | max abs error | RMS error | PSNR against naive (dB) |\n"
      << "|---|---|---|---|---|\n";
   PlotSpec spec;

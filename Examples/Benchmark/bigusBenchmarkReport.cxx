@@ -106,8 +106,8 @@ std::string TableRow(const Row& r)
   s << "| " << r.Method << " | " << Format("%.1f", r.Seconds) << " | " << Format("%.1f", r.MsPerFrame) << " | "
     << Format("%.2f", r.Quality.PSNR) << " | " << Format("%.4f", r.Quality.SSIM) << " | "
     << Format("%.4f", r.Quality.NCC) << " | " << Format("%.4f", r.Quality.Speckle) << " | "
-    << (r.Gaussians >= 0 ? std::to_string(r.Gaussians) : "-") << " | " << Format("%.0f", r.PeakMiB) << " | "
-    << r.Note << " |\n";
+    << (r.Gaussians >= 0 ? std::to_string(r.Gaussians) : "-") << " | " << Format("%.0f", r.PeakMiB) << " | " << r.Note
+    << " |\n";
   return s.str();
 }
 
@@ -152,7 +152,8 @@ bool Failed(const std::string& what, std::string* error)
 void Introduction(const std::string& root, bool quick, Report& report)
 {
   const std::string commit = CommandOutput("git -C '" + root + "' rev-parse --short HEAD 2>/dev/null");
-  const bool dirty = !CommandOutput("git -C '" + root + "' status --porcelain --untracked-files=no 2>/dev/null").empty();
+  const bool dirty =
+    !CommandOutput("git -C '" + root + "' status --porcelain --untracked-files=no 2>/dev/null").empty();
   char date[64];
   const std::time_t now = std::time(nullptr);
   std::strftime(date, sizeof(date), "%Y-%m-%d %H:%M %Z", std::localtime(&now));
@@ -174,7 +175,8 @@ void Introduction(const std::string& root, bool quick, Report& report)
      << "Conventions: metrics inside the fan mask of the recorded frame (DESIGN section 9; speckle = "
      << "Backscatter Fidelity Score). Training time is wall-clock and "
      << "stops while held-out frames are evaluated; each row is the field as trained until then, without the "
-     << "final prune (which changes no training pixel by more than 1/512). A baseline's time is its preparation (compounding) "
+     << "final prune (which changes no training pixel by more than 1/512). A baseline's time is its preparation "
+        "(compounding) "
      << "and its ms per frame is the time to produce one held-out frame; BIGUS's ms per frame is the render "
      << "time of one held-out frame. Peak MiB is the process's peak resident memory during that run "
      << "(frames of every sweep included).\n\n"
@@ -191,8 +193,8 @@ void Introduction(const std::string& root, bool quick, Report& report)
   report.Json["quick"] = quick;
 }
 
-bool WriteReport(const std::string& output, const std::string& section, double seconds, Report& report,
-  std::string* error)
+bool WriteReport(
+  const std::string& output, const std::string& section, double seconds, Report& report, std::string* error)
 {
   report.Markdown << "\nTotal run time of the command: " << Format("%.1f", seconds / 60) << " minutes.\n";
   report.Json["total_seconds"] = seconds;

@@ -33,8 +33,8 @@ std::string Format(const char* format, double value);
 struct Row
 {
   std::string Method;
-  double Seconds = NaN;       ///< training or preparation time (s)
-  double MsPerFrame = NaN;    ///< time to produce one frame once trained / compounded (ms)
+  double Seconds = NaN;    ///< training or preparation time (s)
+  double MsPerFrame = NaN; ///< time to produce one frame once trained / compounded (ms)
   ImageMetrics Quality;
   long long Gaussians = -1;
   double PeakMiB = NaN;
@@ -80,8 +80,8 @@ void Introduction(const std::string& root, bool quick, Report& report);
 /// Adds the total run time (@p seconds) and writes the report to @p output: BENCHMARKS.md for every
 /// section, BENCHMARKS_<section>.md for one alone (so that it does not replace the full report), and
 /// results[_<section>].json next to the plots.
-bool WriteReport(const std::string& output, const std::string& section, double seconds, Report& report,
-  std::string* error);
+bool WriteReport(
+  const std::string& output, const std::string& section, double seconds, Report& report, std::string* error);
 }
 
 #endif

@@ -35,7 +35,8 @@ bool TrainWithMarks(const TrainingData& data, const TrainerSettings& settings, c
     const double start = Now();
     const double slice = mark - trained;
     if (slice > 0 && scheduleLeft() &&
-      !trainer.Train(nullptr, [&]() { return Now() - start >= slice; }, error))
+      !trainer.Train(
+        nullptr, [&]() { return Now() - start >= slice; }, error))
     {
       return false;
     }
@@ -85,10 +86,11 @@ bool TrainToBudget(const TrainingData& data, const TrainerSettings& settings, co
   return evaluate(trainer, row);
 }
 
-bool TrainToBudget(const Sweep& sweep, const TrainerSettings& settings, const std::string& method, Row& row,
-  std::string* error)
+bool TrainToBudget(
+  const Sweep& sweep, const TrainerSettings& settings, const std::string& method, Row& row, std::string* error)
 {
-  return TrainToBudget(sweep.Data, settings, method, row,
+  return TrainToBudget(
+    sweep.Data, settings, method, row,
     [&](Trainer& trainer, Row& r) {
       double secondsPerFrame = 0;
       const bool ok = trainer.Evaluate(sweep.HeldOut, r.Quality, error, &secondsPerFrame);
@@ -121,8 +123,8 @@ AblationExperiment VolumeExperiment(const VolumeProtocol& vp, double seconds)
   return e;
 }
 
-bool RunAblation(const AblationExperiment& e, const TrainerSettings& settings, AblationRun& run, std::string* error,
-  bool train)
+bool RunAblation(
+  const AblationExperiment& e, const TrainerSettings& settings, AblationRun& run, std::string* error, bool train)
 {
   const double start = Now();
   Trainer trainer(*e.Train, settings);

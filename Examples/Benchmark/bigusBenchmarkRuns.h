@@ -27,8 +27,8 @@ bool TrainToBudget(const TrainingData& data, const TrainerSettings& settings, co
   const std::function<bool(Trainer&, Row&)>& evaluate, std::string* error);
 
 /// TrainToBudget on a hold-out sweep, scored on its held-out frames.
-bool TrainToBudget(const Sweep& sweep, const TrainerSettings& settings, const std::string& method, Row& row,
-  std::string* error);
+bool TrainToBudget(
+  const Sweep& sweep, const TrainerSettings& settings, const std::string& method, Row& row, std::string* error);
 
 /// One sweep of the ablation section: where the field is trained and where it is scored.
 struct AblationExperiment
@@ -51,11 +51,11 @@ AblationExperiment VolumeExperiment(const VolumeProtocol& vp, double seconds);
 struct AblationRun
 {
   ImageMetrics HeldOut;
-  double Fit = NaN;     ///< PSNR of the training frames (dB)
+  double Fit = NaN; ///< PSNR of the training frames (dB)
   double Gaussians = 0;
   double Seeds = 0;
   double Steps = 0;
-  double Seconds = 0;   ///< wall clock: initialisation, training and final prune
+  double Seconds = 0; ///< wall clock: initialisation, training and final prune
 };
 
 /// @p train false: the seeded field (Initialize: seeds and their reflectivities) goes straight to Finish.

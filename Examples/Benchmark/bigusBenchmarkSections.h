@@ -30,7 +30,7 @@ struct HoldOutResults
 {
   GaussianField LiverField; ///< the liver's field at the end of its run (render speed against error)
   RenderOptions LiverOptions;
-  Row LiverAtCapacityTime; ///< the liver's default run at CapacitySeconds (the full method)
+  Row LiverAtCapacityTime;             ///< the liver's default run at CapacitySeconds (the full method)
   std::vector<std::vector<Row>> Bigus; ///< per sweep, its BIGUS rows at the time marks
 };
 

@@ -29,8 +29,8 @@ void ResliceAt(vtkImageData* volume, const VolumeProtocol& vp, const int tests[2
     const double t0 = Now();
     reslice->Update();
     rows[t].MsPerFrame = 1e3 * (Now() - t0) / vp.TestList[tests[t]].size();
-    rows[t].Quality = Score(static_cast<float*>(reslice->GetOutput()->GetScalarPointer()), 1.0,
-      vp.TestData[tests[t]], vp.TestList[tests[t]]);
+    rows[t].Quality = Score(
+      static_cast<float*>(reslice->GetOutput()->GetScalarPointer()), 1.0, vp.TestData[tests[t]], vp.TestList[tests[t]]);
   }
 }
 
@@ -56,7 +56,8 @@ vtkSmartPointer<vtkImageData> Stack(vtkUltrasoundVolumeSweep* sweep)
     // Along the frames' columns, rows or normal: that axis's pixel spacing or the slice spacing.
     const double u = first[4 * c], v = first[4 * c + 1];
     const int size = std::abs(u) > 0 ? dims[0] : (std::abs(v) > 0 ? dims[1] : dims[2]);
-    spacing[c] = std::abs(u) > 0 ? std::abs(u) : (std::abs(v) > 0 ? std::abs(v) : std::abs(second[4 * c + 3] - first[4 * c + 3]));
+    spacing[c] =
+      std::abs(u) > 0 ? std::abs(u) : (std::abs(v) > 0 ? std::abs(v) : std::abs(second[4 * c + 3] - first[4 * c + 3]));
     extent[2 * c] = 0;
     extent[2 * c + 1] = size - 1;
   }
@@ -147,7 +148,8 @@ bool SeveralSweepsSection(BenchmarkContext& context, std::string* error)
     Row pair[2];
     for (Row& r : pair)
     {
-      r.Method = std::string(sweep == vp.Train ? "parallel" : "orthogonal") + " sweep's slices stacked, trilinear reslice";
+      r.Method =
+        std::string(sweep == vp.Train ? "parallel" : "orthogonal") + " sweep's slices stacked, trilinear reslice";
       r.Seconds = Now() - t0;
     }
     ResliceAt(stack, vp, tests, pair);
@@ -172,8 +174,9 @@ bool SeveralSweepsSection(BenchmarkContext& context, std::string* error)
   defaults.Iterations = 0;
   defaults.TimeBudget = quick ? 4 : 120;
   Row row;
-  if (!TrainToBudget(both, defaults, "BIGUS defaults on both sweeps, budget " + Format("%.0f", defaults.TimeBudget) + " s",
-        row, [&](Trainer& trainer, Row& r) { return score(trainer, r); }, error))
+  if (!TrainToBudget(
+        both, defaults, "BIGUS defaults on both sweeps, budget " + Format("%.0f", defaults.TimeBudget) + " s", row,
+        [&](Trainer& trainer, Row& r) { return score(trainer, r); }, error))
   {
     return Failed("several sweeps: " + *error, error);
   }
@@ -183,7 +186,8 @@ bool SeveralSweepsSection(BenchmarkContext& context, std::string* error)
     // Under the previous default (400k) the grid is coarser (a stride of 1.1 pixels).
     TrainerSettings tight = defaults;
     tight.MaximumGaussians = 400000;
-    if (!TrainToBudget(both, tight, "BIGUS defaults but MaximumGaussians 400,000 (a coarser grid)", row,
+    if (!TrainToBudget(
+          both, tight, "BIGUS defaults but MaximumGaussians 400,000 (a coarser grid)", row,
           [&](Trainer& trainer, Row& r) { return score(trainer, r); }, error))
     {
       return Failed("several sweeps: " + *error, error);
@@ -194,7 +198,8 @@ bool SeveralSweepsSection(BenchmarkContext& context, std::string* error)
   adam.Seeding.PixelGridFit = false;
   adam.Iterations = 0;
   adam.TimeBudget = marks.back();
-  if (!TrainWithMarks(both, adam, marks, {}, "BIGUS on both sweeps, Harris seeds and Adam",
+  if (!TrainWithMarks(
+        both, adam, marks, {}, "BIGUS on both sweeps, Harris seeds and Adam",
         [&](double, const Row& mark, Trainer& trainer) { return score(trainer, mark); }, error))
   {
     return Failed("several sweeps: " + *error, error);

@@ -111,8 +111,8 @@ std::vector<Row> Baselines(const Sweep& sweep)
     r.Seconds = 0;
     r.Method = mode == vtkUltrasoundFrameInterpolator::NEAREST_POSE ? "nearest training frame (pose)"
                                                                     : "blend of bracketing training frames (time)";
-    r.Quality = Score(static_cast<float*>(predict->GetOutput()->GetScalarPointer()), sweep.Scale, sweep.Data,
-      sweep.HeldOut);
+    r.Quality =
+      Score(static_cast<float*>(predict->GetOutput()->GetScalarPointer()), sweep.Scale, sweep.Data, sweep.HeldOut);
     rows.push_back(r);
   }
   // PLUS-style compounding of the training frames with PLUS's settings for the bundled phantoms
@@ -143,8 +143,8 @@ std::vector<Row> Baselines(const Sweep& sweep)
   r.MsPerFrame = 1e3 * (Now() - t0) / n;
   int dims[3];
   compound->GetOutput()->GetDimensions(dims);
-  r.Note = Format("%.1f", voxel) + " mm voxels, holes filled up to 11^3, " + std::to_string(dims[0]) + " x " + std::to_string(dims[1]) +
-    " x " + std::to_string(dims[2]);
+  r.Note = Format("%.1f", voxel) + " mm voxels, holes filled up to 11^3, " + std::to_string(dims[0]) + " x " +
+    std::to_string(dims[1]) + " x " + std::to_string(dims[2]);
   // The compounded volume holds the input's units (0-255 for 8-bit frames) as float, which the reslice
   // passes through unscaled.
   r.Quality =
@@ -272,7 +272,8 @@ void CompoundVolume(const VolumeProtocol& vp, Row rows[3])
     r.Method = "compounded volume + trilinear reslice";
     r.Seconds = compoundSeconds;
     r.MsPerFrame = 1e3 * (Now() - t0) / vp.TestList[t].size();
-    r.Quality = Score(static_cast<float*>(reslice->GetOutput()->GetScalarPointer()), 1.0, vp.TestData[t], vp.TestList[t]);
+    r.Quality =
+      Score(static_cast<float*>(reslice->GetOutput()->GetScalarPointer()), 1.0, vp.TestData[t], vp.TestList[t]);
   }
 }
 }

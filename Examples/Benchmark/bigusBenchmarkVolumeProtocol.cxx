@@ -132,7 +132,8 @@ bool VolumeProtocolSection(BenchmarkContext& context, std::string* error)
   s.Seeding.PixelGridFit = false; // training from Harris seeds, measured along the way; the defaults' fit is below
   s.Iterations = quick ? 300 : 15000;
   std::vector<Row> bigusRows[3];
-  const bool ok = TrainWithMarks(vp.TrainData, s, marks, {}, "BIGUS, Harris seeds and Adam",
+  const bool ok = TrainWithMarks(
+    vp.TrainData, s, marks, {}, "BIGUS, Harris seeds and Adam",
     [&](double, const Row& mark, Trainer& trainer) {
       Row rows[3];
       if (!ScoreVolume(trainer, vp, mark, rows, error))
@@ -160,7 +161,8 @@ bool VolumeProtocolSection(BenchmarkContext& context, std::string* error)
     baselineRows[t].push_back(budgetRuns.Compounded[t]);
     Print("volume", budgetRuns.Compounded[t]);
   }
-  md << "\n## Volume protocol (spine-phantom reconstruction)\n\n" << vp.Description << " The rows measured along "
+  md << "\n## Volume protocol (spine-phantom reconstruction)\n\n"
+     << vp.Description << " The rows measured along "
      << "one run train from Harris seeds with Adam (`--no-pixel-grid-fit`). The last two rows "
      << "train with only a time budget of " << Format("%.0f", budgetRuns.Budget) << " s as the schedule (the "
      << "trainer's defaults, then the hand-tuned sigma) and include the final prune and gap filling; here the "
@@ -209,7 +211,8 @@ bool VolumeProtocolSection(BenchmarkContext& context, std::string* error)
     }
     report.Json["volume_protocol"][testNames[t]] = j;
   }
-  PlotSpec spec = TimePlot("volume protocol: PSNR of the in-between slices against time", baselineRows[0], bigusRows[0]);
+  PlotSpec spec =
+    TimePlot("volume protocol: PSNR of the in-between slices against time", baselineRows[0], bigusRows[0]);
   spec.Series.push_back({ "BIGUS, oblique slices", {} });
   spec.Series.push_back({ "BIGUS, orthogonal slices", {} });
   for (int t = 1; t < 3; ++t)
@@ -237,7 +240,8 @@ bool VolumeBudgetRuns(const VolumeProtocol& vp, bool quick, VolumeBudgetResults&
   tuned.ElevationSigma = vp.ElevationSigma;
   auto run = [&](const TrainerSettings& settings, const std::string& method, Row rows[3], bool measureSources) {
     Row row;
-    return TrainToBudget(vp.TrainData, settings, method, row,
+    return TrainToBudget(
+      vp.TrainData, settings, method, row,
       [&](Trainer& trainer, Row& r) {
         return ScoreVolume(trainer, vp, r, rows, error) &&
           (!measureSources || MeasureVolumeErrorSources(vp, trainer, r, out, error));

@@ -190,7 +190,8 @@ std::string ReadJob(const json& settings, const fs::path& folder, const CLI::App
   int holdOutSweep = -1;
   std::string holdOutEvery, holdOutOffset = "0";
   std::vector<std::string> shared; // evaluate's options from the job's: the backend
-  std::map<std::string, std::vector<std::string>> perSweep; // calibration, mask (one for all or one per sweep), transform
+  std::map<std::string, std::vector<std::string>>
+    perSweep; // calibration, mask (one for all or one per sweep), transform
   for (const auto& [key, value] : settings.items())
   {
     if (key == "output" || key == "name")
@@ -203,13 +204,15 @@ std::string ReadJob(const json& settings, const fs::path& folder, const CLI::App
     }
     if (key == "distributed")
     {
-      return key + "\tnot a batch option: under mpirun the batch shares its jobs between the ranks, each job "
-                   "trained by one of them";
+      return key +
+        "\tnot a batch option: under mpirun the batch shares its jobs between the ranks, each job "
+        "trained by one of them";
     }
     if (key != "sweep" && !train.get_option_no_throw("--" + key))
     {
-      return key + "\tunknown option (neither a batch key, \"sweep\", \"output\", \"name\", nor an option of bigus "
-                   "train: bigus train --help)";
+      return key +
+        "\tunknown option (neither a batch key, \"sweep\", \"output\", \"name\", nor an option of bigus "
+        "train: bigus train --help)";
     }
     std::vector<std::string> texts;
     if (!OptionTexts(key, value, folder, job.Output, texts) || texts.empty())
@@ -293,8 +296,8 @@ std::string ReadJob(const json& settings, const fs::path& folder, const CLI::App
   }
   if (holdOutSweep < 0 && !holdOutEvery.empty())
   {
-    job.EvaluateArguments.insert(job.EvaluateArguments.end(),
-      { "--holdout-every", holdOutEvery, "--holdout-offset", holdOutOffset });
+    job.EvaluateArguments.insert(
+      job.EvaluateArguments.end(), { "--holdout-every", holdOutEvery, "--holdout-offset", holdOutOffset });
   }
   job.EvaluateArguments.insert(job.EvaluateArguments.end(), shared.begin(), shared.end());
   job.EvaluateArguments.insert(job.EvaluateArguments.end(), { "--report", job.Output });
@@ -327,8 +330,9 @@ bool ReadManifest(const std::string& file, std::vector<BatchJob>& jobs, std::str
   }
   if (!manifest.is_object() || !manifest.contains("jobs") || !manifest["jobs"].is_array() || manifest["jobs"].empty())
   {
-    error = file + ": a manifest is an object with \"jobs\": [ {\"sweep\": ..., \"output\": ...}, ... ] and "
-                   "optionally \"defaults\": { ... }";
+    error = file +
+      ": a manifest is an object with \"jobs\": [ {\"sweep\": ..., \"output\": ...}, ... ] and "
+      "optionally \"defaults\": { ... }";
     return false;
   }
   for (const auto& [key, value] : manifest.items())
@@ -636,8 +640,8 @@ json Spread(const std::vector<double>& values)
 }
 
 /// summary.json and summary.md in @p folder; false when they cannot be written.
-bool WriteSummary(const std::string& folder, const std::string& manifest, const std::vector<json>& records,
-  int ranks, double seconds)
+bool WriteSummary(
+  const std::string& folder, const std::string& manifest, const std::vector<json>& records, int ranks, double seconds)
 {
   const char* metrics[] = { "psnr", "ssim", "ncc", "speckle" };
   std::map<std::string, std::vector<double>> values;
@@ -657,8 +661,8 @@ bool WriteSummary(const std::string& folder, const std::string& manifest, const 
     values["gaussians"].push_back(r.value("gaussians", 0.0));
     values["seconds"].push_back(r.value("seconds", 0.0));
   }
-  json summary = { { "manifest", manifest }, { "ranks", ranks }, { "wall_seconds", seconds },
-    { "done", counts[0] }, { "kept", counts[1] }, { "failed", counts[2] }, { "jobs", records } };
+  json summary = { { "manifest", manifest }, { "ranks", ranks }, { "wall_seconds", seconds }, { "done", counts[0] },
+    { "kept", counts[1] }, { "failed", counts[2] }, { "jobs", records } };
   for (const auto& [name, list] : values)
   {
     summary["statistics"][name] = Spread(list);
@@ -667,8 +671,8 @@ bool WriteSummary(const std::string& folder, const std::string& manifest, const 
   char cell[256];
   md << "# bigus batch " << manifest << "\n\n"
      << records.size() << " jobs: " << counts[0] << " done, " << counts[1] << " kept (complete before this run), "
-     << counts[2] << " failed; " << ranks << (ranks == 1 ? " process" : " MPI ranks") << ", "
-     << std::lround(seconds) << " s wall-clock.\n\n"
+     << counts[2] << " failed; " << ranks << (ranks == 1 ? " process" : " MPI ranks") << ", " << std::lround(seconds)
+     << " s wall-clock.\n\n"
      << "| job | status | rank | seconds | Gaussians | PSNR (dB) | SSIM | NCC | speckle | error |\n"
      << "|---|---|---|---|---|---|---|---|---|---|\n";
   for (const json& r : records)
@@ -696,8 +700,8 @@ bool WriteSummary(const std::string& folder, const std::string& manifest, const 
       std::snprintf(cell, sizeof(cell), format, s["mean"].get<double>(), s["sd"].get<double>());
       return std::string(cell);
     };
-    md << "| mean +- sd (" << values["seconds"].size() << " scored) | | | " << stat("seconds", "%.1f +- %.1f")
-       << " | " << stat("gaussians", "%.0f +- %.0f") << " | " << stat("psnr", "%.2f +- %.2f") << " | "
+    md << "| mean +- sd (" << values["seconds"].size() << " scored) | | | " << stat("seconds", "%.1f +- %.1f") << " | "
+       << stat("gaussians", "%.0f +- %.0f") << " | " << stat("psnr", "%.2f +- %.2f") << " | "
        << stat("ssim", "%.4f +- %.4f") << " | " << stat("ncc", "%.4f +- %.4f") << " | "
        << stat("speckle", "%.4f +- %.4f") << " | |\n";
   }
@@ -724,8 +728,9 @@ int RunBatch(const BatchOptions& o)
     {
       if (rank == 0)
       {
-        std::fprintf(stderr, "bigus: this MPI library does not allow threads (MPI_THREAD_FUNNELED), which rank 0 "
-                             "needs to train while it serves the queue\n");
+        std::fprintf(stderr,
+          "bigus: this MPI library does not allow threads (MPI_THREAD_FUNNELED), which rank 0 "
+          "needs to train while it serves the queue\n");
       }
       MPI_Finalize();
       return 1;
@@ -829,7 +834,10 @@ int RunBatch(const BatchOptions& o)
     pending.size(), jobs.size() - pending.size(), ranks, ranks == 1 ? "process" : "MPI ranks sharing a queue");
   std::fflush(console);
   std::atomic<std::size_t> next{ 0 };
-  auto take = [&]() { const std::size_t k = next++; return k < pending.size() ? pending[k] : -1; };
+  auto take = [&]() {
+    const std::size_t k = next++;
+    return k < pending.size() ? pending[k] : -1;
+  };
   std::mutex recording;
   auto record = [&](json r, int index) {
     {
@@ -892,14 +900,15 @@ Command AddBatchCommand(CLI::App& app)
   CLI::App* batch = app.add_subcommand("batch",
     "Train and evaluate the jobs of a manifest (under mpirun -n P: P ranks share a work queue); a rerun skips "
     "completed jobs");
-  batch->add_option("MANIFEST", options->Manifest,
+  batch
+    ->add_option("MANIFEST", options->Manifest,
       "JSON: {\"defaults\": {...}, \"jobs\": [{\"sweep\": FILE or [FILES], \"output\": FOLDER, \"name\": ..., "
       "and any bigus train option without its dashes: \"calibration\", \"holdout-every\", \"time-budget\", ...}]}; "
       "paths relative to the manifest's folder")
     ->required()
     ->check(CLI::ExistingFile);
-  batch->add_option("--summary", options->Summary,
-    "Folder for summary.json and summary.md (default: the manifest's folder)");
+  batch->add_option(
+    "--summary", options->Summary, "Folder for summary.json and summary.md (default: the manifest's folder)");
   return { batch, [options] { return RunBatch(*options); } };
 }
 

@@ -17,7 +17,8 @@ Command AddBenchmarkCommand(CLI::App& app, const std::string& sourceDirectory)
     "defaults against hand-tuned, block hold-outs; "
     "writes OUTPUT/BENCHMARKS.md and OUTPUT/benchmarks/ (about 3 hours on 2 cores)");
   benchmarkCommand->add_option("--output", benchmark.Output, "Folder for BENCHMARKS.md (default: docs)");
-  benchmarkCommand->add_option("--data", benchmark.SourceDirectory, "Project folder holding Examples/Data and Testing/Data")
+  benchmarkCommand
+    ->add_option("--data", benchmark.SourceDirectory, "Project folder holding Examples/Data and Testing/Data")
     ->check(CLI::ExistingDirectory);
   benchmarkCommand->add_flag("--quick", benchmark.Quick, "A few minutes: short training, small crops (smoke test)");
   benchmarkCommand
@@ -32,9 +33,9 @@ Command AddBenchmarkCommand(CLI::App& app, const std::string& sourceDirectory)
     ->capture_default_str()
     ->check(CLI::IsMember({ "all", "main", "defaults", "volume", "blocks", "ablations", "pareto", "sweeps" }));
   return { benchmarkCommand, [options] {
-    bigus::BenchmarkOptions& benchmark = *options;
-    return bigus::RunBenchmark(benchmark);
-  } };
+            bigus::BenchmarkOptions& benchmark = *options;
+            return bigus::RunBenchmark(benchmark);
+          } };
 }
 
 } // namespace bigus::cli

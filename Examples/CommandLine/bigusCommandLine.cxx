@@ -223,8 +223,8 @@ int WriteImage(vtkImageData* image, const std::string& path)
       for (int i = 0; i < dims[0]; ++i)
       {
         const double v = values->GetTuple1(vtkIdType(j) * dims[0] + i);
-        png.at<unsigned char>(j, i) =
-          static_cast<unsigned char>(std::lround(std::min(255.0, std::max(0.0, values->GetDataType() == VTK_FLOAT ? 255 * v : v))));
+        png.at<unsigned char>(j, i) = static_cast<unsigned char>(
+          std::lround(std::min(255.0, std::max(0.0, values->GetDataType() == VTK_FLOAT ? 255 * v : v))));
       }
     }
     return WritePng(png, path) ? 0 : Fail(path + ": cannot write the image");

@@ -160,9 +160,8 @@ int ScoreAtRefinedPoses(vtkPolyData* field, vtkImageData* truth, bigus::Training
   std::vector<std::array<double, 6>> corrections;
   const bigus::TrainerSettings settings;
   if (!bigus::FieldFromPolyData(field, gaussians, model, &message) ||
-    !bigus::RefinePosesWithFieldFrozen(gaussians, data, scored,
-      bigus::RenderOptionsFor(model, -1, settings.Cutoff), settings.Poses, settings.Loss, o.RefineSteps, o.Backend,
-      corrections, &message))
+    !bigus::RefinePosesWithFieldFrozen(gaussians, data, scored, bigus::RenderOptionsFor(model, -1, settings.Cutoff),
+      settings.Poses, settings.Loss, o.RefineSteps, o.Backend, corrections, &message))
   {
     return Fail("--refine-poses: " + message);
   }
@@ -178,8 +177,8 @@ int ScoreAtRefinedPoses(vtkPolyData* field, vtkImageData* truth, bigus::Training
     return Fail("rendering at the refined poses failed: " + message);
   }
   const auto* againPixels = static_cast<float*>(again->GetOutput()->GetScalarPointer());
-  const bigus::ImageMetrics refinedMean = bigus::MeanFrameMetrics(
-    data, scored, [&](std::size_t m, int) { return againPixels + pixels * m; });
+  const bigus::ImageMetrics refinedMean =
+    bigus::MeanFrameMetrics(data, scored, [&](std::size_t m, int) { return againPixels + pixels * m; });
   double angle = 0, length = 0;
   for (std::size_t n = 0; n < scored.size(); ++n)
   {
@@ -188,9 +187,9 @@ int ScoreAtRefinedPoses(vtkPolyData* field, vtkImageData* truth, bigus::Training
     const double t = std::sqrt(xi[3] * xi[3] + xi[4] * xi[4] + xi[5] * xi[5]);
     angle += a / scored.size();
     length += t / scored.size();
-    report["refined_poses"]["frames"].push_back({ { "frame", scored[n] },
-      { "rotation_degrees", { xi[0] * 180 / M_PI, xi[1] * 180 / M_PI, xi[2] * 180 / M_PI } },
-      { "translation_mm", { xi[3], xi[4], xi[5] } } });
+    report["refined_poses"]["frames"].push_back(
+      { { "frame", scored[n] }, { "rotation_degrees", { xi[0] * 180 / M_PI, xi[1] * 180 / M_PI, xi[2] * 180 / M_PI } },
+        { "translation_mm", { xi[3], xi[4], xi[5] } } });
   }
   report["refined_poses"]["steps"] = o.RefineSteps;
   report["refined_poses"]["mean"] = { { "psnr", refinedMean.PSNR }, { "ssim", refinedMean.SSIM },
@@ -237,7 +236,8 @@ vtkIdType RefinedPosesOf(vtkImageData* sweep, vtkDataArray* poses, double tolera
           double d2 = 0;
           for (int r = 0; r < 3; ++r)
           {
-            const double d = (a[4 * r] - b[4 * r]) * i + (a[4 * r + 1] - b[4 * r + 1]) * j + a[4 * r + 3] - b[4 * r + 3];
+            const double d =
+              (a[4 * r] - b[4 * r]) * i + (a[4 * r + 1] - b[4 * r + 1]) * j + a[4 * r + 3] - b[4 * r + 3];
             d2 += d * d;
           }
           close = close && d2 < tolerance * tolerance; // also false for a non-finite pose
@@ -276,8 +276,8 @@ int RunEvaluate(const EvaluateOptions& o)
       std::printf("poses          the sweep's own (--tracked-poses), not the field's RefinedPoses\n");
     }
     else if (const vtkIdType first = tracked && tracked->GetNumberOfTuples() == refined->GetNumberOfTuples()
-          ? RefinedPosesOf(truth, tracked, 1e-3)
-          : RefinedPosesOf(truth, refined, 5.0);
+               ? RefinedPosesOf(truth, tracked, 1e-3)
+               : RefinedPosesOf(truth, refined, 5.0);
              first >= 0)
     {
       atRefinedPoses = WithOwnFieldData(truth);
@@ -309,8 +309,8 @@ int RunEvaluate(const EvaluateOptions& o)
     }
   }
   std::vector<int> frames = ChooseFrames(dims[2], o.HoldOutEvery, o.HoldOutOffset, o.Frames);
-  frames.erase(std::remove_if(frames.begin(), frames.end(), [&](int k) { return !FrameIsValid(truth, k); }),
-    frames.end());
+  frames.erase(
+    std::remove_if(frames.begin(), frames.end(), [&](int k) { return !FrameIsValid(truth, k); }), frames.end());
   if (frames.empty())
   {
     return Fail("evaluate: no valid frame chosen");
@@ -412,9 +412,10 @@ int RunEvaluate(const EvaluateOptions& o)
     tilted[c] = (middle.u[c] + middle.n[c]) / std::sqrt(2.0);
   }
   const double* matrix = pose.data();
-  if (WriteSliceThrough(field, matrix, dims[0], dims[1], middle.n, middle.v, o.Backend,
-        o.Report + "/slice_orthogonal.png") != 0 ||
-    WriteSliceThrough(field, matrix, dims[0], dims[1], tilted, middle.v, o.Backend, o.Report + "/slice_oblique.png") != 0)
+  if (WriteSliceThrough(
+        field, matrix, dims[0], dims[1], middle.n, middle.v, o.Backend, o.Report + "/slice_orthogonal.png") != 0 ||
+    WriteSliceThrough(field, matrix, dims[0], dims[1], tilted, middle.v, o.Backend, o.Report + "/slice_oblique.png") !=
+      0)
   {
     return 1;
   }
@@ -501,7 +502,8 @@ Command AddEvaluateCommand(CLI::App& app)
   evaluateCommand->add_option("--holdout-every", evaluate.HoldOutEvery, "Evaluate frames with index % K == J");
   evaluateCommand->add_option("--holdout-offset", evaluate.HoldOutOffset, "J of --holdout-every");
   evaluateCommand->add_option("--frames", evaluate.Frames, "Evaluate these frames");
-  evaluateCommand->add_option("--mask", evaluate.Mask, "Fan mask .mha (W x H x 1, or W x H x N per frame; default: estimated)");
+  evaluateCommand->add_option(
+    "--mask", evaluate.Mask, "Fan mask .mha (W x H x 1, or W x H x N per frame; default: estimated)");
   evaluateCommand->add_option("--backend", evaluate.Backend, "Rendering backend: auto, cpu or cuda (as registered)");
   evaluateCommand->add_option("--report", evaluate.Report, "Folder for metrics.json and side-by-side PNGs")->required();
   evaluateCommand->add_flag("--refine-poses", evaluate.RefinePoses,
@@ -515,9 +517,9 @@ Command AddEvaluateCommand(CLI::App& app)
     ->check(CLI::PositiveNumber)
     ->capture_default_str();
   return { evaluateCommand, [options] {
-    EvaluateOptions& evaluate = *options;
-    return RunEvaluate(evaluate);
-  } };
+            EvaluateOptions& evaluate = *options;
+            return RunEvaluate(evaluate);
+          } };
 }
 
 } // namespace bigus::cli

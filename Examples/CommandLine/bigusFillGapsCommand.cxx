@@ -43,8 +43,9 @@ int RunFillGaps(const FillGapsOptions& o)
   }
   if (geometry.Poses.empty())
   {
-    return Fail(o.Field + ": no field data TrainingPoses (a field trained before they were stored): the gaps "
-                          "between training frames are unknown");
+    return Fail(o.Field +
+      ": no field data TrainingPoses (a field trained before they were stored): the gaps "
+      "between training frames are unknown");
   }
   bigus::TrainingData frames;
   frames.Width = geometry.Width;
@@ -66,7 +67,8 @@ int RunFillGaps(const FillGapsOptions& o)
   {
     return 1;
   }
-  std::printf("%s: %lld Gaussians, %s\n", o.Output.c_str(), static_cast<long long>(before + report.Added), text.c_str());
+  std::printf(
+    "%s: %lld Gaussians, %s\n", o.Output.c_str(), static_cast<long long>(before + report.Added), text.c_str());
   return 0;
 }
 }
@@ -105,13 +107,13 @@ Command AddFillGapsCommand(CLI::App& app)
     ->capture_default_str()
     ->check(CLI::NonNegativeNumber);
   return { fillGapsCommand, [options] {
-    FillGapsOptions& fillGaps = *options;
-    if (fillGaps.Output == fillGaps.Field)
-    {
-      return Fail(fillGaps.Output + ": the output would overwrite the input field");
-    }
-    return RunFillGaps(fillGaps);
-  } };
+            FillGapsOptions& fillGaps = *options;
+            if (fillGaps.Output == fillGaps.Field)
+            {
+              return Fail(fillGaps.Output + ": the output would overwrite the input field");
+            }
+            return RunFillGaps(fillGaps);
+          } };
 }
 
 } // namespace bigus::cli

@@ -125,10 +125,10 @@ int RunInfo(const InfoOptions& options)
   std::printf("pose chain     ImageToReference = %s\n", reader->GetTransformChainInUse());
   if (validCount > 0)
   {
-    std::printf("pixel spacing  %.4f to %.4f mm (columns), %.4f to %.4f mm (rows); max shear %.2f deg\n",
-      spacingMin[0], spacingMax[0], spacingMin[1], spacingMax[1], shearMax);
-    std::printf("bounds (mm)    x %.2f .. %.2f, y %.2f .. %.2f, z %.2f .. %.2f\n", lo[0], hi[0], lo[1], hi[1],
-      lo[2], hi[2]);
+    std::printf("pixel spacing  %.4f to %.4f mm (columns), %.4f to %.4f mm (rows); max shear %.2f deg\n", spacingMin[0],
+      spacingMax[0], spacingMin[1], spacingMax[1], shearMax);
+    std::printf(
+      "bounds (mm)    x %.2f .. %.2f, y %.2f .. %.2f, z %.2f .. %.2f\n", lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]);
     std::printf("probe path     %.1f mm (distance between consecutive frame origins, summed)\n", path);
   }
   if (stamps && stamps->GetNumberOfTuples() == dims[2])
@@ -187,15 +187,15 @@ Command AddInfoCommand(CLI::App& app)
   AddSweepOptions(infoCommand, info.Sweep, "sweep");
   infoCommand->add_option("--frames", info.Sweep.FrameRange, "First and last frame to read (inclusive)")->expected(2);
   return { infoCommand, [options] {
-    InfoOptions& info = *options;
-    if (info.Sweep.Sweep.empty() && !info.Backends)
-    {
-      std::fprintf(stderr, "bigus info: give a SWEEP, or --backends\n");
-      return 2;
-    }
-    const int backends = info.Backends ? PrintBackends() : 0;
-    return info.Sweep.Sweep.empty() ? backends : RunInfo(info);
-  } };
+            InfoOptions& info = *options;
+            if (info.Sweep.Sweep.empty() && !info.Backends)
+            {
+              std::fprintf(stderr, "bigus info: give a SWEEP, or --backends\n");
+              return 2;
+            }
+            const int backends = info.Backends ? PrintBackends() : 0;
+            return info.Sweep.Sweep.empty() ? backends : RunInfo(info);
+          } };
 }
 
 } // namespace bigus::cli

@@ -77,23 +77,23 @@ Command AddMergeCommand(CLI::App& app)
     ->capture_default_str()
     ->check(CLI::Range(1e-12, 1.0));
   mergeCommand
-    ->add_option("--neighbours", merge.Neighbours,
-      "Candidates of each Gaussian: the Gaussians with the nearest centres")
+    ->add_option(
+      "--neighbours", merge.Neighbours, "Candidates of each Gaussian: the Gaussians with the nearest centres")
     ->capture_default_str()
     ->check(CLI::Range(1, 64));
   mergeCommand
-    ->add_option("--passes", merge.Passes,
-      "Most passes over the field (each merges a Gaussian once); errors add up over passes")
+    ->add_option(
+      "--passes", merge.Passes, "Most passes over the field (each merges a Gaussian once); errors add up over passes")
     ->capture_default_str()
     ->check(CLI::Range(1, 100));
   return { mergeCommand, [options] {
-    MergeOptions& merge = *options;
-    if (merge.Output == merge.Field)
-    {
-      return Fail(merge.Output + ": the output would overwrite the input field");
-    }
-    return RunMerge(merge);
-  } };
+            MergeOptions& merge = *options;
+            if (merge.Output == merge.Field)
+            {
+              return Fail(merge.Output + ": the output would overwrite the input field");
+            }
+            return RunMerge(merge);
+          } };
 }
 
 } // namespace bigus::cli

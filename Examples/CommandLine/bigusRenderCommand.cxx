@@ -158,9 +158,9 @@ Command AddRenderCommand(CLI::App& app)
   renderCommand->add_option("--backend", render.Backend, "Rendering backend: auto, cpu or cuda (as registered)");
   renderCommand->add_flag("--volume", render.Volume, "Render a stack of parallel slices covering the field");
   return { renderCommand, [options] {
-    RenderOptionsCli& render = *options;
-    return RunRender(render);
-  } };
+            RenderOptionsCli& render = *options;
+            return RunRender(render);
+          } };
 }
 
 } // namespace bigus::cli

@@ -153,16 +153,17 @@ Command AddSweepCommand(CLI::App& app)
     ->check(CLI::IsMember({ "parallel", "oblique", "orthogonal" }))
     ->capture_default_str();
   sweepCommand->add_option("--frames", sweep.Frames, "Number of slices (the paper: 160 and 80)")->capture_default_str();
-  sweepCommand->add_option("--axis", sweep.Axis, "Axis the parallel slices step along (0, 1, 2)")->capture_default_str();
+  sweepCommand->add_option("--axis", sweep.Axis, "Axis the parallel slices step along (0, 1, 2)")
+    ->capture_default_str();
   sweepCommand->add_option("--offset", sweep.Offset, "Shift in slice spacings, [0, 1): 0.5 = in-between slices")
     ->capture_default_str();
   sweepCommand->add_option("--tilt", sweep.Tilt, "Oblique: largest tilt, degrees")->capture_default_str();
   sweepCommand->add_option("--seed", sweep.Seed, "Oblique: random seed")->capture_default_str();
   sweepCommand->add_option("--spacing", sweep.Spacing, "Pixel spacing, mm (0: the volume's)")->capture_default_str();
   return { sweepCommand, [options] {
-    SweepFromVolumeOptions& sweep = *options;
-    return RunSweepFromVolume(sweep);
-  } };
+            SweepFromVolumeOptions& sweep = *options;
+            return RunSweepFromVolume(sweep);
+          } };
 }
 
 } // namespace bigus::cli

@@ -38,7 +38,7 @@ namespace
 struct TrainOptions
 {
   std::vector<std::string> Sweeps, Calibrations, Masks; ///< one calibration / mask for all, or one per sweep
-  std::string Chain;                                     ///< --transform, for every sweep
+  std::string Chain;                                    ///< --transform, for every sweep
   std::string Output, Checkpoint, Resume, Backend = "auto";
   int HoldOutEvery = 0, HoldOutOffset = 0, HoldOutSweep = -1, Threads = 0;
   bool Distributed = false;
@@ -114,12 +114,14 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
     vtkSMPTools::Initialize(threads);
   }
   const std::size_t count = o.Sweeps.size();
-  for (const auto& [files, what] : { std::make_pair(&o.Calibrations, "--calibration"), std::make_pair(&o.Masks, "--mask") })
+  for (const auto& [files, what] :
+    { std::make_pair(&o.Calibrations, "--calibration"), std::make_pair(&o.Masks, "--mask") })
   {
     if (files->size() > 1 && files->size() != count)
     {
-      std::fprintf(stderr, "bigus: %zu sweeps and %zu %s files: give one for every sweep, in the sweeps' order, or one for all\n",
-        count, files->size(), what);
+      std::fprintf(stderr,
+        "bigus: %zu sweeps and %zu %s files: give one for every sweep, in the sweeps' order, or one for all\n", count,
+        files->size(), what);
       return 2;
     }
   }
@@ -127,8 +129,8 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
   if (!o.RefinedPoses.empty() && poses.RefinePoses == PoseRefinement::Off && !poses.RefineTimeOffset &&
     !poses.RefineImageToProbe)
   {
-    std::fprintf(stderr,
-      "bigus: --refined-poses with --no-refine-poses needs --refine-time-offset or --refine-image-to-probe\n");
+    std::fprintf(
+      stderr, "bigus: --refined-poses with --no-refine-poses needs --refine-time-offset or --refine-image-to-probe\n");
     return 2;
   }
   if (!o.RefinedPoses.empty() && o.RefinedPoses.size() != count)
@@ -280,7 +282,8 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
     return 1;
   }
   vtkDataArray* seeds = trainer->GetOutput()->GetFieldData()->GetArray("InitialGaussians");
-  std::printf("field          %s: %lld Gaussians (from %lld seeds) after %d iterations in %.1f s (stop: %s; growth: %s)\n",
+  std::printf(
+    "field          %s: %lld Gaussians (from %lld seeds) after %d iterations in %.1f s (stop: %s; growth: %s)\n",
     o.Output.c_str(), static_cast<long long>(trainer->GetNumberOfGaussians()),
     seeds ? static_cast<long long>(seeds->GetTuple1(0)) : 0LL, trainer->GetCompletedIterations(),
     trainer->GetTrainingSeconds(), trainer->GetStopReason(), trainer->GetGrowthStopReason());
@@ -345,14 +348,16 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
     }
     if (u[1] == 0)
     {
-      std::printf("               frames not trained keep their tracked poses: no smoothing of the corrections predicts "
-                  "a training frame's better than none (leave-one-out error %.3f mm at the corners)\n",
+      std::printf(
+        "               frames not trained keep their tracked poses: no smoothing of the corrections predicts "
+        "a training frame's better than none (leave-one-out error %.3f mm at the corners)\n",
         u[2]);
     }
     else if (u[0] > 0)
     {
-      std::printf("               %.0f frames not trained take their sweep's corrections smoothed over %s (leave-one-out "
-                  "error %.3f mm at the corners against %.3f for none)\n",
+      std::printf(
+        "               %.0f frames not trained take their sweep's corrections smoothed over %s (leave-one-out "
+        "error %.3f mm at the corners against %.3f for none)\n",
         u[0], smoothing, u[3], u[2]);
     }
   }
@@ -398,8 +403,8 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
         std::remove(temporaryPoses.c_str());
         return Fail(o.RefinedPoses[k] + ": cannot write the refined sequence");
       }
-      std::printf("refined poses  %s: %s with its frames' ImageToReference as refined\n",
-        o.RefinedPoses[k].c_str(), o.Sweeps[k].c_str());
+      std::printf("refined poses  %s: %s with its frames' ImageToReference as refined\n", o.RefinedPoses[k].c_str(),
+        o.Sweeps[k].c_str());
     }
   }
   return 0;
@@ -417,7 +422,8 @@ Command AddTrainCommand(CLI::App& app)
     ->required()
     ->check(CLI::ExistingFile);
   trainCommand->add_option("-o,--output", train.Output, "Field to write (.vtp)")->required();
-  trainCommand->add_option("--calibration", train.Calibrations,
+  trainCommand
+    ->add_option("--calibration", train.Calibrations,
       "PLUS device-set configuration XML (ImageToProbe): one for every sweep, or one per sweep in their order "
       "(repeat the option)")
     ->allow_extra_args(false)
@@ -433,70 +439,85 @@ Command AddTrainCommand(CLI::App& app)
   trainCommand->add_option("--holdout-every", train.HoldOutEvery,
     "Hold out frames with index % K == J, the index within each sweep (0: none)");
   trainCommand->add_option("--holdout-offset", train.HoldOutOffset, "J of --holdout-every");
-  trainCommand->add_option("--holdout-sweep", train.HoldOutSweep,
-    "Hold out every frame of sweep K (0 = the first SWEEP): leave-one-sweep-out")
+  trainCommand
+    ->add_option("--holdout-sweep", train.HoldOutSweep,
+      "Hold out every frame of sweep K (0 = the first SWEEP): leave-one-sweep-out")
     ->check(CLI::NonNegativeNumber);
-  trainCommand->add_option("--frames", train.Frames,
-    "Train on these frames only (indices, counting the sweeps' frames in turn); the others are held out")
+  trainCommand
+    ->add_option("--frames", train.Frames,
+      "Train on these frames only (indices, counting the sweeps' frames in turn); the others are held out")
     ->excludes("--holdout-every");
   TrainerSettings& settings = train.Settings;
-  trainCommand->add_option("--time-budget", settings.TimeBudget,
-    "Wall-clock budget for training, seconds (0: none); alone, it is the whole schedule (learning-rate decay, "
-    "densification window) and training runs until it")
+  trainCommand
+    ->add_option("--time-budget", settings.TimeBudget,
+      "Wall-clock budget for training, seconds (0: none); alone, it is the whole schedule (learning-rate decay, "
+      "densification window) and training runs until it")
     ->check(CLI::NonNegativeNumber);
-  auto* iterations = trainCommand->add_option("--iterations", settings.Iterations,
-    "Optimisation steps (with --time-budget: whichever ends first)")
-    ->capture_default_str()
-    ->check(CLI::NonNegativeNumber);
-  trainCommand->add_option("--max-gaussians", settings.MaximumGaussians, "Hard maximum of Gaussians (gap filling's copies included)")
+  auto* iterations =
+    trainCommand
+      ->add_option("--iterations", settings.Iterations, "Optimisation steps (with --time-budget: whichever ends first)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
+  trainCommand
+    ->add_option(
+      "--max-gaussians", settings.MaximumGaussians, "Hard maximum of Gaussians (gap filling's copies included)")
     ->capture_default_str()
     ->check(CLI::PositiveNumber);
-  trainCommand->add_option("--initial-gaussians", settings.Seeding.InitialGaussians,
-    "Seeds (0: chosen from the training frames' fan pixels; the InitialGaussians setting line says how)")
+  trainCommand
+    ->add_option("--initial-gaussians", settings.Seeding.InitialGaussians,
+      "Seeds (0: chosen from the training frames' fan pixels; the InitialGaussians setting line says how)")
     ->capture_default_str()
     ->check(CLI::NonNegativeNumber);
-  trainCommand->add_option("--growth-margin", settings.Densification.GrowthMargin,
-    "Growth stops when the validation loss improves by less than this (relative) on the best so far ...")
+  trainCommand
+    ->add_option("--growth-margin", settings.Densification.GrowthMargin,
+      "Growth stops when the validation loss improves by less than this (relative) on the best so far ...")
     ->capture_default_str()
     ->check(CLI::Range(0.0, 1.0));
-  trainCommand->add_option("--growth-patience", settings.Densification.GrowthPatience,
-    "... over this many densification intervals in a row")
+  trainCommand
+    ->add_option(
+      "--growth-patience", settings.Densification.GrowthPatience, "... over this many densification intervals in a row")
     ->capture_default_str()
     ->check(CLI::PositiveNumber);
-  trainCommand->add_option("--residual-seeds", settings.Densification.ResidualSeedShare,
-    "New Gaussians where the residual is largest at each densification, as a share of those split or cloned, "
-    "their reflectivity the residual (Image-GS; 0: off)")
+  trainCommand
+    ->add_option("--residual-seeds", settings.Densification.ResidualSeedShare,
+      "New Gaussians where the residual is largest at each densification, as a share of those split or cloned, "
+      "their reflectivity the residual (Image-GS; 0: off)")
     ->capture_default_str()
     ->check(CLI::Range(0.0, 100.0));
   trainCommand->add_flag("--reflectivity-solve", settings.ReflectivitySolve,
     "Variable projection: solve the reflectivities by least squares after seeding and after every densification, "
     "Adam between the solves (default: Adam alone)");
-  trainCommand->add_option("--solve-iterations", settings.Solve.MaximumIterations,
-    "CGLS iterations of each reflectivity solve (each a forward and a backward pass over every training frame)")
+  trainCommand
+    ->add_option("--solve-iterations", settings.Solve.MaximumIterations,
+      "CGLS iterations of each reflectivity solve (each a forward and a backward pass over every training frame)")
     ->capture_default_str()
     ->check(CLI::PositiveNumber);
-  trainCommand->add_option("--solve-l1", settings.Solve.L1,
-    "An L1 term in each reflectivity solve (the pixel-grid fit's, variable projection's), as a share of the weight "
-    "that sets every reflectivity to 0 (FISTA; the Gaussians it zeroes are removed and the others refitted by "
-    "least squares; default 0: none, CGLS)")
+  trainCommand
+    ->add_option("--solve-l1", settings.Solve.L1,
+      "An L1 term in each reflectivity solve (the pixel-grid fit's, variable projection's), as a share of the weight "
+      "that sets every reflectivity to 0 (FISTA; the Gaussians it zeroes are removed and the others refitted by "
+      "least squares; default 0: none, CGLS)")
     ->capture_default_str()
     ->check(CLI::Range(0.0, 1.0));
-  trainCommand->add_flag_callback("--dense-adam", [&settings] { settings.SparseAdam = false; },
+  trainCommand->add_flag_callback(
+    "--dense-adam", [&settings] { settings.SparseAdam = false; },
     "Adam moves every Gaussian every step on its momentum (the ablation; default: only the Gaussians a step "
     "touched, the others keep their parameters and moments)");
   trainCommand->add_flag("--dense-start", settings.Seeding.DenseInitialisation,
     "Start from Gaussians on the training frames' pixel grid (--initial-gaussians of them, default half of "
     "--max-gaussians) instead of Harris seeds");
-  trainCommand->add_flag_callback("--no-pixel-grid-fit", [&settings] { settings.Seeding.PixelGridFit = false; },
+  trainCommand->add_flag_callback(
+    "--no-pixel-grid-fit", [&settings] { settings.Seeding.PixelGridFit = false; },
     "Train from Harris seeds even when the training frames hold at most twice --max-gaussians fan pixels (default: "
     "there, a pixel grid of at most --max-gaussians, its reflectivities solved, and no geometry steps)");
-  CLI::Option* refine = trainCommand->add_flag_callback("--refine-poses",
-    [&settings] { settings.Poses.RefinePoses = PoseRefinement::On; },
+  CLI::Option* refine = trainCommand->add_flag_callback(
+    "--refine-poses", [&settings] { settings.Poses.RefinePoses = PoseRefinement::On; },
     "Refine the tracked pose of every sweep's training frames with the field (a rigid correction about its centre "
     "pixel, a prior towards the tracked pose; default: the sweeps whose neighbouring training frames' speckle "
     "correlates, the others trusted, as the RefinePoses setting line says)");
   trainCommand
-    ->add_flag_callback("--no-refine-poses", [&settings] { settings.Poses.RefinePoses = PoseRefinement::Off; },
+    ->add_flag_callback(
+      "--no-refine-poses", [&settings] { settings.Poses.RefinePoses = PoseRefinement::Off; },
       "Trust every tracked pose (see --refine-poses)")
     ->excludes(refine);
   trainCommand->add_flag("--refine-time-offset", settings.Poses.RefineTimeOffset,
@@ -510,17 +531,20 @@ Command AddTrainCommand(CLI::App& app)
       "frames take the shared corrections and the smooth part of their sweep's); one per sweep, in their order (repeat "
       "the option)")
     ->allow_extra_args(false);
-  trainCommand->add_option("--pose-smoothness", settings.Poses.Smoothness,
-    "Where poses are refined: weight of the prior that keeps the corrections smooth along the sweep (0: none)")
+  trainCommand
+    ->add_option("--pose-smoothness", settings.Poses.Smoothness,
+      "Where poses are refined: weight of the prior that keeps the corrections smooth along the sweep (0: none)")
     ->excludes("--no-refine-poses")
     ->check(CLI::NonNegativeNumber);
-  trainCommand->add_option("--pose-refinement-start", settings.Poses.Start,
-    "Where poses are refined: the share of the schedule (0 to 1) trained on the tracked poses before the corrections "
-    "move; -1: chosen from the tracked path's jitter (bigus::ChoosePoseRefinementStart; its setting line says why)")
+  trainCommand
+    ->add_option("--pose-refinement-start", settings.Poses.Start,
+      "Where poses are refined: the share of the schedule (0 to 1) trained on the tracked poses before the corrections "
+      "move; -1: chosen from the tracked path's jitter (bigus::ChoosePoseRefinementStart; its setting line says why)")
     ->capture_default_str()
     ->excludes("--no-refine-poses")
     ->check(CLI::Range(-1.0, 1.0));
-  trainCommand->add_flag_callback("--no-fill-gaps", [&settings] { settings.FillGaps = false; },
+  trainCommand->add_flag_callback(
+    "--no-fill-gaps", [&settings] { settings.FillGaps = false; },
     "Leave gaps between training frames wider than the beam empty (default: bridged, as bigus fill-gaps does)");
   trainCommand
     ->add_option("--merge-tolerance", settings.Merge.Tolerance,
@@ -528,26 +552,32 @@ Command AddTrainCommand(CLI::App& app)
       "below this (as bigus merge does); 0: off")
     ->capture_default_str()
     ->check(CLI::Range(0.0, 1.0));
-  trainCommand->add_option("--elevation-sigma", settings.ElevationSigma, "Elevation beam sigma, mm (FWHM / 2.355); 0: chosen from the sweep (bigus::ChooseElevationSigma; its setting line "
-    "says why)")
+  trainCommand
+    ->add_option("--elevation-sigma", settings.ElevationSigma,
+      "Elevation beam sigma, mm (FWHM / 2.355); 0: chosen from the sweep (bigus::ChooseElevationSigma; its setting "
+      "line "
+      "says why)")
     ->capture_default_str()
     ->check(CLI::NonNegativeNumber);
   trainCommand->add_option("--backend", train.Backend, "Training backend: auto, cpu or cuda (as registered)")
     ->capture_default_str();
   trainCommand->add_option("--threads", train.Threads,
     "Threads (0: all cores; with --distributed, the cores divided among the ranks on each machine)");
-  trainCommand->add_option("--frames-per-step", settings.FramesPerStep,
-    "Training frames rendered per step (per rank with --distributed); their losses are averaged")
+  trainCommand
+    ->add_option("--frames-per-step", settings.FramesPerStep,
+      "Training frames rendered per step (per rank with --distributed); their losses are averaged")
     ->capture_default_str()
     ->check(CLI::Range(1, 4096));
-  trainCommand->add_option("--coarse-fraction", settings.CoarseFraction,
-    "The resolution schedule: the first fraction (0 to 1) of the schedule steps on every second pixel and row of "
-    "its frames; 0: off")
+  trainCommand
+    ->add_option("--coarse-fraction", settings.CoarseFraction,
+      "The resolution schedule: the first fraction (0 to 1) of the schedule steps on every second pixel and row of "
+      "its frames; 0: off")
     ->capture_default_str()
     ->check(CLI::Range(0.0, 1.0));
-  trainCommand->add_flag("--coarse-low-pass", settings.CoarseLowPass,
-    "The coarse steps' frames as 2 x 2 averages, each Gaussian rendered through the pixel's low-pass, instead of "
-    "point samples")
+  trainCommand
+    ->add_flag("--coarse-low-pass", settings.CoarseLowPass,
+      "The coarse steps' frames as 2 x 2 averages, each Gaussian rendered through the pixel's low-pass, instead of "
+      "point samples")
     ->capture_default_str();
   trainCommand->add_flag("--distributed", train.Distributed,
     "Under mpirun -n P: data-parallel training, each rank renders its share of every step's frames and the "
@@ -555,18 +585,20 @@ Command AddTrainCommand(CLI::App& app)
     "checkpoints. Resume with the same P");
   trainCommand->add_option("--seed", settings.Seed, "Random seed")->capture_default_str();
   trainCommand->add_option("--checkpoint", train.Checkpoint, "Checkpoint file, written every 200 steps");
-  trainCommand->add_option("--resume", train.Resume, "Continue from this checkpoint (same settings; the seconds trained before it count towards --time-budget)")
+  trainCommand
+    ->add_option("--resume", train.Resume,
+      "Continue from this checkpoint (same settings; the seconds trained before it count towards --time-budget)")
     ->check(CLI::ExistingFile);
-  trainCommand->add_option("--evaluate-every", train.EvaluationInterval,
-    "Record the held-out PSNR every S seconds (field data HeldOutPSNR)");
+  trainCommand->add_option(
+    "--evaluate-every", train.EvaluationInterval, "Record the held-out PSNR every S seconds (field data HeldOutPSNR)");
   return { trainCommand, [options, iterations] {
-    TrainOptions& train = *options;
-    if (iterations->count() == 0 && train.Settings.TimeBudget > 0)
-    {
-      train.Settings.Iterations = 0; // the budget alone is the schedule
-    }
-    return RunTrain(train);
-  } };
+            TrainOptions& train = *options;
+            if (iterations->count() == 0 && train.Settings.TimeBudget > 0)
+            {
+              train.Settings.Iterations = 0; // the budget alone is the schedule
+            }
+            return RunTrain(train);
+          } };
 }
 
 } // namespace bigus::cli

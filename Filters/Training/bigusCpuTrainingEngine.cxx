@@ -24,8 +24,7 @@ class CpuTrainingEngine : public TrainingEngine
 public:
   explicit CpuTrainingEngine(std::unique_ptr<Renderer> renderer)
     : Backend(std::move(renderer))
-  {
-  }
+  {}
 
   const char* GetName() const override { return this->Backend->GetName(); }
 
@@ -84,8 +83,8 @@ public:
     return true;
   }
 
-  bool ApplyBasis(const float* r, const int* frames, int count, const RenderOptions& options, float* S,
-    std::string* error) override
+  bool ApplyBasis(
+    const float* r, const int* frames, int count, const RenderOptions& options, float* S, std::string* error) override
   {
     FieldView view = this->State.Field.View();
     view.Reflectivities = r;
@@ -121,8 +120,8 @@ public:
       grads.Reflectivities = this->Gradients.data();
       const SliceGeometry slice = this->Data->Slice(frames[k]);
       // With the gradient taken with respect to S the forward S is not read; y stands in for it.
-      if (!this->Backend->Backward(this->State.Field.View(), &slice, 1, linear, y + pixels * k, y + pixels * k, true,
-            grads, nullptr, error))
+      if (!this->Backend->Backward(
+            this->State.Field.View(), &slice, 1, linear, y + pixels * k, y + pixels * k, true, grads, nullptr, error))
       {
         ok = TrainingFrameError(frames[k], error);
         break;
@@ -225,8 +224,8 @@ StepStatus CpuTrainingEngine::Step(const StepRequest& request, double* loss, std
     {
       continue;
     }
-    if (!this->Backend->Forward(this->State.Field.View(), &slice, 1, request.Options, this->S.data(), this->I.data(),
-          nullptr, error))
+    if (!this->Backend->Forward(
+          this->State.Field.View(), &slice, 1, request.Options, this->S.data(), this->I.data(), nullptr, error))
     {
       TrainingFrameError(f, error);
       return this->Reduction ? this->Reduce(request, total, false, error) : StepStatus::Failed;

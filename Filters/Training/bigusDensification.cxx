@@ -124,8 +124,8 @@ DensificationResult DensifyAndPrune(OptimizerState& G, bool grow, double percent
   return result;
 }
 
-std::int64_t FinalPrune(OptimizerState& G, const TrainingData& data, const RenderOptions& o, double gamma,
-  double tolerance)
+std::int64_t FinalPrune(
+  OptimizerState& G, const TrainingData& data, const RenderOptions& o, double gamma, double tolerance)
 {
   // A Gaussian changes a pixel's scattering field by at most |r| amp, hence its intensity by at most
   // gamma |r| amp (dI/dS <= gamma): remove it when that stays below the tolerance on every training frame.

@@ -93,8 +93,8 @@ BIGUSTRAINING_EXPORT DensificationResult DensifyAndPrune(OptimizerState& G, bool
  * peak, bigusGaussianMath.h SetupFootprint with @p options' beam and cutoff) and I by at most gamma |r|
  * amp (dI/dS <= @p gamma). Returns how many were removed.
  */
-BIGUSTRAINING_EXPORT std::int64_t FinalPrune(OptimizerState& G, const TrainingData& data,
-  const RenderOptions& options, double gamma, double tolerance);
+BIGUSTRAINING_EXPORT std::int64_t FinalPrune(
+  OptimizerState& G, const TrainingData& data, const RenderOptions& options, double gamma, double tolerance);
 
 } // namespace bigus
 

@@ -415,8 +415,8 @@ PoseRefinementChoice ChoosePoseRefinement(const std::vector<SweepDecorrelation>&
     if (measured)
     {
       std::snprintf(text, sizeof(text),
-        "%s %s: speckle correlation %.2f at its training frames' spacing %.3g mm %s %.2g",
-        name.c_str(), refined ? "refined" : "trusted", rho, m.NeighbourSpacing, refined ? ">=" : "<",
+        "%s %s: speckle correlation %.2f at its training frames' spacing %.3g mm %s %.2g", name.c_str(),
+        refined ? "refined" : "trusted", rho, m.NeighbourSpacing, refined ? ">=" : "<",
         PoseRefinementMinimumCorrelation);
     }
     else

@@ -46,12 +46,12 @@ struct BIGUSTRAINING_EXPORT ElevationDecorrelation
 /// Settings of the measurement (defaults are the ones ChooseElevationSigma uses).
 struct ElevationDecorrelationSettings
 {
-  int MaximumPairGap = 6;          ///< a frame is paired with the next this many training frames
-  double HighPassMm = 1.0;         ///< sigma of the Gaussian mean removed from each frame, mm
-  long PixelsPerFrame = 20000;     ///< fan pixels sampled per frame (evenly strided)
+  int MaximumPairGap = 6;      ///< a frame is paired with the next this many training frames
+  double HighPassMm = 1.0;     ///< sigma of the Gaussian mean removed from each frame, mm
+  long PixelsPerFrame = 20000; ///< fan pixels sampled per frame (evenly strided)
   double BinWidthMm = 0.1;
   double MaximumDistanceMm = 4.0;
-  int Sweep = -1;                  ///< only the training frames of this sweep (TrainingData::Sweeps); -1: all
+  int Sweep = -1; ///< only the training frames of this sweep (TrainingData::Sweeps); -1: all
 };
 
 /**
@@ -65,9 +65,9 @@ BIGUSTRAINING_EXPORT bool MeasureElevationDecorrelation(const TrainingData& data
 /// One sweep's training frames measured alone (MeasureElevationDecorrelation with the default settings).
 struct BIGUSTRAINING_EXPORT SweepDecorrelation
 {
-  bool Measured = false;            ///< whether the measurement succeeded
+  bool Measured = false; ///< whether the measurement succeeded
   ElevationDecorrelation Measurement;
-  std::string Error;                ///< why not, where it did not
+  std::string Error; ///< why not, where it did not
 };
 
 /**
@@ -79,8 +79,8 @@ BIGUSTRAINING_EXPORT std::vector<SweepDecorrelation> MeasureSweeps(const Trainin
 /// The elevation sigma a trainer uses when none is given, and why.
 struct BIGUSTRAINING_EXPORT ElevationSigmaChoice
 {
-  double Sigma = 0.5;      ///< mm
-  std::string Reason;      ///< one line: the rule and the measured values it used
+  double Sigma = 0.5; ///< mm
+  std::string Reason; ///< one line: the rule and the measured values it used
   ElevationDecorrelation Measurement;
 };
 
@@ -126,7 +126,7 @@ constexpr double PoseRefinementMinimumCorrelation = 0.3;
 /// Which sweeps' training frames a trainer refines the poses of (TrainerSettings::PoseRefinement::Auto), and why.
 struct BIGUSTRAINING_EXPORT PoseRefinementChoice
 {
-  std::vector<char> Sweeps; ///< [sweeps] 1 where the sweep's training frames are refined
+  std::vector<char> Sweeps;        ///< [sweeps] 1 where the sweep's training frames are refined
   std::vector<double> Correlation; ///< [sweeps] CorrelationAtNeighbourSpacing; -1 where it could not be measured
   std::vector<double> Spacing;     ///< [sweeps] NeighbourSpacing, mm; 0 where it could not be measured
   std::string Reason;              ///< one line: the rule and the measured values, sweep by sweep

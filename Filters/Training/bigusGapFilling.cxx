@@ -114,7 +114,8 @@ GapFillingReport FillElevationGaps(
   {
     const double sweepTypical = spacing[k] >= 0 ? typical.at(data.SweepOf(frames[k])) : 0.0;
     if (sweepTypical > 0 && spacing[k] > settings.MinimumGapSpacings * sweepTypical &&
-      spacing[k] > 2 * std::max(LatticeSpacing, settings.ClearanceSigmas) * elevationSigma && spacing[k] <= settings.MaximumGapMm)
+      spacing[k] > 2 * std::max(LatticeSpacing, settings.ClearanceSigmas) * elevationSigma &&
+      spacing[k] <= settings.MaximumGapMm)
     {
       gaps.push_back(k);
     }

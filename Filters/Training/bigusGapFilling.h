@@ -72,9 +72,9 @@ struct GapFillingReport
   int Gaps = 0;              ///< gaps bridged
   double WidestGap = 0;      ///< mm, the widest of them (0 when none)
   std::int64_t Added = 0;    ///< Gaussians added
-  int Thinned = 0;          ///< gaps bridged by only the strongest Gaussians: all copies exceed MaximumGaussians
-  std::int64_t LeftOut = 0; ///< Gaussians of the thinned gaps' frames whose copies were left out
-  int Skipped = 0;          ///< gaps left empty: no room at all under MaximumGaussians
+  int Thinned = 0;           ///< gaps bridged by only the strongest Gaussians: all copies exceed MaximumGaussians
+  std::int64_t LeftOut = 0;  ///< Gaussians of the thinned gaps' frames whose copies were left out
+  int Skipped = 0;           ///< gaps left empty: no room at all under MaximumGaussians
 };
 
 /**

@@ -196,9 +196,8 @@ GaussianMergeReport MergeGaussians(GaussianField& field, const GaussianMergeSett
         order.push_back(i);
       }
     }
-    std::sort(order.begin(), order.end(), [&](std::int64_t a, std::int64_t b) {
-      return std::tie(best[a].Error, a) < std::tie(best[b].Error, b);
-    });
+    std::sort(order.begin(), order.end(),
+      [&](std::int64_t a, std::int64_t b) { return std::tie(best[a].Error, a) < std::tie(best[b].Error, b); });
     std::vector<unsigned char> used(n, 0), keep(n, 1);
     std::int64_t merged = 0;
     for (std::int64_t i : order)

@@ -49,15 +49,15 @@ struct GaussianMergeSettings
 {
   /// The largest relative error (GaussianPairMerge::Error) of a merge; 0 merges nothing.
   double Tolerance = 0;
-  int Neighbours = 8;     ///< candidates of each Gaussian: the Gaussians with the nearest means
-  int MaximumPasses = 4;  ///< passes over the field; each merges disjoint pairs, so a Gaussian merges once a pass
+  int Neighbours = 8;    ///< candidates of each Gaussian: the Gaussians with the nearest means
+  int MaximumPasses = 4; ///< passes over the field; each merges disjoint pairs, so a Gaussian merges once a pass
 };
 
 /// What MergeGaussians did.
 struct GaussianMergeReport
 {
-  std::int64_t Before = 0;  ///< Gaussians before
-  std::int64_t Merged = 0;  ///< pairs merged (the field lost as many Gaussians)
+  std::int64_t Before = 0; ///< Gaussians before
+  std::int64_t Merged = 0; ///< pairs merged (the field lost as many Gaussians)
   int Passes = 0;
   double Seconds = 0;
 };

@@ -122,8 +122,8 @@ double SsimSum(Scratch<T>& w, const unsigned char* mask, double gradientWeight)
 /// w.X = x, w.Y = y (each times the mask when @p maskImages) and their products; returns the number
 /// of masked pixels.
 template <typename T>
-long Prepare(Scratch<T>& w, const float* x, const float* y, const unsigned char* mask, int width, int height,
-  bool maskImages)
+long Prepare(
+  Scratch<T>& w, const float* x, const float* y, const unsigned char* mask, int width, int height, bool maskImages)
 {
   w.Create(width, height);
   vtkSMPTools::For(0, height, 16, [&](int first, int last) {
@@ -270,8 +270,7 @@ struct ImageLossWorkspace::Internals
 
 ImageLossWorkspace::ImageLossWorkspace()
   : Data(new Internals)
-{
-}
+{}
 
 ImageLossWorkspace::~ImageLossWorkspace() = default;
 ImageLossWorkspace::ImageLossWorkspace(ImageLossWorkspace&&) noexcept = default;

@@ -31,8 +31,8 @@ struct ImageMetrics
   double PSNR = 0;
   double SSIM = 0;
   double NCC = 0;
-  double Speckle = 0;   ///< BFS in [0, 1]
-  long Patches = 0;     ///< patches used by the speckle score
+  double Speckle = 0; ///< BFS in [0, 1]
+  long Patches = 0;   ///< patches used by the speckle score
 };
 
 /// sigma_W of the speckle score (contrast units).

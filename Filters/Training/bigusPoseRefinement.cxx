@@ -61,11 +61,11 @@ void PoseRefiner::Configure(TrainingData* data, const PoseRefinementSettings& se
   }
   if (s.RefinePoses == PoseRefinement::On)
   {
-    lines.push_back(vtkfmt::sprintf("RefinePoses = on (from %.0f %% of the schedule, %sAdam %.3g rad and %.3g mm per "
-                                    "step; prior %.3g at %.3g degrees and %.3g mm, smoothness %.3g; ",
-                      100 * s.Start, startBy.empty() ? "" : startBy + "; ", s.RotationLearningRate,
-                      s.TranslationLearningRate, s.Prior, s.RotationSigma * 180 / M_PI, s.TranslationSigma,
-                      s.Smoothness) +
+    lines.push_back(
+      vtkfmt::sprintf("RefinePoses = on (from %.0f %% of the schedule, %sAdam %.3g rad and %.3g mm per "
+                      "step; prior %.3g at %.3g degrees and %.3g mm, smoothness %.3g; ",
+        100 * s.Start, startBy.empty() ? "" : startBy + "; ", s.RotationLearningRate, s.TranslationLearningRate,
+        s.Prior, s.RotationSigma * 180 / M_PI, s.TranslationSigma, s.Smoothness) +
       refinedBy + ")");
     const std::size_t n = data->Poses.size();
     state.PoseCorrections.assign(n, {});
@@ -75,8 +75,8 @@ void PoseRefiner::Configure(TrainingData* data, const PoseRefinementSettings& se
   }
   else if (s.Any())
   {
-    lines.push_back(vtkfmt::sprintf("PoseRefinementStart = %.0f %% of the schedule (%s)", 100 * s.Start,
-      startBy.empty() ? "given" : startBy));
+    lines.push_back(vtkfmt::sprintf(
+      "PoseRefinementStart = %.0f %% of the schedule (%s)", 100 * s.Start, startBy.empty() ? "given" : startBy));
   }
   // A change common to the frames of one smooth sweep is a warp of the scene the field takes up
   // (docs/FINDINGS.md, "Shared pose corrections"): said where it is switched on.
@@ -90,10 +90,10 @@ void PoseRefiner::Configure(TrainingData* data, const PoseRefinementSettings& se
   }
   if (s.RefineImageToProbe)
   {
-    lines.push_back(vtkfmt::sprintf("RefineImageToProbe = on (Adam %.3g rad and %.3g mm per step, prior %.3g at "
-                                    "%.3g degrees and %.3g mm",
-                      s.RotationLearningRate, s.TranslationLearningRate, s.Prior, s.RotationSigma * 180 / M_PI,
-                      s.TranslationSigma) +
+    lines.push_back(
+      vtkfmt::sprintf("RefineImageToProbe = on (Adam %.3g rad and %.3g mm per step, prior %.3g at "
+                      "%.3g degrees and %.3g mm",
+        s.RotationLearningRate, s.TranslationLearningRate, s.Prior, s.RotationSigma * 180 / M_PI, s.TranslationSigma) +
       caveat + ")");
   }
   this->TrackedPoses.clear();
@@ -153,8 +153,8 @@ void PoseRefiner::Step(
   const double rotation = s.RotationLearningRate * rateScale, translation = s.TranslationLearningRate * rateScale;
   const double rate[7] = { rotation, rotation, rotation, translation, translation, translation,
     s.TimeOffsetLearningRate * rateScale };
-  const double sigma[7] = { s.RotationSigma, s.RotationSigma, s.RotationSigma, s.TranslationSigma,
-    s.TranslationSigma, s.TranslationSigma, s.TimeOffsetSigma };
+  const double sigma[7] = { s.RotationSigma, s.RotationSigma, s.RotationSigma, s.TranslationSigma, s.TranslationSigma,
+    s.TranslationSigma, s.TimeOffsetSigma };
   const bool shared = s.RefineTimeOffset || s.RefineImageToProbe;
   if (shared)
   {
@@ -220,8 +220,8 @@ void PoseRefiner::Step(
     {
       continue; // a non-finite pose gradient moves none of the frame's correction
     }
-    AdamSteps(6, g, rate, ++state.PoseSteps[f], xi.data(), state.PoseFirstMoment[f].data(),
-      state.PoseSecondMoment[f].data());
+    AdamSteps(
+      6, g, rate, ++state.PoseSteps[f], xi.data(), state.PoseFirstMoment[f].data(), state.PoseSecondMoment[f].data());
   }
   if (shared)
   {
@@ -337,7 +337,8 @@ bool PoseRefiner::CheckCheckpoint(const TrainingState& loaded, const std::string
   {
     return fail("the checkpoint holds pose corrections of " + std::to_string(loaded.PoseCorrections.size()) +
       " frames and this run " + (refined ? "refines the poses of " : "refines the poses of none of ") +
-      std::to_string(this->Data->Poses.size()) + " (resume with the settings and sweep the checkpoint was written with)");
+      std::to_string(this->Data->Poses.size()) +
+      " (resume with the settings and sweep the checkpoint was written with)");
   }
   const std::array<double, 7>& shared = loaded.SharedPoseCorrection;
   const bool imageToProbe = std::any_of(shared.begin(), shared.begin() + 6, [](double v) { return v != 0; });

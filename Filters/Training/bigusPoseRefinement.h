@@ -128,8 +128,8 @@ public:
    * on the shared corrections from their sum; the poses of the frames that moved are composed again. A frame whose
    * gradient is not finite keeps its correction.
    */
-  void Step(const std::vector<int>& frames, const std::vector<double>& gradients, double rateScale,
-    TrainingState& state);
+  void Step(
+    const std::vector<int>& frames, const std::vector<double>& gradients, double rateScale, TrainingState& state);
   /// Every frame's pose composed from its tracked pose and @p state's corrections (after they were replaced).
   void ComposePoses(const TrainingState& state);
   /// The frames not trained on take the smooth part of their sweep's training corrections (CorrectUntrainedFrames)
@@ -172,8 +172,8 @@ private:
  */
 BIGUSTRAINING_EXPORT bool RefinePosesWithFieldFrozen(const GaussianField& field, TrainingData& data,
   const std::vector<int>& frames, const RenderOptions& options, const PoseRefinementSettings& settings,
-  const ImageLossWeights& loss, int steps, const std::string& backend,
-  std::vector<std::array<double, 6>>& corrections, std::string* error);
+  const ImageLossWeights& loss, int steps, const std::string& backend, std::vector<std::array<double, 6>>& corrections,
+  std::string* error);
 
 } // namespace bigus
 

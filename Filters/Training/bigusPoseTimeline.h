@@ -47,9 +47,9 @@ BIGUSTRAINING_EXPORT PoseStatus PoseCorrectionBetween(
 /// What bigus::CorrectUntrainedFrames chose (TrainerReport; field data UntrainedPoseCorrection).
 struct BIGUSTRAINING_EXPORT UntrainedCorrection
 {
-  int Frames = 0;       ///< the frames given a correction
-  double Bandwidth = 0; ///< the kernel's standard deviation in training-frame intervals; 0: none; infinity: the mean
-  double ErrorNone = 0; ///< leave-one-out rms error (mm at the slice's corners) of a zero correction
+  int Frames = 0;         ///< the frames given a correction
+  double Bandwidth = 0;   ///< the kernel's standard deviation in training-frame intervals; 0: none; infinity: the mean
+  double ErrorNone = 0;   ///< leave-one-out rms error (mm at the slice's corners) of a zero correction
   double ErrorChosen = 0; ///< the same of the chosen kernel (ErrorNone when none)
 };
 
@@ -89,8 +89,8 @@ BIGUSTRAINING_EXPORT double TrackedPathJitter(const TrainingData& data, int swee
 /// When the pose corrections start to move (TrainerSettings::PoseRefinementStart negative), and why.
 struct BIGUSTRAINING_EXPORT PoseRefinementStartChoice
 {
-  double Start = 0.2;   ///< share of the schedule trained on the tracked poses first
-  std::string Reason;   ///< one line: the rule and each sweep's jitter
+  double Start = 0.2; ///< share of the schedule trained on the tracked poses first
+  std::string Reason; ///< one line: the rule and each sweep's jitter
 };
 
 /// The tracked path's jitter (mm, TrackedPathJitter) above which the corrections move from the first step: about

@@ -14,7 +14,6 @@
 #include <cmath>
 #include <cstdio>
 
-
 namespace bigus
 {
 
@@ -147,8 +146,8 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
   }
   if (imaged == 0)
   {
-    return Fail(error, "nothing to solve: the fan masks of the " + std::to_string(allFrames.size()) +
-        " frames are empty");
+    return Fail(
+      error, "nothing to solve: the fan masks of the " + std::to_string(allFrames.size()) + " frames are empty");
   }
   // Data-space vectors: the residual rho and q (A p, the weights G, the input of A^T).
   std::vector<float> rho(m), q(m);
@@ -168,7 +167,8 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
   }
   if (seen == 0)
   {
-    return Fail(error, "nothing to solve: no Gaussian of the field reaches a pixel inside the fan masks of the " +
+    return Fail(error,
+      "nothing to solve: no Gaussian of the field reaches a pixel inside the fan masks of the " +
         std::to_string(allFrames.size()) + " frames");
   }
   const double lambda = settings.Ridge * meanDiagonal / seen;
@@ -213,9 +213,8 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
       {
         return false;
       }
-      ForEach(m, [&](std::int64_t k) {
-        out[k] = static_cast<float>(root(k) * (-std::log1p(-intensity(k)) / gamma - out[k]));
-      });
+      ForEach(m,
+        [&](std::int64_t k) { out[k] = static_cast<float>(root(k) * (-std::log1p(-intensity(k)) / gamma - out[k])); });
       return true;
     };
     // g = B^T (b - B v) from the data part res at v (res is overwritten).
@@ -389,8 +388,8 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
     double norm = Sum(n, [&](std::int64_t i) { return s[i] * s[i]; });
     const double norm0 = norm;
     iterationStart = Now();
-    for (int it = 0; it < settings.MaximumIterations && norm > 0 && norm > settings.Tolerance * settings.Tolerance * norm0;
-         ++it)
+    for (int it = 0;
+         it < settings.MaximumIterations && norm > 0 && norm > settings.Tolerance * settings.Tolerance * norm0; ++it)
     {
       const bool stop = it > 0 && outOfTime();
       if (!communicated)
@@ -456,8 +455,8 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
 }
 
 bool SolveFieldReflectivities(TrainingEngine& engine, const TrainingData& data, const RenderOptions& options,
-  const ReflectivitySolveSettings& settings, const std::function<double()>& timeLimit, double gamma,
-  OptimizerState& G, FieldSolveReport& report, std::string* error, ProcessReduction* reduction)
+  const ReflectivitySolveSettings& settings, const std::function<double()>& timeLimit, double gamma, OptimizerState& G,
+  FieldSolveReport& report, std::string* error, ProcessReduction* reduction)
 {
   const bool relaxed = settings.L1 > 0;
   for (int part = 0; part < (relaxed ? 2 : 1); ++part)
@@ -494,8 +493,7 @@ bool SolveFieldReflectivities(TrainingEngine& engine, const TrainingData& data, 
   return true;
 }
 
-std::string DescribeReflectivitySolve(
-  bool on, bool nonNegative, const ReflectivitySolveSettings& s, int interval)
+std::string DescribeReflectivitySolve(bool on, bool nonNegative, const ReflectivitySolveSettings& s, int interval)
 {
   if (!on)
   {
@@ -507,8 +505,7 @@ std::string DescribeReflectivitySolve(
   }
   return vtkfmt::sprintf("ReflectivitySolve = on (%s, at most %d iterations, ridge %.3g, after seeding, after every "
                          "densification",
-           s.L1 > 0 ? vtkfmt::sprintf("FISTA with L1 %.3g", s.L1) : std::string("CGLS"), s.MaximumIterations,
-           s.Ridge) +
+           s.L1 > 0 ? vtkfmt::sprintf("FISTA with L1 %.3g", s.L1) : std::string("CGLS"), s.MaximumIterations, s.Ridge) +
     (interval > 0 ? vtkfmt::sprintf(" and every %d steps)", interval) : std::string(")"));
 }
 

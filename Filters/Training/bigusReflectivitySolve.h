@@ -69,7 +69,7 @@ struct ReflectivitySolveReport
   std::int64_t UnseenGaussians = 0; ///< Gaussians that no pixel of the frames weighs (their r goes to 0)
   double Seconds = 0;
   bool TimeLimitReached = false; ///< it ended on settings.TimeLimit before MaximumIterations or Tolerance
-  double L1Weight = 0;            ///< settings.L1: the weight mu used
+  double L1Weight = 0;           ///< settings.L1: the weight mu used
 };
 
 /// Bytes a solve allocates for @p gaussians Gaussians over @p pixels pixels (frames x H x W): 52 per

@@ -71,8 +71,8 @@ double ScatteringOfIntensity(double intensity, double gamma)
   return -std::log(1.0 - std::min(intensity, 0.95)) / gamma;
 }
 
-void SeedHarris(const TrainingData& data, std::int64_t total, std::mt19937_64& rng, const SeedShape& shape,
-  GaussianField& field)
+void SeedHarris(
+  const TrainingData& data, std::int64_t total, std::mt19937_64& rng, const SeedShape& shape, GaussianField& field)
 {
   // Seeds in proportion to the positive Harris response inside the mask, plus a uniform share
   // (DESIGN section 4): structure (edges, corners, bright speckle) gets Gaussians first.
@@ -151,8 +151,8 @@ std::int64_t SeedResidual(const TrainingData& data, int f, const float* residual
   return count;
 }
 
-void SeedUniform(const TrainingData& data, std::int64_t total, std::mt19937_64& rng, const SeedShape& shape,
-  GaussianField& field)
+void SeedUniform(
+  const TrainingData& data, std::int64_t total, std::mt19937_64& rng, const SeedShape& shape, GaussianField& field)
 {
   // Ablation: seeds uniform in the bounding box of every training frame's corners.
   double lo[3] = { 1e300, 1e300, 1e300 }, hi[3] = { -1e300, -1e300, -1e300 };

@@ -79,8 +79,8 @@ double ScatteringOfIntensity(double intensity, double gamma);
  * cornerHarris, block 3, aperture 3, k 0.04) of each training frame inside its mask, plus the uniform
  * share; an even share of @p total per frame, pixel positions jittered within the pixel by @p rng.
  */
-void SeedHarris(const TrainingData& data, std::int64_t total, std::mt19937_64& rng, const SeedShape& shape,
-  GaussianField& field);
+void SeedHarris(
+  const TrainingData& data, std::int64_t total, std::mt19937_64& rng, const SeedShape& shape, GaussianField& field);
 
 /**
  * Appends to @p field @p count seeds on frame @p frame of @p data where its residual is largest: pixels
@@ -93,8 +93,8 @@ std::int64_t SeedResidual(const TrainingData& data, int frame, const float* resi
   std::mt19937_64& rng, const SeedShape& shape, GaussianField& field);
 
 /// The ablation: @p total seeds uniform in the bounding box of the training frames' corners, random rotations.
-void SeedUniform(const TrainingData& data, std::int64_t total, std::mt19937_64& rng, const SeedShape& shape,
-  GaussianField& field);
+void SeedUniform(
+  const TrainingData& data, std::int64_t total, std::mt19937_64& rng, const SeedShape& shape, GaussianField& field);
 
 /// The planes of the dense start.
 struct GridPlanes
@@ -115,8 +115,8 @@ GridPlanes SelectGridPlanes(const TrainingData& data, const SeedShape& shape);
  */
 std::string SeedGrid(const TrainingData& data, std::int64_t total, const SeedShape& shape, GaussianField& field);
 /// The same on planes already selected (SelectGridPlanes of the same data and shape).
-std::string SeedGrid(const TrainingData& data, const GridPlanes& planes, std::int64_t total, const SeedShape& shape,
-  GaussianField& field);
+std::string SeedGrid(
+  const TrainingData& data, const GridPlanes& planes, std::int64_t total, const SeedShape& shape, GaussianField& field);
 
 /// What the seeding stage will make (PlanSeeding), decided before any seed is: the route and the count.
 struct SeedingPlan

@@ -28,7 +28,7 @@ namespace bigus
 namespace
 {
 constexpr int SnapshotInterval = 100;
-constexpr int DefaultIterations = 3000;         // the schedule when neither iterations nor a time budget is given
+constexpr int DefaultIterations = 3000; // the schedule when neither iterations nor a time budget is given
 // Variable projection with a TimeBudget: a solve may take this share of the budget left when it starts. The
 // liver, 30 s (docs/FINDINGS.md): the first solve took the whole budget before (0 steps, 18.04 dB held out);
 // shares 0.25 / 0.1 / 0.03 gave 23.58 / 22.64 / 22.44 dB (a solve costs at least its setup and one iteration,
@@ -92,7 +92,8 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
   {
     const ElevationSigmaChoice choice = ChooseElevationSigma(measuredSweeps());
     this->Settings.ElevationSigma = choice.Sigma;
-    this->Report.Settings.push_back(vtkfmt::sprintf("ElevationSigma = %.4g mm (chosen: ", choice.Sigma) + choice.Reason + ")");
+    this->Report.Settings.push_back(
+      vtkfmt::sprintf("ElevationSigma = %.4g mm (chosen: ", choice.Sigma) + choice.Reason + ")");
   }
   this->Report.ElevationSigma = this->Settings.ElevationSigma;
   const TrainerSettings& s = this->Settings;
@@ -107,11 +108,12 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
   this->Report.Settings.push_back(DescribeGapFillingSettings(s.FillGaps, s.BeamIntegration, s.GapFilling));
   this->Report.Settings.push_back(
     DescribeReflectivitySolve(s.ReflectivitySolve, s.NonNegativeReflectivity, s.Solve, s.SolveInterval));
-  this->Report.Settings.push_back(vtkfmt::sprintf("Seed = %u, FramesPerStep = %d, Cutoff = %.3g, SparseAdam = %s%s", s.Seed,
-    s.FramesPerStep, s.Cutoff, s.SparseAdam ? "on" : "off",
+  this->Report.Settings.push_back(vtkfmt::sprintf("Seed = %u, FramesPerStep = %d, Cutoff = %.3g, SparseAdam = %s%s",
+    s.Seed, s.FramesPerStep, s.Cutoff, s.SparseAdam ? "on" : "off",
     s.CoarseFraction > 0
       ? vtkfmt::sprintf(", CoarseFraction = %.3g (a quarter of the pixels per step until then, %s)", s.CoarseFraction,
-          s.CoarseLowPass ? "2 x 2 averages through the pixel's low-pass" : "point samples").c_str()
+          s.CoarseLowPass ? "2 x 2 averages through the pixel's low-pass" : "point samples")
+          .c_str()
       : ""));
   this->Poses.Configure(this->Data.get(), s.Poses, measuredSweeps, this->State, this->Report.Settings);
   this->Settings.Poses = this->Poses.GetSettings();
@@ -160,8 +162,8 @@ const TrainingState& Trainer::GetState() const
   if (!this->PullState(&error))
   {
     // Only a device engine can fail here, and its last good host copy is the best answer left.
-    std::fprintf(stderr, "bigus: cannot read the field back from the %s engine: %s\n", this->Engine->GetName(),
-      error.c_str());
+    std::fprintf(
+      stderr, "bigus: cannot read the field back from the %s engine: %s\n", this->Engine->GetName(), error.c_str());
   }
   return this->State;
 }
@@ -196,8 +198,8 @@ bool Trainer::PrepareInitialField(std::string* error)
     vtkfmt::sprintf("Gamma = %.5g (from the mean fan intensity %.4f of the training frames)", this->Gamma, mean));
   const SeedShape shape = this->SeedShapeOf();
   SeedingPlan plan;
-  if (!PlanSeeding(data, this->Settings.Seeding, this->Settings.MaximumGaussians, this->Settings.NonNegativeReflectivity,
-        shape, count, plan, error))
+  if (!PlanSeeding(data, this->Settings.Seeding, this->Settings.MaximumGaussians,
+        this->Settings.NonNegativeReflectivity, shape, count, plan, error))
   {
     return false;
   }
@@ -265,9 +267,10 @@ bool Trainer::SetProcessReduction(ProcessReduction* reduction, std::string* erro
   this->Reduction = reduction && reduction->Size() > 1 ? reduction : nullptr;
   if (this->Reduction)
   {
-    this->Report.Settings.push_back(vtkfmt::sprintf("Processes = %d (data-parallel: each renders its share of the %d frames "
-                                           "of a step, FramesPerStep %d per process; gradients summed every step)",
-      reduction->Size(), reduction->Size() * this->Settings.FramesPerStep, this->Settings.FramesPerStep));
+    this->Report.Settings.push_back(
+      vtkfmt::sprintf("Processes = %d (data-parallel: each renders its share of the %d frames "
+                      "of a step, FramesPerStep %d per process; gradients summed every step)",
+        reduction->Size(), reduction->Size() * this->Settings.FramesPerStep, this->Settings.FramesPerStep));
   }
   return true;
 }
@@ -330,8 +333,8 @@ SeedShape Trainer::SeedShapeOf() const
 bool Trainer::FitReflectivityScale(std::string* error)
 {
   bool scaled = false;
-  return ScaleSeedReflectivities(*this->Engine, *this->Data, this->Options(), this->Gamma,
-           this->State.Gaussians.Field, scaled, error) &&
+  return ScaleSeedReflectivities(
+           *this->Engine, *this->Data, this->Options(), this->Gamma, this->State.Gaussians.Field, scaled, error) &&
     (!scaled || this->PushState(error));
 }
 
@@ -393,8 +396,8 @@ StepStatus Trainer::Step(double* loss, std::string* error)
   // The resolution schedule's coarse steps: the frames on every second pixel and row, at a random phase (frames
   // narrower than 2 pixels, or 3 for averages, a whole 2 x 2 block at either phase, keep every pixel).
   const int smallest = this->Settings.CoarseLowPass ? 3 : 2;
-  const bool coarse = fraction < this->Settings.CoarseFraction && this->Data->Width >= smallest &&
-    this->Data->Height >= smallest;
+  const bool coarse =
+    fraction < this->Settings.CoarseFraction && this->Data->Width >= smallest && this->Data->Height >= smallest;
   TrainingData decimated;
   int phase = 0;
   if (coarse)
@@ -493,8 +496,8 @@ bool Trainer::DensifyAndPrune(double validation, std::string* error)
   {
     const std::int64_t room = this->Settings.MaximumGaussians - state.Gaussians.Count();
     SeedResiduals(*this->Data, residualFrames, residuals,
-      std::min<std::int64_t>(room, std::llround(d.ResidualSeedShare * result.Added)), state.Random,
-      this->SeedShapeOf(), state.Gaussians.Field);
+      std::min<std::int64_t>(room, std::llround(d.ResidualSeedShare * result.Added)), state.Random, this->SeedShapeOf(),
+      state.Gaussians.Field);
     state.Gaussians.ResizeToField();
   }
   if (state.Growing && result.MaximumReached)
@@ -685,7 +688,8 @@ bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>
     if (s.CheckpointInterval > 0 && !s.CheckpointFile.empty() && it % s.CheckpointInterval == 0)
     {
       // Data-parallel: rank 0 writes, and the others learn whether it could.
-      const bool saved = (this->Reduction && this->Reduction->Rank() != 0) || this->SaveCheckpoint(s.CheckpointFile, error);
+      const bool saved =
+        (this->Reduction && this->Reduction->Rank() != 0) || this->SaveCheckpoint(s.CheckpointFile, error);
       if (!this->Agree(saved, error))
       {
         ok = false;
@@ -830,7 +834,8 @@ bool Trainer::ReadCheckpoint(const std::string& file, std::string* error)
     return false;
   }
   this->State = std::move(loaded);
-  this->Poses.ComposePoses(this->State); // frames never corrected (held out, or before the corrections moved) stay as tracked
+  this->Poses.ComposePoses(
+    this->State); // frames never corrected (held out, or before the corrections moved) stay as tracked
   this->Gamma = gamma;
   this->PixelGrid = false; // a checkpoint comes from a run that takes steps: it goes on with them
   return this->PushState(error);

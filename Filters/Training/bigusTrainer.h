@@ -101,7 +101,8 @@ struct TrainerSettings
   /// L1 0.8 + D-SSIM 0.2 (3D Gaussian splatting's balance); the focal frequency loss off (its two DFTs cost about as
   /// much as the rest of the loss).
   ImageLossWeights Loss;
-  double ConvergenceTolerance = 0; ///< stop when the mean loss of the last 200 steps improved by less (relative); 0 = off
+  double ConvergenceTolerance =
+    0; ///< stop when the mean loss of the last 200 steps improved by less (relative); 0 = off
   // Densification (EA-D; bigusDensification.h)
   DensificationSettings Densification;
   /// Hard maximum, gap filling's copies included (GapFillingSettings): room for a Gaussian per fan pixel of the
@@ -125,24 +126,24 @@ struct TrainerSettings
 struct TrainerReport
 {
   int Iterations = 0;
-  double Seconds = 0;               ///< s: Train, Finish and the first reflectivity solve (not the seeding)
+  double Seconds = 0; ///< s: Train, Finish and the first reflectivity solve (not the seeding)
   std::string StopReason;
   std::string GrowthStopReason;
   std::int64_t InitialGaussians = 0; ///< seeds the run started from
   std::int64_t Gaussians = 0;
   std::int64_t PrunedAtEnd = 0;
-  GapFillingReport GapFilling;      ///< what Finish's gap filling added (FillGaps)
-  GaussianMergeReport Merge;        ///< what Finish's merge did (TrainerSettings::Merge)
-  int Solves = 0;                   ///< reflectivity solves run (ReflectivitySolve)
-  double SolveSeconds = 0;          ///< their time, s (all count towards TimeBudget, the first one's too)
+  GapFillingReport GapFilling;       ///< what Finish's gap filling added (FillGaps)
+  GaussianMergeReport Merge;         ///< what Finish's merge did (TrainerSettings::Merge)
+  int Solves = 0;                    ///< reflectivity solves run (ReflectivitySolve)
+  double SolveSeconds = 0;           ///< their time, s (all count towards TimeBudget, the first one's too)
   ReflectivitySolveReport LastSolve; ///< the last solve: iterations, objective per iteration
   /// With Solve.L1: the last solve's L1 part (FISTA), and how many Gaussians it set to 0 and removed before the
   /// least-squares refit that LastSolve describes (the relaxed lasso).
   ReflectivitySolveReport LastL1Solve;
   std::int64_t LastL1Removed = 0;
   double Gamma = 0;
-  double LastLoss = 0;              ///< mean loss of the last 50 steps
-  double ElevationSigma = 0;        ///< mm, the sigma trained with (given or chosen)
+  double LastLoss = 0;       ///< mean loss of the last 50 steps
+  double ElevationSigma = 0; ///< mm, the sigma trained with (given or chosen)
   /// Early stopping: the iteration whose field Finish kept (the best on the validation frames; a field
   /// measured just before a densification carries that densification's iteration), the validation
   /// loss there and that of the last field (equal when the last was kept).
@@ -218,8 +219,8 @@ public:
    * iteration, loss, gaussians) is called every few steps. Returns false with @p error on an
    * unrecoverable problem (a step the renderer refuses, every step non-finite, a checkpoint not written).
    */
-  bool Train(const std::function<void(double, int, double, std::int64_t)>& progress,
-    const std::function<bool()>& abort, std::string* error);
+  bool Train(const std::function<void(double, int, double, std::int64_t)>& progress, const std::function<bool()>& abort,
+    std::string* error);
   /**
    * Ends a run: early stopping, the final prune (FinalPrune) and the report's totals. Early stopping:
    * the validation frames (every 8th training frame, at most 8) are rendered every DensifyInterval
@@ -250,8 +251,8 @@ public:
    * non-null, receives the mean render time per frame (s). Returns false with @p error when a frame
    * cannot be rendered.
    */
-  bool Evaluate(const std::vector<int>& frames, ImageMetrics& metrics, std::string* error,
-    double* secondsPerFrame = nullptr);
+  bool Evaluate(
+    const std::vector<int>& frames, ImageMetrics& metrics, std::string* error, double* secondsPerFrame = nullptr);
   /// With RefinePoses, the frames not trained on take the smooth part of their sweep's training corrections
   /// (CorrectUntrainedFrames; report's UntrainedCorrections): Evaluate and Finish call it, so that a held-out
   /// frame is scored among its refined neighbours mid-run as at the end.
@@ -330,17 +331,17 @@ private:
   std::unique_ptr<TrainingData> Data; // on the heap: the engine keeps a pointer to it
   TrainerSettings Settings;
   std::unique_ptr<TrainingEngine> Engine;
-  mutable TrainingState State;  // host copy, current when HostCurrent
+  mutable TrainingState State; // host copy, current when HostCurrent
   mutable bool HostCurrent = true;
   double Gamma = 1;
   double PixelSpacing = 1; // mean in-plane pixel spacing of the training frames, mm
   TrainerReport Report;
   ProcessReduction* Reduction = nullptr; // data-parallel training (SetProcessReduction), null alone
   double AgreedElapsed = 0;              // data-parallel: the slowest process's seconds in this Train call
-  double TrainStart = 0;           // Seconds() at the start of the Train call in progress, 0 outside
-  double TrainedBefore = 0;        // the run's training seconds before that call
-  bool DensificationEnded = false; // the last Train call ended past the densification window
-  bool PixelGrid = false;          // the field is the pixel-grid fit (PixelGridFit): Train takes no step
+  double TrainStart = 0;                 // Seconds() at the start of the Train call in progress, 0 outside
+  double TrainedBefore = 0;              // the run's training seconds before that call
+  bool DensificationEnded = false;       // the last Train call ended past the densification window
+  bool PixelGrid = false;                // the field is the pixel-grid fit (PixelGridFit): Train takes no step
   PoseRefiner Poses;
   std::vector<float> S; // scratch for RenderFrame
 };

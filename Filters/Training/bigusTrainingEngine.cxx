@@ -131,7 +131,8 @@ bool CheckTrainingMemory(std::int64_t maximumGaussians, double solveBytes, std::
   {
     char text[300];
     std::snprintf(text, sizeof(text),
-      "MaximumGaussians (%lld) needs %.0f MB of training state (%.0f bytes per Gaussian%s) and this machine has %.0f MB",
+      "MaximumGaussians (%lld) needs %.0f MB of training state (%.0f bytes per Gaussian%s) and this machine has %.0f "
+      "MB",
       static_cast<long long>(maximumGaussians), needed / 1e6, TrainingBytesPerGaussian,
       solveBytes > 0 ? " and the reflectivity solve's vectors" : "", physical / 1e6);
     *error = text;
@@ -181,8 +182,8 @@ namespace
 {
 /// The grid of DecimateFrames: @p width x @p height pixels, pixel (i, j) at the source's pixel indices
 /// (first[0] + 2 i, first[1] + 2 j).
-void DecimatedGrid(const TrainingData& data, int offsetX, int offsetY, bool average, int& width, int& height,
-  double first[2])
+void DecimatedGrid(
+  const TrainingData& data, int offsetX, int offsetY, bool average, int& width, int& height, double first[2])
 {
   const int partial = average ? 0 : 1; // a point sample needs one pixel of its block, an average all four
   width = (data.Width - offsetX + partial) / 2;
@@ -492,8 +493,7 @@ bool TrainingState::Load(const std::string& file, double& gamma, std::string* er
   double storedGamma;
   std::uint32_t length;
   if (!Get(in, iteration) || !Get(in, s.LearningRateScale) || !Get(in, storedGamma) || !Get(in, growing) ||
-    !Get(in, s.BestValidationLoss) || !Get(in, stalled) || !Get(in, rolled) || !Get(in, length) ||
-    length > (1u << 20))
+    !Get(in, s.BestValidationLoss) || !Get(in, stalled) || !Get(in, rolled) || !Get(in, length) || length > (1u << 20))
   {
     return fail("truncated header");
   }

@@ -110,8 +110,8 @@ struct BIGUSTRAINING_EXPORT GaussianField
   /// The array of parameter group @p q (bigusFieldLayout.h: MeanGroup, LogScaleGroup, ...).
   std::vector<float>& Group(int q)
   {
-    return q == MeanGroup ? this->Means
-      : q == LogScaleGroup ? this->LogScales
+    return q == MeanGroup    ? this->Means
+      : q == LogScaleGroup   ? this->LogScales
       : q == QuaternionGroup ? this->Quaternions
                              : this->Reflectivities;
   }
@@ -153,16 +153,17 @@ struct BIGUSTRAINING_EXPORT TrainingState
   int RolledBackSteps = 0;
   std::vector<double> LossHistory; ///< loss of every completed step
   std::mt19937_64 Random;          ///< draws the frames of each step
-  double TrainingSeconds = 0;      ///< seconds spent in Trainer::Train and the first reflectivity solve so far (TrainerSettings::TimeBudget)
+  double TrainingSeconds =
+    0; ///< seconds spent in Trainer::Train and the first reflectivity solve so far (TrainerSettings::TimeBudget)
   // Early stopping (bigus::Trainer::Finish)
-  GaussianField BestField;         ///< the field with the lowest validation loss seen so far
-  double BestFieldLoss = -1;       ///< its validation loss; -1: none measured yet
-  int BestFieldIteration = 0;      ///< the iteration it was measured at
+  GaussianField BestField;    ///< the field with the lowest validation loss seen so far
+  double BestFieldLoss = -1;  ///< its validation loss; -1: none measured yet
+  int BestFieldIteration = 0; ///< the iteration it was measured at
   // Pose refinement (TrainerSettings::RefinePoses): per frame of the data, empty when off
-  std::vector<std::array<double, 6>> PoseCorrections;  ///< rotation vector (rad), translation (mm): CorrectPose
-  std::vector<std::array<double, 6>> PoseFirstMoment;  ///< Adam's moments of the corrections
+  std::vector<std::array<double, 6>> PoseCorrections; ///< rotation vector (rad), translation (mm): CorrectPose
+  std::vector<std::array<double, 6>> PoseFirstMoment; ///< Adam's moments of the corrections
   std::vector<std::array<double, 6>> PoseSecondMoment;
-  std::vector<int> PoseSteps;                          ///< Adam steps each correction took
+  std::vector<int> PoseSteps; ///< Adam steps each correction took
   /// The corrections shared by every frame (TrainerSettings::RefineImageToProbe, RefineTimeOffset): the ImageToProbe
   /// correction (rotation vector, rad; translation, mm: CorrectPose of every frame) then the time offset (s).
   std::array<double, 7> SharedPoseCorrection{};
@@ -183,10 +184,10 @@ struct BIGUSTRAINING_EXPORT TrainingState
    * field's validation loss | int32 its iteration | int64 M | best field as above | float64 training
    * seconds | int64 P (frames with a pose correction; 0 without pose refinement) | P x (6 float64
    * correction, 6 float64 Adam m, 6 float64 Adam v, int32 steps) | 7 float64 shared correction, 7 Adam m,
-   * 7 Adam v, int32 steps | int64 B + B x 6 float64 and 7 float64: the corrections of the best field. Load also reads "BIGUSCK4" files (no shared correction), "BIGUSCK3" files (no
-   * pose corrections), "BIGUSCK2" files (no training seconds either: a time budget starts afresh) and
-   * "BIGUSCK1" files (neither those nor a best field: early stopping starts afresh too).
-   * Returns false with @p error naming the file.
+   * 7 Adam v, int32 steps | int64 B + B x 6 float64 and 7 float64: the corrections of the best field. Load also reads
+   * "BIGUSCK4" files (no shared correction), "BIGUSCK3" files (no pose corrections), "BIGUSCK2" files (no training
+   * seconds either: a time budget starts afresh) and "BIGUSCK1" files (neither those nor a best field: early stopping
+   * starts afresh too). Returns false with @p error naming the file.
    */
   bool Save(const std::string& file, double gamma, std::string* error) const;
   /// Reads a state written by Save; on failure (@p error names the file and what is wrong: bad magic,
@@ -204,8 +205,8 @@ struct StepRequest
   /// The learning rate of parameter group @p q (bigusFieldLayout.h).
   double Rate(int q) const
   {
-    return q == MeanGroup ? this->MeanRate
-      : q == LogScaleGroup ? this->LogScaleRate
+    return q == MeanGroup    ? this->MeanRate
+      : q == LogScaleGroup   ? this->LogScaleRate
       : q == QuaternionGroup ? this->QuaternionRate
                              : this->ReflectivityRate;
   }
@@ -214,7 +215,7 @@ struct StepRequest
   /// and moments (Mallick et al. 2024, Taming 3DGS; gsplat's sparse gradients). False: every Gaussian's
   /// moments decay and its parameters move on their momentum (Kingma and Ba 2015, algorithm 1).
   bool SparseAdam = false;
-  RenderOptions Options;                           ///< rendering while training (cutoff, gamma, beam)
+  RenderOptions Options; ///< rendering while training (cutoff, gamma, beam)
   ImageLossWeights Loss;
   /// Pose refinement: when not null, receives ([Count, 6], overwritten) the gradient of the batch's loss
   /// with respect to a rigid correction of each frame's pose at its current pose (FieldGradients::SlicePoses:
@@ -253,8 +254,8 @@ inline bool TrainingFrameError(int frame, std::string* error)
 BIGUSTRAINING_EXPORT double FrameLoss(const TrainingData& data, int frame, const float* I, const StepRequest& request,
   float* gradient, ImageLossWorkspace* workspace);
 
-/// This machine's physical memory, bytes (vtksys::SystemInformation, to the MiB); 0 when unknown. Sizes are checked against it
-/// before large allocations (the reflectivity solve, a trainer's MaximumGaussians).
+/// This machine's physical memory, bytes (vtksys::SystemInformation, to the MiB); 0 when unknown. Sizes are checked
+/// against it before large allocations (the reflectivity solve, a trainer's MaximumGaussians).
 BIGUSTRAINING_EXPORT double PhysicalMemoryBytes();
 
 /**
@@ -364,8 +365,8 @@ public:
   virtual bool SetReduction(ProcessReduction* reduction, std::string* error);
 
   /// Renders the engine's current field at @p count slices (bigus::Renderer::Forward).
-  virtual bool Render(const SliceGeometry* slices, int count, const RenderOptions& options, float* S, float* I,
-    std::string* error) = 0;
+  virtual bool Render(
+    const SliceGeometry* slices, int count, const RenderOptions& options, float* S, float* I, std::string* error) = 0;
 
   // The reflectivity solve's operators (bigusReflectivitySolve.h, DESIGN section 4). For the engine's
   // current geometry the scattering field of a frame is linear in the reflectivities, S = A r, column i
@@ -377,20 +378,20 @@ public:
    * A r: with @p r ([N]) in place of the field's reflectivities, the scattering field S of each of the
    * @p count @p frames into @p S ([count, H, W]). False with @p error for a pose the renderer rejects.
    */
-  virtual bool ApplyBasis(const float* r, const int* frames, int count, const RenderOptions& options, float* S,
-    std::string* error) = 0;
+  virtual bool ApplyBasis(
+    const float* r, const int* frames, int count, const RenderOptions& options, float* S, std::string* error) = 0;
   /**
    * A^T y: adds to @p out ([N]) sum over the @p count @p frames and their pixels p of y(p) w_i(p), for
    * @p y ([count, H, W]). False with @p error for a pose the renderer rejects.
    */
-  virtual bool ApplyBasisTranspose(const float* y, const int* frames, int count, const RenderOptions& options,
-    double* out, std::string* error) = 0;
+  virtual bool ApplyBasisTranspose(
+    const float* y, const int* frames, int count, const RenderOptions& options, double* out, std::string* error) = 0;
   /**
    * diag(A^T W A): adds to @p out ([N]) sum over the @p count @p frames and their pixels p of
    * weights(p) w_i(p)^2, for @p weights ([count, H, W]; bigusBasisNorms.h).
    */
-  virtual bool BasisNorms(const float* weights, const int* frames, int count, const RenderOptions& options,
-    double* out, std::string* error) = 0;
+  virtual bool BasisNorms(const float* weights, const int* frames, int count, const RenderOptions& options, double* out,
+    std::string* error) = 0;
 };
 
 /// The CPU engine over @p renderer (normally bigus::CreateRenderer("cpu", ...)).

@@ -24,14 +24,13 @@ public:
   enum Fault
   {
     None,
-    BrighterImage,      ///< I x (1 + 1e-3)
+    BrighterImage,               ///< I x (1 + 1e-3)
     OneSmallReflectivityGradient ///< dL/dr of Gaussian SmallGaussian x 1.01
   };
   FaultyRenderer(const char* name, Fault fault)
     : Name(name)
     , What(fault)
-  {
-  }
+  {}
   const char* GetName() const override { return this->Name; }
   bool Forward(const FieldView& field, const SliceGeometry* slices, int count, const RenderOptions& options, float* S,
     float* I, RenderStats* stats, std::string* error) override
@@ -156,8 +155,7 @@ TEST(BackendCheck, OneSmallGaussiansGradientOffByOnePercentFails)
   EXPECT_FALSE(check.Passed);
   EXPECT_NEAR(check.GradientDifference, 0.01, 2e-3) << check.Detail; // 1 % of the Gaussian's own gradient
   EXPECT_EQ(check.ImageDifference, 0.0);
-  EXPECT_NE(check.Detail.find("dL/dr of Gaussian " + std::to_string(FaultyRenderer::SmallGaussian)),
-    std::string::npos)
+  EXPECT_NE(check.Detail.find("dL/dr of Gaussian " + std::to_string(FaultyRenderer::SmallGaussian)), std::string::npos)
     << check.Detail;
 }
 

@@ -34,7 +34,9 @@ TEST(Trainer, ResumingFromACheckpointGivesTheSameField)
   s.CheckpointInterval = 110; // after the first densification, so its state is in the file too
   Trainer first(data, s);
   ASSERT_TRUE(first.Initialize(&error));
-  ASSERT_TRUE(first.Run(nullptr, [&]() { return first.GetIteration() >= 110; }, &error)) << error;
+  ASSERT_TRUE(first.Run(
+    nullptr, [&]() { return first.GetIteration() >= 110; }, &error))
+    << error;
   EXPECT_EQ(first.GetReport().StopReason, "aborted");
 
   Trainer second(data, ShortSettings());
@@ -67,7 +69,9 @@ TEST(Trainer, AResumedRunGoesOnWithThePoseCorrectionsOfItsCheckpoint)
   const std::string checkpoint = std::string(BIGUS_TEST_OUTPUT) + "/poses.ckpt";
   Trainer first(data, s);
   ASSERT_TRUE(first.Initialize(&error));
-  ASSERT_TRUE(first.Train(nullptr, [&]() { return first.GetIteration() >= 110; }, &error)) << error;
+  ASSERT_TRUE(first.Train(
+    nullptr, [&]() { return first.GetIteration() >= 110; }, &error))
+    << error;
   ASSERT_TRUE(first.SaveCheckpoint(checkpoint, &error)) << error;
   double moved = 0;
   for (const auto& xi : first.GetState().PoseCorrections)
@@ -123,7 +127,9 @@ TEST(Trainer, AResumedRunCountsTheSecondsBeforeItsCheckpointTowardsItsTimeBudget
   auto since = [](std::chrono::steady_clock::time_point t) {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
   };
-  ASSERT_TRUE(first.Train(nullptr, [&]() { return since(start) >= 0.7 * s.TimeBudget + 0.05; }, &error)) << error;
+  ASSERT_TRUE(first.Train(
+    nullptr, [&]() { return since(start) >= 0.7 * s.TimeBudget + 0.05; }, &error))
+    << error;
   ASSERT_TRUE(first.SaveCheckpoint(checkpoint, &error)) << error;
   const double saved = first.GetState().TrainingSeconds;
   EXPECT_GE(saved, 0.7 * s.TimeBudget);
@@ -150,8 +156,7 @@ TEST(Trainer, AResumedRunCountsTheSecondsBeforeItsCheckpointTowardsItsTimeBudget
   std::ifstream in(checkpoint, std::ios::binary);
   std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   ASSERT_EQ(bytes.compare(0, 8, "BIGUSCK5"), 0);
-  bytes = bytes.substr(
-    0, bytes.size() - 28 * sizeof(double) - sizeof(std::int32_t) - sizeof(std::int64_t));
+  bytes = bytes.substr(0, bytes.size() - 28 * sizeof(double) - sizeof(std::int32_t) - sizeof(std::int64_t));
   bytes[7] = '4';
   std::ofstream(checkpoint + ".v4", std::ios::binary) << bytes;
   TrainingState old;
@@ -187,7 +192,9 @@ TEST(Trainer, CheckpointHoldsTheWholeTrainingState)
   Trainer trainer(data, settings);
   std::string error;
   ASSERT_TRUE(trainer.Initialize(&error)) << error;
-  ASSERT_TRUE(trainer.Train(nullptr, [&]() { return trainer.GetIteration() >= 150; }, &error)) << error;
+  ASSERT_TRUE(trainer.Train(
+    nullptr, [&]() { return trainer.GetIteration() >= 150; }, &error))
+    << error;
   ASSERT_GT(trainer.GetState().SharedPoseSteps, 0);
   const std::string file = std::string(BIGUS_TEST_OUTPUT) + "/state.ckpt";
   ASSERT_TRUE(trainer.SaveCheckpoint(file, &error)) << error;

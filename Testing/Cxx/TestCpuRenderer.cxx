@@ -38,8 +38,8 @@ double Loss(const reference::FieldD& field, const SliceGeometry& slice, const Re
 }
 
 /// Central differences of every parameter against the analytic reference backward.
-void CheckGradients(reference::FieldD field, const SliceGeometry& slice, const RenderOptions& o, bool onS,
-  double* worst)
+void CheckGradients(
+  reference::FieldD field, const SliceGeometry& slice, const RenderOptions& o, bool onS, double* worst)
 {
   std::mt19937 rng(3);
   std::uniform_real_distribution<double> u(-1, 1);
@@ -114,8 +114,8 @@ reference::FieldD GradientCaseField()
   f.LogScales = { std::log(1.2), std::log(0.5), std::log(0.8), std::log(2.0), std::log(0.4), std::log(0.6),
     std::log(0.7), std::log(0.7), std::log(1.5), std::log(0.3), std::log(1.9), std::log(0.9), std::log(1.0),
     std::log(0.8), std::log(0.35) };
-  f.Quaternions = { 0.9, 0.3, -0.2, 0.1, 0.2, -0.1, 0.25, 0.05, 1.5, 1.1, 0.7, -1.2, -0.4, 0.8, 0.3, 0.6, 0.7,
-    -0.2, 0.1, 0.9 };
+  f.Quaternions = { 0.9, 0.3, -0.2, 0.1, 0.2, -0.1, 0.25, 0.05, 1.5, 1.1, 0.7, -1.2, -0.4, 0.8, 0.3, 0.6, 0.7, -0.2,
+    0.1, 0.9 };
   f.Reflectivities = { 0.9, 0.6, -0.35, 0.8, 0.7 };
   return f;
 }
@@ -395,7 +395,8 @@ TEST(CpuRenderer, GradientsAreIdenticalAcrossRuns)
     g.assign(3 * 5000, 0.f);
     FieldGradients grads;
     grads.Means = g.data();
-    ASSERT_TRUE(renderer->Backward(c.Float.View(), &c.Slice, 1, o, S.data(), dL.data(), false, grads, nullptr, nullptr));
+    ASSERT_TRUE(
+      renderer->Backward(c.Float.View(), &c.Slice, 1, o, S.data(), dL.data(), false, grads, nullptr, nullptr));
   }
   EXPECT_EQ(runs[0], runs[1]);
 }
@@ -501,7 +502,8 @@ TEST(CpuRenderer, ThePoseGradientMatchesCentralDifferencesOverCorrectedPoses)
   // pixel where it was.
   double F[3][3], o[3], p2p[3], moved[16];
   ASSERT_EQ(ComputeRenderingFrame(c.Slice.ImageToReference, 90, F, o, p2p), PoseStatus::Ok);
-  auto pixel = [](const double* m, double i, double j, int k) { return m[4 * k] * i + m[4 * k + 1] * j + m[4 * k + 3]; };
+  auto pixel = [](
+                 const double* m, double i, double j, int k) { return m[4 * k] * i + m[4 * k + 1] * j + m[4 * k + 3]; };
   const double shift[6] = { 0, 0, 0, 0, 0, 1 };
   ASSERT_EQ(CorrectPose(c.Slice.ImageToReference, 48, 48, shift, moved), PoseStatus::Ok);
   for (int k = 0; k < 3; ++k)
@@ -533,7 +535,8 @@ TEST(CpuRenderer, ThePoseGradientMatchesCentralDifferencesOverCorrectedPoses)
   double poses[12] = { 0 };
   FieldGradients grads;
   grads.SlicePoses = poses;
-  ASSERT_TRUE(renderer->Backward(c.Float.View(), slices, 2, options, S.data(), dL.data(), false, grads, nullptr, nullptr));
+  ASSERT_TRUE(
+    renderer->Backward(c.Float.View(), slices, 2, options, S.data(), dL.data(), false, grads, nullptr, nullptr));
   for (int s = 0; s < 2; ++s)
   {
     const std::vector<double> w(weights.begin() + s * pixels, weights.begin() + (s + 1) * pixels);
@@ -559,6 +562,7 @@ TEST(CpuRenderer, ThePoseGradientMatchesCentralDifferencesOverCorrectedPoses)
   // The same call twice gives the same sums (each Gaussian's share summed in index order).
   double again[12] = { 0 };
   grads.SlicePoses = again;
-  ASSERT_TRUE(renderer->Backward(c.Float.View(), slices, 2, options, S.data(), dL.data(), false, grads, nullptr, nullptr));
+  ASSERT_TRUE(
+    renderer->Backward(c.Float.View(), slices, 2, options, S.data(), dL.data(), false, grads, nullptr, nullptr));
   EXPECT_EQ(std::memcmp(poses, again, sizeof(poses)), 0);
 }

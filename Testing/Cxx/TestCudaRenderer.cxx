@@ -129,11 +129,11 @@ TEST(CudaRenderer, MatchesTheCpuOnTheHardCaseGrid)
   const std::vector<SliceGeometry> slices = { HardCaseSlice(), HardCaseSlice(1.3) };
   const std::vector<float> dL = RandomGradient(2 * 160 * 112, 5);
   // Images against the CPU's, gradients against the double reference as accurately as the CPU's (or
-  // within the family's bound). Scale ratios up to 100 at the bounds. At 1e3 and 1e4 the footprint's minor-axis term
-  // (cos dy - sin dx) / sigma_minor subtracts two products of a few mm, so one float rounding moves it
-  // by ~5e-7 mm / sigma_minor (2e-4 mm and less): a backend that fuses multiply-adds differently (nvcc
-  // by default, GCC's AVX2 clone) moves I by up to ~1e-3 near the footprint's edge, as the CPU clones
-  // differ from each other (TestGaussianFootprint bounds the weight by the same aspect-ratio growth).
+  // within the family's bound). Scale ratios up to 100 at the bounds. At 1e3 and 1e4 the footprint's minor-axis
+  // term (cos dy - sin dx) / sigma_minor subtracts two products of a few mm, so one float rounding moves it by ~5e-7 mm
+  // / sigma_minor (2e-4 mm and less): a backend that fuses multiply-adds differently (nvcc by default, GCC's AVX2
+  // clone) moves I by up to ~1e-3 near the footprint's edge, as the CPU clones differ from each other
+  // (TestGaussianFootprint bounds the weight by the same aspect-ratio growth).
   const struct
   {
     std::vector<double> Ratios;
@@ -418,8 +418,7 @@ TEST(CudaRenderer, PoseGradientsMatchTheCpu)
       << error;
     ASSERT_TRUE(gpu->Backward(field.View(), slices.data(), 2, o, S.data(), dL.data(), false, repeat, nullptr, &error))
       << error;
-    ASSERT_TRUE(
-      cpu->Backward(field.View(), slices.data(), 2, o, Sc.data(), dL.data(), false, onCpu, nullptr, &error))
+    ASSERT_TRUE(cpu->Backward(field.View(), slices.data(), 2, o, Sc.data(), dL.data(), false, onCpu, nullptr, &error))
       << error;
     EXPECT_EQ(std::memcmp(means.data(), meansWithPoses.data(), sizeof(float) * means.size()), 0)
       << "sigma_E " << sigmaE << ": the mean gradients change when pose gradients are asked for";
@@ -488,7 +487,8 @@ TEST(CudaRenderer, AWholeTrainingStepThroughTheCudaEngine)
   settings.Poses.RefinePoses = bigus::PoseRefinement::On;
   settings.Poses.Start = 0;
   std::string error;
-  std::unique_ptr<TrainingEngine> engines[2] = { CreateTrainingEngine("cuda", &error), CreateTrainingEngine("cpu", &error) };
+  std::unique_ptr<TrainingEngine> engines[2] = { CreateTrainingEngine("cuda", &error),
+    CreateTrainingEngine("cpu", &error) };
   ASSERT_TRUE(engines[0] && engines[1]) << error;
   EXPECT_STREQ(engines[0]->GetName(), "cuda");
   OptimizerState after[2];
@@ -857,8 +857,8 @@ TEST(CudaTrainingEngine, DataParallelStepsOnTwoProcessesAreTheStepsOfOne)
     std::string error;
     std::unique_ptr<TrainingEngine> engine = CreateTrainingEngine("cuda", &error, nullptr, reduction != nullptr);
     ASSERT_TRUE(engine) << error;
-    ASSERT_TRUE(engine->SetData(&c.Data, &error) && engine->SetReduction(reduction, &error) &&
-      engine->Push(c.State, &error))
+    ASSERT_TRUE(
+      engine->SetData(&c.Data, &error) && engine->SetReduction(reduction, &error) && engine->Push(c.State, &error))
       << error;
     for (int step = 0; step < 3; ++step)
     {
@@ -875,8 +875,8 @@ TEST(CudaTrainingEngine, DataParallelStepsOnTwoProcessesAreTheStepsOfOne)
     // The solve's split: each process applies A^T to its own frames' images.
     const int rank = reduction ? reduction->Rank() : 0, count = reduction ? 1 : 2;
     Aty[e].assign(c.State.Count(), 0.0);
-    EXPECT_TRUE(engine->ApplyBasisTranspose(y.data() + rank * pixels, c.Frames.data() + rank, count,
-      c.Request.Options, Aty[e].data(), &error))
+    EXPECT_TRUE(engine->ApplyBasisTranspose(
+      y.data() + rank * pixels, c.Frames.data() + rank, count, c.Request.Options, Aty[e].data(), &error))
       << error;
   };
   train(nullptr, 2);

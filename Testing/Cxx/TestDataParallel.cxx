@@ -35,8 +35,8 @@ TEST(Trainer, ADataParallelStepOnTwoProcessesIsOneProcessesStepOnAllTheFrames)
     std::string error;
     auto engine = CreateTrainingEngine("cpu", &error);
     ASSERT_NE(engine, nullptr) << error;
-    ASSERT_TRUE(engine->SetData(&data, &error) && engine->SetReduction(reduction, &error) &&
-      engine->Push(state, &error))
+    ASSERT_TRUE(
+      engine->SetData(&data, &error) && engine->SetReduction(reduction, &error) && engine->Push(state, &error))
       << error;
     for (int step = 0; step < 3; ++step)
     {
@@ -51,9 +51,8 @@ TEST(Trainer, ADataParallelStepOnTwoProcessesIsOneProcessesStepOnAllTheFrames)
   std::vector<double> losses[3];
   OptimizerState after[3];
   train(nullptr, losses[2], after[2]);
-  bigus::test::RunOnThreads(2, [&](int rank, ProcessReduction& reduction) {
-    train(&reduction, losses[rank], after[rank]);
-  });
+  bigus::test::RunOnThreads(
+    2, [&](int rank, ProcessReduction& reduction) { train(&reduction, losses[rank], after[rank]); });
   EXPECT_EQ(losses[0], losses[1]);
   ExpectSameField(after[0].Field, after[1].Field);
   ExpectSameField(after[0].SecondMoment, after[1].SecondMoment);
@@ -75,8 +74,8 @@ TEST(Trainer, ADataParallelStepOnTwoProcessesIsOneProcessesStepOnAllTheFrames)
     const double a = after[0].Attribution[k], b = after[2].Attribution[k];
     attribution = std::max(attribution, std::abs(a - b) / std::max(1e-12, std::abs(b)));
   }
-  std::printf("two processes against one: means %.3g mm apart at most, attribution %.3g relative\n", largest,
-    attribution);
+  std::printf(
+    "two processes against one: means %.3g mm apart at most, attribution %.3g relative\n", largest, attribution);
   EXPECT_LT(largest, 1e-4) << "three steps of 0.01 mm each moved the means differently";
   EXPECT_LT(attribution, 1e-4);
 }

@@ -331,8 +331,7 @@ TEST(Trainer, ADensificationAddsResidualSeedsOnTrainingFrames)
       const double uu = u[0] * u[0] + u[1] * u[1] + u[2] * u[2], vv = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
       const double pi = (u[0] * d[0] + u[1] * d[1] + u[2] * d[2]) / uu;
       const double pj = (v[0] * d[0] + v[1] * d[1] + v[2] * d[2]) / vv;
-      onAFrame = onAFrame ||
-        (off < 1e-3 && pi > -0.5 && pi < data.Width - 0.5 && pj > -0.5 && pj < data.Height - 0.5);
+      onAFrame = onAFrame || (off < 1e-3 && pi > -0.5 && pi < data.Width - 0.5 && pj > -0.5 && pj < data.Height - 0.5);
     }
     EXPECT_TRUE(onAFrame) << "seed " << i << " lies on no training frame";
     EXPECT_NE(f.Reflectivities[i], 0.f) << "seed " << i;

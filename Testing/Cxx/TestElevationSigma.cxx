@@ -231,8 +231,7 @@ TEST(PoseRefinementChoice, TheTrainerRefinesTheSweepsTheRuleChooses)
 {
   const GaussianField truth = SpeckleField(12000, 10.0, 7);
   std::vector<int> heldOut;
-  const TrainingData data =
-    TwoSweeps(Sweep(truth, 0.6, 0.2, 30, heldOut), Sweep(truth, 0.3, 1.5, 6, heldOut));
+  const TrainingData data = TwoSweeps(Sweep(truth, 0.6, 0.2, 30, heldOut), Sweep(truth, 0.3, 1.5, 6, heldOut));
   TrainerSettings s;
   s.ElevationSigma = 0.5;
   s.Seeding.PixelGridFit = false;

@@ -87,7 +87,8 @@ Sweep MakeSweep(double degrees, double offset = 0.1)
       s.Field.LogScales.insert(
         s.Field.LogScales.end(), { float(std::log(scale(rng))), float(std::log(scale(rng))), float(std::log(0.03)) });
       // Rotation about x by a, so the thin axis stays along the frame's normal.
-      s.Field.Quaternions.insert(s.Field.Quaternions.end(), { float(std::cos(a / 2)), float(std::sin(a / 2)), 0.f, 0.f });
+      s.Field.Quaternions.insert(
+        s.Field.Quaternions.end(), { float(std::cos(a / 2)), float(std::sin(a / 2)), 0.f, 0.f });
       s.Field.Reflectivities.push_back(float(r(rng)));
       s.Owner.push_back(k);
     }
@@ -294,7 +295,8 @@ TEST(GapFilling, UnderTheMaximumOfGaussiansAGapIsBridgedByItsStrongestGaussians)
     norm += full[p] * full[p];
   }
   ASSERT_GT(norm, 0);
-  std::printf("half the copies, strongest first: relative error in the middle of the gap %.3f\n", std::sqrt(error / norm));
+  std::printf(
+    "half the copies, strongest first: relative error in the middle of the gap %.3f\n", std::sqrt(error / norm));
   EXPECT_LT(std::sqrt(error / norm), 0.5) << "the strongest half of the copies carries most of the gap";
   EXPECT_NE(DescribeGapFilling(report, settings).find("1 gaps thinned"), std::string::npos)
     << DescribeGapFilling(report, settings);

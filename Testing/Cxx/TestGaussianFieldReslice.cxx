@@ -211,8 +211,7 @@ TEST(GaussianFieldReslice, APixelLowPassOfOneTwelfthAveragesEachPixelsArea)
     reslice->SetPixelLowPass(lowPass);
     reslice->OutputScatteringFieldOn();
     reslice->Update();
-    vtkFloatArray* S =
-      vtkFloatArray::SafeDownCast(reslice->GetOutput()->GetPointData()->GetArray("ScatteringField"));
+    vtkFloatArray* S = vtkFloatArray::SafeDownCast(reslice->GetOutput()->GetPointData()->GetArray("ScatteringField"));
     EXPECT_NE(S, nullptr);
     return std::vector<float>(S->GetPointer(0), S->GetPointer(0) + std::size_t(width) * height);
   };
@@ -372,8 +371,8 @@ std::vector<float> Values(vtkImageData* image)
 /// The scalar type the output information announces.
 int AnnouncedScalarType(vtkAlgorithm* filter)
 {
-  vtkInformation* scalars = vtkDataObject::GetActiveFieldInformation(filter->GetOutputInformation(0),
-    vtkDataObject::FIELD_ASSOCIATION_POINTS, vtkDataSetAttributes::SCALARS);
+  vtkInformation* scalars = vtkDataObject::GetActiveFieldInformation(
+    filter->GetOutputInformation(0), vtkDataObject::FIELD_ASSOCIATION_POINTS, vtkDataSetAttributes::SCALARS);
   return scalars ? scalars->Get(vtkDataObject::FIELD_ARRAY_TYPE()) : -1;
 }
 

@@ -148,9 +148,8 @@ TEST(GaussianFieldTrainer, PipelineOutputsTheFieldOfTheDataModel)
   aborted->SetIterations(100000);
   aborted->SetInitialGaussians(300);
   vtkNew<vtkCallbackCommand> stopper;
-  stopper->SetCallback([](vtkObject* caller, unsigned long, void*, void*) {
-    static_cast<vtkAlgorithm*>(caller)->SetAbortExecute(1);
-  });
+  stopper->SetCallback(
+    [](vtkObject* caller, unsigned long, void*, void*) { static_cast<vtkAlgorithm*>(caller)->SetAbortExecute(1); });
   aborted->AddObserver(vtkCommand::ProgressEvent, stopper);
   aborted->Update();
   EXPECT_STREQ(aborted->GetStopReason(), "aborted");

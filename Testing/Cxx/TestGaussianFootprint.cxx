@@ -160,14 +160,11 @@ LocalGaussian<T> MakeLocal(const GaussianParams& g, const SliceFrameD& frame)
 
 // 7-point Gauss / 15-point Kronrod nodes and weights on [-1, 1] (QUADPACK qk15), to long double digits.
 const long double KronrodNodes[8] = { 0.991455371120812639206854697526329L, 0.949107912342758524526189684047851L,
-  0.864864423359769072789712788640926L, 0.741531185599394439863864773280788L,
-  0.586087235467691130294144845693013L, 0.405845151377397166906606412076961L,
-  0.207784955007898467600689403773245L, 0.0L };
-const long double KronrodWeights[8] = { 0.022935322010529224963732008058970L,
-  0.063092092629978553290700663189204L, 0.104790010322250183839876322541518L,
-  0.140653259715525918745189590510238L, 0.169004726639267902826583426598550L,
-  0.190350578064785409913256402421014L, 0.204432940075298892414161999234649L,
-  0.209482141084727828012999174891714L };
+  0.864864423359769072789712788640926L, 0.741531185599394439863864773280788L, 0.586087235467691130294144845693013L,
+  0.405845151377397166906606412076961L, 0.207784955007898467600689403773245L, 0.0L };
+const long double KronrodWeights[8] = { 0.022935322010529224963732008058970L, 0.063092092629978553290700663189204L,
+  0.104790010322250183839876322541518L, 0.140653259715525918745189590510238L, 0.169004726639267902826583426598550L,
+  0.190350578064785409913256402421014L, 0.204432940075298892414161999234649L, 0.209482141084727828012999174891714L };
 const long double GaussWeights[4] = { 0.129484966168869693270611432679082L, 0.279705391489276667901467771423780L,
   0.381830050505118944950369775488975L, 0.417959183673469387755102040816327L };
 
@@ -261,8 +258,8 @@ T IntegrateLine(const F& f, T peak, T width, T relTol)
 
 /**
  * Integral over z of G(p, z) N(z; 0, sigmaE^2) (sigmaE > 0), or of G(p, z) alone (sigmaE = 0 here means
- * no beam, i.e. the projection; not SetupFootprint's thin plane), optionally times z^2 (second moment). The exponent in z is quadratic; its
- * curvature and vertex place the quadrature pieces only.
+ * no beam, i.e. the projection; not SetupFootprint's thin plane), optionally times z^2 (second moment). The exponent in
+ * z is quadratic; its curvature and vertex place the quadrature pieces only.
  */
 template <typename T>
 T ElevationIntegral(const LocalGaussian<T>& L, T px, T py, T sigmaE, T relTol, bool timesZ2 = false)
@@ -600,7 +597,8 @@ TEST(GaussianFootprint, ConicRoundingIsTheLimit)
             exactError = std::max(exactError, double(std::abs(weight(exact) / oracle - 1)));
             roundedError = std::max(roundedError, double(std::abs(weight(rounded) / oracle - 1)));
             const LD closedForm = ClosedFormWeight(f, double(dx), double(dy));
-            const LD roundedDouble = bigus::PixelWeight<double>(f.Amplitude, double(exact[0]), double(exact[1]), double(exact[2]), double(dx), double(dy));
+            const LD roundedDouble = bigus::PixelWeight<double>(
+              f.Amplitude, double(exact[0]), double(exact[1]), double(exact[2]), double(dx), double(dy));
             roundedDoubleError = std::max(roundedDoubleError, double(std::abs(roundedDouble / oracle - 1)));
             closedFormError = std::max(closedFormError, double(std::abs(closedForm / oracle - 1)));
           }
@@ -766,7 +764,8 @@ TEST(GaussianFootprint, ClosedFormEqualsThePapersSchurComplementForm)
             }
             // Centre error measured in footprint standard deviations.
             const double dc[2] = { f.Center[0] - centre[0], f.Center[1] - centre[1] };
-            const double centreError = std::sqrt(std::abs(S[0] * dc[0] * dc[0] + 2 * S[1] * dc[0] * dc[1] + S[2] * dc[1] * dc[1]));
+            const double centreError =
+              std::sqrt(std::abs(S[0] * dc[0] * dc[0] + 2 * S[1] * dc[0] * dc[1] + S[2] * dc[1] * dc[1]));
             worstCentre = std::max(worstCentre, centreError);
             EXPECT_LE(centreError, 1e-10) << what;
             const double ampError = std::abs(f.Amplitude - paper(centre[0], centre[1])) / f.Amplitude;
@@ -776,7 +775,8 @@ TEST(GaussianFootprint, ClosedFormEqualsThePapersSchurComplementForm)
             {
               const double px = f.Center[0] + d[0], py = f.Center[1] + d[1];
               const double reference = paper(px, py);
-              const double err = std::abs(ClosedFormWeight(f, px - f.Center[0], py - f.Center[1]) - reference) / reference;
+              const double err =
+                std::abs(ClosedFormWeight(f, px - f.Center[0], py - f.Center[1]) - reference) / reference;
               worstWeight = std::max(worstWeight, err);
               EXPECT_LE(err, 1e-10) << Where(what, d);
             }
@@ -821,7 +821,7 @@ TEST(GaussianFootprint, NoNaNOrInfOnExtremeParameters)
   const double quaternionNorms[] = { 1, 1e-12, 1e-3, 1e3, 1e12, 0 };
   const double beams[] = { 0, 1e-4, 100 };
   const double origins[2][3] = { { 0, 0, 0 }, { 577.35, -577.35, 577.35 } }; // the second 1 m out
-  const double elevations[] = { 0, 0.05, 3, 1e3 };                             // mm off the plane
+  const double elevations[] = { 0, 0.05, 3, 1e3 };                           // mm off the plane
   int setups = 0, visible = 0, weights = 0, farVisible = 0, aboveAmplitude = 0, nonFinite = 0, nanOrNegative = 0;
   std::string firstNonFinite, firstNanOrNegative;
   double smallestBadGap = std::numeric_limits<double>::infinity();
@@ -859,8 +859,8 @@ TEST(GaussianFootprint, NoNaNOrInfOnExtremeParameters)
                     ++setups;
                     char what[200];
                     std::snprintf(what, sizeof(what),
-                      "log-scales (%g, %g, %g) |q| %g tilt %g m_z %g sigma_E %g origin %g cutoff %g", l0, l1, l2, norm, tilt,
-                      mz, sigmaE, origin[0], cutoff);
+                      "log-scales (%g, %g, %g) |q| %g tilt %g m_z %g sigma_E %g origin %g cutoff %g", l0, l1, l2, norm,
+                      tilt, mz, sigmaE, origin[0], cutoff);
                     EXPECT_TRUE(std::isfinite(f.Elevation) && !std::isnan(f.ElevationVar)) << what;
                     if (!f.Visible)
                     {
@@ -927,8 +927,8 @@ TEST(GaussianFootprint, NoNaNOrInfOnExtremeParameters)
       }
     }
   }
-  std::printf("%d setups, %d visible, %d weights; amp > 0 beyond 38.7 elevation sd: %d\n", setups, visible,
-    weights, farVisible);
+  std::printf(
+    "%d setups, %d visible, %d weights; amp > 0 beyond 38.7 elevation sd: %d\n", setups, visible, weights, farVisible);
   std::printf("weights above the amplitude: %d (worst w / amp = %.3e: %s)\n", aboveAmplitude, worstExcess,
     worstExcessWhere.c_str());
   std::printf("smallest log-scale gap (after clamping) with a bad weight: %g\n", smallestBadGap);
@@ -1156,8 +1156,8 @@ TEST(SlicePose, TheGradientWithRespectToTheCorrectionMatchesCentralDifferences)
   const double weights[6] = { 0.7, -1.3, 0.45, -0.8, 0.3, 1.9 }; // centre x, y, conic a, b, c, amplitude
   auto loss = [&](const Case& c, const SliceFrameD& frame) {
     const Footprint f = bigus::SetupFootprint(c.G, frame, c.SigmaE, 1e3, nullptr);
-    return weights[0] * f.Center[0] + weights[1] * f.Center[1] + weights[2] * f.Conic[0] +
-      weights[3] * f.Conic[1] + weights[4] * f.Conic[2] + weights[5] * f.Amplitude;
+    return weights[0] * f.Center[0] + weights[1] * f.Center[1] + weights[2] * f.Conic[0] + weights[3] * f.Conic[1] +
+      weights[4] * f.Conic[2] + weights[5] * f.Amplitude;
   };
   const double pivot[3] = { 7.5, -3.0, 0 };
   const double pixelToPlane[3] = { 0.6, 0.1, 0.55 }; // a sheared pixel, for the cases with a low-pass

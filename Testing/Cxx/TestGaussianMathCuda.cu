@@ -24,12 +24,12 @@ struct Case
 {
   float Means[3], LogScales[3], Quaternions[4], Reflectivity; // [1, 3], [1, 3], [1, 4], [1]
   SliceFrameD Frame;
-  double SigmaE, Cutoff; // mm, standard deviations
+  double SigmaE, Cutoff;   // mm, standard deviations
   double FootprintSeed[6]; // dL/d(centre, conic, amp) fed to SetupFootprintBackward
   // Inputs of the per-pixel functions, from the host's footprint of this Gaussian (a random one where
   // it is culled), so that both sides evaluate them on the same numbers.
   double Conic[3], Axes[4], Amplitude;
-  double Dx, Dy;         // pixel offset from the footprint centre, mm
+  double Dx, Dy; // pixel offset from the footprint centre, mm
   double GS, S, Gamma, MeanIntensity;
 };
 
@@ -304,9 +304,8 @@ std::vector<Case> MakeCases()
       default:
         break;
     }
-    const Footprint f =
-      SetupFootprint(LoadGaussian(k.Means, k.LogScales, k.Quaternions, &k.Reflectivity, 0), k.Frame, k.SigmaE,
-        k.Cutoff, nullptr);
+    const Footprint f = SetupFootprint(
+      LoadGaussian(k.Means, k.LogScales, k.Quaternions, &k.Reflectivity, 0), k.Frame, k.SigmaE, k.Cutoff, nullptr);
     if (f.Visible)
     {
       for (int i = 0; i < 3; ++i)

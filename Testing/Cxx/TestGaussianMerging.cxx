@@ -27,8 +27,8 @@ using namespace bigus;
 
 namespace
 {
-GaussianParams MakeGaussian(const std::array<double, 3>& mean, const std::array<double, 3>& scales,
-  const std::array<double, 4>& q, double r)
+GaussianParams MakeGaussian(
+  const std::array<double, 3>& mean, const std::array<double, 3>& scales, const std::array<double, 4>& q, double r)
 {
   GaussianParams g{};
   for (int k = 0; k < 3; ++k)

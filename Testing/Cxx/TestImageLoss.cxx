@@ -160,7 +160,8 @@ TEST(ImageLoss, FflMatchesADirectDftWithFocalWeights)
         for (int u = 0; u < PW; ++u)
         {
           g += 2 * weight[v * PW + u] *
-            std::real(std::conj(F[v * PW + u]) * std::polar(1.0, -2 * M_PI * (double(u) * i / PW + double(v) * j / PH)));
+            std::real(
+              std::conj(F[v * PW + u]) * std::polar(1.0, -2 * M_PI * (double(u) * i / PW + double(v) * j / PH)));
         }
       }
       g = im.Mask[p] ? g / (N * N) : 0.0;

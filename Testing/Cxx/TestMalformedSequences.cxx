@@ -134,7 +134,7 @@ struct MalformedCase
   std::vector<std::string> Expected; ///< substrings the error text must contain (field, frame, ...)
   int First = 0;                     ///< FrameRange
   int Last = -1;
-  bool Calibration = true;           ///< SetCalibrationFileName(nwire XML) for ImageToProbe
+  bool Calibration = true; ///< SetCalibrationFileName(nwire XML) for ImageToProbe
 };
 
 void PrintTo(const MalformedCase& c, std::ostream* os)
@@ -231,8 +231,7 @@ const std::vector<MalformedCase>& Cases()
 }
 
 class MalformedSequence : public ::testing::TestWithParam<MalformedCase>
-{
-};
+{};
 
 TEST_P(MalformedSequence, FailsWithPreciseMessage)
 {
@@ -325,7 +324,8 @@ TEST_F(WellFormedSequence, OrientationsAreFlippedBackToMF)
 {
   for (const char* code : { "UF", "MN", "UN" })
   {
-    std::string file = std::string("orientation_") + char(std::tolower(code[0])) + char(std::tolower(code[1])) + ".igs.mha";
+    std::string file =
+      std::string("orientation_") + char(std::tolower(code[0])) + char(std::tolower(code[1])) + ".igs.mha";
     const ReadResult r = ReadOk(Corpus(file));
     ASSERT_TRUE(r.UpdateOk) << file;
     EXPECT_EQ(r.FileOrientation, code) << file;

@@ -99,8 +99,8 @@ vtkSmartPointer<vtkUltrasoundSequenceReader> ReferenceSweep(const nlohmann::json
 /// A deliberate change of the rendering, for the check that the comparison sees small changes.
 struct Perturbation
 {
-  double NormalShift = 0;      ///< mm, the plane moved along its normal
-  double SigmaFactor = 1;      ///< the field's elevation sigma scaled
+  double NormalShift = 0; ///< mm, the plane moved along its normal
+  double SigmaFactor = 1; ///< the field's elevation sigma scaled
 };
 
 /// Renders reference plane @p plane (an entry of reference.json's "planes") with vtkGaussianFieldReslice.
@@ -120,9 +120,9 @@ vtkSmartPointer<vtkImageData> RenderPlane(vtkPolyData* field, const nlohmann::js
 /// Outcome of comparing a test image with a baseline image.
 struct Comparison
 {
-  std::string GridMismatch;    ///< empty when sizes, spacings and origins agree
+  std::string GridMismatch; ///< empty when sizes, spacings and origins agree
   double MaximumDifference = 0;
-  vtkIdType PixelsBeyond = 0;  ///< pixels differing by more than the tolerance
+  vtkIdType PixelsBeyond = 0; ///< pixels differing by more than the tolerance
 };
 
 /// ITK --compare: same grid, then per pixel |test - baseline| against @p tolerance.
@@ -166,8 +166,7 @@ void ExpectMatchesBaseline(vtkImageData* test, const std::string& baselineName, 
   const Comparison c = CompareImages(test, baseline, IntensityTolerance);
   std::printf("%-26s max |difference| %.3g, %lld pixels beyond %g\n", label.c_str(), c.MaximumDifference,
     static_cast<long long>(c.PixelsBeyond), IntensityTolerance);
-  EXPECT_TRUE(c.GridMismatch.empty()) << label << ": the grid differs from " << baselineName << ", "
-                                      << c.GridMismatch;
+  EXPECT_TRUE(c.GridMismatch.empty()) << label << ": the grid differs from " << baselineName << ", " << c.GridMismatch;
   EXPECT_LE(c.PixelsBeyond, ToleratedPixels)
     << label << ": " << c.PixelsBeyond << " pixels differ from " << baselineName << " by more than "
     << IntensityTolerance << " (largest " << c.MaximumDifference << ")";
@@ -263,8 +262,10 @@ TEST(ReferenceResults, CpuRendererMatchesReferenceSliceAtTheRecordedPose)
   int dims[3];
   sweep->GetOutput()->GetDimensions(dims);
   bigus::SliceGeometry slice;
-  sweep->GetOutput()->GetFieldData()->GetArray("ImageToReference")->GetTuple(plane["frame"].get<int>(),
-    slice.ImageToReference);
+  sweep->GetOutput()
+    ->GetFieldData()
+    ->GetArray("ImageToReference")
+    ->GetTuple(plane["frame"].get<int>(), slice.ImageToReference);
   slice.Width = dims[0];
   slice.Height = dims[1];
 
@@ -276,8 +277,8 @@ TEST(ReferenceResults, CpuRendererMatchesReferenceSliceAtTheRecordedPose)
   auto renderer = bigus::CreateRenderer("cpu", &error);
   ASSERT_TRUE(renderer) << error;
   std::vector<float> S(std::size_t(dims[0]) * dims[1]), I(S.size());
-  ASSERT_TRUE(renderer->Forward(field.View(), &slice, 1, bigus::RenderOptionsFor(model, -1, 5.0), S.data(),
-    I.data(), nullptr, &error))
+  ASSERT_TRUE(renderer->Forward(
+    field.View(), &slice, 1, bigus::RenderOptionsFor(model, -1, 5.0), S.data(), I.data(), nullptr, &error))
     << error;
 
   vtkNew<vtkImageData> rendered;
@@ -308,8 +309,8 @@ TEST(ReferenceResults, ComparisonDetectsSmallRenderingChanges)
       std::printf("%-8s moved %.2f mm, sigma x %.3f: max |difference| %.3g, %lld pixels beyond %g\n",
         plane["name"].get<std::string>().c_str(), change.NormalShift, change.SigmaFactor, c.MaximumDifference,
         static_cast<long long>(c.PixelsBeyond), IntensityTolerance);
-      EXPECT_GT(c.PixelsBeyond, ToleratedPixels) << plane["name"] << " moved " << change.NormalShift
-                                                 << " mm, sigma x " << change.SigmaFactor;
+      EXPECT_GT(c.PixelsBeyond, ToleratedPixels)
+        << plane["name"] << " moved " << change.NormalShift << " mm, sigma x " << change.SigmaFactor;
     }
   }
 }

@@ -116,8 +116,8 @@ Eigen::MatrixXd DenseBasis(TrainingEngine& engine, const TrainingData& data, std
   for (std::int64_t i = 0; i < n; ++i)
   {
     unit[i] = 1.f;
-    EXPECT_TRUE(engine.ApplyBasis(unit.data(), data.TrainFrames.data(), static_cast<int>(data.TrainFrames.size()), o,
-      S.data(), &error))
+    EXPECT_TRUE(engine.ApplyBasis(
+      unit.data(), data.TrainFrames.data(), static_cast<int>(data.TrainFrames.size()), o, S.data(), &error))
       << error;
     unit[i] = 0.f;
     for (std::size_t p = 0; p < size; ++p)
@@ -169,8 +169,8 @@ TEST(ReflectivitySolve, TheTransposeProductIsTheAdjointOfTheBasisProductOnHardCa
       // Relative to the sum of the absolute terms: with signed x and y the inner product itself cancels
       // (a sum of terms of random sign), while float rounding scales with the terms.
       EXPECT_GT(scale, 1.0) << "the frames must see the field";
-      EXPECT_NEAR(left, right, 1e-6 * scale) << "sigma_E " << sigmaE << ", trial " << trial << ", sum of |terms| "
-                                              << scale;
+      EXPECT_NEAR(left, right, 1e-6 * scale)
+        << "sigma_E " << sigmaE << ", trial " << trial << ", sum of |terms| " << scale;
     }
   }
 }
@@ -230,8 +230,8 @@ TEST(ReflectivitySolve, MatchesADenseDirectSolveOnATinyProblem)
   ReflectivitySolveReport report;
   std::string error;
   ASSERT_TRUE(SolveReflectivities(*engine, data, data.TrainFrames, o, settings, r, &report, &error)) << error;
-  const Eigen::MatrixXd normal = A.transpose() * g.asDiagonal() * A +
-    report.Lambda * Eigen::MatrixXd::Identity(geometry.Count(), geometry.Count());
+  const Eigen::MatrixXd normal =
+    A.transpose() * g.asDiagonal() * A + report.Lambda * Eigen::MatrixXd::Identity(geometry.Count(), geometry.Count());
   const Eigen::VectorXd expected = normal.ldlt().solve(A.transpose() * (g.array() * t.array()).matrix());
   const Eigen::ArrayXd diagonal = (A.array().square().colwise() * g.array()).colwise().sum().transpose();
   const double diagonalMean = diagonal.sum() / (diagonal > 0).count(); // over the Gaussians the frames see
@@ -354,8 +354,8 @@ TEST(ReflectivitySolve, IntensitiesAtOneGiveFiniteReflectivities)
   auto engine = EngineFor(data, geometry);
   std::vector<float> r = geometry.Reflectivities;
   std::string error;
-  ASSERT_TRUE(SolveReflectivities(*engine, data, data.TrainFrames, Options(sigmaE), ReflectivitySolveSettings(), r,
-    nullptr, &error))
+  ASSERT_TRUE(SolveReflectivities(
+    *engine, data, data.TrainFrames, Options(sigmaE), ReflectivitySolveSettings(), r, nullptr, &error))
     << error;
   for (float v : r)
   {
@@ -375,7 +375,8 @@ TEST(ReflectivitySolve, NothingToSolveIsAClearErrorAndLeavesTheReflectivities)
     std::fill(empty.Mask.begin(), empty.Mask.end(), 0);
     auto engine = EngineFor(empty, geometry);
     std::vector<float> r = geometry.Reflectivities;
-    EXPECT_FALSE(SolveReflectivities(*engine, empty, empty.TrainFrames, o, ReflectivitySolveSettings(), r, nullptr, &error));
+    EXPECT_FALSE(
+      SolveReflectivities(*engine, empty, empty.TrainFrames, o, ReflectivitySolveSettings(), r, nullptr, &error));
     EXPECT_NE(error.find("the fan masks of the 2 frames are empty"), std::string::npos) << error;
     EXPECT_EQ(r, geometry.Reflectivities);
   }
@@ -387,7 +388,8 @@ TEST(ReflectivitySolve, NothingToSolveIsAClearErrorAndLeavesTheReflectivities)
     }
     auto engine = EngineFor(data, away);
     std::vector<float> r = away.Reflectivities;
-    EXPECT_FALSE(SolveReflectivities(*engine, data, data.TrainFrames, o, ReflectivitySolveSettings(), r, nullptr, &error));
+    EXPECT_FALSE(
+      SolveReflectivities(*engine, data, data.TrainFrames, o, ReflectivitySolveSettings(), r, nullptr, &error));
     EXPECT_NE(error.find("no Gaussian of the field reaches a pixel"), std::string::npos) << error;
     EXPECT_EQ(r, away.Reflectivities);
   }
@@ -419,8 +421,8 @@ Eigen::VectorXd LassoByCoordinateDescent(
       const double rest = c[i] - H.row(i).dot(r) + H(i, i) * r[i];
       const double threshold = 0.5 * mu * w[i];
       const double next = rest > threshold ? (rest - threshold) / H(i, i)
-        : rest < -threshold                 ? (rest + threshold) / H(i, i)
-                                            : 0.0;
+        : rest < -threshold                ? (rest + threshold) / H(i, i)
+                                           : 0.0;
       change = std::max(change, std::abs(next - r[i]));
       r[i] = next;
     }

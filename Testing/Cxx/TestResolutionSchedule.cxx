@@ -257,8 +257,8 @@ public:
   {
     return this->Cpu->Render(slices, count, options, S, I, error);
   }
-  bool ApplyBasis(const float* r, const int* frames, int count, const RenderOptions& options, float* S,
-    std::string* error) override
+  bool ApplyBasis(
+    const float* r, const int* frames, int count, const RenderOptions& options, float* S, std::string* error) override
   {
     return this->Cpu->ApplyBasis(r, frames, count, options, S, error);
   }
@@ -303,7 +303,9 @@ TEST(Trainer, TheResolutionScheduleStepsOnAQuarterOfThePixelsFirstAndLearnsThere
     std::string error;
     ASSERT_TRUE(trainer.Initialize(&error)) << error;
     const double before = HeldOutPsnr(trainer, heldOut);
-    ASSERT_TRUE(trainer.Train(nullptr, [&] { return engine->StepWidths.size() >= 200; }, &error)) << error;
+    ASSERT_TRUE(trainer.Train(
+      nullptr, [&] { return engine->StepWidths.size() >= 200; }, &error))
+      << error;
     ASSERT_LE(engine->StepWidths.size(), 200u);
     const double coarse = HeldOutPsnr(trainer, heldOut);
     ASSERT_TRUE(trainer.Train(nullptr, nullptr, &error)) << error;

@@ -321,10 +321,11 @@ TEST(Trainer, ADenseStartKeepsToItsCountAndSolvesTheReflectivities)
   s.MaximumGaussians = 1000000000000LL;
   Trainer tooLarge(data, s);
   EXPECT_FALSE(tooLarge.Initialize(&error));
-  const double megabytes = 1e12 * (TrainingBytesPerGaussian + 52) / 1e6 +
-    double(data.Width) * data.Height * data.TrainFrames.size() * 8 / 1e6;
+  const double megabytes =
+    1e12 * (TrainingBytesPerGaussian + 52) / 1e6 + double(data.Width) * data.Height * data.TrainFrames.size() * 8 / 1e6;
   EXPECT_NE(error.find("MaximumGaussians (1000000000000) needs " + std::to_string(std::llround(megabytes)) + " MB"),
-    std::string::npos) << error;
+    std::string::npos)
+    << error;
   EXPECT_NE(error.find("and this machine has"), std::string::npos) << error;
   EXPECT_EQ(tooLarge.GetField().Count(), 0);
 }

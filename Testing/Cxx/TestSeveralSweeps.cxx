@@ -51,8 +51,8 @@ vtkSmartPointer<vtkImageData> Volume()
       for (int i = 0; i < 48; ++i)
       {
         const double x = 0.5 * i, y = 0.5 * j, z = 0.5 * k;
-        *v++ = static_cast<float>(0.45 + 0.2 * std::sin(0.9 * x + 0.4 * z) * std::cos(0.7 * y) +
-          0.15 * std::sin(1.1 * z + 0.3 * y));
+        *v++ = static_cast<float>(
+          0.45 + 0.2 * std::sin(0.9 * x + 0.4 * z) * std::cos(0.7 * y) + 0.15 * std::sin(1.1 * z + 0.3 * y));
       }
     }
   }
@@ -309,14 +309,14 @@ TEST(SeveralSweeps, AFieldTrainedOnTwoSweepsRendersTheHeldOutFramesOfBoth)
     Psnr(parallel->GetOutput(), s.Parallel, true), Psnr(orthogonal->GetOutput(), s.Parallel, true) };
   const double onOrthogonal[3] = { Psnr(both->GetOutput(), s.Orthogonal, true),
     Psnr(parallel->GetOutput(), s.Orthogonal, true), Psnr(orthogonal->GetOutput(), s.Orthogonal, true) };
-  const double onOblique[3] = { Psnr(both->GetOutput(), s.Oblique, false), Psnr(parallel->GetOutput(), s.Oblique, false),
-    Psnr(orthogonal->GetOutput(), s.Oblique, false) };
+  const double onOblique[3] = { Psnr(both->GetOutput(), s.Oblique, false),
+    Psnr(parallel->GetOutput(), s.Oblique, false), Psnr(orthogonal->GetOutput(), s.Oblique, false) };
   std::printf("held-out frames of the parallel sweep: both sweeps' field %.2f dB, parallel's %.2f, orthogonal's %.2f\n",
     onParallel[0], onParallel[1], onParallel[2]);
   std::printf("held-out frames of the orthogonal sweep: both %.2f dB, parallel's %.2f, orthogonal's %.2f\n",
     onOrthogonal[0], onOrthogonal[1], onOrthogonal[2]);
-  std::printf("oblique slices: both %.2f dB, parallel's %.2f, orthogonal's %.2f\n", onOblique[0], onOblique[1],
-    onOblique[2]);
+  std::printf(
+    "oblique slices: both %.2f dB, parallel's %.2f, orthogonal's %.2f\n", onOblique[0], onOblique[1], onOblique[2]);
   // Measured: 30.85 / 28.00 / 18.97, 30.76 / 16.86 / 31.05, 33.03 / 30.00 / 18.98 dB.
   EXPECT_GT(onParallel[0], onParallel[2] + 3);
   EXPECT_GT(onOrthogonal[0], onOrthogonal[1] + 3);
@@ -500,7 +500,7 @@ TEST(SeveralSweeps, CompoundingTwoSweepsIsTheMeanOfEveryPixelEitherSweepInserted
   c->SetFrameList(second);
   c->Update();
   ASSERT_FALSE(messages->Errors.empty());
-  EXPECT_NE(messages->Errors.front().find("frame " + std::to_string(NP + NO)), std::string::npos) << messages->Errors.front();
+  EXPECT_NE(messages->Errors.front().find("frame " + std::to_string(NP + NO)), std::string::npos)
+    << messages->Errors.front();
   messages->Delete();
 }
-

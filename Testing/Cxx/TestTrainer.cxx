@@ -113,8 +113,8 @@ TEST(Trainer, PerFrameMasksTrainOnEachFramesOwnPixels)
   perFrame.Frames = corrupted.Frames;
   const double withMask = HeldOutPsnr(train(perFrame), heldOut);
   const double withoutMask = HeldOutPsnr(train(corrupted), heldOut);
-  std::printf("held-out PSNR with the artefact bands masked per frame %.2f dB, trained on them %.2f dB\n", withMask,
-    withoutMask);
+  std::printf(
+    "held-out PSNR with the artefact bands masked per frame %.2f dB, trained on them %.2f dB\n", withMask, withoutMask);
   EXPECT_GT(withMask, withoutMask + 3);
 }
 
@@ -134,7 +134,9 @@ TEST(Trainer, TrainingInStagesEqualsOneRunAndOnlyFinishPrunes)
   ASSERT_TRUE(staged.Initialize(&error)) << error;
   for (int stop : { 70, 150, 230 })
   {
-    ASSERT_TRUE(staged.Train(nullptr, [&]() { return staged.GetIteration() >= stop; }, &error)) << error;
+    ASSERT_TRUE(staged.Train(
+      nullptr, [&]() { return staged.GetIteration() >= stop; }, &error))
+      << error;
     EXPECT_EQ(staged.GetReport().PrunedAtEnd, 0);
   }
   ASSERT_TRUE(staged.Train(nullptr, nullptr, &error)) << error;
@@ -302,9 +304,9 @@ TEST(Trainer, SparseAdamLeavesTheGaussiansAStepDidNotTouchAsTheyWere)
     EXPECT_NE(after.Field.Reflectivities[0], state.Field.Reflectivities[0]) << "the Gaussian on the frame moves";
     if (sparse)
     {
-      for (const auto& [a, b] : { std::make_pair(&after.Field, &state.Field),
-             std::make_pair(&after.FirstMoment, &state.FirstMoment),
-             std::make_pair(&after.SecondMoment, &state.SecondMoment) })
+      for (const auto& [a, b] :
+        { std::make_pair(&after.Field, &state.Field), std::make_pair(&after.FirstMoment, &state.FirstMoment),
+          std::make_pair(&after.SecondMoment, &state.SecondMoment) })
       {
         EXPECT_TRUE(std::equal(a->Means.begin() + 3, a->Means.end(), b->Means.begin() + 3));
         EXPECT_TRUE(std::equal(a->LogScales.begin() + 3, a->LogScales.end(), b->LogScales.begin() + 3));
@@ -331,8 +333,7 @@ class EngineBackendRenderer : public Renderer
 public:
   explicit EngineBackendRenderer(const char* name)
     : Name(name)
-  {
-  }
+  {}
   const char* GetName() const override { return this->Name; }
   bool Forward(const FieldView& field, const SliceGeometry* slices, int count, const RenderOptions& options, float* S,
     float* I, RenderStats* stats, std::string* error) override
@@ -390,8 +391,8 @@ TEST(Trainer, ABackendBringsItsOwnTrainingEngine)
   RegisterBackend("broken-engine", &MakeBrokenEngineRenderer, 30);
   RegisterTrainingEngine("broken-engine", &MakeBrokenEngine);
   EXPECT_EQ(CreateTrainingEngine("broken-engine", &error), nullptr);
-  EXPECT_NE(error.find("training engine of backend 'broken-engine' cannot be used: the device has no room"),
-    std::string::npos)
+  EXPECT_NE(
+    error.find("training engine of backend 'broken-engine' cannot be used: the device has no room"), std::string::npos)
     << error;
   std::unique_ptr<TrainingEngine> fallback = CreateTrainingEngine("auto", &error, &notice);
   ASSERT_NE(fallback, nullptr) << error;
@@ -413,9 +414,9 @@ TEST(Trainer, AnUnavailableBackendIsAClearError)
 
   std::vector<int> heldOut;
   const TrainingData data = SyntheticSweep(KnownField(150, 9), 0.5, heldOut);
-  vtkSmartPointer<vtkImageData> sequence = bigus_test::TrackedSequence(W, H, data.Poses,
-    std::vector<double>(data.Count(), 0.0),
-    [&](int k, int i, int j) { return data.Frames[(std::size_t(k) * H + j) * W + i]; });
+  vtkSmartPointer<vtkImageData> sequence =
+    bigus_test::TrackedSequence(W, H, data.Poses, std::vector<double>(data.Count(), 0.0),
+      [&](int k, int i, int j) { return data.Frames[(std::size_t(k) * H + j) * W + i]; });
   vtkNew<vtkGaussianFieldTrainer> filter;
   filter->SetInputData(sequence);
   filter->SetIterations(10);
@@ -447,12 +448,25 @@ TEST(Trainer, EveryAblationSwitchRuns)
       "no L1" };
     switch (variant)
     {
-      case 0: s.Seeding.HarrisInitialisation = false; break;
-      case 1: s.Densification.Enabled = false; break;
-      case 2: s.BeamIntegration = false; break;
-      case 3: s.NonNegativeReflectivity = true; break;
-      case 4: s.Loss.DSSIM = 0; s.Loss.FFL = 0; break;
-      case 5: s.Loss.L1 = 0; break;
+      case 0:
+        s.Seeding.HarrisInitialisation = false;
+        break;
+      case 1:
+        s.Densification.Enabled = false;
+        break;
+      case 2:
+        s.BeamIntegration = false;
+        break;
+      case 3:
+        s.NonNegativeReflectivity = true;
+        break;
+      case 4:
+        s.Loss.DSSIM = 0;
+        s.Loss.FFL = 0;
+        break;
+      case 5:
+        s.Loss.L1 = 0;
+        break;
     }
     Trainer trainer(data, s);
     std::string error;
@@ -470,8 +484,8 @@ TEST(Trainer, EveryAblationSwitchRuns)
     EXPECT_TRUE(AllFinite(trainer.GetField())) << names[variant];
     // The settings lines say what Finish does: no gap filling without an elevation beam.
     const std::vector<std::string>& lines = trainer.GetReport().Settings;
-    const bool fillsGaps = std::any_of(lines.begin(), lines.end(),
-      [](const std::string& line) { return line.rfind("FillGaps = on", 0) == 0; });
+    const bool fillsGaps = std::any_of(
+      lines.begin(), lines.end(), [](const std::string& line) { return line.rfind("FillGaps = on", 0) == 0; });
     EXPECT_EQ(fillsGaps, s.BeamIntegration) << names[variant];
   }
 }

@@ -39,10 +39,10 @@ using namespace bigus;
 
 namespace
 {
-constexpr int FW = 40, FH = 30;    // training frame size, pixels
-constexpr double Pixel = 0.25;     // mm per pixel of the training frames
-constexpr double Sigma = 1.0;      // the field's elevation sigma, mm
-constexpr double Gap = 2.0;        // mm between the two parallel training frames
+constexpr int FW = 40, FH = 30; // training frame size, pixels
+constexpr double Pixel = 0.25;  // mm per pixel of the training frames
+constexpr double Sigma = 1.0;   // the field's elevation sigma, mm
+constexpr double Gap = 2.0;     // mm between the two parallel training frames
 
 /// A fan: an annulus sector opening downwards from above the frame, the shape of a curvilinear probe's.
 bool InFan(int i, int j)
@@ -249,8 +249,8 @@ void Rotation(const double k[3], double angle, double R[3][3])
 }
 
 /// A pose with pixel axes R e_x s0 and R (sin(shear) e_x + cos(shear) e_y) s1 (shear in radians) at @p origin.
-std::array<double, 16> ObliquePose(const double axis[3], double angle, double shear, double s0, double s1,
-  const double origin[3])
+std::array<double, 16> ObliquePose(
+  const double axis[3], double angle, double shear, double s0, double s1, const double origin[3])
 {
   double R[3][3];
   Rotation(axis, angle, R);
@@ -419,8 +419,8 @@ TEST(TrainingCoverage, TheSequenceRendererOutputsCoverageAtEveryPose)
   ASSERT_NE(coverage, nullptr);
   ASSERT_EQ(coverage->GetNumberOfTuples(), FW * FH * 3);
   EXPECT_STREQ(out->GetPointData()->GetScalars()->GetName(), "Intensity") << "Coverage is not the scalars";
-  const double expected[3] = { 1 + std::exp(-Gap * Gap / (2 * Sigma * Sigma)),
-    2 * std::exp(-1.0 / (2 * Sigma * Sigma)), 0 };
+  const double expected[3] = { 1 + std::exp(-Gap * Gap / (2 * Sigma * Sigma)), 2 * std::exp(-1.0 / (2 * Sigma * Sigma)),
+    0 };
   for (int k = 0; k < 3; ++k)
   {
     for (int p = 0; p < FW * FH; ++p)
@@ -448,8 +448,8 @@ TEST(TrainingCoverage, AFieldWithoutTrainingGeometryRendersAsBeforeWithoutCovera
   std::vector<float> images[3];
   int index = 0;
   vtkNew<bigus_test::MessageCollector> messages;
-  for (auto [field, coverage] : { std::make_pair(plain.Get(), true), std::make_pair(trained.Get(), true),
-         std::make_pair(trained.Get(), false) })
+  for (auto [field, coverage] :
+    { std::make_pair(plain.Get(), true), std::make_pair(trained.Get(), true), std::make_pair(trained.Get(), false) })
   {
     vtkNew<vtkGaussianFieldReslice> reslice;
     messages->Watch(reslice);

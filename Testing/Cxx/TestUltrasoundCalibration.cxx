@@ -68,8 +68,9 @@ TEST(Calibration, BadFilesGiveAClearError)
   };
   const Case cases[] = {
     { "truncated.xml", "<PlusConfiguration><CoordinateDefinitions><Transform From=\"Image\"", "malformed XML" },
-    { "no_to.xml", "<A><CoordinateDefinitions><Transform From=\"Image\" Matrix=\"1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1\"/>"
-                   "</CoordinateDefinitions></A>",
+    { "no_to.xml",
+      "<A><CoordinateDefinitions><Transform From=\"Image\" Matrix=\"1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1\"/>"
+      "</CoordinateDefinitions></A>",
       "needs both From and To" },
     { "short_matrix.xml", "<A><Transform From=\"Image\" To=\"Probe\" Matrix=\"1 0 0 0 0 1 0 0 0 0 1 0\"/></A>",
       "16 numbers" },

@@ -89,7 +89,8 @@ TEST(FrameInterpolator, TemporalBlendIsExactForFramesLinearInTime)
   ASSERT_EQ(dims[1], 10);
   ASSERT_EQ(dims[2], 5);
   const std::vector<int> targets = { 1, 3, 4, 6, 7 };
-  const std::vector<std::array<int, 2>> brackets = { { { 0, 2 } }, { { 2, 5 } }, { { 2, 5 } }, { { 5, 8 } }, { { 5, 8 } } };
+  const std::vector<std::array<int, 2>> brackets = { { { 0, 2 } }, { { 2, 5 } }, { { 2, 5 } }, { { 5, 8 } },
+    { { 5, 8 } } };
   const float* p = Pixels(out);
   for (int m = 0; m < 5; ++m)
   {
@@ -106,7 +107,8 @@ TEST(FrameInterpolator, TemporalBlendIsExactForFramesLinearInTime)
     {
       for (int i = 0; i < 12; ++i)
       {
-        ASSERT_NEAR(p[(m * 10 + j) * 12 + i], LinearInTime(k, i, j), 1e-4) << "frame " << k << " pixel " << i << ", " << j;
+        ASSERT_NEAR(p[(m * 10 + j) * 12 + i], LinearInTime(k, i, j), 1e-4)
+          << "frame " << k << " pixel " << i << ", " << j;
       }
     }
   }
@@ -145,7 +147,8 @@ TEST(FrameInterpolator, NearestPoseUsesTheImageCentre)
     Translation(0, 0, 4),   // 4
     Translation(40, 0, 0),  // 5: target, nearest frame 1 (37 mm)
   };
-  auto sweep = bigus_test::TrackedSequence(20, 10, poses, { 0, 1, 2, 3, 4, 5 }, [](int k, int, int) { return float(k); });
+  auto sweep =
+    bigus_test::TrackedSequence(20, 10, poses, { 0, 1, 2, 3, 4, 5 }, [](int k, int, int) { return float(k); });
   vtkNew<vtkUltrasoundFrameInterpolator> interpolator;
   interpolator->SetInputData(sweep);
   interpolator->SetTrainingFrames(Ids({ 1, 2, 4 }));
@@ -266,12 +269,16 @@ TEST(FrameInterpolator, BadListsAndInputsFailWithAnError)
     { "empty training list", [](vtkImageData*, vtkUltrasoundFrameInterpolator* f) { f->SetTrainingFrames(Ids({})); },
       "training frame list is empty" },
     { "training frame out of range",
-      [](vtkImageData*, vtkUltrasoundFrameInterpolator* f) { f->SetTrainingFrames(Ids({ 0, 9 })); },
+      [](vtkImageData*, vtkUltrasoundFrameInterpolator* f) {
+        f->SetTrainingFrames(Ids({ 0, 9 }));
+      },
       "training frame 9 is outside the 9 frames" },
     { "negative training frame",
       [](vtkImageData*, vtkUltrasoundFrameInterpolator* f) { f->SetTrainingFrames(Ids({ -1 })); }, "outside" },
     { "target frame out of range",
-      [](vtkImageData*, vtkUltrasoundFrameInterpolator* f) { f->SetTargetFrames(Ids({ 3, 12 })); },
+      [](vtkImageData*, vtkUltrasoundFrameInterpolator* f) {
+        f->SetTargetFrames(Ids({ 3, 12 }));
+      },
       "target frame 12 is outside" },
     { "invalid training frame",
       [](vtkImageData* s, vtkUltrasoundFrameInterpolator*) {
@@ -279,7 +286,9 @@ TEST(FrameInterpolator, BadListsAndInputsFailWithAnError)
       },
       "training frame 2 has FrameValid = 0" },
     { "every frame is a training frame",
-      [](vtkImageData*, vtkUltrasoundFrameInterpolator* f) { f->SetTrainingFrames(Ids({ 0, 1, 2, 3, 4, 5, 6, 7, 8 })); },
+      [](vtkImageData*, vtkUltrasoundFrameInterpolator* f) {
+        f->SetTrainingFrames(Ids({ 0, 1, 2, 3, 4, 5, 6, 7, 8 }));
+      },
       "no target frame" },
     { "no Timestamp for the blend",
       [](vtkImageData* s, vtkUltrasoundFrameInterpolator* f) {

@@ -191,8 +191,8 @@ double ReferenceSSIM(const std::vector<float>& x, const std::vector<float>& y, c
 std::vector<float> Blurred(const std::vector<float>& frame)
 {
   std::vector<float> out(frame.size());
-  cv::GaussianBlur(cv::Mat(H, W, CV_32F, const_cast<float*>(frame.data())), cv::Mat(H, W, CV_32F, out.data()),
-    cv::Size(0, 0), 2.0);
+  cv::GaussianBlur(
+    cv::Mat(H, W, CV_32F, const_cast<float*>(frame.data())), cv::Mat(H, W, CV_32F, out.data()), cv::Size(0, 0), 2.0);
   return out;
 }
 
@@ -300,8 +300,8 @@ TEST(UltrasoundImageMetrics, SsimMatchesAnIndependentImplementation)
   auto truthImage = vtkSmartPointer<vtkImageData>::New();
   truthImage->SetDimensions(W, H, 1);
   truthImage->AllocateScalars(VTK_UNSIGNED_CHAR, 1);
-  std::copy(Bytes(truthFrames) + std::size_t(k) * W * H, Bytes(truthFrames) + std::size_t(k + 1) * W * H,
-    Bytes(truthImage));
+  std::copy(
+    Bytes(truthFrames) + std::size_t(k) * W * H, Bytes(truthFrames) + std::size_t(k + 1) * W * H, Bytes(truthImage));
   vtkSmartPointer<vtkImageData> renderedImage = FloatImage(blurred);
 
   const double whole = Value(Measure(renderedImage, truthImage).Table, "SSIM", 0);
@@ -386,8 +386,7 @@ TEST(UltrasoundImageMetrics, OnlyTheMaskedPixelsCount)
   ASSERT_GT(inside, W * H / 4);
   ASSERT_GT(W * H - inside - near, W * H / 20) << "the spine frames' fan should leave a background";
 
-  auto damage = [&](bool nearToo)
-  {
+  auto damage = [&](bool nearToo) {
     auto out = vtkSmartPointer<vtkImageData>::New();
     out->DeepCopy(rendered);
     for (int k = 0; k < Frames; ++k)
@@ -502,8 +501,7 @@ TEST(UltrasoundImageMetrics, FrameValidOnlySkipsInvalidTruthFrames)
 
 TEST(UltrasoundImageMetrics, InconsistentInputsFailWithBothSizes)
 {
-  auto image = [](int w, int h, int n, int type, int components)
-  {
+  auto image = [](int w, int h, int n, int type, int components) {
     auto out = vtkSmartPointer<vtkImageData>::New();
     out->SetDimensions(w, h, n);
     out->AllocateScalars(type, components);

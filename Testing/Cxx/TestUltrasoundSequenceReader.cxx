@@ -207,10 +207,10 @@ TEST(SequenceReader, ExplicitChainAndStaticMatrixEqualTheAutomaticChain)
   {
     EXPECT_EQ(Pose(a, k), Pose(b, k)) << "frame " << k;
   }
-  const double probeToTracker[16] = { 0.229438, 0.950472, -0.209668, 174.425, -0.126821, -0.184385, -0.974638,
-    -94.5085, -0.965026, 0.250209, 0.0782352, -21.6545, 0, 0, 0, 1 };
-  const double referenceToTracker[16] = { 0.949522, -0.20838, 0.234489, 264.207, -0.195712, -0.977687,
-    -0.0763249, 93.8733, 0.245161, 0.0265799, -0.969118, 3.12539, 0, 0, 0, 1 };
+  const double probeToTracker[16] = { 0.229438, 0.950472, -0.209668, 174.425, -0.126821, -0.184385, -0.974638, -94.5085,
+    -0.965026, 0.250209, 0.0782352, -21.6545, 0, 0, 0, 1 };
+  const double referenceToTracker[16] = { 0.949522, -0.20838, 0.234489, 264.207, -0.195712, -0.977687, -0.0763249,
+    93.8733, 0.245161, 0.0265799, -0.969118, 3.12539, 0, 0, 0, 1 };
   vtkNew<vtkMatrix4x4> trackerToReference, expected;
   vtkMatrix4x4::Invert(referenceToTracker, trackerToReference->GetData());
   vtkMatrix4x4::Multiply4x4(trackerToReference->GetData(), probeToTracker, expected->GetData());

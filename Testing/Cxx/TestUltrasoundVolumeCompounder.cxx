@@ -70,8 +70,8 @@ std::array<double, 3> PixelToMm(const Matrix& m, double i, double j)
 
 /// A tracked sequence of W x H float frames 0.05 s apart: pixel (i, j) of frame k has
 /// value(k, mm position of the pixel).
-vtkSmartPointer<vtkImageData> Sequence(int w, int h, const std::vector<Matrix>& poses,
-  const std::function<float(int, const std::array<double, 3>&)>& value)
+vtkSmartPointer<vtkImageData> Sequence(
+  int w, int h, const std::vector<Matrix>& poses, const std::function<float(int, const std::array<double, 3>&)>& value)
 {
   std::vector<double> times;
   for (std::size_t k = 0; k < poses.size(); ++k)
@@ -324,7 +324,8 @@ TEST(VolumeCompounder, LinearFieldIsReproducedWithinHalfAVoxelGradient)
   const double g[3] = { 0.7, -0.4, 1.1 };
   auto f = [&](const std::array<double, 3>& p) { return 3 + g[0] * p[0] + g[1] * p[1] + g[2] * p[2]; };
   const std::vector<Matrix> poses = { MakePose(1, 0, 0, 90, 0.3, 0, 0, 0), MakePose(1, 0.2, 0, 70, 0.3, 1.5, -2, 1),
-    MakePose(0, 1, 0, 40, 0.3, -3, 2, 4), MakePose(1, 1, 1, 100, 0.3, 2, 1, -1), MakePose(0, 0, 1, 15, 0.3, -1, -4, 3) };
+    MakePose(0, 1, 0, 40, 0.3, -3, 2, 4), MakePose(1, 1, 1, 100, 0.3, 2, 1, -1),
+    MakePose(0, 0, 1, 15, 0.3, -1, -4, 3) };
   auto sweep = Sequence(60, 50, poses, [&](int, const std::array<double, 3>& p) { return float(f(p)); });
   vtkNew<vtkUltrasoundVolumeCompounder> compounder;
   compounder->SetInputData(sweep);
@@ -424,8 +425,8 @@ vtkSmartPointer<vtkImageData> TwoConstantFrames()
 }
 
 /// The values of the hit voxels after compounding with the given setup; counts their pixels too.
-std::vector<float> HitValues(vtkImageData* sweep, const std::function<void(vtkUltrasoundVolumeCompounder*)>& setup,
-  vtkIdType* pixels = nullptr)
+std::vector<float> HitValues(
+  vtkImageData* sweep, const std::function<void(vtkUltrasoundVolumeCompounder*)>& setup, vtkIdType* pixels = nullptr)
 {
   vtkNew<vtkUltrasoundVolumeCompounder> compounder;
   compounder->SetInputData(sweep);
@@ -467,7 +468,9 @@ TEST(VolumeCompounder, CompoundingModesOfTwoFramesAtOnePose)
 {
   auto sweep = TwoConstantFrames();
   vtkIdType pixels = 0;
-  ExpectAll(HitValues(sweep, [](vtkUltrasoundVolumeCompounder*) {}, &pixels), 20.0f); // MEAN, exact
+  ExpectAll(HitValues(
+              sweep, [](vtkUltrasoundVolumeCompounder*) {}, &pixels),
+    20.0f); // MEAN, exact
   EXPECT_EQ(pixels, 2 * 20 * 16);
   ExpectAll(HitValues(sweep, [](vtkUltrasoundVolumeCompounder* c) { c->SetCompoundingModeToMaximum(); }), 30.0f);
   ExpectAll(HitValues(sweep, [](vtkUltrasoundVolumeCompounder* c) { c->SetCompoundingModeToLatest(); }), 30.0f);
@@ -503,7 +506,9 @@ TEST(VolumeCompounder, FrameListMasksAndFrameValidKeepFramesOut)
   std::fill(m, m + 20 * 16, 1);
   std::fill(m + 20 * 16, m + 2 * 20 * 16, 0);
   vtkIdType pixels = 0;
-  ExpectAll(HitValues(sweep, [&](vtkUltrasoundVolumeCompounder* c) { c->SetFanMaskData(perFrame); }, &pixels), 10.0f);
+  ExpectAll(HitValues(
+              sweep, [&](vtkUltrasoundVolumeCompounder* c) { c->SetFanMaskData(perFrame); }, &pixels),
+    10.0f);
   EXPECT_EQ(pixels, 20 * 16);
 
   // One mask for every frame (W x H x 1): the left half of the image only.
@@ -515,11 +520,14 @@ TEST(VolumeCompounder, FrameListMasksAndFrameValidKeepFramesOut)
   {
     s[p] = (p % 20) < 10 ? 255 : 0;
   }
-  ExpectAll(HitValues(sweep, [&](vtkUltrasoundVolumeCompounder* c) { c->SetFanMaskData(shared); }, &pixels), 20.0f);
+  ExpectAll(HitValues(
+              sweep, [&](vtkUltrasoundVolumeCompounder* c) { c->SetFanMaskData(shared); }, &pixels),
+    20.0f);
   EXPECT_EQ(pixels, 2 * 10 * 16);
 
   // The clip rectangle, PLUS's convention: origin + size is included (columns 2..6, rows 3..8).
-  HitValues(sweep,
+  HitValues(
+    sweep,
     [](vtkUltrasoundVolumeCompounder* c) {
       c->SetClipRectangleOrigin(2, 3);
       c->SetClipRectangleSize(4, 5);
@@ -638,9 +646,8 @@ TEST(VolumeCompounder, AbortStopsWithoutAVolume)
   vtkNew<vtkUltrasoundVolumeCompounder> compounder;
   compounder->SetInputData(TwoConstantFrames());
   vtkNew<vtkCallbackCommand> abort;
-  abort->SetCallback([](vtkObject* caller, unsigned long, void*, void*) {
-    static_cast<vtkAlgorithm*>(caller)->AbortExecuteOn();
-  });
+  abort->SetCallback(
+    [](vtkObject* caller, unsigned long, void*, void*) { static_cast<vtkAlgorithm*>(caller)->AbortExecuteOn(); });
   compounder->AddObserver(vtkCommand::ProgressEvent, abort);
   vtkNew<MessageCollector> messages;
   messages->Watch(compounder->GetExecutive());
@@ -659,76 +666,98 @@ TEST(VolumeCompounder, BadInputsFailWithAnErrorAndNoVolume)
     std::string Expected; // part of the error text
   };
   const std::vector<Case> cases = {
-    { "no ImageToReference", [](vtkImageData* s, vtkUltrasoundVolumeCompounder*) {
-        s->GetFieldData()->RemoveArray("ImageToReference");
-      }, "no ImageToReference" },
-    { "one pose short", [](vtkImageData* s, vtkUltrasoundVolumeCompounder*) {
+    { "no ImageToReference",
+      [](vtkImageData* s, vtkUltrasoundVolumeCompounder*) { s->GetFieldData()->RemoveArray("ImageToReference"); },
+      "no ImageToReference" },
+    { "one pose short",
+      [](vtkImageData* s, vtkUltrasoundVolumeCompounder*) {
         s->GetFieldData()->GetArray("ImageToReference")->SetNumberOfTuples(1);
-      }, "must hold 2 tuples" },
-    { "frame out of range", [](vtkImageData*, vtkUltrasoundVolumeCompounder* c) {
+      },
+      "must hold 2 tuples" },
+    { "frame out of range",
+      [](vtkImageData*, vtkUltrasoundVolumeCompounder* c) {
         vtkNew<vtkIdList> frames;
         frames->InsertNextId(0);
         frames->InsertNextId(2);
         c->SetFrameList(frames);
-      }, "frame 2 of the frame list is outside the 2 frames" },
-    { "negative frame", [](vtkImageData*, vtkUltrasoundVolumeCompounder* c) {
+      },
+      "frame 2 of the frame list is outside the 2 frames" },
+    { "negative frame",
+      [](vtkImageData*, vtkUltrasoundVolumeCompounder* c) {
         vtkNew<vtkIdList> frames;
         frames->InsertNextId(-1);
         c->SetFrameList(frames);
-      }, "outside" },
-    { "singular pose", [](vtkImageData* s, vtkUltrasoundVolumeCompounder*) {
+      },
+      "outside" },
+    { "singular pose",
+      [](vtkImageData* s, vtkUltrasoundVolumeCompounder*) {
         double m[16];
         s->GetFieldData()->GetArray("ImageToReference")->GetTuple(1, m);
         m[0] = m[4] = m[8] = 0;
         s->GetFieldData()->GetArray("ImageToReference")->SetTuple(1, m);
-      }, "frame 1: ImageToReference has a singular" },
-    { "parallel image axes", [](vtkImageData* s, vtkUltrasoundVolumeCompounder*) {
+      },
+      "frame 1: ImageToReference has a singular" },
+    { "parallel image axes",
+      [](vtkImageData* s, vtkUltrasoundVolumeCompounder*) {
         double m[16];
         s->GetFieldData()->GetArray("ImageToReference")->GetTuple(0, m);
         m[1] = 2 * m[0];
         m[5] = 2 * m[4];
         m[9] = 2 * m[8];
         s->GetFieldData()->GetArray("ImageToReference")->SetTuple(0, m);
-      }, "singular" },
-    { "NaN pose", [](vtkImageData* s, vtkUltrasoundVolumeCompounder*) {
+      },
+      "singular" },
+    { "NaN pose",
+      [](vtkImageData* s, vtkUltrasoundVolumeCompounder*) {
         s->GetFieldData()->GetArray("ImageToReference")->SetComponent(0, 3, std::nan(""));
-      }, "non-finite" },
-    { "projective pose", [](vtkImageData* s, vtkUltrasoundVolumeCompounder*) {
+      },
+      "non-finite" },
+    { "projective pose",
+      [](vtkImageData* s, vtkUltrasoundVolumeCompounder*) {
         s->GetFieldData()->GetArray("ImageToReference")->SetComponent(0, 12, 0.1);
-      }, "not affine" },
-    { "every frame invalid", [](vtkImageData* s, vtkUltrasoundVolumeCompounder*) {
+      },
+      "not affine" },
+    { "every frame invalid",
+      [](vtkImageData* s, vtkUltrasoundVolumeCompounder*) {
         s->GetFieldData()->GetArray("FrameValid")->SetTuple1(0, 0);
         s->GetFieldData()->GetArray("FrameValid")->SetTuple1(1, 0);
-      }, "no valid frame" },
-    { "empty explicit grid", [](vtkImageData*, vtkUltrasoundVolumeCompounder* c) {
+      },
+      "no valid frame" },
+    { "empty explicit grid",
+      [](vtkImageData*, vtkUltrasoundVolumeCompounder* c) {
         c->SetOutputOrigin(0, 0, 0);
         c->SetOutputExtent(0, 10, 5, 4, 0, 10);
-      }, "empty" },
-    { "grid over the voxel limit", [](vtkImageData*, vtkUltrasoundVolumeCompounder* c) {
-        c->SetMaximumNumberOfVoxels(100);
-      }, "MaximumNumberOfVoxels = 100" },
-    { "tiny spacing", [](vtkImageData*, vtkUltrasoundVolumeCompounder* c) {
-        c->SetOutputSpacing(1e-4, 1e-4, 1e-4);
-      }, "MaximumNumberOfVoxels" },
-    { "zero spacing", [](vtkImageData*, vtkUltrasoundVolumeCompounder* c) {
-        c->SetOutputSpacing(0.5, 0, 0.5);
-      }, "OutputSpacing must be positive" },
-    { "clip rectangle outside", [](vtkImageData*, vtkUltrasoundVolumeCompounder* c) {
+      },
+      "empty" },
+    { "grid over the voxel limit",
+      [](vtkImageData*, vtkUltrasoundVolumeCompounder* c) { c->SetMaximumNumberOfVoxels(100); },
+      "MaximumNumberOfVoxels = 100" },
+    { "tiny spacing", [](vtkImageData*, vtkUltrasoundVolumeCompounder* c) { c->SetOutputSpacing(1e-4, 1e-4, 1e-4); },
+      "MaximumNumberOfVoxels" },
+    { "zero spacing", [](vtkImageData*, vtkUltrasoundVolumeCompounder* c) { c->SetOutputSpacing(0.5, 0, 0.5); },
+      "OutputSpacing must be positive" },
+    { "clip rectangle outside",
+      [](vtkImageData*, vtkUltrasoundVolumeCompounder* c) {
         c->SetClipRectangleOrigin(100, 0);
         c->SetClipRectangleSize(10, 10);
-      }, "clip rectangle" },
-    { "mask of the wrong size", [](vtkImageData*, vtkUltrasoundVolumeCompounder* c) {
+      },
+      "clip rectangle" },
+    { "mask of the wrong size",
+      [](vtkImageData*, vtkUltrasoundVolumeCompounder* c) {
         vtkNew<vtkImageData> mask;
         mask->SetDimensions(19, 16, 1);
         mask->AllocateScalars(VTK_UNSIGNED_CHAR, 1);
         c->SetFanMaskData(mask);
-      }, "fan mask must be" },
-    { "two-component frames", [](vtkImageData* s, vtkUltrasoundVolumeCompounder*) {
+      },
+      "fan mask must be" },
+    { "two-component frames",
+      [](vtkImageData* s, vtkUltrasoundVolumeCompounder*) {
         vtkNew<vtkFloatArray> rgb;
         rgb->SetNumberOfComponents(2);
         rgb->SetNumberOfTuples(s->GetNumberOfPoints());
         s->GetPointData()->SetScalars(rgb);
-      }, "one-component" },
+      },
+      "one-component" },
   };
   for (const Case& c : cases)
   {

@@ -550,7 +550,11 @@ TEST(UltrasoundVolumeSweep, BadSettingsFailTheRequest)
     { "zero frames", [](vtkUltrasoundVolumeSweep* s) { s->SetNumberOfFrames(0); } },
     { "offset 1", [](vtkUltrasoundVolumeSweep* s) { s->SetOffset(1.0); } },
     { "negative offset", [](vtkUltrasoundVolumeSweep* s) { s->SetOffset(-0.1); } },
-    { "tilt 91", [](vtkUltrasoundVolumeSweep* s) { s->SetProtocolToOblique(); s->SetMaximumTiltAngle(91); } },
+    { "tilt 91",
+      [](vtkUltrasoundVolumeSweep* s) {
+        s->SetProtocolToOblique();
+        s->SetMaximumTiltAngle(91);
+      } },
     { "negative tilt", [](vtkUltrasoundVolumeSweep* s) { s->SetMaximumTiltAngle(-1); } },
     { "NaN tilt", [](vtkUltrasoundVolumeSweep* s) { s->SetMaximumTiltAngle(std::nan("")); } },
     { "sweep axis 3", [](vtkUltrasoundVolumeSweep* s) { s->SetSweepAxis(3); } },

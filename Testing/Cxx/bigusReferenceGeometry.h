@@ -21,7 +21,8 @@ namespace bigus_test
  * of reference.json's "planes"; reslice_axes row-major 4 x 4, identity when absent; origin and extent
  * left at the filter's defaults when absent), the plane moved @p normalShift mm along its normal.
  */
-inline void ApplyReferenceGeometry(vtkGaussianFieldReslice* reslice, const nlohmann::json& plane, double normalShift = 0)
+inline void ApplyReferenceGeometry(
+  vtkGaussianFieldReslice* reslice, const nlohmann::json& plane, double normalShift = 0)
 {
   vtkNew<vtkMatrix4x4> axes;
   if (plane.contains("reslice_axes"))

@@ -17,7 +17,8 @@ namespace bigus
 namespace test
 {
 /// A slice pose: rotation about the axis (ax, ay, az) by `degrees`, then translation; spacing in mm.
-inline SliceGeometry MakeSlice(int w, int h, double spacing, double degrees, const double axis[3], const double origin[3])
+inline SliceGeometry MakeSlice(
+  int w, int h, double spacing, double degrees, const double axis[3], const double origin[3])
 {
   return RotatedSlice(w, h, spacing, degrees, axis, origin);
 }
@@ -36,7 +37,8 @@ double PoseCentralDifference(const Loss& loss, int k)
 
 /// Random field around the slice centre: means in a cube of side `extent` mm, scales 0.3..2 mm,
 /// random (unnormalised) quaternions, reflectivities N(mean, sd).
-inline reference::FieldD RandomField(int n, const double centre[3], double extent, double meanR, double sdR, unsigned seed)
+inline reference::FieldD RandomField(
+  int n, const double centre[3], double extent, double meanR, double sdR, unsigned seed)
 {
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> u01(0, 1);

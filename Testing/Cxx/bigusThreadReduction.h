@@ -34,8 +34,7 @@ public:
     : Size(size)
     , Values(static_cast<std::size_t>(size))
     , Counts(static_cast<std::size_t>(size))
-  {
-  }
+  {}
 
   /// Every thread of the group calls it with its own @p values ([count]); each gets the element-wise @p combine
   /// of all of them, in rank order. False with @p error on every thread when the counts differ.
@@ -45,7 +44,8 @@ public:
     this->Values[rank] = values;
     this->Counts[rank] = count;
     this->Wait();
-    const bool same = std::all_of(this->Counts.begin(), this->Counts.end(), [count](std::size_t c) { return c == count; });
+    const bool same =
+      std::all_of(this->Counts.begin(), this->Counts.end(), [count](std::size_t c) { return c == count; });
     std::vector<T> result;
     if (same)
     {
@@ -102,8 +102,7 @@ public:
     : Group(group)
     , ThisRank(rank)
     , Processes(size)
-  {
-  }
+  {}
   int Rank() const override { return this->ThisRank; }
   int Size() const override { return this->Processes; }
   bool Sum(float* values, std::size_t count, std::string* error) override

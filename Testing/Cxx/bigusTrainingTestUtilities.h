@@ -89,8 +89,8 @@ inline void ExpectSameField(const GaussianField& a, const GaussianField& b)
 /// @p truth (frames of @p width x @p height pixels) with the pose of each of @p frames moved by a rotation of
 /// @p degrees about its centre pixel and a translation of @p mm, in random directions (uniform on the sphere;
 /// generator seeded with @p seed).
-inline TrainingData PerturbedPoses(const TrainingData& truth, const std::vector<int>& frames, double degrees,
-  double mm, unsigned seed, int width, int height)
+inline TrainingData PerturbedPoses(const TrainingData& truth, const std::vector<int>& frames, double degrees, double mm,
+  unsigned seed, int width, int height)
 {
   TrainingData perturbed = truth;
   std::mt19937_64 rng(seed);
@@ -202,7 +202,7 @@ inline double FairPsnr(const GaussianField& field, const RenderOptions& options,
   std::vector<std::array<double, 6>> corrections;
   std::string error;
   EXPECT_TRUE(RefinePosesWithFieldFrozen(
-                field, scored, frames, options, settings.Poses, settings.Loss, steps, "cpu", corrections, &error))
+    field, scored, frames, options, settings.Poses, settings.Loss, steps, "cpu", corrections, &error))
     << error;
   return PsnrAt(field, options, scored, frames);
 }

@@ -40,15 +40,13 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     }
   }
   catch (const bigus::MetaImageError&)
-  {
-  }
+  {}
   // The first line doubles as a transform chain.
   try
   {
     (void)bigus::ParseTransformChain(bytes.substr(0, bytes.find('\n')));
   }
   catch (const bigus::MetaImageError&)
-  {
-  }
+  {}
   return 0;
 }

@@ -86,8 +86,8 @@ void vtkPVGaussianFieldReslice::UpdateAxesAndGrid()
   else if (!std::isfinite(this->SliceOrigin[0]) || !std::isfinite(this->SliceOrigin[1]) ||
     !std::isfinite(this->SliceOrigin[2]))
   {
-    error << "SliceOrigin (" << this->SliceOrigin[0] << ", " << this->SliceOrigin[1] << ", "
-          << this->SliceOrigin[2] << ") is not finite";
+    error << "SliceOrigin (" << this->SliceOrigin[0] << ", " << this->SliceOrigin[1] << ", " << this->SliceOrigin[2]
+          << ") is not finite";
   }
   this->PlaneError = error.str();
   if (!this->PlaneError.empty())
@@ -254,12 +254,12 @@ int vtkPVGaussianFieldReslice::RequestData(
 void vtkPVGaussianFieldReslice::PrintSelf(ostream& os, vtkIndent indent)
 {
   this->Superclass::PrintSelf(os, indent);
-  os << indent << "SliceOrigin: " << this->SliceOrigin[0] << " " << this->SliceOrigin[1] << " "
-     << this->SliceOrigin[2] << "\n";
-  os << indent << "SliceNormal: " << this->SliceNormal[0] << " " << this->SliceNormal[1] << " "
-     << this->SliceNormal[2] << "\n";
+  os << indent << "SliceOrigin: " << this->SliceOrigin[0] << " " << this->SliceOrigin[1] << " " << this->SliceOrigin[2]
+     << "\n";
+  os << indent << "SliceNormal: " << this->SliceNormal[0] << " " << this->SliceNormal[1] << " " << this->SliceNormal[2]
+     << "\n";
   os << indent << "SliceSpacing: " << this->SliceSpacing[0] << " " << this->SliceSpacing[1] << " "
      << this->SliceSpacing[2] << "\n";
-  os << indent << "SliceDimensions: " << this->SliceDimensions[0] << " " << this->SliceDimensions[1]
-     << " " << this->SliceDimensions[2] << "\n";
+  os << indent << "SliceDimensions: " << this->SliceDimensions[0] << " " << this->SliceDimensions[1] << " "
+     << this->SliceDimensions[2] << "\n";
 }
