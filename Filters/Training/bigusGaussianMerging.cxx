@@ -248,4 +248,18 @@ std::string DescribeGaussianMerge(const GaussianMergeReport& report, const Gauss
   return text;
 }
 
+std::string DescribeGaussianMergeSettings(const GaussianMergeSettings& settings)
+{
+  if (settings.Tolerance <= 0)
+  {
+    return "Merge = off";
+  }
+  char text[300];
+  std::snprintf(text, sizeof(text),
+    "Merge = on (last, neighbouring pairs whose moment-matched merge has a relative error below %.3g; %d neighbours, "
+    "at most %d passes)",
+    settings.Tolerance, settings.Neighbours, settings.MaximumPasses);
+  return text;
+}
+
 } // namespace bigus

@@ -77,6 +77,9 @@ BIGUSTRAINING_EXPORT GaussianMergeReport MergeGaussians(GaussianField& field, co
 BIGUSTRAINING_EXPORT std::string DescribeGaussianMerge(
   const GaussianMergeReport& report, const GaussianMergeSettings& settings);
 
+/// The merge stage's `setting` line ("Merge = last, pairs whose merge errs by less than 0.001 ...", or off).
+BIGUSTRAINING_EXPORT std::string DescribeGaussianMergeSettings(const GaussianMergeSettings& settings);
+
 } // namespace bigus
 
 #endif

@@ -283,22 +283,6 @@ UntrainedCorrection PoseRefiner::PlaceUntrainedFrames(TrainingState& state)
   return placed;
 }
 
-void PoseRefiner::KeepBest(TrainingState& state)
-{
-  state.BestPoseCorrections = state.PoseCorrections;
-  state.BestSharedPoseCorrection = state.SharedPoseCorrection;
-}
-
-void PoseRefiner::RestoreBest(TrainingState& state)
-{
-  if (state.BestPoseCorrections.size() == state.PoseCorrections.size())
-  {
-    state.PoseCorrections = state.BestPoseCorrections;
-  }
-  state.SharedPoseCorrection = state.BestSharedPoseCorrection;
-  this->ComposePoses(state);
-}
-
 std::vector<FramePoseCorrection> PoseRefiner::Corrections(const TrainingState& state) const
 {
   std::vector<FramePoseCorrection> corrections;

@@ -135,10 +135,6 @@ public:
   /// The frames not trained on take the smooth part of their sweep's training corrections (CorrectUntrainedFrames)
   /// where RefinePoses is On; returns what was chosen (empty otherwise).
   UntrainedCorrection PlaceUntrainedFrames(TrainingState& state);
-  /// Early stopping: the corrections of @p state are remembered with the best field (BestPoseCorrections) ...
-  static void KeepBest(TrainingState& state);
-  /// ... and put back with it, the poses composed again.
-  void RestoreBest(TrainingState& state);
   /// The training frames' corrections, for the report (refined sweeps only).
   std::vector<FramePoseCorrection> Corrections(const TrainingState& state) const;
   /// Whether a checkpoint's state @p loaded holds the corrections this run refines (same settings, same sweep);

@@ -106,6 +106,7 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
   this->Report.Settings.push_back(schedule);
   this->Report.Settings.push_back(DescribeDensification(s.Densification, s.MaximumGaussians));
   this->Report.Settings.push_back(DescribeGapFillingSettings(s.FillGaps, s.BeamIntegration, s.GapFilling));
+  this->Report.Settings.push_back(DescribeGaussianMergeSettings(s.Merge));
   this->Report.Settings.push_back(
     DescribeReflectivitySolve(s.ReflectivitySolve, s.NonNegativeReflectivity, s.Solve, s.SolveInterval));
   this->Report.Settings.push_back(vtkfmt::sprintf("Seed = %u, FramesPerStep = %d, Cutoff = %.3g, SparseAdam = %s%s",
@@ -456,15 +457,8 @@ bool Trainer::CheckValidation(double& loss, std::string* error)
   {
     return false;
   }
-  TrainingState& state = this->State;
-  this->Report.ValidationHistory.push_back({ state.Iteration, loss, state.Gaussians.Count() });
-  if (state.BestFieldLoss < 0 || loss < state.BestFieldLoss)
-  {
-    state.BestFieldLoss = loss;
-    state.BestFieldIteration = state.Iteration;
-    state.BestField = this->GetField();
-    PoseRefiner::KeepBest(state);
-  }
+  this->Report.ValidationHistory.push_back({ this->State.Iteration, loss, this->State.Gaussians.Count() });
+  KeepIfBest(this->State, loss, this->GetField());
   return true;
 }
 
@@ -735,13 +729,9 @@ bool Trainer::Finish(std::string* error)
   this->Report.LastValidationLoss = last;
   this->Report.BestValidationLoss = this->State.BestFieldLoss;
   this->Report.BestIteration = this->State.BestFieldIteration;
-  if (last > this->State.BestFieldLoss)
+  if (RestoreBestField(this->State, last))
   {
-    // Fresh optimiser moments, as after SetField, but the record of the best field stays.
-    this->State.Gaussians = OptimizerState();
-    this->State.Gaussians.Field = this->State.BestField;
-    this->State.Gaussians.ResizeToField();
-    this->Poses.RestoreBest(this->State); // ... at the poses it was measured at
+    this->Poses.ComposePoses(this->State); // the best field's poses
     if (!this->PushState(error))
     {
       return false;

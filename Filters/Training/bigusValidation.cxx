@@ -55,4 +55,34 @@ bool ValidationLoss(TrainingEngine& engine, const TrainingData& data, const std:
   return true;
 }
 
+void KeepIfBest(TrainingState& state, double loss, const GaussianField& field)
+{
+  if (!(state.BestFieldLoss < 0 || loss < state.BestFieldLoss))
+  {
+    return; // not better (a NaN loss never is)
+  }
+  state.BestFieldLoss = loss;
+  state.BestFieldIteration = state.Iteration;
+  state.BestField = field;
+  state.BestPoseCorrections = state.PoseCorrections;
+  state.BestSharedPoseCorrection = state.SharedPoseCorrection;
+}
+
+bool RestoreBestField(TrainingState& state, double last)
+{
+  if (!(last > state.BestFieldLoss))
+  {
+    return false;
+  }
+  state.Gaussians = OptimizerState();
+  state.Gaussians.Field = state.BestField;
+  state.Gaussians.ResizeToField();
+  if (state.BestPoseCorrections.size() == state.PoseCorrections.size())
+  {
+    state.PoseCorrections = state.BestPoseCorrections;
+  }
+  state.SharedPoseCorrection = state.BestSharedPoseCorrection;
+  return true;
+}
+
 } // namespace bigus

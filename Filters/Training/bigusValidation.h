@@ -35,6 +35,21 @@ BIGUSTRAINING_EXPORT bool ValidationLoss(TrainingEngine& engine, const TrainingD
   const std::vector<int>& frames, const RenderOptions& options, const ImageLossWeights& weights,
   ProcessReduction* reduction, double& loss, std::string* error);
 
+/**
+ * Early stopping's record: when @p loss is the first validation loss of the run or below the best so far, @p state
+ * keeps a copy of @p field (TrainingState::BestField), @p loss, its iteration and the pose corrections it was
+ * measured at (BestPoseCorrections, BestSharedPoseCorrection).
+ */
+BIGUSTRAINING_EXPORT void KeepIfBest(TrainingState& state, double loss, const GaussianField& field);
+
+/**
+ * Early stopping at the end of a run: when the last validation loss @p last is above the best kept (KeepIfBest),
+ * @p state's field becomes the best one with fresh optimiser moments (the record of the best stays) and its pose
+ * corrections those kept with it. Returns whether it did (the frames' poses are then to be composed again,
+ * PoseRefiner::ComposePoses).
+ */
+BIGUSTRAINING_EXPORT bool RestoreBestField(TrainingState& state, double last);
+
 } // namespace bigus
 
 #endif

@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
 #include <vector>
 
 using namespace bigus;
@@ -33,4 +34,44 @@ TEST(Validation, EveryEighthOfTheTrainingFramesAtMostEight)
     }
     EXPECT_EQ(ValidationFrames(data), c.Expected) << c.Frames << " training frames";
   }
+}
+
+// Early stopping: KeepIfBest keeps the field of the lowest loss seen (not a later, worse one, nor a NaN), with its
+// iteration and pose corrections; RestoreBestField brings it back, moments zeroed, only when the last loss is worse.
+TEST(Validation, EarlyStoppingKeepsAndRestoresTheBestFieldWithItsPoses)
+{
+  auto fieldWith = [](float r) {
+    GaussianField f;
+    f.Means = { 0.f, 0.f, 0.f };
+    f.LogScales = { 0.f, 0.f, 0.f };
+    f.Quaternions = { 1.f, 0.f, 0.f, 0.f };
+    f.Reflectivities = { r };
+    return f;
+  };
+  TrainingState state;
+  state.PoseCorrections.assign(2, {});
+  const double losses[] = { 0.5, 0.3, 0.4, std::numeric_limits<double>::quiet_NaN(), 0.35 };
+  for (int k = 0; k < 5; ++k)
+  {
+    state.Iteration = 100 * (k + 1);
+    state.PoseCorrections[1][3] = 0.1 * (k + 1); // the corrections move with the field
+    KeepIfBest(state, losses[k], fieldWith(float(k + 1)));
+  }
+  EXPECT_EQ(state.BestFieldLoss, 0.3);
+  EXPECT_EQ(state.BestFieldIteration, 200);
+  ASSERT_EQ(state.BestField.Reflectivities.size(), 1u);
+  EXPECT_EQ(state.BestField.Reflectivities[0], 2.f);
+  ASSERT_EQ(state.BestPoseCorrections.size(), 2u);
+  EXPECT_DOUBLE_EQ(state.BestPoseCorrections[1][3], 0.2);
+
+  state.Gaussians.Field = fieldWith(5.f);
+  state.Gaussians.ResizeToField();
+  state.Gaussians.FirstMoment.Reflectivities[0] = 7.f;
+  EXPECT_FALSE(RestoreBestField(state, 0.3)) << "a last loss equal to the best keeps the last field";
+  EXPECT_EQ(state.Gaussians.Field.Reflectivities[0], 5.f);
+  EXPECT_TRUE(RestoreBestField(state, 0.35));
+  EXPECT_EQ(state.Gaussians.Field.Reflectivities[0], 2.f);
+  EXPECT_EQ(state.Gaussians.FirstMoment.Reflectivities[0], 0.f) << "fresh moments";
+  EXPECT_DOUBLE_EQ(state.PoseCorrections[1][3], 0.2) << "the poses the best field was measured at";
+  EXPECT_EQ(state.BestFieldLoss, 0.3) << "the record of the best stays";
 }
