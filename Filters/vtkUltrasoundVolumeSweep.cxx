@@ -1,6 +1,7 @@
 #include "vtkUltrasoundVolumeSweep.h"
 
 #include "bigusPipeline.h"
+#include "bigusSeeding.h" // bigus::UniformDouble
 #include "vtkUltrasoundSequenceReslice.h"
 
 #include "vtkCallbackCommand.h"
@@ -35,12 +36,6 @@ namespace
 constexpr double FrameInterval = 0.05;
 /// Largest frame side (pixels) that a PixelSpacing may ask for.
 constexpr int MaximumFrameSide = 16384;
-
-/// Uniform double in [0, 1) from the generator's raw output (identical on every platform).
-double Uniform(std::mt19937_64& rng)
-{
-  return (rng() >> 11) * (1.0 / 9007199254740992.0);
-}
 
 /// Frame layout of a sweep, from the volume's dimensions and spacing and the filter's settings.
 struct SweepGeometry
@@ -147,9 +142,9 @@ std::vector<std::array<double, 16>> Poses(vtkImageData* volume, const SweepGeome
     std::mt19937_64 rng(seed);
     for (Slice& slice : slices)
     {
-      slice.Z = Uniform(rng) * length;
-      const double phi = 2 * M_PI * Uniform(rng);
-      const double theta = maximumTilt * M_PI / 180 * Uniform(rng);
+      slice.Z = bigus::UniformDouble(rng) * length;
+      const double phi = 2 * M_PI * bigus::UniformDouble(rng);
+      const double theta = maximumTilt * M_PI / 180 * bigus::UniformDouble(rng);
       double w[3] = { 0, 0, 0 };
       w[g.U] = std::cos(phi);
       w[g.V] = std::sin(phi);

@@ -19,15 +19,10 @@ namespace bigus
 {
 namespace
 {
-double Uniform(std::mt19937_64& rng)
-{
-  return UniformDouble(rng);
-}
-
 /// A pixel drawn from @p cumulative, the running sum of per-pixel weights whose last entry is @p total (> 0).
 std::size_t DrawPixel(const std::vector<double>& cumulative, double total, std::mt19937_64& rng)
 {
-  const double target = Uniform(rng) * total;
+  const double target = UniformDouble(rng) * total;
   const std::size_t p = std::upper_bound(cumulative.begin(), cumulative.end(), target) - cumulative.begin();
   return std::min(p, cumulative.size() - 1);
 }
@@ -117,8 +112,8 @@ void SeedHarris(
     for (std::int64_t s = 0; s < seeds; ++s)
     {
       const std::size_t pixel = DrawPixel(cumulative, running, rng);
-      const double i = double(pixel % W) + Uniform(rng) - 0.5;
-      const double j = double(pixel / W) + Uniform(rng) - 0.5;
+      const double i = double(pixel % W) + UniformDouble(rng) - 0.5;
+      const double j = double(pixel / W) + UniformDouble(rng) - 0.5;
       AddSeed(field, data.Poses[f], i, j, shape.InPlaneScale, shape.ElevationScale,
         ScatteringOfIntensity(frame[pixel], shape.Gamma));
     }
@@ -178,13 +173,13 @@ void SeedUniform(
   {
     for (int k = 0; k < 3; ++k)
     {
-      field.Means.push_back(static_cast<float>(lo[k] + (hi[k] - lo[k]) * Uniform(rng)));
+      field.Means.push_back(static_cast<float>(lo[k] + (hi[k] - lo[k]) * UniformDouble(rng)));
       field.LogScales.push_back(static_cast<float>(std::log(scale)));
     }
     double q[4], n2 = 0;
     for (double& v : q)
     {
-      v = Uniform(rng) - 0.5;
+      v = UniformDouble(rng) - 0.5;
       n2 += v * v;
     }
     for (double v : q)

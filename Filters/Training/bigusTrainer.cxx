@@ -505,10 +505,7 @@ bool Trainer::DensifyAndPrune(double validation, std::string* error)
 
 void Trainer::PlaceUntrainedFrames()
 {
-  if (this->Settings.Poses.RefinePoses == PoseRefinement::On)
-  {
-    this->Report.UntrainedCorrections = this->Poses.PlaceUntrainedFrames(this->State);
-  }
+  this->Report.UntrainedCorrections = this->Poses.PlaceUntrainedFrames(this->State); // none unless RefinePoses On
 }
 
 bool Trainer::Evaluate(
