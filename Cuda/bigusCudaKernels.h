@@ -4,8 +4,9 @@
  *        pointers and a stream (private to BIGUS::Cuda): binning (bigusCudaBinning.cu: phase 1's
  *        footprints, the (tile, Gaussian) entries, the tile ranges of the sorted entries), forward
  *        (bigusCudaForward.cu: phase 2, one block per tile) and backward (bigusCudaBackward.cu: dL/dS and
- *        one warp per Gaussian). DeviceRenderer (bigusCudaDeviceRenderer.h) owns the work buffers, the CUB
- *        scan and sort, and the order of the launches, for the renderer and the training engine alike.
+ *        one warp per Gaussian), and the image loss (bigusCudaImageLoss.cu). DeviceRenderer (bigusCudaDeviceRenderer.h)
+ * owns the work buffers, the CUB scan and sort, and the order of the launches, for the renderer and the training engine
+ * alike.
  *
  * A launcher only enqueues its kernel on @p stream (the caller checks cudaGetLastError). Every pointer is
  * device memory; shapes as in bigusRenderer.h.
@@ -91,6 +92,19 @@ void LaunchBackward(const DeviceField& field, const PreparedSlice& s, double sig
   const float* gS, FieldGradients out, const PoseShares& pose, Counters* counters, cudaStream_t stream);
 /// Adds the sum over the @p count Gaussians of @p shares [N, 6] to @p total [6], in a fixed order.
 void LaunchPoseShareSum(const double* shares, std::int64_t count, double* total, cudaStream_t stream);
+
+// The image loss (bigusCudaImageLoss.cu; definitions as bigus::ComputeImageLoss without the FFL term).
+
+/// Device bytes of LaunchImageLoss's @p scratch for [@p height, @p width] images (8 doubles a pixel and the
+/// per-block sums).
+std::int64_t ImageLossScratchBytes(int width, int height);
+/// Queues the masked L1 and D-SSIM loss of @p rendered against @p target inside @p mask (null: every pixel), all
+/// [H, W]: into @p terms (4 doubles) L1, D-SSIM, the masked pixels and weighted total (@p weightL1 L1 + @p weightDSSIM
+/// D-SSIM, 0 for an empty mask); when @p gradient is not null, @p gradientScale times dTotal/d(rendered) into it
+/// (it may be @p rendered itself). The same result on every run (sums in a fixed order).
+void LaunchImageLoss(const float* rendered, const float* target, const unsigned char* mask, int width, int height,
+  double weightL1, double weightDSSIM, double gradientScale, float* gradient, double* terms, void* scratch,
+  cudaStream_t stream);
 
 } // namespace cuda
 } // namespace bigus

@@ -160,6 +160,9 @@ private:
   bool DownloadField(int which, GaussianField& field, std::string* error);
   /// Reserves the solve's buffers (SolveBytes per Gaussian) before allocating.
   bool PrepareSolve(std::string* error);
+  /// Copies the recorded frames and masks of the step's frames to the device (LossTargets, LossMasks) and reserves
+  /// the image loss's scratch, checked before allocating.
+  bool StageLossTargets(const TrainingData& data, const StepRequest& request, std::string* error);
   /// Copies @p bytes from the device to the host and waits.
   bool Download(void* host, const void* device, std::size_t bytes, const char* what, std::string* error)
   {
@@ -180,7 +183,10 @@ private:
   Buffer Finite;      // int: 0 when Adam met a non-finite value
   Buffer SolveValues; // [N] float: the reflectivities of ApplyBasis, one frame's dL/dr in ApplyBasisTranspose
   Buffer SolveSum;    // [N] double: ApplyBasisTranspose's sum over frames
-  // Host scratch, kept between steps
+  Buffer LossTargets; // [count, H, W] floats: the step's recorded frames
+  Buffer LossMasks;   // [count, H, W] bytes: their masks
+  Buffer LossScratch; // the image loss's work maps (ImageLossScratchBytes), then [count, 4] doubles: its terms
+  // Host scratch, kept between steps (the host loss: steps with an FFL term)
   std::vector<float> I, LossGradient;
   ImageLossWorkspace LossWorkspace;
   GaussianField HostField; // BasisNorms's copy of the field
@@ -314,6 +320,40 @@ bool CudaTrainingEngine::PrepareSolve(std::string* error)
     this->SolveSum.Reserve(slots * sizeof(double), "allocating the solve's vectors", error);
 }
 
+bool CudaTrainingEngine::StageLossTargets(const TrainingData& data, const StepRequest& request, std::string* error)
+{
+  const std::int64_t pixels = std::int64_t(data.Width) * data.Height;
+  const std::int64_t count = request.Count;
+  const std::int64_t scratch =
+    ImageLossScratchBytes(data.Width, data.Height) + 4 * count * std::int64_t(sizeof(double));
+  const std::int64_t bytes = count * pixels * std::int64_t(sizeof(float) + 1) + scratch;
+  const std::int64_t held = this->LossTargets.Bytes + this->LossMasks.Bytes + this->LossScratch.Bytes;
+  if (!this->Device.Fits(bytes, held,
+        "the image loss of " + std::to_string(count) + " frames of " + std::to_string(pixels) + " pixels", error) ||
+    !this->LossTargets.Reserve(
+      std::max<std::int64_t>(1, count * pixels) * sizeof(float), "allocating the loss's frames", error) ||
+    !this->LossMasks.Reserve(std::max<std::int64_t>(1, count * pixels), "allocating the loss's masks", error) ||
+    !this->LossScratch.Reserve(scratch, "allocating the loss's scratch", error))
+  {
+    return false;
+  }
+  const cudaStream_t stream = this->Device.GetStream();
+  for (int b = 0; b < request.Count; ++b)
+  {
+    const int f = request.Frames[b];
+    if (!Check(cudaMemcpyAsync(this->LossTargets.As<float>() + pixels * b, &data.Frames[pixels * f],
+                 sizeof(float) * pixels, cudaMemcpyHostToDevice, stream),
+          "copying a recorded frame to the device", error) ||
+      !Check(cudaMemcpyAsync(this->LossMasks.As<unsigned char>() + pixels * b, data.MaskOf(f), std::size_t(pixels),
+               cudaMemcpyHostToDevice, stream),
+        "copying a mask to the device", error))
+    {
+      return TrainingFrameError(f, error);
+    }
+  }
+  return true;
+}
+
 StepStatus CudaTrainingEngine::Step(const StepRequest& request, double* loss, std::string* error)
 {
   const TrainingData& data = request.Data ? *request.Data : *this->Data;
@@ -338,8 +378,23 @@ StepStatus CudaTrainingEngine::Step(const StepRequest& request, double* loss, st
   {
     return StepStatus::Failed;
   }
-  this->I.resize(pixels);
-  this->LossGradient.resize(pixels);
+  // The loss on the device unless it has an FFL term (an FFT, on the host): then I goes to the host and dL/dI back.
+  const bool deviceLoss = request.Loss.FFL == 0;
+  double* lossTerms = nullptr; // [count, 4] on the device: each frame's terms (LaunchImageLoss)
+  if (deviceLoss)
+  {
+    if (!this->StageLossTargets(data, request, error))
+    {
+      return StepStatus::Failed;
+    }
+    lossTerms =
+      this->LossScratch.As<double>() + ImageLossScratchBytes(data.Width, data.Height) / std::int64_t(sizeof(double));
+  }
+  else
+  {
+    this->I.resize(pixels);
+    this->LossGradient.resize(pixels);
+  }
   float* dS = this->Images.As<float>();
   float* dI = dS + pixels; // I, then dL/dI
   const DeviceField field = this->Field();
@@ -347,15 +402,28 @@ StepStatus CudaTrainingEngine::Step(const StepRequest& request, double* loss, st
   for (int b = 0; b < request.Count; ++b)
   {
     const int f = request.Frames[b];
-    if (!this->Device.Forward(field, prepared[b], request.Options, dS, dI, nullptr, error) ||
-      !this->Download(this->I.data(), dI, sizeof(float) * pixels, "copying I to the host", error))
+    if (!this->Device.Forward(field, prepared[b], request.Options, dS, dI, nullptr, error))
     {
       TrainingFrameError(f, error);
       return StepStatus::Failed;
     }
-    total += FrameLoss(data, f, this->I.data(), request, this->LossGradient.data(), &this->LossWorkspace);
-    if (!Check(cudaMemcpyAsync(dI, this->LossGradient.data(), sizeof(float) * pixels, cudaMemcpyHostToDevice, stream),
-          "copying dL/dI to the device", error) ||
+    bool ok = true;
+    if (deviceLoss)
+    {
+      LaunchImageLoss(dI, this->LossTargets.As<float>() + pixels * b, this->LossMasks.As<unsigned char>() + pixels * b,
+        data.Width, data.Height, request.Loss.L1, request.Loss.DSSIM, 1.0 / request.Count, dI, lossTerms + 4 * b,
+        this->LossScratch.Data, stream);
+      ok = Check(cudaGetLastError(), "image loss kernels", error);
+    }
+    else
+    {
+      ok = this->Download(this->I.data(), dI, sizeof(float) * pixels, "copying I to the host", error);
+      total += ok ? FrameLoss(data, f, this->I.data(), request, this->LossGradient.data(), &this->LossWorkspace) : 0;
+      ok = ok &&
+        Check(cudaMemcpyAsync(dI, this->LossGradient.data(), sizeof(float) * pixels, cudaMemcpyHostToDevice, stream),
+          "copying dL/dI to the device", error);
+    }
+    if (!ok ||
       !this->Device.Backward(field, prepared[b], request.Options, dS, dI, false, dI + pixels, out,
         poses ? this->PoseTotals.As<double>() + 6 * b : nullptr, error))
     {
@@ -367,6 +435,18 @@ StepStatus CudaTrainingEngine::Step(const StepRequest& request, double* loss, st
   if (!this->Device.Synchronize(nullptr, "backward", error))
   {
     return StepStatus::Failed;
+  }
+  if (deviceLoss)
+  {
+    std::vector<double> terms(4 * std::size_t(request.Count));
+    if (!this->Download(terms.data(), lossTerms, sizeof(double) * terms.size(), "copying the loss to the host", error))
+    {
+      return StepStatus::Failed;
+    }
+    for (int b = 0; b < request.Count; ++b)
+    {
+      total += terms[4 * b + 3]; // in frame order, as the host loss sums them
+    }
   }
   if (poses &&
     !this->Download(request.PoseGradients, this->PoseTotals.Data, sizeof(double) * 6 * request.Count,

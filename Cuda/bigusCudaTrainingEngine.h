@@ -4,10 +4,11 @@
  *        bigus::RegisterTrainingEngine when the backend loads.
  *
  * The field, its Adam moments, the last known-good copy of both (Snapshot / Restore), the step's gradients
- * and the EA-D accumulators live on the device between steps; a step moves images only. For each frame of
- * the batch: the forward pass on the device, I ([H, W]) to the host, the image loss there (the same
- * ComputeImageLoss as the CPU engine: L1, D-SSIM, FFL inside the frame's mask), dL/dI back to the device,
- * the backward pass into the device's gradients; then Adam on the device (Kingma and Ba 2015, algorithm 1;
+ * and the EA-D accumulators live on the device between steps. A step copies the batch's recorded frames and masks
+ * to the device; for each frame of the batch: the forward pass, the image loss and its gradient dL/dI on the device
+ * (bigusCudaImageLoss.h: ComputeImageLoss's masked L1 and D-SSIM, in double), the backward pass into the device's
+ * gradients; only each frame's loss comes back. A loss with an FFL term takes the host instead: I ([H, W]) to the
+ * host, ComputeImageLoss there, dL/dI back. Then Adam on the device (Kingma and Ba 2015, algorithm 1;
  * bigus::AdamUpdate, the CPU engine's function, per parameter, unit quaternions and clamped log-scales after
  * it, and a non-finite gradient or parameter reported as StepStatus::NonFinite). Pose gradients
  * (StepRequest::PoseGradients) are 6 doubles per frame copied back.

@@ -2,6 +2,8 @@
 // (separable Gaussian window) and the DFT; the gradients are derived below.
 #include "bigusImageLoss.h"
 
+#include "bigusSsimMath.h"
+
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -18,15 +20,10 @@ namespace bigus
 
 namespace
 {
-constexpr int Window = 11;
-constexpr double WindowSigma = 1.5;
-constexpr double C1 = 0.01 * 0.01;
-constexpr double C2 = 0.03 * 0.03;
-
 /// Gaussian window filter with zero padding: self-adjoint, so it is also its own gradient.
 void Filter(const cv::Mat& in, cv::Mat& out)
 {
-  const cv::Mat kernel = cv::getGaussianKernel(Window, WindowSigma, in.depth());
+  const cv::Mat kernel = cv::getGaussianKernel(SsimWindow, SsimWindowSigma, in.depth());
   cv::sepFilter2D(in, out, in.depth(), kernel, kernel, cv::Point(-1, -1), 0, cv::BORDER_CONSTANT);
 }
 
@@ -71,11 +68,7 @@ double SumRows(const std::vector<double>& rows)
 /**
  * SSIM map of w.X and w.Y (their products already in w.XX, w.YY, w.XY); returns its sum over the
  * masked pixels. With @p gradientWeight g != 0 it also fills w.D1, w.Dxx, w.Dxy so that
- * d(g sum_{p in mask} SSIM(p))/dX = G*D1 + 2 X G*Dxx + Y G*Dxy:
- * SSIM(p) = A1 A2 / (B1 B2), A1 = 2 m1 m2 + C1, A2 = 2 (sxy - m1 m2) + C2, B1 = m1^2 + m2^2 + C1,
- * B2 = sxx - m1^2 + syy - m2^2 + C2 with m1 = G*X, m2 = G*Y, sxx = G*X^2, syy = G*Y^2, sxy = G*XY.
- * dSSIM/dm1 = 2 m2 (A2 - A1) / (B1 B2) - 2 m1 SSIM (1/B1 - 1/B2), dSSIM/dsxx = -SSIM / B2,
- * dSSIM/dsxy = 2 A1 / (B1 B2).
+ * d(g sum_{p in mask} SSIM(p))/dX = G*D1 + 2 X G*Dxx + Y G*Dxy (SsimAt, bigusSsimMath.h).
  */
 template <typename T>
 double SsimSum(Scratch<T>& w, const unsigned char* mask, double gradientWeight)
@@ -98,19 +91,14 @@ double SsimSum(Scratch<T>& w, const unsigned char* mask, double gradientWeight)
       double sum = 0;
       for (int i = 0; i < width; ++i)
       {
-        const double a = pm1[i], b = pm2[i];
-        const double A1 = 2 * a * b + C1;
-        const double A2 = 2 * (pxy[i] - a * b) + C2;
-        const double B1 = a * a + b * b + C1;
-        const double B2 = pxx[i] - a * a + pyy[i] - b * b + C2;
-        const double s = A1 * A2 / (B1 * B2);
+        const SsimPixel s = SsimAt(pm1[i], pm2[i], pxx[i], pyy[i], pxy[i]);
         const double g = (!mr || mr[i]) ? gradientWeight : 0.0;
-        sum += (!mr || mr[i]) ? s : 0.0;
+        sum += (!mr || mr[i]) ? s.Value : 0.0;
         if (gradientWeight != 0)
         {
-          d1[i] = static_cast<T>(g * (2 * b * (A2 - A1) / (B1 * B2) - 2 * a * s * (1 / B1 - 1 / B2)));
-          dxx[i] = static_cast<T>(g * (-s / B2));
-          dxy[i] = static_cast<T>(g * (2 * A1 / (B1 * B2)));
+          d1[i] = static_cast<T>(g * s.DMean);
+          dxx[i] = static_cast<T>(g * s.DSquare);
+          dxy[i] = static_cast<T>(g * s.DCross);
         }
       }
       rows[j] = sum;

@@ -5,8 +5,10 @@
 #include "bigusBackend.h"
 #include "bigusBackendCheck.h"
 #include "bigusCudaDevice.h"
+#include "bigusCudaImageLoss.h"
 #include "bigusCudaRenderer.h"
 #include "bigusGaussianFieldData.h"
+#include "bigusImageLoss.h"
 #include "bigusRendererTestUtilities.h"
 #include "bigusThreadReduction.h"
 #include "bigusTrainer.h"
@@ -752,6 +754,134 @@ TEST(CudaTrainingEngine, ANonFiniteStepAndARefusedPoseAreReported)
   error.clear();
   EXPECT_EQ(engine->Step(c.Request, &loss, &error), StepStatus::Failed);
   EXPECT_NE(error.find("training frame 8"), std::string::npos) << error;
+}
+
+/// A frame pair for the image loss: speckle-like rendered and recorded images with saturated (0 and 1) patches, and
+/// a fan-like mask (a disc sector) on [H, W].
+struct LossImages
+{
+  int Width, Height;
+  std::vector<float> X, Y;
+  std::vector<unsigned char> Mask;
+  LossImages(int width, int height, unsigned seed)
+    : Width(width)
+    , Height(height)
+    , X(std::size_t(width) * height)
+    , Y(X.size())
+    , Mask(X.size())
+  {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> u(0.f, 1.f);
+    for (int j = 0; j < height; ++j)
+    {
+      for (int i = 0; i < width; ++i)
+      {
+        const std::size_t p = std::size_t(j) * width + i;
+        const double base = 0.5 + 0.4 * std::sin(0.07 * i) * std::cos(0.05 * j);
+        this->Y[p] = static_cast<float>(std::clamp(base * (0.5 + u(rng)), 0.0, 1.0));
+        this->X[p] = static_cast<float>(std::clamp(base + 0.2 * (u(rng) - 0.5), 0.0, 1.0));
+        if (i < width / 5 && j < height / 3)
+        {
+          this->X[p] = 1.f; // saturated in both, and 0 in both
+          this->Y[p] = (i + j) % 3 ? 1.f : 0.f;
+        }
+        const double dx = i - 0.5 * width, dy = j + 0.3 * height;
+        const double r = std::hypot(dx, dy), angle = std::atan2(dx, dy);
+        this->Mask[p] = (r > 0.35 * height && r < 1.25 * height && std::abs(angle) < 0.6) ? 1 : 0;
+      }
+    }
+  }
+};
+
+TEST(CudaImageLoss, IsTheHostLossOnMaskedEmptyAndSaturatedFrames)
+{
+  // The device loss against ComputeImageLoss in double on the CPU (itself checked against finite differences in
+  // TestImageLoss): the terms and dTotal/dx to 1e-6, on frames with a fan mask, without one, with an empty one,
+  // of sizes that are not multiples of the kernels' 32 x 8 blocks (one smaller than the 11 x 11 window), and with
+  // each term alone.
+  struct Case
+  {
+    int Width, Height;
+    const char* Mask; // "fan", "none", "empty"
+    double L1, DSSIM;
+  };
+  const Case cases[] = { { 256, 200, "fan", 0.8, 0.2 }, { 333, 97, "fan", 0.8, 0.2 }, { 64, 48, "none", 0.8, 0.2 },
+    { 9, 7, "none", 0.5, 0.5 }, { 120, 90, "empty", 0.8, 0.2 }, { 150, 111, "fan", 1.0, 0.0 },
+    { 150, 111, "fan", 0.0, 1.0 } };
+  for (const Case& k : cases)
+  {
+    const LossImages im(k.Width, k.Height, 7);
+    std::vector<unsigned char> mask = im.Mask;
+    if (std::string(k.Mask) == "empty")
+    {
+      std::fill(mask.begin(), mask.end(), 0);
+    }
+    const unsigned char* m = std::string(k.Mask) == "none" ? nullptr : mask.data();
+    ImageLossWeights weights;
+    weights.L1 = k.L1;
+    weights.DSSIM = k.DSSIM;
+    std::vector<float> host(im.X.size()), device(im.X.size(), -7.f);
+    const ImageLossTerms expected =
+      ComputeImageLoss(im.X.data(), im.Y.data(), m, k.Width, k.Height, weights, host.data(), true);
+    ImageLossTerms got;
+    std::string error;
+    ASSERT_TRUE(cuda::ComputeImageLossOnDevice(
+      im.X.data(), im.Y.data(), m, k.Width, k.Height, weights, device.data(), &got, &error))
+      << error;
+    const std::string name = std::to_string(k.Width) + " x " + std::to_string(k.Height) + ", mask " + k.Mask +
+      ", weights " + std::to_string(k.L1) + " / " + std::to_string(k.DSSIM);
+    EXPECT_EQ(got.MaskedPixels, expected.MaskedPixels) << name;
+    EXPECT_NEAR(got.L1, expected.L1, 1e-6 * std::max(1e-3, expected.L1)) << name;
+    EXPECT_NEAR(got.DSSIM, expected.DSSIM, 1e-6 * std::max(1e-3, expected.DSSIM)) << name;
+    EXPECT_NEAR(got.Total, expected.Total, 1e-6 * std::max(1e-3, expected.Total)) << name;
+    double largest = 0, worst = 0;
+    for (std::size_t p = 0; p < host.size(); ++p)
+    {
+      largest = std::max(largest, std::abs(double(host[p])));
+      worst = std::max(worst, std::abs(double(device[p]) - host[p]));
+    }
+    EXPECT_LE(worst, 1e-6 * largest) << name << ": the gradient";
+    if (expected.MaskedPixels == 0)
+    {
+      EXPECT_EQ(got.Total, 0.0) << name;
+      EXPECT_EQ(largest, 0.0) << name;
+      EXPECT_EQ(*std::max_element(device.begin(), device.end()), 0.f) << name << ": a gradient on an empty mask";
+    }
+    std::printf("%s: total %.12f (host %.12f), gradient error %.3g of its largest %.3g\n", name.c_str(), got.Total,
+      expected.Total, largest > 0 ? worst / largest : worst, largest);
+  }
+  // Without a gradient: the terms alone. With an FFL weight: refused, with the reason.
+  const LossImages im(100, 80, 9);
+  ImageLossTerms got;
+  std::string error;
+  ASSERT_TRUE(cuda::ComputeImageLossOnDevice(
+    im.X.data(), im.Y.data(), im.Mask.data(), 100, 80, ImageLossWeights(), nullptr, &got, &error))
+    << error;
+  EXPECT_NEAR(got.Total,
+    ComputeImageLoss(im.X.data(), im.Y.data(), im.Mask.data(), 100, 80, ImageLossWeights(), nullptr, true).Total,
+    1e-6 * got.Total);
+  ImageLossWeights ffl;
+  ffl.FFL = 0.1;
+  EXPECT_FALSE(
+    cuda::ComputeImageLossOnDevice(im.X.data(), im.Y.data(), im.Mask.data(), 100, 80, ffl, nullptr, &got, &error));
+  EXPECT_NE(error.find("FFL"), std::string::npos) << error;
+}
+
+TEST(CudaTrainingEngine, AStepWithAnFflTermTakesTheHostLossAndMatchesTheCpuEngine)
+{
+  // The device loss has no FFL term: such a step computes its loss on the host, and gives the CPU engine's.
+  EngineCase c;
+  c.Request.Loss.FFL = 0.5;
+  double loss[2] = { 0, 0 };
+  const char* backends[2] = { "cuda", "cpu" };
+  for (int e = 0; e < 2; ++e)
+  {
+    std::unique_ptr<TrainingEngine> engine = c.Engine(backends[e]);
+    ASSERT_TRUE(engine);
+    std::string error;
+    ASSERT_EQ(engine->Step(c.Request, &loss[e], &error), StepStatus::Done) << backends[e] << ": " << error;
+  }
+  EXPECT_NEAR(loss[0], loss[1], 1e-4 * loss[1]);
 }
 
 TEST(CudaTrainingEngine, ACoarseStepOfTheResolutionScheduleMatchesTheCpuEngine)

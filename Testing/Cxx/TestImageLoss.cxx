@@ -1,9 +1,11 @@
 // Training losses: every gradient against central finite differences, FFL against a direct O(N^2)
 // DFT, SSIM against known cases.
 #include "bigusImageLoss.h"
+#include "bigusSsimMath.h"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <complex>
 #include <random>
@@ -168,6 +170,36 @@ TEST(ImageLoss, FflMatchesADirectDftWithFocalWeights)
       EXPECT_NEAR(grad[p], g, 1e-6 * std::abs(g) + 1e-9) << "pixel " << p;
     }
   }
+}
+
+TEST(ImageLoss, SsimDerivativesOfOnePixelMatchFiniteDifferences)
+{
+  // SsimAt (bigusSsimMath.h, shared by this loss and the CUDA engine's): its three derivatives against central
+  // differences of its own value, at moments of an ordinary window and of a nearly flat one (B2 near C2).
+  const double cases[][5] = { { 0.4, 0.55, 0.2, 0.33, 0.24 }, { 0.9, 0.88, 0.8101, 0.7745, 0.7920 } };
+  for (const auto& m : cases)
+  {
+    const SsimPixel s = SsimAt(m[0], m[1], m[2], m[3], m[4]);
+    const double h = 1e-7; // the flat window's curvature is large: a small step, still far above rounding
+    const double dMean =
+      (SsimAt(m[0] + h, m[1], m[2], m[3], m[4]).Value - SsimAt(m[0] - h, m[1], m[2], m[3], m[4]).Value) / (2 * h);
+    const double dSquare =
+      (SsimAt(m[0], m[1], m[2] + h, m[3], m[4]).Value - SsimAt(m[0], m[1], m[2] - h, m[3], m[4]).Value) / (2 * h);
+    const double dCross =
+      (SsimAt(m[0], m[1], m[2], m[3], m[4] + h).Value - SsimAt(m[0], m[1], m[2], m[3], m[4] - h).Value) / (2 * h);
+    EXPECT_NEAR(s.DMean, dMean, 1e-6 * std::max(1.0, std::abs(dMean)));
+    EXPECT_NEAR(s.DSquare, dSquare, 1e-6 * std::max(1.0, std::abs(dSquare)));
+    EXPECT_NEAR(s.DCross, dCross, 1e-6 * std::max(1.0, std::abs(dCross)));
+  }
+  double w[SsimWindow];
+  SsimWindowWeights(w);
+  double sum = 0;
+  for (double v : w)
+  {
+    sum += v;
+  }
+  EXPECT_NEAR(sum, 1.0, 1e-15);
+  EXPECT_NEAR(w[SsimRadius + 1] / w[SsimRadius], std::exp(-1.0 / (2 * 1.5 * 1.5)), 1e-15);
 }
 
 TEST(ImageLoss, SsimKnownCases)
