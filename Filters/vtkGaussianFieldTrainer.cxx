@@ -528,7 +528,7 @@ int vtkGaussianFieldTrainer::RequestData(
       report.Solves, report.SolveSeconds, last.Iterations,
       last.TimeLimitReached ? " (ended by its share of the time budget)" : "",
       last.Objective.empty() ? 0.0 : last.Objective.front(), last.Objective.empty() ? 0.0 : last.Objective.back());
-    std::string solves = text;
+    std::string solves = text + ("; products " + last.Products);
     if (report.LastL1Solve.L1Weight > 0)
     {
       std::snprintf(text, sizeof(text),

@@ -493,6 +493,13 @@ Command AddTrainCommand(CLI::App& app)
     ->capture_default_str()
     ->check(CLI::PositiveNumber);
   trainCommand
+    ->add_option("--solve-memory", settings.Solve.AssembledMemoryShare,
+      "Share of this machine's memory that a reflectivity solve may hold as the assembled basis (its products then "
+      "passes over stored weights instead of renders of every training frame; where it needs more, or with 0, the "
+      "products are matrix free)")
+    ->capture_default_str()
+    ->check(CLI::Range(0.0, 1.0));
+  trainCommand
     ->add_option("--solve-l1", settings.Solve.L1,
       "An L1 term in each reflectivity solve (the pixel-grid fit's, variable projection's), as a share of the weight "
       "that sets every reflectivity to 0 (FISTA; the Gaussians it zeroes are removed and the others refitted by "

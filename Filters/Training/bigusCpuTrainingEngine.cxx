@@ -2,6 +2,7 @@
 // with vtkSMPTools, over any renderer with host buffers. See bigusTrainingEngine.h.
 #include "bigusTrainingEngine.h"
 
+#include "bigusAssembledBasis.h"
 #include "bigusBasisNorms.h"
 
 #include "vtkSMPTools.h"
@@ -9,6 +10,7 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <utility>
@@ -31,11 +33,13 @@ public:
   bool SetData(const TrainingData* data, std::string*) override
   {
     this->Data = data;
+    this->Assembled.reset();
     return true;
   }
 
   bool Push(const OptimizerState& state, std::string*) override
   {
+    this->Assembled.reset();
     this->State = state;
     this->State.ResizeToField();
     this->Snapshot();
@@ -63,6 +67,7 @@ public:
 
   void Restore() override
   {
+    this->Assembled.reset();
     this->State.Field = this->Saved;
     this->State.FirstMoment = this->SavedFirst;
     this->State.SecondMoment = this->SavedSecond;
@@ -86,11 +91,16 @@ public:
   bool ApplyBasis(
     const float* r, const int* frames, int count, const RenderOptions& options, float* S, std::string* error) override
   {
+    bool ok = true;
+    if (this->UseAssembled(frames, count, options, ok, error))
+    {
+      this->Assembled->Apply(r, S);
+      return this->Agree(true, error);
+    }
     FieldView view = this->State.Field.View();
     view.Reflectivities = r;
     const RenderOptions linear = LinearBasisOptions(options);
     const std::size_t pixels = std::size_t(this->Data->Width) * this->Data->Height;
-    bool ok = true;
     for (int k = 0; k < count && ok; ++k)
     {
       const SliceGeometry slice = this->Data->Slice(frames[k]);
@@ -114,6 +124,11 @@ public:
     std::vector<double> own(this->Reduction ? n : 0, 0.0);
     double* sum = this->Reduction ? own.data() : out;
     bool ok = true;
+    if (this->UseAssembled(frames, count, options, ok, error))
+    {
+      this->Assembled->ApplyTranspose(y, sum);
+      return this->Agree(true, error) && this->AddSum(own, out, error);
+    }
     for (int k = 0; k < count && ok; ++k)
     {
       this->Gradients.assign(n, 0.f);
@@ -143,6 +158,11 @@ public:
     std::vector<double> own(this->Reduction ? this->State.Count() : 0, 0.0);
     double* sum = this->Reduction ? own.data() : out;
     bool ok = true;
+    if (this->UseAssembled(frames, count, options, ok, error))
+    {
+      this->Assembled->Norms(weights, sum);
+      return this->Agree(true, error) && this->AddSum(own, out, error);
+    }
     for (int k = 0; k < count && ok; ++k)
     {
       const SliceGeometry slice = this->Data->Slice(frames[k]);
@@ -154,6 +174,17 @@ public:
     return this->Agree(ok, error) && this->AddSum(own, out, error);
   }
 
+  void SetBasisMemoryLimit(std::int64_t bytes) override
+  {
+    this->BasisMemoryLimit = bytes;
+    if (this->Assembled && this->Assembled->GetSize().Bytes() > bytes)
+    {
+      this->Assembled.reset();
+    }
+  }
+
+  std::string DescribeBasisProducts() const override { return this->BasisProducts; }
+
 private:
   /// Adam (Kingma and Ba 2015, algorithm 1: bigus::AdamUpdate) on every Gaussian in one pass that also keeps each
   /// parameter in its meaningful range (unit quaternions, clamped log-scales); false when a gradient
@@ -162,6 +193,14 @@ private:
   /// Data-parallel step (Reduction): after this process's frames (@p ok: all rendered), the loss sum @p total,
   /// the pose gradients, the field's gradients and the EA-D accumulators summed over the processes.
   StepStatus Reduce(const StepRequest& request, double& total, bool ok, std::string* error);
+
+  /**
+   * Whether the basis products of @p frames with @p options run over the assembled A (AssembledBasis), assembling it
+   * for the current geometry when the last one was for other frames or options (or the field changed since):
+   * true where it fits in BasisMemoryLimit; false for the matrix-free products (it does not fit, or no limit is
+   * set), and false with @p ok false and @p error for a pose the assembly refuses. BasisProducts says which.
+   */
+  bool UseAssembled(const int* frames, int count, const RenderOptions& options, bool& ok, std::string* error);
 
   /// Whether this process renders position @p k of a step's frames (all of them alone).
   bool Owns(int k) const { return !this->Reduction || k % this->Reduction->Size() == this->Reduction->Rank(); }
@@ -194,10 +233,69 @@ private:
   std::vector<float> S, I, LossGradient, Gradients;
   std::vector<int> Seen; // a data-parallel step's seen counts, before they are summed
   ImageLossWorkspace LossWorkspace;
+  // The basis products' assembled A: for AssembledFrames and AssembledOptions' elevation sigma and cut-off, dropped
+  // when the field changes (Push, Step, Restore) or the data (SetData).
+  std::unique_ptr<AssembledBasis> Assembled;
+  std::vector<int> AssembledFrames;
+  double AssembledSigma = 0, AssembledCutoff = 0;
+  std::int64_t BasisMemoryLimit = 0;
+  std::string BasisProducts = "matrix free (no product run yet)";
 };
+
+bool CpuTrainingEngine::UseAssembled(
+  const int* frames, int count, const RenderOptions& options, bool& ok, std::string* error)
+{
+  ok = true;
+  if (this->BasisMemoryLimit <= 0)
+  {
+    this->BasisProducts = "matrix free (no memory allowed for the assembled basis)";
+    return false;
+  }
+  const double sigma = EffectiveElevationSigma(options);
+  if (this->Assembled && this->AssembledFrames == std::vector<int>(frames, frames + count) &&
+    this->AssembledSigma == sigma && this->AssembledCutoff == options.Cutoff)
+  {
+    return true;
+  }
+  this->Assembled.reset();
+  const double start = std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+  std::vector<SliceGeometry> slices(count);
+  for (int k = 0; k < count; ++k)
+  {
+    slices[k] = this->Data->Slice(frames[k]);
+  }
+  std::unique_ptr<AssembledBasis> basis(new AssembledBasis);
+  std::string why;
+  bool tooLarge = false;
+  if (!basis->Assemble(this->State.Field.View(), slices.data(), count, LinearBasisOptions(options),
+        this->BasisMemoryLimit, &why, &tooLarge))
+  {
+    // Refused before allocating when it does not fit (matrix free then); a refused pose fails the product.
+    this->BasisProducts = "matrix free (" + why + ")";
+    ok = tooLarge;
+    if (!ok && error)
+    {
+      *error = why;
+    }
+    return false;
+  }
+  this->Assembled = std::move(basis);
+  this->AssembledFrames.assign(frames, frames + count);
+  this->AssembledSigma = sigma;
+  this->AssembledCutoff = options.Cutoff;
+  const double seconds =
+    std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count() - start;
+  const AssembledBasis::Size& size = this->Assembled->GetSize();
+  char text[200];
+  std::snprintf(text, sizeof(text), "assembled (%lld weights, %.0f MB, built in %.2f s)",
+    static_cast<long long>(size.Weights), size.Bytes() / 1e6, seconds);
+  this->BasisProducts = text;
+  return true;
+}
 
 StepStatus CpuTrainingEngine::Step(const StepRequest& request, double* loss, std::string* error)
 {
+  this->Assembled.reset(); // the step moves the geometry
   const TrainingData& data = request.Data ? *request.Data : *this->Data;
   const std::size_t pixels = std::size_t(data.Width) * data.Height;
   const std::int64_t n = this->State.Count();

@@ -13,6 +13,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 
 namespace bigus
 {
@@ -149,6 +150,11 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
     return Fail(
       error, "nothing to solve: the fan masks of the " + std::to_string(allFrames.size()) + " frames are empty");
   }
+  // The products over A assembled once for this solve where it fits beside the vectors (the CPU engine).
+  const double allowed = settings.AssembledMemoryShare * (physical > 0 ? physical : 0.0) - needed;
+  engine.SetBasisMemoryLimit(settings.AssembledMemoryShare > 0 && physical <= 0
+      ? std::numeric_limits<std::int64_t>::max()
+      : static_cast<std::int64_t>(std::max(0.0, allowed)));
   // Data-space vectors: the residual rho and q (A p, the weights G, the input of A^T).
   std::vector<float> rho(m), q(m);
   // Jacobi preconditioner P = (diag(A^T G A) + lambda)^(-1/2).
@@ -451,6 +457,7 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
   }
   reflectivities.swap(solved);
   r.Seconds = Now() - start;
+  r.Products = engine.DescribeBasisProducts();
   return true;
 }
 

@@ -12,8 +12,10 @@
  *
  * with lambda = Ridge * mean_i diag(A^T G A) (Tikhonov). The solver is CGLS (Hestenes and Stiefel 1952;
  * Paige and Saunders 1982, section 7.1) on the column-scaled system, Jacobi-preconditioned with
- * diag(A^T G A) + lambda (BasisNorms): matrix free, through the TrainingEngine's ApplyBasis (A) and
- * ApplyBasisTranspose (A^T), so a CUDA or distributed engine solves by implementing the same products.
+ * diag(A^T G A) + lambda (BasisNorms), through the TrainingEngine's ApplyBasis (A) and ApplyBasisTranspose (A^T),
+ * so a CUDA or distributed engine solves by implementing the same products. The CPU engine assembles A once per
+ * solve where it fits (AssembledBasis, ReflectivitySolveSettings::AssembledMemoryShare), so that a product is a
+ * pass over stored weights; elsewhere every product renders the frames (matrix free).
  * In exact arithmetic each iteration lowers the objective; it starts from the field's reflectivities.
  *
  * With an L1 term (ReflectivitySolveSettings::L1) the objective gains mu sum_i |r_i| / P_i, a lasso whose
@@ -58,6 +60,10 @@ struct ReflectivitySolveSettings
   /// the trainer then removes the Gaussians it set to exactly 0 and refits the others by CGLS, the relaxed lasso).
   /// Tolerance then bounds the relative change of the scaled reflectivities between iterations.
   double L1 = 0;
+  /// Share of the machine's physical memory that the engine may hold as the assembled basis (AssembledBasis: A built
+  /// once per geometry, each product then a pass over its weights instead of a render of every frame); where A needs
+  /// more, or with 0, the products are matrix free. Engines without an assembled path (CUDA) ignore it.
+  double AssembledMemoryShare = 0.25;
 };
 
 struct ReflectivitySolveReport
@@ -70,6 +76,7 @@ struct ReflectivitySolveReport
   double Seconds = 0;
   bool TimeLimitReached = false; ///< it ended on settings.TimeLimit before MaximumIterations or Tolerance
   double L1Weight = 0;           ///< settings.L1: the weight mu used
+  std::string Products;          ///< how the engine's products ran (TrainingEngine::DescribeBasisProducts)
 };
 
 /// Bytes a solve allocates for @p gaussians Gaussians over @p pixels pixels (frames x H x W): 52 per

@@ -22,6 +22,14 @@ namespace bigus
 
 TrainingEngine::~TrainingEngine() = default;
 
+void TrainingEngine::SetBasisMemoryLimit(std::int64_t)
+{}
+
+std::string TrainingEngine::DescribeBasisProducts() const
+{
+  return std::string("matrix free (the ") + this->GetName() + " engine renders every product)";
+}
+
 bool TrainingEngine::SetReduction(ProcessReduction* reduction, std::string* error)
 {
   if (reduction && reduction->Size() > 1)

@@ -370,9 +370,19 @@ public:
 
   // The reflectivity solve's operators (bigusReflectivitySolve.h, DESIGN section 4). For the engine's
   // current geometry the scattering field of a frame is linear in the reflectivities, S = A r, column i
-  // of A being Gaussian i's beam-integrated weight w_i(p). The matrix is never formed: a backend gives
-  // the solve these three products, and nothing else. RenderOptions::NonNegativeReflectivity does not
-  // enter (A is linear). Frames index the engine's TrainingData; each has that data's [H, W] grid.
+  // of A being Gaussian i's beam-integrated weight w_i(p). A backend gives the solve these three products,
+  // and nothing else: matrix free (each product renders) or over A assembled once per geometry and frame set
+  // (the CPU engine: AssembledBasis, where it fits in SetBasisMemoryLimit). RenderOptions::NonNegativeReflectivity
+  // does not enter (A is linear). Frames index the engine's TrainingData; each has that data's [H, W] grid.
+
+  /**
+   * The most memory (bytes) the basis products may hold as an assembled matrix; 0 or less: matrix free. An engine
+   * without an assembled path ignores it (the CPU engine's default: 0; bigus::SolveReflectivities sets it from
+   * ReflectivitySolveSettings::AssembledMemoryShare).
+   */
+  virtual void SetBasisMemoryLimit(std::int64_t bytes);
+  /// How the last basis products ran, for reports: "assembled (...)" or "matrix free (...)".
+  virtual std::string DescribeBasisProducts() const;
 
   /**
    * A r: with @p r ([N]) in place of the field's reflectivities, the scattering field S of each of the

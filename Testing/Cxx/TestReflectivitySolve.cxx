@@ -2,6 +2,7 @@
 // the adjoint identity on hard-case geometries, the Jacobi diagonal against squared columns of A,
 // the solve against a dense direct solve (Eigen), recovery of known reflectivities, a residual that
 // never increases, and clear errors where nothing can be solved.
+#include "bigusAssembledBasis.h"
 #include "bigusReflectivitySolve.h"
 #include "bigusTrainingEngine.h"
 #include "bigusTrainingTestUtilities.h"
@@ -11,6 +12,7 @@
 
 #include <cmath>
 #include <random>
+#include <tuple>
 
 using namespace bigus;
 
@@ -490,4 +492,155 @@ TEST(ReflectivitySolve, TheL1TermMatchesCoordinateDescentOnTheSameLasso)
     EXPECT_LT(zeros, geometry.Count());
     EXPECT_LT(report.Objective.back(), report.Objective.front());
   }
+}
+
+namespace
+{
+/// @p engine with its basis products over the assembled A (a limit far above what these fields need).
+std::unique_ptr<TrainingEngine> AssembledEngineFor(const TrainingData& data, const GaussianField& field)
+{
+  std::unique_ptr<TrainingEngine> engine = EngineFor(data, field);
+  engine->SetBasisMemoryLimit(std::int64_t(1) << 40);
+  return engine;
+}
+}
+
+TEST(ReflectivitySolve, TheAssembledBasisGivesTheMatrixFreeProductsOnHardCases)
+{
+  // AssembledBasis (through the CPU engine) against the engine's matrix-free products, which render: A x against
+  // Forward, A^T y against the backward pass, diag(A^T W A) against AccumulateBasisNorms, each to 1e-6 of the
+  // largest term, for a thin, a moderate and a thick beam on needles, pancakes and blobs.
+  for (double sigmaE : { 0.05, 0.5, 2.0 })
+  {
+    const GaussianField field = HardCaseField(300, 3, 40 * Spacing, 36 * Spacing);
+    const TrainingData data = Frames(field, 4, 40, 36, sigmaE);
+    auto free = EngineFor(data, field);
+    auto assembled = AssembledEngineFor(data, field);
+    const RenderOptions o = Options(sigmaE);
+    std::mt19937_64 rng(17);
+    std::uniform_real_distribution<double> u(-1, 1);
+    const std::size_t size = data.Frames.size();
+    const std::int64_t n = field.Count();
+    std::vector<float> x(n), y(size), weights(size);
+    for (float& v : x)
+    {
+      v = static_cast<float>(u(rng));
+    }
+    for (std::size_t p = 0; p < size; ++p)
+    {
+      y[p] = static_cast<float>(u(rng));
+      weights[p] = static_cast<float>(p % 7 == 0 ? 0.0 : 1 + u(rng));
+    }
+    std::vector<float> Ax[2] = { std::vector<float>(size), std::vector<float>(size) };
+    std::vector<double> ATy[2] = { std::vector<double>(n, 0.0), std::vector<double>(n, 0.0) };
+    std::vector<double> norms[2] = { std::vector<double>(n, 0.0), std::vector<double>(n, 0.0) };
+    TrainingEngine* engines[2] = { free.get(), assembled.get() };
+    for (int e = 0; e < 2; ++e)
+    {
+      std::string error;
+      const int* frames = data.TrainFrames.data();
+      ASSERT_TRUE(engines[e]->BasisNorms(weights.data(), frames, 4, o, norms[e].data(), &error)) << error;
+      ASSERT_TRUE(engines[e]->ApplyBasis(x.data(), frames, 4, o, Ax[e].data(), &error)) << error;
+      ASSERT_TRUE(engines[e]->ApplyBasisTranspose(y.data(), frames, 4, o, ATy[e].data(), &error)) << error;
+    }
+    EXPECT_EQ(assembled->DescribeBasisProducts().rfind("assembled (", 0), 0u) << assembled->DescribeBasisProducts();
+    EXPECT_EQ(free->DescribeBasisProducts().rfind("matrix free", 0), 0u) << free->DescribeBasisProducts();
+    // Each to the largest value: A^T y and the norms sum the same float weights as the backward pass and
+    // AccumulateBasisNorms, to 1e-6; A x to 1e-5, the bound of the renderers' parity tests, since Forward sums its
+    // tiles' contributions in float (its own error against the double reference is of that order).
+    auto worst = [](const auto& a, const auto& b) {
+      double largest = 0, difference = 0;
+      for (std::size_t k = 0; k < a.size(); ++k)
+      {
+        largest = std::max(largest, std::abs(double(a[k])));
+        difference = std::max(difference, std::abs(double(a[k]) - double(b[k])));
+      }
+      return std::make_pair(difference / largest, largest);
+    };
+    const std::tuple<const char*, std::pair<double, double>, double> checks[] = { { "A x", worst(Ax[0], Ax[1]), 1e-5 },
+      { "A^T y", worst(ATy[0], ATy[1]), 1e-6 }, { "diag(A^T W A)", worst(norms[0], norms[1]), 1e-6 } };
+    for (const auto& [name, d, bound] : checks)
+    {
+      EXPECT_GT(d.second, 0.1) << name << ": the frames must see the field";
+      EXPECT_LE(d.first, bound) << name << ", sigma_E " << sigmaE;
+      std::printf("sigma_E %.2f, %s: largest difference %.3g of the largest value\n", sigmaE, name, d.first);
+    }
+  }
+}
+
+TEST(ReflectivitySolve, TheAssembledAndTheMatrixFreeSolvesAgree)
+{
+  // The same solve with the products over the assembled A (the default) and matrix free (AssembledMemoryShare 0):
+  // the same reflectivities to 1e-5, and each report says which products ran.
+  const double sigmaE = 0.5;
+  const GaussianField truth = HardCaseField(120, 7, 40 * Spacing, 36 * Spacing);
+  const TrainingData data = Frames(truth, 5, 40, 36, sigmaE);
+  GaussianField start = truth;
+  std::fill(start.Reflectivities.begin(), start.Reflectivities.end(), 0.f);
+  std::vector<float> solved[2];
+  ReflectivitySolveReport reports[2];
+  for (int e = 0; e < 2; ++e)
+  {
+    auto engine = EngineFor(data, start);
+    ReflectivitySolveSettings settings;
+    settings.MaximumIterations = 30;
+    settings.AssembledMemoryShare = e == 0 ? 0.0 : 0.25;
+    solved[e] = start.Reflectivities;
+    std::string error;
+    ASSERT_TRUE(
+      SolveReflectivities(*engine, data, data.TrainFrames, Options(sigmaE), settings, solved[e], &reports[e], &error))
+      << error;
+  }
+  EXPECT_EQ(reports[0].Products.rfind("matrix free", 0), 0u) << reports[0].Products;
+  EXPECT_EQ(reports[1].Products.rfind("assembled (", 0), 0u) << reports[1].Products;
+  double difference = 0, norm = 0;
+  for (std::size_t i = 0; i < solved[0].size(); ++i)
+  {
+    difference += std::pow(double(solved[0][i]) - solved[1][i], 2);
+    norm += std::pow(double(solved[0][i]), 2);
+  }
+  EXPECT_GT(norm, 0.0);
+  EXPECT_LE(std::sqrt(difference), 1e-5 * std::sqrt(norm))
+    << "after " << reports[0].Iterations << " and " << reports[1].Iterations << " iterations";
+}
+
+TEST(ReflectivitySolve, AnAssembledBasisThatDoesNotFitIsRefusedBeforeAllocating)
+{
+  // Measure gives the bytes; one byte less is refused with them, before anything is stored, and the engine's
+  // products fall back to the matrix-free ones and say why.
+  const double sigmaE = 0.5;
+  const GaussianField field = HardCaseField(200, 9, 40 * Spacing, 36 * Spacing);
+  const TrainingData data = Frames(field, 4, 40, 36, sigmaE);
+  std::vector<SliceGeometry> slices;
+  for (int k = 0; k < 4; ++k)
+  {
+    slices.push_back(data.Slice(k));
+  }
+  const RenderOptions o = LinearBasisOptions(Options(sigmaE));
+  AssembledBasis::Size size;
+  std::string error;
+  ASSERT_TRUE(AssembledBasis::Measure(field.View(), slices.data(), 4, o, size, &error)) << error;
+  EXPECT_GT(size.Weights, 1000);
+  EXPECT_EQ(size.Bytes(), 4 * size.Weights + 16 * size.Spans + 40 * size.Footprints);
+  AssembledBasis basis;
+  bool tooLarge = false;
+  EXPECT_FALSE(basis.Assemble(field.View(), slices.data(), 4, o, size.Bytes() - 1, &error, &tooLarge));
+  EXPECT_TRUE(tooLarge);
+  EXPECT_NE(error.find("needs"), std::string::npos) << error;
+  EXPECT_EQ(basis.GetSize().Weights, 0);
+  ASSERT_TRUE(basis.Assemble(field.View(), slices.data(), 4, o, size.Bytes(), &error, &tooLarge)) << error;
+  EXPECT_EQ(basis.GetSize().Weights, size.Weights);
+  auto engine = EngineFor(data, field);
+  engine->SetBasisMemoryLimit(size.Bytes() - 1);
+  std::vector<float> x(field.Count(), 1.f), S(data.Frames.size());
+  ASSERT_TRUE(engine->ApplyBasis(x.data(), data.TrainFrames.data(), 4, Options(sigmaE), S.data(), &error)) << error;
+  EXPECT_EQ(engine->DescribeBasisProducts().rfind("matrix free (the assembled reflectivity basis needs", 0), 0u)
+    << engine->DescribeBasisProducts();
+  // A bad pose is an error, not a fallback.
+  TrainingData bad = data;
+  bad.Poses[1][0] = std::nan("");
+  auto refused = EngineFor(bad, field);
+  refused->SetBasisMemoryLimit(std::int64_t(1) << 40);
+  EXPECT_FALSE(refused->ApplyBasis(x.data(), bad.TrainFrames.data(), 4, Options(sigmaE), S.data(), &error));
+  EXPECT_FALSE(error.empty());
 }
