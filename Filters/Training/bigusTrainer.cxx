@@ -92,6 +92,7 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
   {
     const ElevationSigmaChoice choice = ChooseElevationSigma(measuredSweeps());
     this->Settings.ElevationSigma = choice.Sigma;
+    this->SigmaByRule = true;
     this->Report.Settings.push_back(
       vtkfmt::sprintf("ElevationSigma = %.4g mm (chosen: ", choice.Sigma) + choice.Reason + ")");
   }
@@ -201,6 +202,10 @@ bool Trainer::PrepareInitialField(std::string* error)
   SeedingPlan plan;
   if (!PlanSeeding(data, this->Settings.Seeding, this->Settings.MaximumGaussians,
         this->Settings.NonNegativeReflectivity, shape, count, plan, error))
+  {
+    return false;
+  }
+  if (plan.PixelGrid && this->SigmaByRule && !this->MeasureElevationSigma(count, plan, error))
   {
     return false;
   }
@@ -329,6 +334,39 @@ SeedShape Trainer::SeedShapeOf() const
   shape.UniformShare = this->Settings.Seeding.UniformShare;
   shape.Gamma = this->Gamma;
   return shape;
+}
+
+bool Trainer::MeasureElevationSigma(std::int64_t fanPixels, SeedingPlan& plan, std::string* error)
+{
+  const double rule = this->Settings.ElevationSigma;
+  HeldOutChoice& choice = this->Report.ElevationSigmaChoice;
+  if (!this->Settings.HeldOut.Enabled)
+  {
+    choice = HeldOutChoice();
+    choice.Untested = "the held-out choices are off";
+  }
+  else if (!ChooseElevationSigmaOnHeldOutFrames(*this->Data, this->Settings, rule, choice, error))
+  {
+    return false;
+  }
+  const double sigma = choice.Chosen < 0 ? rule : choice.Candidates[choice.Chosen].Value;
+  for (std::string& line : this->Report.Settings)
+  {
+    if (line.rfind("ElevationSigma = ", 0) == 0)
+    {
+      line = vtkfmt::sprintf("ElevationSigma = %.4g mm (%s; the rule's value %.4g mm, %s)", sigma,
+        choice.Describe("mm").c_str(), rule, line.substr(line.find('(') + 1, line.rfind(')') - line.find('(') - 1));
+    }
+  }
+  if (sigma == rule)
+  {
+    return true;
+  }
+  // The seeding plan of the chosen sigma (the grid's elevation scale follows it).
+  this->Settings.ElevationSigma = sigma;
+  this->Report.ElevationSigma = sigma;
+  return PlanSeeding(*this->Data, this->Settings.Seeding, this->Settings.MaximumGaussians,
+    this->Settings.NonNegativeReflectivity, this->SeedShapeOf(), fanPixels, plan, error);
 }
 
 bool Trainer::FitReflectivityScale(std::string* error)

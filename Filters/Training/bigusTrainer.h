@@ -18,6 +18,7 @@
 #include "bigusFrameMetrics.h"
 #include "bigusGapFilling.h"
 #include "bigusGaussianMerging.h"
+#include "bigusHeldOutChoices.h"
 #include "bigusImageLoss.h"
 #include "bigusPoseRefinement.h"
 #include "bigusImageMetrics.h"
@@ -116,6 +117,8 @@ struct TrainerSettings
   GaussianMergeSettings Merge{ 1e-3 };
   // Pose refinement (bigusPoseRefinement.h)
   PoseRefinementSettings Poses;
+  /// The choices measured on held-out frames (bigusHeldOutChoices.h): ElevationSigma on the pixel-grid route.
+  HeldOutChoiceSettings HeldOut;
   // Run
   unsigned Seed = 1;
   int CheckpointInterval = 0; ///< steps between checkpoints (0 = none)
@@ -142,8 +145,9 @@ struct TrainerReport
   ReflectivitySolveReport LastL1Solve;
   std::int64_t LastL1Removed = 0;
   double Gamma = 0;
-  double LastLoss = 0;       ///< mean loss of the last 50 steps
-  double ElevationSigma = 0; ///< mm, the sigma trained with (given or chosen)
+  double LastLoss = 0;                ///< mean loss of the last 50 steps
+  double ElevationSigma = 0;          ///< mm, the sigma trained with (given or chosen)
+  HeldOutChoice ElevationSigmaChoice; ///< how ElevationSigma was measured on held-out frames (Chosen -1: it was not)
   /// Early stopping: the iteration whose field Finish kept (the best on the validation frames; a field
   /// measured just before a densification carries that densification's iteration), the validation
   /// loss there and that of the last field (equal when the last was kept).
@@ -296,6 +300,9 @@ private:
   bool FitReflectivityScale(std::string* error);
   /// Initialize's part on this process alone: the data's checks, gamma, the memory check and the seeded field.
   bool PrepareInitialField(std::string* error);
+  /// On the pixel-grid route with ElevationSigma by rule: the measured choice (ChooseElevationSigmaOnHeldOutFrames),
+  /// its setting line, and @p plan made again for the chosen sigma (@p fanPixels: the training frames').
+  bool MeasureElevationSigma(std::int64_t fanPixels, SeedingPlan& plan, std::string* error);
   /// The engine takes the seeded field; its reflectivities are then solved (ReflectivitySolve) or scaled.
   bool FitInitialReflectivities(std::string* error);
   /// LoadCheckpoint's part on this process alone.
@@ -342,6 +349,7 @@ private:
   double TrainedBefore = 0;              // the run's training seconds before that call
   bool DensificationEnded = false;       // the last Train call ended past the densification window
   bool PixelGrid = false;                // the field is the pixel-grid fit (PixelGridFit): Train takes no step
+  bool SigmaByRule = false;              // ElevationSigma came from the rule (MeasureElevationSigma may measure it)
   PoseRefiner Poses;
   std::vector<float> S; // scratch for RenderFrame
 };

@@ -1,0 +1,93 @@
+/**
+ * @file bigusHeldOutChoices.h
+ * @brief The held-out choices of training (DESIGN section 4, "Choices measured on held-out frames"): a setting the
+ *        user left to the trainer is decided by fitting each candidate on the training frames less a few held out
+ *        along each sweep, and scoring the candidates' fits on the frames they did not see; the final fit then uses
+ *        every training frame with the candidate chosen.
+ *
+ * Today one choice is measured this way: ElevationSigma on the pixel-grid route (bigusSeeding.h, PlanSeeding), where
+ * a candidate's whole fit is one reflectivity solve (a second or two with the assembled basis, AssembledBasis). The
+ * rule of bigusElevationSigma.h gives the centre of the candidates. Where a candidate's fit would be a whole Adam
+ * run (the Harris route), the rule's value is taken untested and its setting line says so.
+ *
+ * Part of BIGUS::Training (public, not wrapped for Python).
+ */
+#ifndef bigusHeldOutChoices_h
+#define bigusHeldOutChoices_h
+
+#include "bigusTrainingEngine.h"
+#include "bigusTrainingModule.h" // For export macro
+
+#include <string>
+#include <vector>
+
+namespace bigus
+{
+
+struct TrainerSettings;
+
+/// The held-out choices' settings (TrainerSettings::HeldOut).
+struct HeldOutChoiceSettings
+{
+  /// Measure the choices that can be measured (false, the default: the rules decide, untested). Off by default: on
+  /// parallel slices a held-out frame lies a whole spacing from the frames its candidate was fitted on, where the
+  /// final field's in-between views lie at most half a spacing from a training frame, so the held-out score favours
+  /// the widest beam (docs/FINDINGS.md, "ElevationSigma measured on held-out frames").
+  bool Enabled = false;
+  int Stride = 8; ///< every Stride-th training frame of a sweep is held out (HeldOutFrames)
+  int MaximumFrames = 12;
+  /// ElevationSigma's candidates: the rule's value times these (small ones included: a volume has no beam).
+  std::vector<double> ElevationSigmaFactors = { 0.125, 0.25, 0.5, 1.0, 2.0 };
+};
+
+/**
+ * The frames held out for the choices: in each sweep, its training frames in order, every @p stride-th from the
+ * (@p stride / 2)-th, never the sweep's first or last training frame (a held-out frame lies between frames the fit
+ * sees), at most @p maximum over all sweeps (the sweeps' shares in turn). Empty when no sweep has three training
+ * frames.
+ */
+BIGUSTRAINING_EXPORT std::vector<int> HeldOutFrames(const TrainingData& data, int stride, int maximum);
+
+/// @p data with @p heldOut taken out of its TrainFrames: what a candidate is fitted on.
+BIGUSTRAINING_EXPORT TrainingData WithoutHeldOutFrames(const TrainingData& data, const std::vector<int>& heldOut);
+
+/// One candidate of a measured choice.
+struct HeldOutCandidate
+{
+  double Value = 0;       ///< the setting's value (mm for ElevationSigma)
+  double PSNR = 0;        ///< dB, the mean over the held-out frames of its fit's masked PSNR
+  double Seconds = 0;     ///< its fit and scoring
+  std::int64_t Count = 0; ///< Gaussians of its fit
+};
+
+/// What a measured choice did.
+struct HeldOutChoice
+{
+  std::vector<int> Frames;                  ///< the held-out frames
+  std::vector<HeldOutCandidate> Candidates; ///< in the order tried
+  int Chosen = -1;                          ///< index into Candidates; -1: untested
+  std::string Untested;                     ///< why no candidate was measured (Chosen -1)
+  /// The setting line's parenthesis: "chosen on 9 held-out frames: 0.12 mm 40.6 dB, 0.25 mm 41.0, ... (s)".
+  std::string Describe(const char* unit) const;
+};
+
+/**
+ * The pixel-grid fit of @p settings (ElevationSigma given, > 0) on @p data's training frames other than
+ * @p heldOut, into @p field: a Trainer's Initialize on WithoutHeldOutFrames (no pose refinement, no held-out choice
+ * of its own; CPU engine). It reads no pixel of a held-out frame. False with @p error as Trainer::Initialize.
+ */
+BIGUSTRAINING_EXPORT bool FitWithoutHeldOutFrames(const TrainingData& data, const std::vector<int>& heldOut,
+  const TrainerSettings& settings, GaussianField& field, std::string* error);
+
+/**
+ * ElevationSigma measured on held-out frames: each candidate (@p ruleSigma times settings.HeldOut's factors) fitted
+ * by FitWithoutHeldOutFrames and scored by the mean masked PSNR of the held-out frames rendered from its field; the
+ * highest wins (the earlier candidate on a tie). With fewer than 2 held-out frames nothing is measured
+ * (choice.Untested says why). False with @p error when a fit fails.
+ */
+BIGUSTRAINING_EXPORT bool ChooseElevationSigmaOnHeldOutFrames(const TrainingData& data, const TrainerSettings& settings,
+  double ruleSigma, HeldOutChoice& choice, std::string* error);
+
+} // namespace bigus
+
+#endif

@@ -1,0 +1,122 @@
+// The held-out choices (bigusHeldOutChoices.h): which frames are held out, that a candidate's fit reads none of their
+// pixels, and that the trainer takes the candidate with the best held-out score and says so.
+#include "bigusHeldOutChoices.h"
+#include "bigusTrainer.h"
+#include "bigusTrainingTestUtilities.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+using namespace bigus;
+
+namespace
+{
+/// The synthetic sweep's first 24 frames, all of them training frames (a pixel grid of 24 x 64 x 64 fan pixels).
+TrainingData GridSweep()
+{
+  std::vector<int> unused;
+  TrainingData data = synthetic::SyntheticSweep(synthetic::KnownField(300, 5), 0.3, unused);
+  data.TrainFrames.clear();
+  for (int k = 0; k < 24; ++k)
+  {
+    data.TrainFrames.push_back(k);
+  }
+  return data;
+}
+}
+
+TEST(HeldOutChoices, FramesLieBetweenTrainingFramesOfEachSweepTakenInTurn)
+{
+  // Sweep 0: frames 0 to 19; sweep 1: frames 20 to 29, of which 25 is not a training frame; sweep 2: 30 and 31.
+  TrainingData data;
+  for (int f = 0; f < 32; ++f)
+  {
+    data.Sweeps.push_back(f < 20 ? 0 : f < 30 ? 1 : 2);
+    if (f != 25)
+    {
+      data.TrainFrames.push_back(f);
+    }
+  }
+  // Stride 8 from the 4th training frame of each sweep, never its last: sweep 0 positions 4 and 12 (frames 4, 12);
+  // sweep 1's training frames 20 to 24 and 26 to 29, position 4 (frame 24); sweep 2 has none between two others.
+  EXPECT_EQ(HeldOutFrames(data, 8, 12), (std::vector<int>{ 4, 12, 24 }));
+  // At most 2: the sweeps' first shares in turn.
+  EXPECT_EQ(HeldOutFrames(data, 8, 2), (std::vector<int>{ 4, 24 }));
+  // Stride 4 from position 2: sweep 0 positions 2, 6, 10, 14, 18 (not 19, its last); sweep 1 positions 2, 6.
+  EXPECT_EQ(HeldOutFrames(data, 4, 12), (std::vector<int>{ 2, 6, 10, 14, 18, 22, 27 }));
+  const TrainingData fit = WithoutHeldOutFrames(data, { 4, 12, 24 });
+  EXPECT_EQ(fit.TrainFrames.size(), data.TrainFrames.size() - 3);
+  EXPECT_TRUE(std::none_of(fit.TrainFrames.begin(), fit.TrainFrames.end(), [](int f) { return f == 12; }));
+  TrainingData two;
+  two.TrainFrames = { 3, 4 };
+  EXPECT_TRUE(HeldOutFrames(two, 8, 12).empty());
+}
+
+TEST(HeldOutChoices, ACandidatesFitReadsNoPixelOfAHeldOutFrame)
+{
+  // The held-out frames' pixels replaced by noise: the candidate's fit is the same to the bit. A training frame's
+  // pixels changed the same way change it (the comparison can fail).
+  const TrainingData data = GridSweep();
+  const std::vector<int> heldOut = HeldOutFrames(data, 8, 12);
+  ASSERT_EQ(heldOut, (std::vector<int>{ 4, 12, 20 }));
+  TrainerSettings settings;
+  settings.ElevationSigma = 0.3;
+  settings.Poses.RefinePoses = PoseRefinement::Off;
+  auto scrambled = [&](int frame) {
+    TrainingData d = data;
+    const std::size_t pixels = std::size_t(d.Width) * d.Height;
+    std::mt19937 rng(frame);
+    std::uniform_real_distribution<float> u(0.f, 1.f);
+    std::generate(d.Frames.begin() + pixels * frame, d.Frames.begin() + pixels * (frame + 1), [&] { return u(rng); });
+    return d;
+  };
+  GaussianField fits[3];
+  std::string error;
+  ASSERT_TRUE(FitWithoutHeldOutFrames(data, heldOut, settings, fits[0], &error)) << error;
+  ASSERT_TRUE(FitWithoutHeldOutFrames(scrambled(12), heldOut, settings, fits[1], &error)) << error;
+  ASSERT_TRUE(FitWithoutHeldOutFrames(scrambled(13), heldOut, settings, fits[2], &error)) << error;
+  EXPECT_GT(fits[0].Count(), 1000) << "the pixel-grid fit";
+  ExpectSameField(fits[0], fits[1]);
+  EXPECT_NE(fits[0].Reflectivities, fits[2].Reflectivities) << "a fitted frame's pixels must matter";
+}
+
+TEST(HeldOutChoices, TheTrainerTakesTheBestHeldOutCandidateAndItsLineSaysSo)
+{
+  const TrainingData data = GridSweep();
+  TrainerSettings settings;
+  settings.Poses.RefinePoses = PoseRefinement::Off;
+  settings.HeldOut.Enabled = true;
+  Trainer trainer(data, settings);
+  const double rule = trainer.GetReport().ElevationSigma;
+  std::string error;
+  ASSERT_TRUE(trainer.Initialize(&error)) << error;
+  const TrainerReport& report = trainer.GetReport();
+  const HeldOutChoice& choice = report.ElevationSigmaChoice;
+  ASSERT_EQ(choice.Candidates.size(), settings.HeldOut.ElevationSigmaFactors.size());
+  ASSERT_GE(choice.Chosen, 0);
+  for (std::size_t k = 0; k < choice.Candidates.size(); ++k)
+  {
+    EXPECT_NEAR(choice.Candidates[k].Value, rule * settings.HeldOut.ElevationSigmaFactors[k], 1e-12);
+    EXPECT_TRUE(std::isfinite(choice.Candidates[k].PSNR));
+    EXPECT_LE(choice.Candidates[k].PSNR, choice.Candidates[choice.Chosen].PSNR);
+  }
+  EXPECT_EQ(report.ElevationSigma, choice.Candidates[choice.Chosen].Value);
+  EXPECT_EQ(trainer.Options().ElevationSigma, report.ElevationSigma);
+  const auto line = std::find_if(report.Settings.begin(), report.Settings.end(),
+    [](const std::string& l) { return l.rfind("ElevationSigma = ", 0) == 0; });
+  ASSERT_NE(line, report.Settings.end());
+  std::printf("%s\n", line->c_str());
+  EXPECT_NE(line->find("chosen on 3 held-out frames"), std::string::npos) << *line;
+  EXPECT_NE(line->find("the rule's value"), std::string::npos) << *line;
+  // Off (the default): the rule's value, untested, and the line says why.
+  settings.HeldOut.Enabled = false;
+  Trainer untested(data, settings);
+  ASSERT_TRUE(untested.Initialize(&error)) << error;
+  EXPECT_EQ(untested.GetReport().ElevationSigma, rule);
+  EXPECT_EQ(untested.GetReport().ElevationSigmaChoice.Chosen, -1);
+}
