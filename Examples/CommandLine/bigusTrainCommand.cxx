@@ -492,10 +492,11 @@ Command AddTrainCommand(CLI::App& app)
       "CGLS iterations of each reflectivity solve (each a forward and a backward pass over every training frame)")
     ->capture_default_str()
     ->check(CLI::PositiveNumber);
-  trainCommand->add_flag("--held-out-choices", settings.HeldOut.Enabled,
-    "Measure ElevationSigma (when not given) on training frames held out of each candidate's fit, where the fit is "
-    "the pixel grid's solve: the rule's value times 1/8, 1/4, 1/2, 1 and 2, the best held-out PSNR taken (default: "
-    "the rule's value, untested)");
+  trainCommand->add_flag_callback(
+    "--no-held-out-choices", [&settings] { settings.HeldOut.Enabled = false; },
+    "Take ElevationSigma's rule untested (default: where the fit is the pixel grid's solve, the rule's value times "
+    "1/8, 1/4, 1/2, 1 and 2 are each fitted without every second training frame and scored on those; the narrowest "
+    "within 0.05 dB of the best held-out PSNR is taken)");
   trainCommand
     ->add_option("--solve-memory", settings.Solve.AssembledMemoryShare,
       "Share of this machine's memory that a reflectivity solve may hold as the assembled basis (its products then "

@@ -177,7 +177,7 @@ public:
   void SetBasisMemoryLimit(std::int64_t bytes) override
   {
     this->BasisMemoryLimit = bytes;
-    if (this->Assembled && this->Assembled->GetSize().Bytes() > bytes)
+    if (this->Assembled && this->Assembled->GetSize().Bytes() > std::max<std::int64_t>(0, bytes))
     {
       this->Assembled.reset();
     }

@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <limits>
 #include <map>
 #include <memory>
 
@@ -64,25 +65,23 @@ std::vector<int> HeldOutFrames(const TrainingData& data, int stride, int maximum
     }
     candidates.push_back(own);
   }
-  // The sweeps' shares in turn, up to the maximum.
   std::vector<int> heldOut;
-  for (std::size_t round = 0; static_cast<int>(heldOut.size()) < maximum; ++round)
+  for (const std::vector<int>& own : candidates)
   {
-    bool any = false;
-    for (const std::vector<int>& own : candidates)
-    {
-      if (round < own.size() && static_cast<int>(heldOut.size()) < maximum)
-      {
-        heldOut.push_back(own[round]);
-        any = true;
-      }
-    }
-    if (!any)
-    {
-      break;
-    }
+    heldOut.insert(heldOut.end(), own.begin(), own.end());
   }
   std::sort(heldOut.begin(), heldOut.end());
+  if (maximum > 0 && static_cast<int>(heldOut.size()) > maximum)
+  {
+    // Spread evenly over them (the first and the last kept).
+    std::vector<int> spread;
+    for (int k = 0; k < maximum; ++k)
+    {
+      const std::size_t at = maximum == 1 ? 0 : (k * (heldOut.size() - 1) + (maximum - 1) / 2) / (maximum - 1);
+      spread.push_back(heldOut[at]);
+    }
+    heldOut = spread;
+  }
   return heldOut;
 }
 
@@ -107,6 +106,12 @@ std::string HeldOutChoice::Describe(const char* unit) const
     return "untested: " + this->Untested;
   }
   std::string text = vtkfmt::sprintf("chosen on %zu held-out frames:", this->Frames.size());
+  if (this->Stride > 0)
+  {
+    text = vtkfmt::sprintf("chosen on %zu frames held out (every %d%s training frame, left out of every candidate's "
+                           "fit):",
+      this->Frames.size(), this->Stride, this->Stride == 2 ? "nd" : "th");
+  }
   double seconds = 0;
   for (std::size_t k = 0; k < this->Candidates.size(); ++k)
   {
@@ -133,6 +138,9 @@ bool ChooseElevationSigmaOnHeldOutFrames(const TrainingData& data, const Trainer
   HeldOutChoice& choice, std::string* error)
 {
   choice = HeldOutChoice();
+  choice.Stride = std::max(2, settings.HeldOut.Stride);
+  // Every candidate is fitted without any held-out frame and scored on up to MaximumFrames of them.
+  const std::vector<int> heldOut = HeldOutFrames(data, settings.HeldOut.Stride, 0);
   choice.Frames = HeldOutFrames(data, settings.HeldOut.Stride, settings.HeldOut.MaximumFrames);
   if (choice.Frames.size() < 2)
   {
@@ -147,7 +155,7 @@ bool ChooseElevationSigmaOnHeldOutFrames(const TrainingData& data, const Trainer
     c.Value = ruleSigma * factor;
     TrainerSettings s = settings;
     s.ElevationSigma = c.Value;
-    const std::unique_ptr<Trainer> trainer = FitCandidate(data, choice.Frames, s, error);
+    const std::unique_ptr<Trainer> trainer = FitCandidate(data, heldOut, s, error);
     ImageMetrics metrics;
     if (!trainer || !trainer->EvaluateOn(data, choice.Frames, metrics, error))
     {
@@ -161,9 +169,21 @@ bool ChooseElevationSigmaOnHeldOutFrames(const TrainingData& data, const Trainer
     c.Count = trainer->GetField().Count();
     c.Seconds = Now() - start;
     choice.Candidates.push_back(c);
-    if (choice.Chosen < 0 || c.PSNR > choice.Candidates[choice.Chosen].PSNR)
+  }
+  // The narrowest beam within Tolerance of the best score: the held-out frames lie twice as far from the fitted
+  // ones as the final field's in-between views from its frames, which favours a wider beam.
+  double best = -std::numeric_limits<double>::infinity();
+  for (const HeldOutCandidate& c : choice.Candidates)
+  {
+    best = std::max(best, c.PSNR);
+  }
+  for (std::size_t k = 0; k < choice.Candidates.size(); ++k)
+  {
+    const HeldOutCandidate& c = choice.Candidates[k];
+    if (c.PSNR >= best - settings.HeldOut.Tolerance &&
+      (choice.Chosen < 0 || c.Value < choice.Candidates[choice.Chosen].Value))
     {
-      choice.Chosen = static_cast<int>(choice.Candidates.size()) - 1;
+      choice.Chosen = static_cast<int>(k);
     }
   }
   return true;

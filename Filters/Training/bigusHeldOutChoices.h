@@ -29,13 +29,18 @@ struct TrainerSettings;
 /// The held-out choices' settings (TrainerSettings::HeldOut).
 struct HeldOutChoiceSettings
 {
-  /// Measure the choices that can be measured (false, the default: the rules decide, untested). Off by default: on
-  /// parallel slices a held-out frame lies a whole spacing from the frames its candidate was fitted on, where the
-  /// final field's in-between views lie at most half a spacing from a training frame, so the held-out score favours
-  /// the widest beam (docs/FINDINGS.md, "ElevationSigma measured on held-out frames").
-  bool Enabled = false;
-  int Stride = 8; ///< every Stride-th training frame of a sweep is held out (HeldOutFrames)
-  int MaximumFrames = 12;
+  /// Measure the choices that can be measured (false: the rules decide, untested).
+  bool Enabled = true;
+  /// Every Stride-th training frame of a sweep is left out of the candidates' fits (HeldOutFrames). With 2 the fits
+  /// see every second frame and the held-out frames lie half the fits' spacing from them, as the final field's
+  /// in-between views lie from its frames; with 8 a held-out frame lies a whole spacing from the nearest fitted one
+  /// and the score favours the widest beam (docs/FINDINGS.md, "ElevationSigma measured on held-out frames").
+  int Stride = 2;
+  int MaximumFrames = 12; ///< of the held-out frames, at most this many spread over them are rendered and scored
+  /// dB: of the candidates within this of the best held-out score, the simplest is taken (for ElevationSigma the
+  /// narrowest beam: the held-out frames lie twice as far from the fitted ones as the final field's views from its
+  /// frames, which favours a wider one).
+  double Tolerance = 0.05;
   /// ElevationSigma's candidates: the rule's value times these (small ones included: a volume has no beam).
   std::vector<double> ElevationSigmaFactors = { 0.125, 0.25, 0.5, 1.0, 2.0 };
 };
@@ -43,8 +48,8 @@ struct HeldOutChoiceSettings
 /**
  * The frames held out for the choices: in each sweep, its training frames in order, every @p stride-th from the
  * (@p stride / 2)-th, never the sweep's first or last training frame (a held-out frame lies between frames the fit
- * sees), at most @p maximum over all sweeps (the sweeps' shares in turn). Empty when no sweep has three training
- * frames.
+ * sees); with @p maximum > 0, at most that many of them, spread evenly (the first and last kept). Empty when no
+ * sweep has three training frames.
  */
 BIGUSTRAINING_EXPORT std::vector<int> HeldOutFrames(const TrainingData& data, int stride, int maximum);
 
@@ -63,7 +68,8 @@ struct HeldOutCandidate
 /// What a measured choice did.
 struct HeldOutChoice
 {
-  std::vector<int> Frames;                  ///< the held-out frames
+  std::vector<int> Frames;                  ///< the held-out frames scored
+  int Stride = 0;                           ///< every Stride-th training frame was left out of the fits
   std::vector<HeldOutCandidate> Candidates; ///< in the order tried
   int Chosen = -1;                          ///< index into Candidates; -1: untested
   std::string Untested;                     ///< why no candidate was measured (Chosen -1)
@@ -81,9 +87,10 @@ BIGUSTRAINING_EXPORT bool FitWithoutHeldOutFrames(const TrainingData& data, cons
 
 /**
  * ElevationSigma measured on held-out frames: each candidate (@p ruleSigma times settings.HeldOut's factors) fitted
- * by FitWithoutHeldOutFrames and scored by the mean masked PSNR of the held-out frames rendered from its field; the
- * highest wins (the earlier candidate on a tie). With fewer than 2 held-out frames nothing is measured
- * (choice.Untested says why). False with @p error when a fit fails.
+ * by FitWithoutHeldOutFrames without every HeldOutFrames(stride) frame and scored by the mean masked PSNR of up to
+ * MaximumFrames of them rendered from its field; the
+ * narrowest candidate within HeldOut.Tolerance dB of the best wins. With fewer than 2 held-out frames nothing is
+ * measured (choice.Untested says why). False with @p error when a fit fails.
  */
 BIGUSTRAINING_EXPORT bool ChooseElevationSigmaOnHeldOutFrames(const TrainingData& data, const TrainerSettings& settings,
   double ruleSigma, HeldOutChoice& choice, std::string* error);

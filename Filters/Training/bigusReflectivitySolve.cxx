@@ -155,6 +155,12 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
   engine.SetBasisMemoryLimit(settings.AssembledMemoryShare > 0 && physical <= 0
       ? std::numeric_limits<std::int64_t>::max()
       : static_cast<std::int64_t>(std::max(0.0, allowed)));
+  // The matrix is this solve's: released when it returns, however it returns.
+  struct Release
+  {
+    TrainingEngine& Engine;
+    ~Release() { this->Engine.SetBasisMemoryLimit(0); }
+  } release{ engine };
   // Data-space vectors: the residual rho and q (A p, the weights G, the input of A^T).
   std::vector<float> rho(m), q(m);
   // Jacobi preconditioner P = (diag(A^T G A) + lambda)^(-1/2).

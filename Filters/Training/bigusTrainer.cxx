@@ -205,7 +205,7 @@ bool Trainer::PrepareInitialField(std::string* error)
   {
     return false;
   }
-  if (plan.PixelGrid && this->SigmaByRule && !this->MeasureElevationSigma(count, plan, error))
+  if (this->SigmaByRule && !this->MeasureElevationSigma(count, plan, error))
   {
     return false;
   }
@@ -340,10 +340,14 @@ bool Trainer::MeasureElevationSigma(std::int64_t fanPixels, SeedingPlan& plan, s
 {
   const double rule = this->Settings.ElevationSigma;
   HeldOutChoice& choice = this->Report.ElevationSigmaChoice;
+  choice = HeldOutChoice();
   if (!this->Settings.HeldOut.Enabled)
   {
-    choice = HeldOutChoice();
     choice.Untested = "the held-out choices are off";
+  }
+  else if (!plan.PixelGrid)
+  {
+    choice.Untested = "a candidate's fit on this route is an Adam run, which the budget does not repeat per candidate";
   }
   else if (!ChooseElevationSigmaOnHeldOutFrames(*this->Data, this->Settings, rule, choice, error))
   {

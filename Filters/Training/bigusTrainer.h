@@ -300,8 +300,9 @@ private:
   bool FitReflectivityScale(std::string* error);
   /// Initialize's part on this process alone: the data's checks, gamma, the memory check and the seeded field.
   bool PrepareInitialField(std::string* error);
-  /// On the pixel-grid route with ElevationSigma by rule: the measured choice (ChooseElevationSigmaOnHeldOutFrames),
-  /// its setting line, and @p plan made again for the chosen sigma (@p fanPixels: the training frames').
+  /// With ElevationSigma by rule: on the pixel-grid route the measured choice (ChooseElevationSigmaOnHeldOutFrames)
+  /// and @p plan made again for the chosen sigma (@p fanPixels: the training frames'); elsewhere why it is untested;
+  /// the setting line either way.
   bool MeasureElevationSigma(std::int64_t fanPixels, SeedingPlan& plan, std::string* error);
   /// The engine takes the seeded field; its reflectivities are then solved (ReflectivitySolve) or scaled.
   bool FitInitialReflectivities(std::string* error);
