@@ -64,12 +64,12 @@ bool OutOfReach(const Reach& g, const PreparedSlice& s, double sigmaE, double cu
 }
 
 /**
- * Calls @p span(row, first, last) for every row of Gaussian @p i's footprint on slice @p s, with @p fp and @p box
- * set first (the arithmetic of AccumulateBasisNorms and the backward pass); false when it is not visible there.
+ * ForEachFootprintSpan for Gaussian @p i on slice @p s after the cheap test of OutOfReach and the set-up; false when
+ * it is not visible there.
  */
 template <typename F>
 bool ForEachSpan(const FieldView& field, std::int64_t i, const Reach& reach, const PreparedSlice& s, double sigmaE,
-  double cutoff, BoxFootprint& fp, int box[4], F span)
+  double cutoff, int box[4], F span)
 {
   if (OutOfReach(reach, s, sigmaE, cutoff))
   {
@@ -77,24 +77,7 @@ bool ForEachSpan(const FieldView& field, std::int64_t i, const Reach& reach, con
   }
   const GaussianParams g = LoadGaussian(field.Means, field.LogScales, field.Quaternions, field.Reflectivities, i);
   const Footprint f = SetupFootprint(g, s.Frame, sigmaE, cutoff, nullptr);
-  if (!f.Visible || !FootprintBox(f, s, box))
-  {
-    return false;
-  }
-  fp = MakeBoxFootprint(f, s, box, 1.0);
-  const float det = fp.A * fp.C - fp.B * fp.B;
-  for (int row = box[2]; row <= box[3]; ++row)
-  {
-    const float dy = (row - box[2]) * fp.P2 - fp.Dcy;
-    const float xrow = (row - box[2]) * fp.P1 - fp.Dcx;
-    int first, last;
-    RowSpan(fp.A, fp.B, det, fp.CutoffSquared, dy, xrow, fp.P0, 0, box[1] - box[0] + 1, first, last);
-    if (last > first)
-    {
-      span(row, first, last);
-    }
-  }
-  return true;
+  return f.Visible && ForEachFootprintSpan(f, s, box, span);
 }
 }
 
@@ -158,22 +141,17 @@ bool AssembledBasis::Build(const FieldView& field, const SliceGeometry* slices, 
         Size cursor = pass == 0 ? Size() : at[t];
         for (std::int64_t i = (t % chunks) * GaussianChunk; i < std::min(n, (t % chunks + 1) * GaussianChunk); ++i)
         {
-          BoxFootprint fp;
           int box[4];
           const Size first = cursor;
-          const bool visible =
-            ForEachSpan(field, i, reach[i], s, sigmaE, options.Cutoff, fp, box, [&](int row, int a, int b) {
+          const bool visible = ForEachSpan(
+            field, i, reach[i], s, sigmaE, options.Cutoff, box, [&](int row, int a, int b, const auto& weight) {
               if (pass == 1)
               {
                 this->Spans[cursor.Spans] = { slicePixels[j] + std::int64_t(row) * s.Width + box[0] + a, b - a };
-                const float dy = (row - box[2]) * fp.P2 - fp.Dcy;
-                const float xrow = (row - box[2]) * fp.P1 - fp.Dcx;
                 float* w = this->Weights.data() + cursor.Weights;
                 for (int col = a; col < b; ++col)
                 {
-                  const float dx = col * fp.P0 + xrow;
-                  const float form = AxesForm(fp.Axes[0], fp.Axes[1], fp.Axes[2], fp.Axes[3], dx, dy);
-                  w[col - a] = form <= fp.CutoffSquared ? fp.Weight * FastExp(-0.5f * form) : 0.0f;
+                  w[col - a] = weight(col);
                 }
               }
               cursor.Spans += 1;

@@ -34,31 +34,18 @@ bool AccumulateBasisNorms(const FieldView& field, const SliceGeometry* slices, i
         offset += std::int64_t(s.Width) * s.Height;
         const Footprint f = SetupFootprint(g, s.Frame, sigmaE, options.Cutoff, nullptr);
         int box[4];
-        if (!f.Visible || !FootprintBox(f, s, box))
+        if (!f.Visible)
         {
           continue;
         }
-        // The pixels and the float arithmetic of phase 2 (RasterTile), relative to the box's first pixel.
-        const BoxFootprint fp = MakeBoxFootprint(f, s, box, 1.0);
-        const float det = fp.A * fp.C - fp.B * fp.B;
-        for (int row = box[2]; row <= box[3]; ++row)
-        {
-          const float dy = (row - box[2]) * fp.P2 - fp.Dcy;
-          const float xrow = (row - box[2]) * fp.P1 - fp.Dcx;
-          int first, last;
-          RowSpan(fp.A, fp.B, det, fp.CutoffSquared, dy, xrow, fp.P0, 0, box[1] - box[0] + 1, first, last);
+        ForEachFootprintSpan(f, s, box, [&](int row, int first, int last, const auto& weight) {
           const float* w = W + std::int64_t(row) * s.Width + box[0];
           for (int col = first; col < last; ++col)
           {
-            const float dx = col * fp.P0 + xrow;
-            const float form = AxesForm(fp.Axes[0], fp.Axes[1], fp.Axes[2], fp.Axes[3], dx, dy);
-            if (form <= fp.CutoffSquared && w[col] != 0)
-            {
-              const double value = fp.Weight * FastExp(-0.5f * form);
-              total += w[col] * value * value;
-            }
+            const double value = weight(col);
+            total += w[col] * value * value;
           }
-        }
+        });
       }
       norms[i] += total;
     }

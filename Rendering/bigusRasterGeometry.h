@@ -220,6 +220,39 @@ BIGUS_HD void RowSpan(
 }
 
 /**
+ * The pixels of the visible footprint @p f on slice @p s as the backward pass visits them (host): each row of its
+ * box (FootprintBox, into @p box) that meets the cut-off ellipse (RowSpan) as @p span(row, first, last, weight),
+ * columns [first, last) counted from box[0], where weight(col) is the pixel's float weight at reflectivity 1
+ * (MakeBoxFootprint; 0 outside the cut-off). False when the box misses the slice. AccumulateBasisNorms and
+ * AssembledBasis use it, so that both sum exactly the backward pass's pixels.
+ */
+template <typename Span>
+inline bool ForEachFootprintSpan(const Footprint& f, const PreparedSlice& s, int box[4], Span span)
+{
+  if (!FootprintBox(f, s, box))
+  {
+    return false;
+  }
+  const BoxFootprint fp = MakeBoxFootprint(f, s, box, 1.0);
+  const float det = fp.A * fp.C - fp.B * fp.B;
+  for (int row = box[2]; row <= box[3]; ++row)
+  {
+    const float dy = (row - box[2]) * fp.P2 - fp.Dcy;
+    const float xrow = (row - box[2]) * fp.P1 - fp.Dcx;
+    int first, last;
+    RowSpan(fp.A, fp.B, det, fp.CutoffSquared, dy, xrow, fp.P0, 0, box[1] - box[0] + 1, first, last);
+    if (last > first)
+    {
+      span(row, first, last, [&](int col) {
+        const float form = AxesForm(fp.Axes[0], fp.Axes[1], fp.Axes[2], fp.Axes[3], col * fp.P0 + xrow, dy);
+        return form <= fp.CutoffSquared ? fp.Weight * FastExp(-0.5f * form) : 0.0f;
+      });
+    }
+  }
+  return true;
+}
+
+/**
  * The backward pass of Gaussian @p i on one slice from its pixel sums @p sums (PixelWeightBackward's
  * terms over its footprint): its mean, log-scale, quaternion and reflectivity gradients and its share
  * of the attribution, added to the non-null outputs of @p out (host or device pointers). @p r is the

@@ -103,7 +103,7 @@ std::string HeldOutChoice::Describe(const char* unit) const
 {
   if (this->Chosen < 0)
   {
-    return "untested: " + this->Untested;
+    return "untested on held-out frames: " + this->Untested;
   }
   std::string text = vtkfmt::sprintf("chosen on %zu held-out frames:", this->Frames.size());
   if (this->Stride > 0)

@@ -358,8 +358,11 @@ bool Trainer::MeasureElevationSigma(std::int64_t fanPixels, SeedingPlan& plan, s
   {
     if (line.rfind("ElevationSigma = ", 0) == 0)
     {
-      line = vtkfmt::sprintf("ElevationSigma = %.4g mm (%s; the rule's value %.4g mm, %s)", sigma,
-        choice.Describe("mm").c_str(), rule, line.substr(line.find('(') + 1, line.rfind(')') - line.find('(') - 1));
+      // Untested: the rule's line, and why. Measured: the candidates first, then the rule's line as the centre.
+      line = choice.Chosen < 0
+        ? line.substr(0, line.rfind(')')) + "; " + choice.Describe("mm") + ")"
+        : vtkfmt::sprintf("ElevationSigma = %.4g mm (%s; the rule's value %.4g mm, %s)", sigma,
+            choice.Describe("mm").c_str(), rule, line.substr(line.find('(') + 1, line.rfind(')') - line.find('(') - 1));
     }
   }
   if (sigma == rule)

@@ -143,4 +143,11 @@ TEST(HeldOutChoices, TheChosenBeamRendersFramesNoChoiceSawAsWellAsTheBestCandida
   ASSERT_TRUE(untested.Initialize(&error)) << error;
   EXPECT_EQ(untested.GetReport().ElevationSigma, rule);
   EXPECT_EQ(untested.GetReport().ElevationSigmaChoice.Chosen, -1);
+  const std::vector<std::string>& lines = untested.GetReport().Settings;
+  const auto ruleLine =
+    std::find_if(lines.begin(), lines.end(), [](const std::string& l) { return l.rfind("ElevationSigma = ", 0) == 0; });
+  ASSERT_NE(ruleLine, lines.end());
+  EXPECT_NE(ruleLine->find("(chosen: "), std::string::npos) << *ruleLine;
+  EXPECT_NE(ruleLine->find("; untested on held-out frames: the held-out choices are off)"), std::string::npos)
+    << *ruleLine;
 }
