@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdlib>
 #include <limits>
 #include <map>
 #include <memory>
@@ -120,6 +121,35 @@ std::string HeldOutChoice::Describe(const char* unit) const
     seconds += c.Seconds;
   }
   return text + vtkfmt::sprintf(" (%.1f s)", seconds);
+}
+
+std::string HeldOutChoice::SettingLine(const std::string& ruleLine, const char* name, const char* unit) const
+{
+  const std::size_t open = ruleLine.find('('), close = ruleLine.rfind(')');
+  if (this->Chosen < 0 || open == std::string::npos || close == std::string::npos || close < open)
+  {
+    return (close == std::string::npos ? ruleLine : ruleLine.substr(0, close)) + "; " + this->Describe(unit) + ")";
+  }
+  const double rule = std::atof(ruleLine.c_str() + ruleLine.find('=') + 1);
+  return vtkfmt::sprintf("%s = %.4g %s (%s; the rule's value %.4g %s, %s)", name, this->Candidates[this->Chosen].Value,
+    unit, this->Describe(unit).c_str(), rule, unit, ruleLine.substr(open + 1, close - open - 1).c_str());
+}
+
+bool ElevationSigmaOnHeldOutFrames(const TrainingData& data, const TrainerSettings& settings, bool pixelGrid,
+  double ruleSigma, HeldOutChoice& choice, std::string* error)
+{
+  choice = HeldOutChoice();
+  if (!settings.HeldOut.Enabled)
+  {
+    choice.Untested = "the held-out choices are off";
+    return true;
+  }
+  if (!pixelGrid)
+  {
+    choice.Untested = "a candidate's fit on this route is an Adam run, which the budget does not repeat per candidate";
+    return true;
+  }
+  return ChooseElevationSigmaOnHeldOutFrames(data, settings, ruleSigma, choice, error);
 }
 
 bool FitWithoutHeldOutFrames(const TrainingData& data, const std::vector<int>& heldOut, const TrainerSettings& settings,

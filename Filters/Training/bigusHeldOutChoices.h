@@ -75,6 +75,11 @@ struct HeldOutChoice
   std::string Untested;                     ///< why no candidate was measured (Chosen -1)
   /// The setting line's parenthesis: "chosen on 9 held-out frames: 0.12 mm 40.6 dB, 0.25 mm 41.0, ... (s)".
   std::string Describe(const char* unit) const;
+  /**
+   * The setting line of @p name made from the rule's @p ruleLine ("NAME = V UNIT (the rule's reason)"): untested,
+   * the rule's line with why appended; measured, the value chosen, the candidates, then the rule's value and reason.
+   */
+  std::string SettingLine(const std::string& ruleLine, const char* name, const char* unit) const;
 };
 
 /**
@@ -84,6 +89,14 @@ struct HeldOutChoice
  */
 BIGUSTRAINING_EXPORT bool FitWithoutHeldOutFrames(const TrainingData& data, const std::vector<int>& heldOut,
   const TrainerSettings& settings, GaussianField& field, std::string* error);
+
+/**
+ * The ElevationSigma choice of a run whose rule gave @p ruleSigma: ChooseElevationSigmaOnHeldOutFrames where
+ * settings.HeldOut is on and the route is the pixel grid's (@p pixelGrid); otherwise @p choice says why it is
+ * untested. False with @p error when a candidate's fit fails.
+ */
+BIGUSTRAINING_EXPORT bool ElevationSigmaOnHeldOutFrames(const TrainingData& data, const TrainerSettings& settings,
+  bool pixelGrid, double ruleSigma, HeldOutChoice& choice, std::string* error);
 
 /**
  * ElevationSigma measured on held-out frames: each candidate (@p ruleSigma times settings.HeldOut's factors) fitted

@@ -340,30 +340,14 @@ bool Trainer::MeasureElevationSigma(std::int64_t fanPixels, SeedingPlan& plan, s
 {
   const double rule = this->Settings.ElevationSigma;
   HeldOutChoice& choice = this->Report.ElevationSigmaChoice;
-  choice = HeldOutChoice();
-  if (!this->Settings.HeldOut.Enabled)
-  {
-    choice.Untested = "the held-out choices are off";
-  }
-  else if (!plan.PixelGrid)
-  {
-    choice.Untested = "a candidate's fit on this route is an Adam run, which the budget does not repeat per candidate";
-  }
-  else if (!ChooseElevationSigmaOnHeldOutFrames(*this->Data, this->Settings, rule, choice, error))
+  if (!ElevationSigmaOnHeldOutFrames(*this->Data, this->Settings, plan.PixelGrid, rule, choice, error))
   {
     return false;
   }
   const double sigma = choice.Chosen < 0 ? rule : choice.Candidates[choice.Chosen].Value;
   for (std::string& line : this->Report.Settings)
   {
-    if (line.rfind("ElevationSigma = ", 0) == 0)
-    {
-      // Untested: the rule's line, and why. Measured: the candidates first, then the rule's line as the centre.
-      line = choice.Chosen < 0
-        ? line.substr(0, line.rfind(')')) + "; " + choice.Describe("mm") + ")"
-        : vtkfmt::sprintf("ElevationSigma = %.4g mm (%s; the rule's value %.4g mm, %s)", sigma,
-            choice.Describe("mm").c_str(), rule, line.substr(line.find('(') + 1, line.rfind(')') - line.find('(') - 1));
-    }
+    line = line.rfind("ElevationSigma = ", 0) == 0 ? choice.SettingLine(line, "ElevationSigma", "mm") : line;
   }
   if (sigma == rule)
   {
