@@ -125,6 +125,18 @@ public:
   virtual void SetSolveL1(double value);
   virtual double GetSolveL1() const;
   ///@}
+  ///@{ Share of this machine's physical memory that a reflectivity solve may hold as the assembled basis (default
+  /// 0.25; 0: the matrix-free products). See bigus::ReflectivitySolveSettings::AssembledMemoryShare.
+  virtual void SetSolveMemoryShare(double value);
+  virtual double GetSolveMemoryShare() const;
+  ///@}
+  ///@{ Choices measured on held-out frames (default on): with ElevationSigma 0 and the pixel-grid fit, five
+  /// candidates around the rule's value are each fitted without every second training frame and scored on those
+  /// (bigusHeldOutChoices.h; TrainingSettings prints the scores). Off: the rule, untested.
+  virtual void SetHeldOutChoices(bool value);
+  virtual bool GetHeldOutChoices() const;
+  vtkBooleanMacro(HeldOutChoices, bool);
+  ///@}
   ///@{ A dense start: Gaussians on the training frames' pixel grid instead of Harris seeds (default
   /// off; bigus::TrainerSettings::DenseInitialisation).
   virtual void SetDenseInitialisation(bool value);
