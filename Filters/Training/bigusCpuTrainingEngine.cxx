@@ -10,7 +10,6 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
-#include <chrono>
 #include <cmath>
 #include <limits>
 #include <utility>
@@ -258,7 +257,7 @@ bool CpuTrainingEngine::UseAssembled(
     return true;
   }
   this->Assembled.reset();
-  const double start = std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+  const double start = SteadySeconds();
   std::vector<SliceGeometry> slices(count);
   for (int k = 0; k < count; ++k)
   {
@@ -283,8 +282,7 @@ bool CpuTrainingEngine::UseAssembled(
   this->AssembledFrames.assign(frames, frames + count);
   this->AssembledSigma = sigma;
   this->AssembledCutoff = options.Cutoff;
-  const double seconds =
-    std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count() - start;
+  const double seconds = SteadySeconds() - start;
   const AssembledBasis::Size& size = this->Assembled->GetSize();
   char text[200];
   std::snprintf(text, sizeof(text), "assembled (%lld weights, %.0f MB, built in %.2f s)",

@@ -9,7 +9,6 @@
 // clang-format on
 
 #include <algorithm>
-#include <chrono>
 #include <cstdlib>
 #include <limits>
 #include <map>
@@ -20,11 +19,6 @@ namespace bigus
 
 namespace
 {
-double Now()
-{
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-
 /// A trainer that has made the candidate's fit (Initialize) on the training frames other than @p heldOut.
 std::unique_ptr<Trainer> FitCandidate(
   const TrainingData& data, const std::vector<int>& heldOut, const TrainerSettings& settings, std::string* error)
@@ -51,25 +45,15 @@ std::vector<int> HeldOutFrames(const TrainingData& data, int stride, int maximum
   {
     sweeps[data.SweepOf(f)].push_back(f);
   }
-  std::vector<std::vector<int>> candidates;
+  std::vector<int> heldOut;
   for (auto& entry : sweeps)
   {
     std::vector<int>& frames = entry.second;
     std::sort(frames.begin(), frames.end());
-    std::vector<int> own;
     for (std::size_t k = stride / 2; k + 1 < frames.size(); k += stride)
     {
-      if (k > 0)
-      {
-        own.push_back(frames[k]); // between two training frames of its sweep
-      }
+      heldOut.push_back(frames[k]); // between two training frames of its sweep (k >= 1 as stride >= 2)
     }
-    candidates.push_back(own);
-  }
-  std::vector<int> heldOut;
-  for (const std::vector<int>& own : candidates)
-  {
-    heldOut.insert(heldOut.end(), own.begin(), own.end());
   }
   std::sort(heldOut.begin(), heldOut.end());
   if (maximum > 0 && static_cast<int>(heldOut.size()) > maximum)
@@ -106,13 +90,15 @@ std::string HeldOutChoice::Describe(const char* unit) const
   {
     return "untested on held-out frames: " + this->Untested;
   }
-  std::string text = vtkfmt::sprintf("chosen on %zu held-out frames:", this->Frames.size());
-  if (this->Stride > 0)
-  {
-    text = vtkfmt::sprintf("chosen on %zu frames held out (every %d%s training frame, left out of every candidate's "
-                           "fit):",
-      this->Frames.size(), this->Stride, this->Stride == 2 ? "nd" : "th");
-  }
+  const int last = this->Stride % 10;
+  const char* ordinal = this->Stride % 100 / 10 == 1 ? "th"
+    : last == 1                                      ? "st"
+    : last == 2                                      ? "nd"
+    : last == 3                                      ? "rd"
+                                                     : "th";
+  std::string text =
+    vtkfmt::sprintf("chosen on %zu frames held out (every %d%s training frame, left out of every candidate's fit):",
+      this->Frames.size(), this->Stride, ordinal);
   double seconds = 0;
   for (std::size_t k = 0; k < this->Candidates.size(); ++k)
   {
@@ -180,7 +166,7 @@ bool ChooseElevationSigmaOnHeldOutFrames(const TrainingData& data, const Trainer
   }
   for (double factor : settings.HeldOut.ElevationSigmaFactors)
   {
-    const double start = Now();
+    const double start = SteadySeconds();
     HeldOutCandidate c;
     c.Value = ruleSigma * factor;
     TrainerSettings s = settings;
@@ -197,7 +183,7 @@ bool ChooseElevationSigmaOnHeldOutFrames(const TrainingData& data, const Trainer
     }
     c.PSNR = metrics.PSNR;
     c.Count = trainer->GetField().Count();
-    c.Seconds = Now() - start;
+    c.Seconds = SteadySeconds() - start;
     choice.Candidates.push_back(c);
   }
   // The narrowest beam within Tolerance of the best score: the held-out frames lie twice as far from the fitted

@@ -10,7 +10,6 @@
 // clang-format on
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -21,11 +20,6 @@ namespace bigus
 namespace
 {
 constexpr std::int64_t Chunk = 1 << 16;
-
-double Now()
-{
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
 
 /// sum_k f(k) over [0, n) in fixed chunks summed in order: the same result for any thread count.
 template <typename F>
@@ -86,7 +80,7 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
   const RenderOptions& options, const ReflectivitySolveSettings& settings, std::vector<float>& reflectivities,
   ReflectivitySolveReport* report, std::string* error, ProcessReduction* reduction)
 {
-  const double start = Now();
+  const double start = SteadySeconds();
   reduction = reduction && reduction->Size() > 1 ? reduction : nullptr;
   if (allFrames.empty())
   {
@@ -194,13 +188,13 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
   r.Lambda = lambda;
   r.UnseenGaussians = n - seen;
   // The time limit: stop when one more iteration, as long as the last, would pass it (on the slowest clock).
-  double iterationStart = Now();
+  double iterationStart = SteadySeconds();
   auto outOfTime = [&]() {
     if (settings.TimeLimit <= 0)
     {
       return false;
     }
-    const double now = Now();
+    const double now = SteadySeconds();
     double clock[2] = { now - start, now - iterationStart };
     iterationStart = now;
     communicated = communicated && (!reduction || reduction->Maximum(clock, 2, error));
@@ -272,7 +266,7 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
     z = y;
     sZ = s;
     double fZ = f, L = 2, momentum = 1; // B^T B has a unit diagonal, so L >= 2
-    iterationStart = Now();
+    iterationStart = SteadySeconds();
     for (int it = 0; it < settings.MaximumIterations; ++it)
     {
       const bool stop = it > 0 && outOfTime();
@@ -399,7 +393,7 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
     direction = s;
     double norm = Sum(n, [&](std::int64_t i) { return s[i] * s[i]; });
     const double norm0 = norm;
-    iterationStart = Now();
+    iterationStart = SteadySeconds();
     for (int it = 0;
          it < settings.MaximumIterations && norm > 0 && norm > settings.Tolerance * settings.Tolerance * norm0; ++it)
     {
@@ -462,7 +456,7 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
     return Fail(error, "the reflectivity solve produced a non-finite value");
   }
   reflectivities.swap(solved);
-  r.Seconds = Now() - start;
+  r.Seconds = SteadySeconds() - start;
   r.Products = engine.DescribeBasisProducts();
   return true;
 }

@@ -14,7 +14,6 @@
 
 #include <algorithm>
 #include <atomic>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -36,11 +35,6 @@ constexpr int DefaultIterations = 3000; // the schedule when neither iterations 
 constexpr double SolveShareOfRemainingBudget = 0.25;
 constexpr double MinimumScaleMm = 1e-3;
 constexpr double MaximumScaleMm = 100.0;
-
-double Seconds()
-{
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
 
 }
 
@@ -371,7 +365,7 @@ bool Trainer::FitReflectivityScale(std::string* error)
 double Trainer::TrainingSeconds() const
 {
   return this->TrainStart > 0
-    ? this->TrainedBefore + (this->Reduction ? this->AgreedElapsed : Seconds() - this->TrainStart)
+    ? this->TrainedBefore + (this->Reduction ? this->AgreedElapsed : SteadySeconds() - this->TrainStart)
     : this->State.TrainingSeconds;
 }
 
@@ -553,9 +547,9 @@ bool Trainer::EvaluateOn(const TrainingData& data, const std::vector<int>& frame
   int rendered = 0;
   bool ok = true;
   const ImageMetrics mean = MeanFrameMetrics(data, frames, [&](std::size_t, int f) {
-    const double t0 = Seconds();
+    const double t0 = SteadySeconds();
     ok = ok && this->RenderFrame(data, f, I.data(), error);
-    seconds += Seconds() - t0;
+    seconds += SteadySeconds() - t0;
     ++rendered;
     return I.data();
   });
@@ -610,7 +604,7 @@ bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>
     }
     return false;
   }
-  const double start = Seconds();
+  const double start = SteadySeconds();
   this->TrainStart = start;
   this->TrainedBefore = this->State.TrainingSeconds;
   this->AgreedElapsed = 0;
@@ -634,7 +628,7 @@ bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>
     if (this->Reduction)
     {
       // Every process stops at the same step: on the slowest clock, when any was asked to.
-      double agreed[2] = { Seconds() - start, aborted ? 1.0 : 0.0 };
+      double agreed[2] = { SteadySeconds() - start, aborted ? 1.0 : 0.0 };
       if (!this->Reduction->Maximum(agreed, 2, error))
       {
         ok = false;
@@ -722,7 +716,7 @@ bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>
     }
   }
   this->Report.Iterations = state.Iteration;
-  this->Report.Seconds += Seconds() - start;
+  this->Report.Seconds += SteadySeconds() - start;
   this->Report.Gamma = this->Gamma;
   const std::size_t h = state.LossHistory.size();
   double last = 0;
@@ -740,7 +734,7 @@ bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>
 
 bool Trainer::Finish(std::string* error)
 {
-  const double start = Seconds();
+  const double start = SteadySeconds();
   const TrainerSettings& s = this->Settings;
   if (this->Report.GrowthStopReason.empty() && (!s.Densification.Enabled || this->DensificationEnded))
   {
@@ -814,7 +808,7 @@ bool Trainer::Finish(std::string* error)
     }
   }
   this->Report.Gaussians = this->GetField().Count();
-  this->Report.Seconds += Seconds() - start;
+  this->Report.Seconds += SteadySeconds() - start;
   return true;
 }
 

@@ -21,6 +21,7 @@
 
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cstdint>
 #include <memory>
 #include <random>
@@ -403,6 +404,12 @@ public:
   virtual bool BasisNorms(const float* weights, const int* frames, int count, const RenderOptions& options, double* out,
     std::string* error) = 0;
 };
+
+/// Seconds on the monotonic clock (std::chrono::steady_clock): the durations the trainer and its stages report.
+inline double SteadySeconds()
+{
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
 
 /// The CPU engine over @p renderer (normally bigus::CreateRenderer("cpu", ...)).
 BIGUSTRAINING_EXPORT std::unique_ptr<TrainingEngine> CreateCpuTrainingEngine(std::unique_ptr<Renderer> renderer);
