@@ -3,6 +3,11 @@
 
 #include "vtkSMPTools.h"
 
+#include <vtk_fmt.h>
+// clang-format off
+#include VTK_FMT(fmt/printf.h)
+// clang-format on
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -80,9 +85,7 @@ std::string Format(const char* format, double value)
   {
     return "-";
   }
-  char text[64];
-  std::snprintf(text, sizeof(text), format, value);
-  return text;
+  return vtkfmt::sprintf(format, value);
 }
 
 nlohmann::json ToJson(const Row& r)
