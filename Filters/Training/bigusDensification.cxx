@@ -205,4 +205,42 @@ std::string UpdateGrowth(TrainingState& state, double validation, const Densific
     100 * s.GrowthMargin, s.GrowthPatience, state.Iteration);
 }
 
+bool DensifyField(TrainingEngine& engine, const TrainingData& data, const RenderOptions& options, double gamma,
+  const SeedShape& shape, const DensificationSettings& settings, std::int64_t maximumGaussians, double validation,
+  TrainingState& state, std::string& growthStopReason, std::string* error)
+{
+  const DensificationSettings& d = settings;
+  const std::string stopped = UpdateGrowth(state, validation, d);
+  if (!stopped.empty())
+  {
+    growthStopReason = stopped;
+  }
+  // Image-GS's new Gaussians from the residual: rendered before densification changes the field.
+  std::vector<int> residualFrames;
+  std::vector<float> residuals;
+  if (d.ResidualSeedShare > 0 && d.ResidualSeedFrames > 0 && state.Growing &&
+    !RenderResiduals(
+      engine, data, options, gamma, d.ResidualSeedFrames, state.Random, residualFrames, residuals, error))
+  {
+    return false;
+  }
+  const DensificationResult result = DensifyAndPrune(state.Gaussians, state.Growing, d.Percentile, maximumGaussians,
+    d.SplitScalePixels * shape.PixelSpacing, d.PruneReflectivity);
+  if (!residualFrames.empty() && result.Added > 0)
+  {
+    const std::int64_t room = maximumGaussians - state.Gaussians.Count();
+    SeedResiduals(data, residualFrames, residuals,
+      std::min<std::int64_t>(room, std::llround(d.ResidualSeedShare * result.Added)), state.Random, shape,
+      state.Gaussians.Field);
+    state.Gaussians.ResizeToField();
+  }
+  if (state.Growing && result.MaximumReached)
+  {
+    state.Growing = false;
+    growthStopReason = "hard maximum of " + std::to_string(maximumGaussians) + " Gaussians reached (iteration " +
+      std::to_string(state.Iteration) + ")";
+  }
+  return true;
+}
+
 } // namespace bigus

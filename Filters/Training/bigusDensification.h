@@ -7,6 +7,7 @@
 #ifndef bigusDensification_h
 #define bigusDensification_h
 
+#include "bigusSeeding.h"
 #include "bigusTrainingEngine.h"
 #include "bigusTrainingModule.h" // For export macro
 
@@ -86,6 +87,18 @@ struct DensificationResult
  */
 BIGUSTRAINING_EXPORT DensificationResult DensifyAndPrune(OptimizerState& G, bool grow, double percentile,
   std::int64_t maximumGaussians, double splitScale, double pruneReflectivity);
+
+/**
+ * The stage at a densification step, on @p state's host field: growth control (UpdateGrowth with @p validation);
+ * Image-GS's residuals rendered by @p engine before the field changes (ResidualSeedShare, RenderResiduals); EA-D
+ * (DensifyAndPrune, splitting above SplitScalePixels x @p shape's pixel spacing); the residual seeds in the room
+ * left under @p maximumGaussians (SeedResiduals with @p shape); growth stopped when the maximum is reached.
+ * @p growthStopReason receives why growth stopped at this call, and is left as it is otherwise. Returns false with
+ * @p error when a residual cannot be rendered.
+ */
+BIGUSTRAINING_EXPORT bool DensifyField(TrainingEngine& engine, const TrainingData& data, const RenderOptions& options,
+  double gamma, const SeedShape& shape, const DensificationSettings& settings, std::int64_t maximumGaussians,
+  double validation, TrainingState& state, std::string& growthStopReason, std::string* error);
 
 /**
  * The final prune: removes from @p G every Gaussian whose removal changes no pixel of a training frame

@@ -5,6 +5,10 @@
 #include "vtkSMPTools.h"
 
 #include <opencv2/imgproc.hpp>
+#include <vtk_fmt.h>
+// clang-format off
+#include VTK_FMT(fmt/printf.h)
+// clang-format on
 
 #include <algorithm>
 #include <cmath>
@@ -426,6 +430,20 @@ PoseRefinementChoice ChoosePoseRefinement(const std::vector<SweepDecorrelation>&
     choice.Reason += (s > 0 ? "; " : "") + std::string(text);
   }
   return choice;
+}
+
+double ElevationSigmaSetting(
+  double given, const std::function<const std::vector<SweepDecorrelation>&()>& sweeps, bool& byRule, std::string& line)
+{
+  byRule = given <= 0;
+  if (!byRule)
+  {
+    line = vtkfmt::sprintf("ElevationSigma = %.4g mm (given)", given);
+    return given;
+  }
+  const ElevationSigmaChoice choice = ChooseElevationSigma(sweeps());
+  line = vtkfmt::sprintf("ElevationSigma = %.4g mm (chosen: ", choice.Sigma) + choice.Reason + ")";
+  return choice.Sigma;
 }
 
 } // namespace bigus

@@ -11,6 +11,7 @@
 #include "bigusTrainingEngine.h"
 #include "bigusTrainingModule.h" // For export macro
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -109,6 +110,13 @@ struct BIGUSTRAINING_EXPORT ElevationSigmaChoice
 BIGUSTRAINING_EXPORT ElevationSigmaChoice ChooseElevationSigma(const TrainingData& data);
 /// The same from measurements already taken (MeasureSweeps).
 BIGUSTRAINING_EXPORT ElevationSigmaChoice ChooseElevationSigma(const std::vector<SweepDecorrelation>& sweeps);
+
+/**
+ * A run's ElevationSigma (mm) and its `setting` line: @p given (> 0) as it is, "(given)"; otherwise
+ * ChooseElevationSigma of @p sweeps() (measured only then), "(chosen: the rule's reason)", and @p byRule true.
+ */
+BIGUSTRAINING_EXPORT double ElevationSigmaSetting(
+  double given, const std::function<const std::vector<SweepDecorrelation>&()>& sweeps, bool& byRule, std::string& line);
 
 /// The factors of ChooseElevationSigma's two rules.
 constexpr double ElevationSigmaDecorrelationFactor = 0.4;

@@ -44,4 +44,46 @@ ImageMetrics MeanFrameMetrics(const TrainingData& data, const std::vector<int>& 
   return mean;
 }
 
+bool RenderFrame(TrainingEngine& engine, const TrainingData& data, int frame, const RenderOptions& options,
+  std::vector<float>& scratch, float* image, std::string* error)
+{
+  const SliceGeometry slice = data.Slice(frame);
+  scratch.resize(std::size_t(data.Width) * data.Height);
+  if (!engine.Render(&slice, 1, options, scratch.data(), image, error))
+  {
+    if (error)
+    {
+      *error = "frame " + std::to_string(frame) + ": " + *error;
+    }
+    return false;
+  }
+  return true;
+}
+
+bool EvaluateFrames(TrainingEngine& engine, const TrainingData& data, const std::vector<int>& frames,
+  const RenderOptions& options, ImageMetrics& metrics, std::string* error, double* secondsPerFrame)
+{
+  std::vector<float> I(std::size_t(data.Width) * data.Height), S;
+  double seconds = 0;
+  int rendered = 0;
+  bool ok = true;
+  const ImageMetrics mean = MeanFrameMetrics(data, frames, [&](std::size_t, int f) {
+    const double t0 = SteadySeconds();
+    ok = ok && RenderFrame(engine, data, f, options, S, I.data(), error);
+    seconds += SteadySeconds() - t0;
+    ++rendered;
+    return I.data();
+  });
+  if (!ok)
+  {
+    return false;
+  }
+  metrics = mean;
+  if (secondsPerFrame)
+  {
+    *secondsPerFrame = rendered == 0 ? 0.0 : seconds / rendered;
+  }
+  return true;
+}
+
 } // namespace bigus

@@ -12,6 +12,7 @@
 
 #include <functional>
 #include <optional>
+#include <string>
 #include <vector>
 
 namespace bigus
@@ -26,6 +27,22 @@ namespace bigus
 BIGUSTRAINING_EXPORT ImageMetrics MeanFrameMetrics(const TrainingData& data, const std::vector<int>& frames,
   const std::function<const float*(std::size_t, int)>& image,
   std::vector<std::optional<ImageMetrics>>* perFrame = nullptr);
+
+/**
+ * Intensities in [0, 1] of @p engine's field rendered at the pose of frame @p frame of @p data with @p options into
+ * @p image ([H, W] of @p data); @p scratch holds the scattering image S. Returns false with @p error ("frame F: ...")
+ * for a pose the renderer rejects.
+ */
+BIGUSTRAINING_EXPORT bool RenderFrame(TrainingEngine& engine, const TrainingData& data, int frame,
+  const RenderOptions& options, std::vector<float>& scratch, float* image, std::string* error);
+
+/**
+ * MeanFrameMetrics of @p engine's field rendered (RenderFrame) at @p frames of @p data. @p secondsPerFrame, if
+ * non-null, receives the mean render time per frame (s). Returns false with @p error when a frame cannot be rendered.
+ */
+BIGUSTRAINING_EXPORT bool EvaluateFrames(TrainingEngine& engine, const TrainingData& data,
+  const std::vector<int>& frames, const RenderOptions& options, ImageMetrics& metrics, std::string* error,
+  double* secondsPerFrame = nullptr);
 
 } // namespace bigus
 

@@ -262,4 +262,17 @@ std::string DescribeGaussianMergeSettings(const GaussianMergeSettings& settings)
   return text;
 }
 
+GaussianMergeReport MergeGaussians(OptimizerState& G, const GaussianMergeSettings& settings)
+{
+  const GaussianMergeReport report = MergeGaussians(G.Field, settings);
+  if (report.Merged > 0)
+  {
+    GaussianField field = std::move(G.Field);
+    G = OptimizerState();
+    G.Field = std::move(field);
+    G.ResizeToField();
+  }
+  return report;
+}
+
 } // namespace bigus

@@ -72,6 +72,9 @@ struct GaussianMergeReport
  * and partner) besides the locator's; its time on the README jobs' fields: docs/FINDINGS.md, "Merging".
  */
 BIGUSTRAINING_EXPORT GaussianMergeReport MergeGaussians(GaussianField& field, const GaussianMergeSettings& settings);
+/// The same on a training state's field: when any pair merged, every Gaussian starts with fresh optimiser moments and
+/// accumulators, as after Trainer::SetField (a merged Gaussian is a new one).
+BIGUSTRAINING_EXPORT GaussianMergeReport MergeGaussians(OptimizerState& G, const GaussianMergeSettings& settings);
 
 /// One line for a report ("merged 1,234 pairs of 56,789 Gaussians in 2 passes (error below 0.01), 0.4 s").
 BIGUSTRAINING_EXPORT std::string DescribeGaussianMerge(

@@ -109,16 +109,27 @@ std::string HeldOutChoice::Describe(const char* unit) const
   return text + vtkfmt::sprintf(" (%.1f s)", seconds);
 }
 
-std::string HeldOutChoice::SettingLine(const std::string& ruleLine, const char* name, const char* unit) const
+void HeldOutChoice::RewriteSettingLine(std::vector<std::string>& lines, const char* name, const char* unit) const
 {
-  const std::size_t open = ruleLine.find('('), close = ruleLine.rfind(')');
-  if (this->Chosen < 0 || open == std::string::npos || close == std::string::npos || close < open)
+  const std::string prefix = std::string(name) + " = ";
+  for (std::string& ruleLine : lines)
   {
-    return (close == std::string::npos ? ruleLine : ruleLine.substr(0, close)) + "; " + this->Describe(unit) + ")";
+    const std::size_t open = ruleLine.find('('), close = ruleLine.rfind(')');
+    if (ruleLine.rfind(prefix, 0) != 0)
+    {
+      continue;
+    }
+    if (this->Chosen < 0 || open == std::string::npos || close == std::string::npos || close < open)
+    {
+      ruleLine =
+        (close == std::string::npos ? ruleLine : ruleLine.substr(0, close)) + "; " + this->Describe(unit) + ")";
+      continue;
+    }
+    const double rule = std::atof(ruleLine.c_str() + prefix.size());
+    ruleLine =
+      vtkfmt::sprintf("%s = %.4g %s (%s; the rule's value %.4g %s, %s)", name, this->Candidates[this->Chosen].Value,
+        unit, this->Describe(unit).c_str(), rule, unit, ruleLine.substr(open + 1, close - open - 1).c_str());
   }
-  const double rule = std::atof(ruleLine.c_str() + ruleLine.find('=') + 1);
-  return vtkfmt::sprintf("%s = %.4g %s (%s; the rule's value %.4g %s, %s)", name, this->Candidates[this->Chosen].Value,
-    unit, this->Describe(unit).c_str(), rule, unit, ruleLine.substr(open + 1, close - open - 1).c_str());
 }
 
 bool ElevationSigmaOnHeldOutFrames(const TrainingData& data, const TrainerSettings& settings, bool pixelGrid,

@@ -76,10 +76,10 @@ struct HeldOutChoice
   /// The setting line's parenthesis: "chosen on 9 held-out frames: 0.12 mm 40.6 dB, 0.25 mm 41.0, ... (s)".
   std::string Describe(const char* unit) const;
   /**
-   * The setting line of @p name made from the rule's @p ruleLine ("NAME = V UNIT (the rule's reason)"): untested,
+   * Rewrites the setting line of @p name in @p lines, the rule's ("NAME = V UNIT (the rule's reason)"): untested,
    * the rule's line with why appended; measured, the value chosen, the candidates, then the rule's value and reason.
    */
-  std::string SettingLine(const std::string& ruleLine, const char* name, const char* unit) const;
+  void RewriteSettingLine(std::vector<std::string>& lines, const char* name, const char* unit) const;
 };
 
 /**

@@ -308,6 +308,23 @@ std::string SeedGrid(const TrainingData& data, const GridPlanes& selected, std::
     stride, inPlane);
   return line + text;
 }
+bool GammaOfTrainingFrames(
+  const TrainingData& data, double& gamma, std::int64_t& fanPixels, std::string& line, std::string* error)
+{
+  const double mean = MeanFanIntensity(data, fanPixels);
+  if (fanPixels == 0)
+  {
+    if (error)
+    {
+      *error = "the fan mask is empty";
+    }
+    return false;
+  }
+  gamma = GammaFromMeanIntensity(mean);
+  line = vtkfmt::sprintf("Gamma = %.5g (from the mean fan intensity %.4f of the training frames)", gamma, mean);
+  return true;
+}
+
 double UniformDouble(std::mt19937_64& rng)
 {
   return (rng() >> 11) * (1.0 / 9007199254740992.0);

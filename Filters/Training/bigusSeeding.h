@@ -57,6 +57,14 @@ struct SeedingSettings
  */
 constexpr double PixelGridFanPixelsPerGaussian = 2.0;
 
+/**
+ * The intensity map's exponent for @p data (GammaFromMeanIntensity of the training frames' mean intensity inside
+ * their masks) and its `setting` line; @p fanPixels receives how many training pixels are inside the masks. False
+ * with @p error when none is.
+ */
+BIGUSTRAINING_EXPORT bool GammaOfTrainingFrames(
+  const TrainingData& data, double& gamma, std::int64_t& fanPixels, std::string& line, std::string* error);
+
 /// Uniform double in [0, 1) from the generator's raw output (identical on every platform).
 BIGUSTRAINING_EXPORT double UniformDouble(std::mt19937_64& rng);
 

@@ -1,25 +1,15 @@
 // The BIGUS training loop (see bigusTrainer.h and DESIGN section 4).
 #include "bigusTrainer.h"
 
-#include "bigusGaussianMath.h"
-#include "bigusSeeding.h"
-#include "bigusSliceFrame.h"
-
-#include "vtkSMPTools.h"
-
 #include <vtk_fmt.h>
 // clang-format off
 #include VTK_FMT(fmt/printf.h)
 // clang-format on
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
-#include <fstream>
-#include <numeric>
-#include <sstream>
+#include <limits>
 
 namespace bigus
 {
@@ -27,48 +17,18 @@ namespace bigus
 namespace
 {
 constexpr int SnapshotInterval = 100;
-constexpr int DefaultIterations = 3000; // the schedule when neither iterations nor a time budget is given
-// Variable projection with a TimeBudget: a solve may take this share of the budget left when it starts. The
-// liver, 30 s (docs/FINDINGS.md): the first solve took the whole budget before (0 steps, 18.04 dB held out);
-// shares 0.25 / 0.1 / 0.03 gave 23.58 / 22.64 / 22.44 dB (a solve costs at least its setup and one iteration,
-// so a smaller share leaves no more steps).
+// Variable projection with a TimeBudget: a solve may take this share of the budget left when it starts
+// (docs/FINDINGS.md, "The trainer's defaults, measured").
 constexpr double SolveShareOfRemainingBudget = 0.25;
-constexpr double MinimumScaleMm = 1e-3;
-constexpr double MaximumScaleMm = 100.0;
-
 }
-
-// ------------------------------------------------------------------------------------------------
-
-double PixelSpacingOf(const std::array<double, 16>& pose)
-{
-  SliceFrame frame;
-  ComputeSliceFrame(pose.data(), 90, frame);
-  return 0.5 * (frame.spacing[0] + frame.spacing[1]);
-}
-
-// ------------------------------------------------------------------------------------------------
 
 Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique_ptr<TrainingEngine> engine)
   : Data(new TrainingData(std::move(data)))
-  , Settings(settings)
+  , Settings(ScheduledSettings(settings))
   , Engine(engine ? std::move(engine) : CreateTrainingEngine("cpu", nullptr))
 {
   this->State.Random.seed(settings.Seed);
-  this->Settings.FramesPerStep = std::max(1, this->Settings.FramesPerStep);
-  if (this->Settings.Iterations <= 0 && this->Settings.TimeBudget <= 0)
-  {
-    this->Settings.Iterations = DefaultIterations;
-  }
-  if (!this->Data->TrainFrames.empty())
-  {
-    double spacing = 0;
-    for (int f : this->Data->TrainFrames)
-    {
-      spacing += PixelSpacingOf(this->Data->Poses[f]);
-    }
-    this->PixelSpacing = spacing / this->Data->TrainFrames.size();
-  }
+  this->PixelSpacing = MeanTrainingPixelSpacing(*this->Data);
   // The speckle decorrelation of each sweep, measured once for the choices below that need it.
   std::vector<SweepDecorrelation> measured;
   auto measuredSweeps = [&]() -> const std::vector<SweepDecorrelation>& {
@@ -78,40 +38,14 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
     }
     return measured;
   };
-  if (this->Settings.ElevationSigma > 0)
-  {
-    this->Report.Settings.push_back(vtkfmt::sprintf("ElevationSigma = %.4g mm (given)", this->Settings.ElevationSigma));
-  }
-  else
-  {
-    const ElevationSigmaChoice choice = ChooseElevationSigma(measuredSweeps());
-    this->Settings.ElevationSigma = choice.Sigma;
-    this->SigmaByRule = true;
-    this->Report.Settings.push_back(
-      vtkfmt::sprintf("ElevationSigma = %.4g mm (chosen: ", choice.Sigma) + choice.Reason + ")");
-  }
+  std::string sigmaLine;
+  this->Settings.ElevationSigma =
+    ElevationSigmaSetting(this->Settings.ElevationSigma, measuredSweeps, this->SigmaByRule, sigmaLine);
+  this->Report.Settings.push_back(sigmaLine);
   this->Report.ElevationSigma = this->Settings.ElevationSigma;
-  const TrainerSettings& s = this->Settings;
-  std::string schedule = s.Iterations > 0 ? vtkfmt::sprintf("Iterations = %d", s.Iterations) : "Iterations = no limit";
-  if (s.TimeBudget > 0)
-  {
-    schedule += vtkfmt::sprintf(", TimeBudget = %.4g s (", s.TimeBudget) +
-      (s.Iterations > 0 ? "whichever ends first; " : "") + "the schedule follows the one further along)";
-  }
-  this->Report.Settings.push_back(schedule);
-  this->Report.Settings.push_back(DescribeDensification(s.Densification, s.MaximumGaussians));
-  this->Report.Settings.push_back(DescribeGapFillingSettings(s.FillGaps, s.BeamIntegration, s.GapFilling));
-  this->Report.Settings.push_back(DescribeGaussianMergeSettings(s.Merge));
-  this->Report.Settings.push_back(
-    DescribeReflectivitySolve(s.ReflectivitySolve, s.NonNegativeReflectivity, s.Solve, s.SolveInterval));
-  this->Report.Settings.push_back(vtkfmt::sprintf("Seed = %u, FramesPerStep = %d, Cutoff = %.3g, SparseAdam = %s%s",
-    s.Seed, s.FramesPerStep, s.Cutoff, s.SparseAdam ? "on" : "off",
-    s.CoarseFraction > 0
-      ? vtkfmt::sprintf(", CoarseFraction = %.3g (a quarter of the pixels per step until then, %s)", s.CoarseFraction,
-          s.CoarseLowPass ? "2 x 2 averages through the pixel's low-pass" : "point samples")
-          .c_str()
-      : ""));
-  this->Poses.Configure(this->Data.get(), s.Poses, measuredSweeps, this->State, this->Report.Settings);
+  const std::vector<std::string> described = DescribeTrainerSettings(this->Settings);
+  this->Report.Settings.insert(this->Report.Settings.end(), described.begin(), described.end());
+  this->Poses.Configure(this->Data.get(), this->Settings.Poses, measuredSweeps, this->State, this->Report.Settings);
   this->Settings.Poses = this->Poses.GetSettings();
   this->Engine->SetData(this->Data.get(), nullptr);
 }
@@ -122,13 +56,7 @@ Trainer& Trainer::operator=(Trainer&&) noexcept = default;
 
 RenderOptions Trainer::Options() const
 {
-  RenderOptions o;
-  o.ElevationSigma = this->Settings.ElevationSigma;
-  o.BeamIntegration = this->Settings.BeamIntegration;
-  o.NonNegativeReflectivity = this->Settings.NonNegativeReflectivity;
-  o.Cutoff = this->Settings.Cutoff;
-  o.Gamma = this->Gamma;
-  return o;
+  return RenderOptionsOf(this->Settings, this->Gamma);
 }
 
 bool Trainer::PullState(std::string* error) const
@@ -176,22 +104,13 @@ bool Trainer::PrepareInitialField(std::string* error)
 {
   const TrainingData& data = *this->Data;
   std::int64_t count = 0;
-  if (!CheckTrainingData(data, error) || !this->Poses.Prepare(error))
+  std::string gammaLine;
+  if (!CheckTrainingData(data, error) || !this->Poses.Prepare(error) ||
+    !GammaOfTrainingFrames(data, this->Gamma, count, gammaLine, error))
   {
     return false;
   }
-  const double mean = MeanFanIntensity(data, count);
-  if (count == 0)
-  {
-    if (error)
-    {
-      *error = "the fan mask is empty";
-    }
-    return false;
-  }
-  this->Gamma = GammaFromMeanIntensity(mean);
-  this->Report.Settings.push_back(
-    vtkfmt::sprintf("Gamma = %.5g (from the mean fan intensity %.4f of the training frames)", this->Gamma, mean));
+  this->Report.Settings.push_back(gammaLine);
   const SeedShape shape = this->SeedShapeOf();
   SeedingPlan plan;
   if (!PlanSeeding(data, this->Settings.Seeding, this->Settings.MaximumGaussians,
@@ -234,9 +153,12 @@ bool Trainer::FitInitialReflectivities(std::string* error)
   {
     return false;
   }
+  bool scaled = false;
   if (!this->SolvesReflectivities())
   {
-    return this->FitReflectivityScale(error);
+    return ScaleSeedReflectivities(
+             *this->Engine, *this->Data, this->Options(), this->Gamma, this->State.Gaussians.Field, scaled, error) &&
+      (!scaled || this->PushState(error));
   }
   // The first solve is training, not seeding: its time counts towards TimeBudget like the later ones.
   if (!this->SolveFieldReflectivities(error))
@@ -320,14 +242,7 @@ bool Trainer::SetField(const GaussianField& field, std::string* error)
 
 SeedShape Trainer::SeedShapeOf() const
 {
-  SeedShape shape;
-  shape.PixelSpacing = this->PixelSpacing;
-  shape.InPlaneScale = this->Settings.Seeding.InitialScalePixels * this->PixelSpacing;
-  shape.ElevationSigma = this->Settings.BeamIntegration ? this->Settings.ElevationSigma : 0.0;
-  shape.ElevationScale = shape.ElevationSigma > 0 ? shape.ElevationSigma : this->PixelSpacing;
-  shape.UniformShare = this->Settings.Seeding.UniformShare;
-  shape.Gamma = this->Gamma;
-  return shape;
+  return bigus::SeedShapeOf(this->Settings, this->PixelSpacing, this->Gamma);
 }
 
 bool Trainer::MeasureElevationSigma(std::int64_t fanPixels, SeedingPlan& plan, std::string* error)
@@ -339,10 +254,7 @@ bool Trainer::MeasureElevationSigma(std::int64_t fanPixels, SeedingPlan& plan, s
     return false;
   }
   const double sigma = choice.Chosen < 0 ? rule : choice.Candidates[choice.Chosen].Value;
-  for (std::string& line : this->Report.Settings)
-  {
-    line = line.rfind("ElevationSigma = ", 0) == 0 ? choice.SettingLine(line, "ElevationSigma", "mm") : line;
-  }
+  choice.RewriteSettingLine(this->Report.Settings, "ElevationSigma", "mm");
   if (sigma == rule)
   {
     return true;
@@ -352,14 +264,6 @@ bool Trainer::MeasureElevationSigma(std::int64_t fanPixels, SeedingPlan& plan, s
   this->Report.ElevationSigma = sigma;
   return PlanSeeding(*this->Data, this->Settings.Seeding, this->Settings.MaximumGaussians,
     this->Settings.NonNegativeReflectivity, this->SeedShapeOf(), fanPixels, plan, error);
-}
-
-bool Trainer::FitReflectivityScale(std::string* error)
-{
-  bool scaled = false;
-  return ScaleSeedReflectivities(
-           *this->Engine, *this->Data, this->Options(), this->Gamma, this->State.Gaussians.Field, scaled, error) &&
-    (!scaled || this->PushState(error));
 }
 
 double Trainer::TrainingSeconds() const
@@ -380,12 +284,6 @@ double Trainer::ScheduleFraction() const
   return std::min(1.0, f);
 }
 
-double Trainer::MeanLearningRateAt(double fraction) const
-{
-  return this->Settings.MeanLearningRate *
-    std::pow(this->Settings.MeanLearningRateFinal / this->Settings.MeanLearningRate, fraction);
-}
-
 bool Trainer::InDensificationWindow() const
 {
   const TrainerSettings& s = this->Settings;
@@ -402,36 +300,16 @@ StepStatus Trainer::Step(double* loss, std::string* error)
   {
     f = train[static_cast<std::size_t>(UniformDouble(state.Random) * train.size())];
   }
-  StepRequest request;
+  const double fraction = this->ScheduleFraction();
+  StepRequest request = StepRequestAt(this->Settings, fraction, state.LearningRateScale, this->Options());
   request.Frames = frames.data();
   request.Count = static_cast<int>(frames.size());
   request.Iteration = state.Iteration;
-  const double scale = state.LearningRateScale;
-  const double fraction = this->ScheduleFraction();
-  request.MeanRate = scale * this->MeanLearningRateAt(fraction);
-  request.LogScaleRate = scale * this->Settings.LogScaleLearningRate;
-  request.QuaternionRate = scale * this->Settings.QuaternionLearningRate;
-  request.ReflectivityRate = scale * this->Settings.ReflectivityLearningRate;
-  request.MinimumLogScale = std::log(MinimumScaleMm);
-  request.MaximumLogScale = std::log(MaximumScaleMm);
-  request.Options = this->Options();
-  request.Loss = this->Settings.Loss;
-  request.SparseAdam = this->Settings.SparseAdam;
-  // The resolution schedule's coarse steps: the frames on every second pixel and row, at a random phase (frames
-  // narrower than 2 pixels, or 3 for averages, a whole 2 x 2 block at either phase, keep every pixel).
-  const int smallest = this->Settings.CoarseLowPass ? 3 : 2;
-  const bool coarse =
-    fraction < this->Settings.CoarseFraction && this->Data->Width >= smallest && this->Data->Height >= smallest;
   TrainingData decimated;
-  int phase = 0;
-  if (coarse)
-  {
-    phase = static_cast<int>(UniformDouble(state.Random) * 4);
-    decimated =
-      DecimateFrames(*this->Data, frames.data(), request.Count, phase & 1, phase >> 1, this->Settings.CoarseLowPass);
-    request.Data = &decimated;
-    request.Frames = decimated.TrainFrames.data();
-  }
+  const bool lowPass = this->Settings.CoarseLowPass;
+  const int phase = fraction < this->Settings.CoarseFraction
+    ? DecimateStep(*this->Data, frames, lowPass, state.Random, decimated, request)
+    : -1;
   const bool refine = this->Poses.RefinesAt(fraction);
   std::vector<double> poseGradients(refine ? 6 * frames.size() : 0);
   request.PoseGradients = refine ? poseGradients.data() : nullptr;
@@ -457,10 +335,9 @@ StepStatus Trainer::Step(double* loss, std::string* error)
   }
   if (refine)
   {
-    for (std::size_t k = 0; coarse && k < frames.size(); ++k)
+    for (std::size_t k = 0; phase >= 0 && k < frames.size(); ++k)
     {
-      DecimatedPoseGradientToSource(
-        *this->Data, frames[k], phase & 1, phase >> 1, &poseGradients[6 * k], this->Settings.CoarseLowPass);
+      DecimatedPoseGradientToSource(*this->Data, frames[k], phase & 1, phase >> 1, &poseGradients[6 * k], lowPass);
     }
     this->Poses.Step(frames, poseGradients, state.LearningRateScale, state);
   }
@@ -468,15 +345,10 @@ StepStatus Trainer::Step(double* loss, std::string* error)
   return status;
 }
 
-bool Trainer::ValidationLoss(double& loss, std::string* error)
-{
-  return bigus::ValidationLoss(*this->Engine, *this->Data, ValidationFrames(*this->Data), this->Options(),
-    this->Settings.Loss, this->Reduction, loss, error);
-}
-
 bool Trainer::CheckValidation(double& loss, std::string* error)
 {
-  if (!this->ValidationLoss(loss, error))
+  if (!bigus::ValidationLoss(*this->Engine, *this->Data, ValidationFrames(*this->Data), this->Options(),
+        this->Settings.Loss, this->Reduction, loss, error))
   {
     return false;
   }
@@ -487,43 +359,11 @@ bool Trainer::CheckValidation(double& loss, std::string* error)
 
 bool Trainer::DensifyAndPrune(double validation, std::string* error)
 {
-  TrainingState& state = this->State;
-  const DensificationSettings& d = this->Settings.Densification;
-  const std::string stopped = UpdateGrowth(state, validation, d);
-  if (!stopped.empty())
-  {
-    this->Report.GrowthStopReason = stopped;
-  }
-  if (!this->PullState(error))
-  {
-    return false;
-  }
-  // Image-GS's new Gaussians from the residual: rendered before densification changes the field.
-  std::vector<int> residualFrames;
-  std::vector<float> residuals;
-  if (d.ResidualSeedShare > 0 && d.ResidualSeedFrames > 0 && state.Growing &&
-    !RenderResiduals(*this->Engine, *this->Data, this->Options(), this->Gamma, d.ResidualSeedFrames, state.Random,
-      residualFrames, residuals, error))
-  {
-    return false;
-  }
-  const DensificationResult result = bigus::DensifyAndPrune(state.Gaussians, state.Growing, d.Percentile,
-    this->Settings.MaximumGaussians, d.SplitScalePixels * this->PixelSpacing, d.PruneReflectivity);
-  if (!residualFrames.empty() && result.Added > 0)
-  {
-    const std::int64_t room = this->Settings.MaximumGaussians - state.Gaussians.Count();
-    SeedResiduals(*this->Data, residualFrames, residuals,
-      std::min<std::int64_t>(room, std::llround(d.ResidualSeedShare * result.Added)), state.Random, this->SeedShapeOf(),
-      state.Gaussians.Field);
-    state.Gaussians.ResizeToField();
-  }
-  if (state.Growing && result.MaximumReached)
-  {
-    state.Growing = false;
-    this->Report.GrowthStopReason = "hard maximum of " + std::to_string(this->Settings.MaximumGaussians) +
-      " Gaussians reached (iteration " + std::to_string(state.Iteration) + ")";
-  }
-  return this->PushState(error);
+  return this->PullState(error) &&
+    DensifyField(*this->Engine, *this->Data, this->Options(), this->Gamma, this->SeedShapeOf(),
+      this->Settings.Densification, this->Settings.MaximumGaussians, validation, this->State,
+      this->Report.GrowthStopReason, error) &&
+    this->PushState(error);
 }
 
 void Trainer::PlaceUntrainedFrames()
@@ -542,55 +382,19 @@ bool Trainer::Evaluate(
 bool Trainer::EvaluateOn(const TrainingData& data, const std::vector<int>& frames, ImageMetrics& metrics,
   std::string* error, double* secondsPerFrame)
 {
-  std::vector<float> I(std::size_t(data.Width) * data.Height);
-  double seconds = 0;
-  int rendered = 0;
-  bool ok = true;
-  const ImageMetrics mean = MeanFrameMetrics(data, frames, [&](std::size_t, int f) {
-    const double t0 = SteadySeconds();
-    ok = ok && this->RenderFrame(data, f, I.data(), error);
-    seconds += SteadySeconds() - t0;
-    ++rendered;
-    return I.data();
-  });
-  if (!ok)
-  {
-    return false;
-  }
-  metrics = mean;
-  if (secondsPerFrame)
-  {
-    *secondsPerFrame = rendered == 0 ? 0.0 : seconds / rendered;
-  }
-  return true;
+  return EvaluateFrames(*this->Engine, data, frames, this->FilterRenderOptions(), metrics, error, secondsPerFrame);
 }
 
 bool Trainer::RenderFrame(const TrainingData& data, int frame, float* image, std::string* error)
 {
-  RenderOptions o = this->Options();
-  o.Cutoff = RenderOptions().Cutoff;
-  const SliceGeometry slice = data.Slice(frame);
-  this->S.resize(std::size_t(data.Width) * data.Height);
-  if (!this->Engine->Render(&slice, 1, o, this->S.data(), image, error))
-  {
-    if (error)
-    {
-      *error = "frame " + std::to_string(frame) + ": " + *error;
-    }
-    return false;
-  }
-  return true;
+  return bigus::RenderFrame(*this->Engine, data, frame, this->FilterRenderOptions(), this->S, image, error);
 }
 
-std::int64_t Trainer::FinalPrune(std::string* error)
+RenderOptions Trainer::FilterRenderOptions() const
 {
-  if (!this->PullState(error))
-  {
-    return -1;
-  }
-  const std::int64_t removed = bigus::FinalPrune(
-    this->State.Gaussians, *this->Data, this->Options(), this->Gamma, this->Settings.FinalPruneTolerance);
-  return removed > 0 && !this->PushState(error) ? -1 : removed;
+  RenderOptions o = this->Options();
+  o.Cutoff = RenderOptions().Cutoff;
+  return o;
 }
 
 bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>& progress,
@@ -618,102 +422,11 @@ bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>
       "the pixel-grid fit (no geometry steps: a Gaussian per fan pixel, or a grid of MaximumGaussians)";
     this->Report.GrowthStopReason = "none (the pixel-grid fit)";
   }
-  double recent = 0;
-  int recentCount = 0;
-  double previousWindow = -1;
-  bool ok = true;
-  while (!this->PixelGrid && (s.Iterations <= 0 || state.Iteration < s.Iterations))
+  this->Recent = LossWindow();
+  bool ok = true, stop = false;
+  while (ok && !stop && !this->PixelGrid && (s.Iterations <= 0 || state.Iteration < s.Iterations))
   {
-    bool aborted = abort && abort();
-    if (this->Reduction)
-    {
-      // Every process stops at the same step: on the slowest clock, when any was asked to.
-      double agreed[2] = { SteadySeconds() - start, aborted ? 1.0 : 0.0 };
-      if (!this->Reduction->Maximum(agreed, 2, error))
-      {
-        ok = false;
-        break;
-      }
-      this->AgreedElapsed = agreed[0];
-      aborted = agreed[1] > 0;
-    }
-    if (aborted)
-    {
-      this->Report.StopReason = "aborted";
-      break;
-    }
-    if (s.TimeBudget > 0 && this->TrainingSeconds() >= s.TimeBudget)
-    {
-      this->Report.StopReason = "time budget";
-      break;
-    }
-    double loss = 0;
-    if (this->Step(&loss, error) == StepStatus::Failed)
-    {
-      ok = false;
-      break;
-    }
-    if (std::isfinite(loss))
-    {
-      recent += loss;
-      ++recentCount;
-    }
-    if (state.LearningRateScale < 1e-6)
-    {
-      if (error)
-      {
-        *error = "every step produces NaN or Inf, even with learning rates divided by 1e6";
-      }
-      ok = false;
-      break;
-    }
-    const int it = state.Iteration;
-    double validation = 0;
-    const DensificationSettings& d = s.Densification;
-    if (it % d.Interval == 0 && !this->CheckValidation(validation, error))
-    {
-      ok = false;
-      break;
-    }
-    const bool densify = d.Enabled && it >= d.Start && it % d.Interval == 0 && this->InDensificationWindow();
-    if (densify && !this->DensifyAndPrune(validation, error))
-    {
-      ok = false;
-      break;
-    }
-    if (this->SolvesReflectivities() && (densify || (s.SolveInterval > 0 && it % s.SolveInterval == 0)) &&
-      !this->SolveFieldReflectivities(error))
-    {
-      ok = false;
-      break;
-    }
-    if (s.ConvergenceTolerance > 0 && it % 200 == 0 && recentCount > 0)
-    {
-      const double window = recent / recentCount;
-      if (previousWindow > 0 && (previousWindow - window) < s.ConvergenceTolerance * previousWindow)
-      {
-        this->Report.StopReason = "converged";
-        break;
-      }
-      previousWindow = window;
-      recent = 0;
-      recentCount = 0;
-    }
-    if (s.CheckpointInterval > 0 && !s.CheckpointFile.empty() && it % s.CheckpointInterval == 0)
-    {
-      // Data-parallel: rank 0 writes, and the others learn whether it could.
-      const bool saved =
-        (this->Reduction && this->Reduction->Rank() != 0) || this->SaveCheckpoint(s.CheckpointFile, error);
-      if (!this->Agree(saved, error))
-      {
-        ok = false;
-        break;
-      }
-    }
-    if (progress && (it % 10 == 0 || it == s.Iterations))
-    {
-      progress(this->ScheduleFraction(), it, std::isfinite(loss) ? loss : 0.0, state.Gaussians.Count());
-    }
+    ok = this->Iterate(start, progress, abort, stop, error);
   }
   this->Report.Iterations = state.Iteration;
   this->Report.Seconds += SteadySeconds() - start;
@@ -730,6 +443,84 @@ bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>
   this->State.TrainingSeconds = this->TrainingSeconds();
   this->TrainStart = 0;
   return ok;
+}
+
+bool Trainer::Iterate(double start, const std::function<void(double, int, double, std::int64_t)>& progress,
+  const std::function<bool()>& abort, bool& stop, std::string* error)
+{
+  const TrainerSettings& s = this->Settings;
+  const TrainingState& state = this->State;
+  bool aborted = abort && abort();
+  if (this->Reduction)
+  {
+    // Every process stops at the same step: on the slowest clock, when any was asked to.
+    double agreed[2] = { SteadySeconds() - start, aborted ? 1.0 : 0.0 };
+    if (!this->Reduction->Maximum(agreed, 2, error))
+    {
+      return false;
+    }
+    this->AgreedElapsed = agreed[0];
+    aborted = agreed[1] > 0;
+  }
+  stop = aborted || (s.TimeBudget > 0 && this->TrainingSeconds() >= s.TimeBudget);
+  if (stop)
+  {
+    this->Report.StopReason = aborted ? "aborted" : "time budget";
+    return true;
+  }
+  double loss = 0;
+  if (this->Step(&loss, error) == StepStatus::Failed)
+  {
+    return false;
+  }
+  if (state.LearningRateScale < 1e-6)
+  {
+    if (error)
+    {
+      *error = "every step produces NaN or Inf, even with learning rates divided by 1e6";
+    }
+    return false;
+  }
+  LossWindow& recent = this->Recent;
+  recent.Sum += std::isfinite(loss) ? loss : 0.0;
+  recent.Count += std::isfinite(loss) ? 1 : 0;
+  const int it = state.Iteration;
+  double validation = 0;
+  const DensificationSettings& d = s.Densification;
+  if (it % d.Interval == 0 && !this->CheckValidation(validation, error))
+  {
+    return false;
+  }
+  const bool densify = d.Enabled && it >= d.Start && it % d.Interval == 0 && this->InDensificationWindow();
+  if ((densify && !this->DensifyAndPrune(validation, error)) ||
+    (this->SolvesReflectivities() && (densify || (s.SolveInterval > 0 && it % s.SolveInterval == 0)) &&
+      !this->SolveFieldReflectivities(error)))
+  {
+    return false;
+  }
+  if (s.ConvergenceTolerance > 0 && it % 200 == 0 && recent.Count > 0)
+  {
+    const double mean = recent.Sum / recent.Count;
+    stop = recent.Previous > 0 && (recent.Previous - mean) < s.ConvergenceTolerance * recent.Previous;
+    if (stop)
+    {
+      this->Report.StopReason = "converged";
+      return true;
+    }
+    recent = LossWindow{ 0.0, 0, mean };
+  }
+  // Data-parallel: rank 0 writes the checkpoint, and the others learn whether it could.
+  if (s.CheckpointInterval > 0 && !s.CheckpointFile.empty() && it % s.CheckpointInterval == 0 &&
+    !this->Agree(
+      (this->Reduction && this->Reduction->Rank() != 0) || this->SaveCheckpoint(s.CheckpointFile, error), error))
+  {
+    return false;
+  }
+  if (progress && (it % 10 == 0 || it == s.Iterations))
+  {
+    progress(this->ScheduleFraction(), it, std::isfinite(loss) ? loss : 0.0, state.Gaussians.Count());
+  }
+  return true;
 }
 
 bool Trainer::Finish(std::string* error)
@@ -763,49 +554,27 @@ bool Trainer::Finish(std::string* error)
   const std::array<double, 7>& shared = this->State.SharedPoseCorrection;
   this->Report.TimeOffset = shared[6];
   std::copy_n(shared.begin(), 6, this->Report.ImageToProbeCorrection.begin());
-  const std::int64_t pruned = this->FinalPrune(error);
-  if (pruned < 0)
+  if (!this->PullState(error))
   {
     return false;
   }
-  this->Report.PrunedAtEnd = pruned;
+  // The stages that end a run, on the host field: the final prune, gap filling, the merge.
+  OptimizerState& G = this->State.Gaussians;
+  this->Report.PrunedAtEnd = bigus::FinalPrune(G, *this->Data, this->Options(), this->Gamma, s.FinalPruneTolerance);
   if (s.FillGaps && s.BeamIntegration)
   {
-    if (!this->PullState(error))
-    {
-      return false;
-    }
     GapFillingSettings gaps = s.GapFilling;
     gaps.MaximumGaussians = s.MaximumGaussians;
-    this->Report.GapFilling = FillElevationGaps(this->State.Gaussians.Field, *this->Data, s.ElevationSigma, gaps);
-    if (this->Report.GapFilling.Added > 0)
-    {
-      this->State.Gaussians.ResizeToField();
-      if (!this->PushState(error))
-      {
-        return false;
-      }
-    }
+    this->Report.GapFilling = FillElevationGaps(G.Field, *this->Data, s.ElevationSigma, gaps);
+    G.ResizeToField();
   }
   if (s.Merge.Tolerance > 0)
   {
-    if (!this->PullState(error))
-    {
-      return false;
-    }
-    this->Report.Merge = MergeGaussians(this->State.Gaussians.Field, s.Merge);
-    if (this->Report.Merge.Merged > 0)
-    {
-      // Fresh optimiser moments, as after SetField: a merged Gaussian is a new one.
-      GaussianField field = std::move(this->State.Gaussians.Field);
-      this->State.Gaussians = OptimizerState();
-      this->State.Gaussians.Field = std::move(field);
-      this->State.Gaussians.ResizeToField();
-      if (!this->PushState(error))
-      {
-        return false;
-      }
-    }
+    this->Report.Merge = MergeGaussians(G, s.Merge);
+  }
+  if (!this->PushState(error))
+  {
+    return false;
   }
   this->Report.Gaussians = this->GetField().Count();
   this->Report.Seconds += SteadySeconds() - start;

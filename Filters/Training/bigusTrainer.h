@@ -13,18 +13,11 @@
 #define bigusTrainer_h
 
 #include "bigusTrainingModule.h" // For export macro
-#include "bigusDensification.h"
 #include "bigusElevationSigma.h"
 #include "bigusFrameMetrics.h"
-#include "bigusGapFilling.h"
-#include "bigusGaussianMerging.h"
-#include "bigusHeldOutChoices.h"
-#include "bigusImageLoss.h"
-#include "bigusPoseRefinement.h"
 #include "bigusImageMetrics.h"
-#include "bigusReflectivitySolve.h"
-#include "bigusSeeding.h"
 #include "bigusRenderer.h"
+#include "bigusTrainerSettings.h"
 #include "bigusTrainingEngine.h"
 #include "bigusValidation.h"
 
@@ -39,91 +32,6 @@
 
 namespace bigus
 {
-
-/**
- * Every setting of a run, one struct per stage where a stage has its own (Seeding, Solve, Densification, Poses,
- * GapFilling, Merge), the loop's and the schedule's here. The defaults are the project's (vtkGaussianFieldTrainer,
- * `bigus train` and the ParaView plugin take theirs from a default-constructed TrainerSettings); what each default
- * was measured against is in docs/FINDINGS.md, "The trainer's defaults, measured". A rule that chooses a setting
- * from the data lives in the stage that applies it, and the run's `setting` lines (TrainerReport::Settings) say
- * what it chose and why.
- */
-struct TrainerSettings
-{
-  // Model
-  /// mm; 0 = chosen from the training frames (bigus::ChooseElevationSigma, bigusElevationSigma.h)
-  double ElevationSigma = 0;
-  /// Beam integration (false: the thin plane, UltraGauss; the ablation).
-  bool BeamIntegration = true;
-  /// Signed reflectivity (true: clamped to >= 0; the ablation).
-  bool NonNegativeReflectivity = false;
-  /// Renderer cutoff k while training (Evaluate renders at the filters' 5): a step is faster, and the rendered
-  /// intensity changes by about 1e-3.
-  double Cutoff = 4.0;
-  // The first field (bigusSeeding.h)
-  SeedingSettings Seeding;
-  // Variable projection (DESIGN section 4, "Solve what is linear"; bigusReflectivitySolve.h)
-  /// On: the reflectivities are solved by least squares (bigus::SolveReflectivities over every training
-  /// frame) after seeding, after every densification and every SolveInterval steps, and Adam moves every
-  /// parameter between the solves. Off (default): one least-squares scale of the seeds' reflectivities
-  /// (ScaleSeedReflectivities), then Adam alone. Ignored (off) with NonNegativeReflectivity, whose model is not
-  /// linear in r. With a TimeBudget (and no Solve.TimeLimit given) each solve may take a quarter of the budget
-  /// left when it starts, the pixel-grid fit's all of it (ReflectivitySolveSettings::TimeLimit).
-  bool ReflectivitySolve = false;
-  ReflectivitySolveSettings Solve;
-  int SolveInterval = 0; ///< steps between solves besides those after densification; 0 = none
-  // Optimisation
-  /// Steps; 0 = no step limit when a TimeBudget is given (the budget is then the schedule), 3000 when
-  /// neither is. With both, whichever ends first, and the schedule follows the one further along.
-  int Iterations = 3000;
-  /// Seconds of training of the run, 0 = no limit: every Train call counts, and a run resumed from a
-  /// checkpoint counts the seconds trained before it (TrainingState::TrainingSeconds).
-  double TimeBudget = 0;
-  int FramesPerStep = 1; ///< training frames rendered per step (the batch); losses are averaged
-  /// The resolution schedule: steps in the first CoarseFraction of the schedule see their frames on every second
-  /// pixel and row, from a pixel drawn at random among the first 2 x 2 every step (DecimateFrames: a quarter of
-  /// the pixels, point samples as the renderer's pixels are), later steps the whole frames; 0 = off. After
-  /// DashGaussian's coarse-to-fine schedule (Chen et al. 2025); its low-pass images are CoarseLowPass. A coarse
-  /// step's pose gradients are moved to the source frame's pivot (DecimatedPoseGradientToSource).
-  double CoarseFraction = 0.5;
-  /// The coarse steps' frames as 2 x 2 averages rendered through the pixel's low-pass (DecimateFrames with
-  /// average, SliceGeometry::PixelLowPass: each footprint convolved with the 2 x 2 box's extra variance, as
-  /// DashGaussian's and Mip-Splatting's low-pass filter does) instead of point samples. Off: a random phase makes the
-  /// point samples an unbiased sample of the whole frame's loss, the averages a blurred one.
-  bool CoarseLowPass = false;
-  /// Adam over the Gaussians a step touched only (StepRequest::SparseAdam). Off: every Gaussian's moments decay and
-  /// its parameters move every step (the ablation).
-  bool SparseAdam = true;
-  double MeanLearningRate = 0.02;       ///< mm per step at the start ...
-  double MeanLearningRateFinal = 0.002; ///< ... decaying exponentially to this at the end of the schedule
-  double LogScaleLearningRate = 0.01;
-  double QuaternionLearningRate = 0.005;
-  double ReflectivityLearningRate = 0.01;
-  /// L1 0.8 + D-SSIM 0.2 (3D Gaussian splatting's balance); the focal frequency loss off (its two DFTs cost about as
-  /// much as the rest of the loss).
-  ImageLossWeights Loss;
-  double ConvergenceTolerance =
-    0; ///< stop when the mean loss of the last 200 steps improved by less (relative); 0 = off
-  // Densification (EA-D; bigusDensification.h)
-  DensificationSettings Densification;
-  /// Hard maximum, gap filling's copies included (GapFillingSettings): room for a Gaussian per fan pixel of the
-  /// volume protocol's two sweeps.
-  std::int64_t MaximumGaussians = 500000;
-  double FinalPruneTolerance = 1.0 / 512; ///< final prune: max change of any training pixel's I
-  /// After the final prune, bridge gaps between training frames wider than the beam (FillElevationGaps).
-  bool FillGaps = true;
-  GapFillingSettings GapFilling;
-  /// Last, merge neighbouring Gaussians that one Gaussian represents (bigus::MergeGaussians; Tolerance 0: off).
-  GaussianMergeSettings Merge{ 1e-3 };
-  // Pose refinement (bigusPoseRefinement.h)
-  PoseRefinementSettings Poses;
-  /// The choices measured on held-out frames (bigusHeldOutChoices.h): ElevationSigma on the pixel-grid route.
-  HeldOutChoiceSettings HeldOut;
-  // Run
-  unsigned Seed = 1;
-  int CheckpointInterval = 0; ///< steps between checkpoints (0 = none)
-  std::string CheckpointFile;
-};
 
 /// What a run did.
 struct TrainerReport
@@ -270,10 +178,6 @@ public:
   /// @p data). Returns false with @p error for a pose the renderer rejects.
   bool RenderFrame(const TrainingData& data, int frame, float* image, std::string* error);
 
-  /// Remove Gaussians whose removal changes no training pixel by more than FinalPruneTolerance;
-  /// returns how many (-1 with @p error when the engine fails).
-  std::int64_t FinalPrune(std::string* error);
-
   /// The current field (pulled from the engine when steps ran since the last pull).
   const GaussianField& GetField() const;
   /// The whole training state, pulled likewise.
@@ -295,9 +199,10 @@ public:
   RenderOptions Options() const;
 
 private:
+  /// Options() at the render filters' cutoff whatever the training cutoff: the images a user gets.
+  RenderOptions FilterRenderOptions() const;
   /// The seeds' shape for this run's data, settings and gamma (bigusSeeding.h).
   SeedShape SeedShapeOf() const;
-  bool FitReflectivityScale(std::string* error);
   /// Initialize's part on this process alone: the data's checks, gamma, the memory check and the seeded field.
   bool PrepareInitialField(std::string* error);
   /// With ElevationSigma by rule: on the pixel-grid route the measured choice (ChooseElevationSigmaOnHeldOutFrames)
@@ -318,7 +223,11 @@ private:
     return (this->Settings.ReflectivitySolve || this->PixelGrid) && !this->Settings.NonNegativeReflectivity;
   }
   bool DensifyAndPrune(double validation, std::string* error);
-  bool ValidationLoss(double& loss, std::string* error);
+  /// One turn of Train's loop: the stop checks, a step, then what the schedule does at its iteration (validation,
+  /// densification, solve, convergence, checkpoint, progress). @p stop: the run ends here (the report says why);
+  /// false with @p error on an unrecoverable problem.
+  bool Iterate(double start, const std::function<void(double, int, double, std::int64_t)>& progress,
+    const std::function<bool()>& abort, bool& stop, std::string* error);
   /// Measures the validation loss; keeps a copy of the field when it is the best so far.
   bool CheckValidation(double& loss, std::string* error);
   /**
@@ -329,7 +238,6 @@ private:
   double ScheduleFraction() const;
   /// The run's seconds inside Train so far (TrainingState::TrainingSeconds, plus the call in progress).
   double TrainingSeconds() const;
-  double MeanLearningRateAt(double fraction) const;
   bool InDensificationWindow() const;
   /// The host state becomes the engine's (a no-op when nothing changed since the last pull).
   bool PullState(std::string* error) const;
@@ -348,15 +256,18 @@ private:
   double AgreedElapsed = 0;              // data-parallel: the slowest process's seconds in this Train call
   double TrainStart = 0;                 // Seconds() at the start of the Train call in progress, 0 outside
   double TrainedBefore = 0;              // the run's training seconds before that call
-  bool DensificationEnded = false;       // the last Train call ended past the densification window
-  bool PixelGrid = false;                // the field is the pixel-grid fit (PixelGridFit): Train takes no step
-  bool SigmaByRule = false;              // ElevationSigma came from the rule (MeasureElevationSigma may measure it)
+  struct LossWindow // ConvergenceTolerance: the finite losses since the last window, the last window's mean
+  {
+    double Sum = 0;
+    int Count = 0;
+    double Previous = -1;
+  } Recent;
+  bool DensificationEnded = false; // the last Train call ended past the densification window
+  bool PixelGrid = false;          // the field is the pixel-grid fit (PixelGridFit): Train takes no step
+  bool SigmaByRule = false;        // ElevationSigma came from the rule (MeasureElevationSigma may measure it)
   PoseRefiner Poses;
   std::vector<float> S; // scratch for RenderFrame
 };
-
-/// Mean in-plane pixel spacing (mm) of a pose.
-double PixelSpacingOf(const std::array<double, 16>& pose);
 
 } // namespace bigus
 

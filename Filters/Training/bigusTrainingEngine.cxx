@@ -169,6 +169,27 @@ double MeanFanIntensity(const TrainingData& data, std::int64_t& fanPixels)
   return fanPixels > 0 ? sum / fanPixels : 0.0;
 }
 
+double PixelSpacingOf(const std::array<double, 16>& pose)
+{
+  SliceFrame frame;
+  ComputeSliceFrame(pose.data(), 90, frame);
+  return 0.5 * (frame.spacing[0] + frame.spacing[1]);
+}
+
+double MeanTrainingPixelSpacing(const TrainingData& data)
+{
+  if (data.TrainFrames.empty())
+  {
+    return 1.0;
+  }
+  double spacing = 0;
+  for (int f : data.TrainFrames)
+  {
+    spacing += PixelSpacingOf(data.Poses[f]);
+  }
+  return spacing / data.TrainFrames.size();
+}
+
 double PhysicalMemoryBytes()
 {
   vtksys::SystemInformation info;

@@ -270,6 +270,12 @@ BIGUSTRAINING_EXPORT bool CheckTrainingData(const TrainingData& data, std::strin
 /// and the mean is 0).
 BIGUSTRAINING_EXPORT double MeanFanIntensity(const TrainingData& data, std::int64_t& fanPixels);
 
+/// Mean in-plane pixel spacing (mm) of a pose (ImageToReference, row-major 4 x 4).
+BIGUSTRAINING_EXPORT double PixelSpacingOf(const std::array<double, 16>& pose);
+
+/// Mean in-plane pixel spacing (mm) of @p data's training frames; 1 when it has none.
+BIGUSTRAINING_EXPORT double MeanTrainingPixelSpacing(const TrainingData& data);
+
 /**
  * Host memory of a training run per Gaussian, bytes, with the CPU engine (the documented table is in
  * docs/FINDINGS.md, "Memory per Gaussian"): the trainer's optimiser state (the field 44: means, log-scales,

@@ -1,0 +1,97 @@
+// The setting lines that a run's settings alone fix (see bigusTrainerSettings.h).
+#include "bigusTrainerSettings.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <vtk_fmt.h>
+// clang-format off
+#include VTK_FMT(fmt/printf.h)
+// clang-format on
+
+namespace bigus
+{
+
+std::vector<std::string> DescribeTrainerSettings(const TrainerSettings& s)
+{
+  std::string schedule = s.Iterations > 0 ? vtkfmt::sprintf("Iterations = %d", s.Iterations) : "Iterations = no limit";
+  if (s.TimeBudget > 0)
+  {
+    schedule += vtkfmt::sprintf(", TimeBudget = %.4g s (", s.TimeBudget) +
+      (s.Iterations > 0 ? "whichever ends first; " : "") + "the schedule follows the one further along)";
+  }
+  return { schedule, DescribeDensification(s.Densification, s.MaximumGaussians),
+    DescribeGapFillingSettings(s.FillGaps, s.BeamIntegration, s.GapFilling), DescribeGaussianMergeSettings(s.Merge),
+    DescribeReflectivitySolve(s.ReflectivitySolve, s.NonNegativeReflectivity, s.Solve, s.SolveInterval),
+    vtkfmt::sprintf("Seed = %u, FramesPerStep = %d, Cutoff = %.3g, SparseAdam = %s%s", s.Seed, s.FramesPerStep,
+      s.Cutoff, s.SparseAdam ? "on" : "off",
+      s.CoarseFraction > 0
+        ? vtkfmt::sprintf(", CoarseFraction = %.3g (a quarter of the pixels per step until then, %s)", s.CoarseFraction,
+            s.CoarseLowPass ? "2 x 2 averages through the pixel's low-pass" : "point samples")
+            .c_str()
+        : "") };
+}
+
+TrainerSettings ScheduledSettings(TrainerSettings s)
+{
+  s.FramesPerStep = std::max(1, s.FramesPerStep);
+  s.Iterations = s.Iterations <= 0 && s.TimeBudget <= 0 ? DefaultIterations : s.Iterations;
+  return s;
+}
+
+SeedShape SeedShapeOf(const TrainerSettings& s, double pixelSpacing, double gamma)
+{
+  SeedShape shape;
+  shape.PixelSpacing = pixelSpacing;
+  shape.InPlaneScale = s.Seeding.InitialScalePixels * pixelSpacing;
+  shape.ElevationSigma = s.BeamIntegration ? s.ElevationSigma : 0.0;
+  shape.ElevationScale = shape.ElevationSigma > 0 ? shape.ElevationSigma : pixelSpacing;
+  shape.UniformShare = s.Seeding.UniformShare;
+  shape.Gamma = gamma;
+  return shape;
+}
+
+RenderOptions RenderOptionsOf(const TrainerSettings& s, double gamma)
+{
+  RenderOptions o;
+  o.ElevationSigma = s.ElevationSigma;
+  o.BeamIntegration = s.BeamIntegration;
+  o.NonNegativeReflectivity = s.NonNegativeReflectivity;
+  o.Cutoff = s.Cutoff;
+  o.Gamma = gamma;
+  return o;
+}
+
+StepRequest StepRequestAt(const TrainerSettings& s, double fraction, double rateScale, const RenderOptions& options)
+{
+  constexpr double MinimumScaleMm = 1e-3, MaximumScaleMm = 100.0;
+  StepRequest request;
+  request.MeanRate =
+    rateScale * (s.MeanLearningRate * std::pow(s.MeanLearningRateFinal / s.MeanLearningRate, fraction));
+  request.LogScaleRate = rateScale * s.LogScaleLearningRate;
+  request.QuaternionRate = rateScale * s.QuaternionLearningRate;
+  request.ReflectivityRate = rateScale * s.ReflectivityLearningRate;
+  request.MinimumLogScale = std::log(MinimumScaleMm);
+  request.MaximumLogScale = std::log(MaximumScaleMm);
+  request.Options = options;
+  request.Loss = s.Loss;
+  request.SparseAdam = s.SparseAdam;
+  return request;
+}
+
+int DecimateStep(const TrainingData& data, const std::vector<int>& frames, bool average, std::mt19937_64& rng,
+  TrainingData& decimated, StepRequest& request)
+{
+  const int smallest = average ? 3 : 2;
+  if (data.Width < smallest || data.Height < smallest)
+  {
+    return -1;
+  }
+  const int phase = static_cast<int>(UniformDouble(rng) * 4);
+  decimated = DecimateFrames(data, frames.data(), static_cast<int>(frames.size()), phase & 1, phase >> 1, average);
+  request.Data = &decimated;
+  request.Frames = decimated.TrainFrames.data();
+  return phase;
+}
+
+} // namespace bigus
