@@ -427,10 +427,13 @@ int vtkGaussianFieldTrainer::RequestData(
   this->InvokeEvent(SettingsChosenEvent, nullptr);
   // Held-out frames for the evaluation: valid, not trained on.
   std::vector<int> heldOut;
+  // (Not the validation frames the trainer holds out of the fit for a while: they join it.)
+  const std::vector<int>& validation = trainer.GetReport().ValidationFrames;
   for (int k = 0; k < trainer.GetData().Count(); ++k)
   {
     if (in.Valid[k] &&
-      !std::binary_search(trainer.GetData().TrainFrames.begin(), trainer.GetData().TrainFrames.end(), k))
+      !std::binary_search(trainer.GetData().TrainFrames.begin(), trainer.GetData().TrainFrames.end(), k) &&
+      !(trainer.GetReport().ValidationHeldOut && std::binary_search(validation.begin(), validation.end(), k)))
     {
       heldOut.push_back(k);
     }
@@ -505,6 +508,7 @@ int vtkGaussianFieldTrainer::RequestData(
   addValue("BestIteration", report.BestIteration);
   addValue("BestValidationLoss", report.BestValidationLoss);
   addValue("LastValidationLoss", report.LastValidationLoss);
+  addValue("ValidationJoinedAt", report.ValidationJoinedAt);
   vtkNew<vtkDoubleArray> validationHistory;
   validationHistory->SetName("ValidationHistory");
   validationHistory->SetNumberOfComponents(3);

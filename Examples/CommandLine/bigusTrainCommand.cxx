@@ -290,7 +290,14 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
   vtkFieldData* fd = trainer->GetOutput()->GetFieldData();
   vtkDataArray* best = fd->GetArray("BestValidationLoss");
   vtkDataArray* last = fd->GetArray("LastValidationLoss");
-  if (best && last)
+  vtkDataArray* joined = fd->GetArray("ValidationJoinedAt");
+  if (best && last && joined && joined->GetTuple1(0) >= 0)
+  {
+    std::printf("early stopping on the held-out validation frames: the field of iteration %.0f (validation loss %.5f) "
+                "kept when they joined the fit at iteration %.0f; %.5f at the end, fitted since\n",
+      fd->GetArray("BestIteration")->GetTuple1(0), best->GetTuple1(0), joined->GetTuple1(0), last->GetTuple1(0));
+  }
+  else if (best && last)
   {
     std::printf("early stopping %s (validation loss %.5f at iteration %.0f, %.5f at the end)\n",
       best->GetTuple1(0) < last->GetTuple1(0) ? "kept an earlier field" : "kept the last field", best->GetTuple1(0),
@@ -497,6 +504,10 @@ Command AddTrainCommand(CLI::App& app)
     "Take ElevationSigma's rule untested (default: where the fit is the pixel grid's solve, the rule's value times "
     "1/8, 1/4, 1/2, 1 and 2 are each fitted without every second training frame and scored on those; the narrowest "
     "within 0.05 dB of the best held-out PSNR is taken)");
+  trainCommand->add_flag("--held-out-validation", settings.HeldOut.HoldOutValidationFrames,
+    "Validate on frames held out of the fit until the densification window closes (one in 8 training frames of a "
+    "sweep, 4 to 8 of them), then joined to it: growth stops and early stopping keeps a field on frames the fit has "
+    "not seen (default: on training frames)");
   trainCommand
     ->add_option("--solve-memory", settings.Solve.AssembledMemoryShare,
       "Share of this machine's memory that a reflectivity solve may hold as the assembled basis (its products then "

@@ -2,6 +2,7 @@
 #include "bigusDensification.h"
 
 #include "bigusGaussianMath.h"
+#include "bigusRasterGeometry.h"
 #include "bigusSliceFrame.h"
 
 #include "vtkSMPTools.h"
@@ -127,29 +128,38 @@ DensificationResult DensifyAndPrune(OptimizerState& G, bool grow, double percent
 std::int64_t FinalPrune(
   OptimizerState& G, const TrainingData& data, const RenderOptions& o, double gamma, double tolerance)
 {
-  // A Gaussian changes a pixel's scattering field by at most |r| amp, hence its intensity by at most
-  // gamma |r| amp (dI/dS <= gamma): remove it when that stays below the tolerance on every training frame.
+  // Removing Gaussian i changes a pixel's scattering field by r_i w_i (its footprint's weight there, at most its peak
+  // amp_i), hence its intensity by at most gamma |r_i| w_i (dI/dS <= gamma); removing a set, by at most the sum.
   const GaussianField& field = G.Field;
   const std::int64_t n = field.Count();
   const double sigmaE = EffectiveElevationSigma(o);
-  std::vector<unsigned char> keep(n, 0);
-  std::vector<SliceFrameD> frames;
+  std::vector<SliceGeometry> slices;
   for (int f : data.TrainFrames)
   {
-    SliceFrameD frame;
-    double pixel[3];
-    ComputeRenderingFrame(data.Poses[f].data(), 90, frame.F, frame.Origin, pixel);
-    frames.push_back(frame);
+    slices.push_back(data.Slice(f));
   }
+  std::vector<PreparedSlice> prepared;
+  if (!PrepareSlices(slices.data(), static_cast<int>(slices.size()), o, prepared, nullptr))
+  {
+    return 0; // a pose the renderer rejects (Initialize refuses them): nothing is removed
+  }
+  auto reflectivity = [&](const GaussianParams& g) {
+    return o.NonNegativeReflectivity ? std::max(g.Reflectivity, 0.0) : std::abs(g.Reflectivity);
+  };
+  auto load = [&](std::int64_t i) {
+    return LoadGaussian(
+      field.Means.data(), field.LogScales.data(), field.Quaternions.data(), field.Reflectivities.data(), i);
+  };
+  // The candidates: every Gaussian whose own change stays within the tolerance on every training frame.
+  std::vector<unsigned char> keep(n, 0);
   vtkSMPTools::For(0, n, 256, [&](std::int64_t b, std::int64_t e) {
     for (std::int64_t i = b; i < e; ++i)
     {
-      const GaussianParams g = LoadGaussian(
-        field.Means.data(), field.LogScales.data(), field.Quaternions.data(), field.Reflectivities.data(), i);
-      const double r = o.NonNegativeReflectivity ? std::max(g.Reflectivity, 0.0) : std::abs(g.Reflectivity);
-      for (const SliceFrameD& frame : frames)
+      const GaussianParams g = load(i);
+      const double r = reflectivity(g);
+      for (const PreparedSlice& s : prepared)
       {
-        const Footprint f = SetupFootprint(g, frame, sigmaE, o.Cutoff, nullptr);
+        const Footprint f = SetupFootprint(g, s.Frame, sigmaE, o.Cutoff, nullptr);
         if (f.Visible && gamma * r * f.Amplitude > tolerance)
         {
           keep[i] = 1;
@@ -158,6 +168,63 @@ std::int64_t FinalPrune(
       }
     }
   });
+  std::vector<std::int64_t> candidates;
+  for (std::int64_t i = 0; i < n; ++i)
+  {
+    if (!keep[i])
+    {
+      candidates.push_back(i);
+    }
+  }
+  // Together: on each training frame, the candidates' changes summed at every pixel; a candidate that touches a
+  // masked pixel where the sum exceeds the tolerance is kept. What remains sums to at most the tolerance at every
+  // training pixel (at a pixel over it, none remains; elsewhere a subset's sum is at most the whole set's).
+  std::vector<std::vector<std::int64_t>> touching(prepared.size());
+  vtkSMPTools::For(0, static_cast<std::int64_t>(prepared.size()), 1, [&](std::int64_t b, std::int64_t e) {
+    for (std::int64_t k = b; k < e; ++k)
+    {
+      const PreparedSlice& s = prepared[k];
+      const unsigned char* mask = data.MaskOf(data.TrainFrames[k]);
+      std::vector<double> change(std::size_t(s.Width) * s.Height, 0.0);
+      // Each candidate's spans on this frame: visit(i, pixel index, weight).
+      auto walk = [&](const auto& visit) {
+        for (std::int64_t i : candidates)
+        {
+          const GaussianParams g = load(i);
+          const Footprint f = SetupFootprint(g, s.Frame, sigmaE, o.Cutoff, nullptr);
+          int box[4];
+          if (!f.Visible)
+          {
+            continue;
+          }
+          const double amount = gamma * reflectivity(g);
+          ForEachFootprintSpan(f, s, box, [&](int row, int first, int last, const auto& weight) {
+            const std::size_t pixel = std::size_t(row) * s.Width + box[0];
+            for (int col = first; col < last; ++col)
+            {
+              visit(i, pixel + col, amount * weight(col));
+            }
+          });
+        }
+      };
+      walk([&](std::int64_t, std::size_t p, double value) { change[p] += value; });
+      std::int64_t last = -1;
+      walk([&](std::int64_t i, std::size_t p, double value) {
+        if (i != last && value > 0 && mask[p] && change[p] > tolerance)
+        {
+          touching[k].push_back(i);
+          last = i;
+        }
+      });
+    }
+  });
+  for (const std::vector<std::int64_t>& kept : touching)
+  {
+    for (std::int64_t i : kept)
+    {
+      keep[i] = 1;
+    }
+  }
   const std::int64_t removed = n - std::count(keep.begin(), keep.end(), 1);
   if (removed > 0)
   {

@@ -101,10 +101,12 @@ BIGUSTRAINING_EXPORT bool DensifyField(TrainingEngine& engine, const TrainingDat
   double validation, TrainingState& state, std::string& growthStopReason, std::string* error);
 
 /**
- * The final prune: removes from @p G every Gaussian whose removal changes no pixel of a training frame
- * of @p data by more than @p tolerance in intensity: it changes S by at most |r| amp (its footprint's
- * peak, bigusGaussianMath.h SetupFootprint with @p options' beam and cutoff) and I by at most gamma |r|
- * amp (dI/dS <= @p gamma). Returns how many were removed.
+ * The final prune: removes from @p G a set of Gaussians whose removal together changes no pixel inside the mask of a
+ * training frame of @p data by more than @p tolerance in intensity. Removing Gaussian i changes S by r_i w_i (its
+ * footprint's weight at the pixel, at most its peak amp: bigusGaussianMath.h SetupFootprint with @p options' beam and
+ * cutoff) and I by at most gamma |r_i| w_i (dI/dS <= @p gamma); the candidates are the Gaussians whose own bound stays
+ * within the tolerance on every training frame, and of those, every one that touches a training pixel where the
+ * candidates' summed bound exceeds it is kept. Returns how many were removed.
  */
 BIGUSTRAINING_EXPORT std::int64_t FinalPrune(
   OptimizerState& G, const TrainingData& data, const RenderOptions& options, double gamma, double tolerance);

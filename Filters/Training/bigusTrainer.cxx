@@ -110,11 +110,9 @@ bool Trainer::PrepareInitialField(std::string* error)
   {
     return false;
   }
-  this->Report.Settings.push_back(gammaLine);
-  const SeedShape shape = this->SeedShapeOf();
   SeedingPlan plan;
   if (!PlanSeeding(data, this->Settings.Seeding, this->Settings.MaximumGaussians,
-        this->Settings.NonNegativeReflectivity, shape, count, plan, error))
+        this->Settings.NonNegativeReflectivity, this->SeedShapeOf(), count, plan, error))
   {
     return false;
   }
@@ -132,9 +130,19 @@ bool Trainer::PrepareInitialField(std::string* error)
   {
     return false;
   }
+  if (!plan.PixelGrid)
+  {
+    // Before gamma and the seeds: nothing of a held-out frame's pixels goes into the fit.
+    this->HoldOutValidationFrames();
+  }
+  if (this->Report.ValidationHeldOut && !GammaOfTrainingFrames(data, this->Gamma, count, gammaLine, error))
+  {
+    return false;
+  }
+  this->Report.Settings.push_back(gammaLine);
   GaussianField& field = this->State.Gaussians.Field;
-  this->Report.Settings.push_back(
-    SeedField(data, plan, this->Settings.Seeding, shape, this->Settings.Seed, this->Settings.Solve.L1, field));
+  this->Report.Settings.push_back(SeedField(
+    data, plan, this->Settings.Seeding, this->SeedShapeOf(), this->Settings.Seed, this->Settings.Solve.L1, field));
   this->Report.InitialGaussians =
     plan.PixelGrid || this->Settings.Seeding.DenseInitialisation ? field.Count() : plan.Count;
   if (plan.PixelGrid)
@@ -347,13 +355,21 @@ StepStatus Trainer::Step(double* loss, std::string* error)
 
 bool Trainer::CheckValidation(double& loss, std::string* error)
 {
-  if (!bigus::ValidationLoss(*this->Engine, *this->Data, ValidationFrames(*this->Data), this->Options(),
-        this->Settings.Loss, this->Reduction, loss, error))
+  TrainerReport& r = this->Report;
+  if (r.ValidationFrames.empty())
+  {
+    r.ValidationFrames = ValidationFrames(*this->Data); // a field given (SetField): its training frames
+  }
+  if (!bigus::ValidationLoss(*this->Engine, *this->Data, r.ValidationFrames, this->Options(), this->Settings.Loss,
+        this->Reduction, loss, error))
   {
     return false;
   }
-  this->Report.ValidationHistory.push_back({ this->State.Iteration, loss, this->State.Gaussians.Count() });
-  KeepIfBest(this->State, loss, this->GetField());
+  r.ValidationHistory.push_back({ this->State.Iteration, loss, this->State.Gaussians.Count() });
+  if (r.ValidationJoinedAt < 0)
+  {
+    KeepIfBest(this->State, loss, this->GetField());
+  }
   return true;
 }
 
@@ -364,6 +380,39 @@ bool Trainer::DensifyAndPrune(double validation, std::string* error)
       this->Settings.Densification, this->Settings.MaximumGaussians, validation, this->State,
       this->Report.GrowthStopReason, error) &&
     this->PushState(error);
+}
+
+void Trainer::HoldOutValidationFrames()
+{
+  TrainerReport& r = this->Report;
+  std::string line;
+  r.ValidationFrames = ChooseValidationFrames(*this->Data, this->Settings.HeldOut, r.ValidationHeldOut, line);
+  r.Settings.push_back(line);
+  if (r.ValidationHeldOut)
+  {
+    this->HeldOutValidation = r.ValidationFrames;
+    this->Engine->SetData(this->Data.get(), nullptr);
+  }
+}
+
+bool Trainer::JoinValidationFrames(const double* last, std::string* error)
+{
+  if (this->HeldOutValidation.empty())
+  {
+    return true;
+  }
+  if (last && RestoreBestField(this->State, *last))
+  {
+    this->Poses.ComposePoses(this->State); // the best field's poses
+    if (!this->PushState(error))
+    {
+      return false;
+    }
+  }
+  JoinTrainingFrames(*this->Data, this->HeldOutValidation);
+  this->HeldOutValidation.clear();
+  this->Report.ValidationJoinedAt = this->State.Iteration;
+  return this->Engine->SetData(this->Data.get(), error);
 }
 
 void Trainer::PlaceUntrainedFrames()
@@ -491,7 +540,14 @@ bool Trainer::Iterate(double start, const std::function<void(double, int, double
   {
     return false;
   }
-  const bool densify = d.Enabled && it >= d.Start && it % d.Interval == 0 && this->InDensificationWindow();
+  const bool window = this->InDensificationWindow();
+  const bool densify = d.Enabled && it >= d.Start && it % d.Interval == 0 && window;
+  // The choices made on the held-out frames end here: the fit goes on from the best field they scored, with them.
+  if (!window && it % d.Interval == 0 && !this->JoinValidationFrames(&validation, error))
+  {
+    return false;
+  }
+
   if ((densify && !this->DensifyAndPrune(validation, error)) ||
     (this->SolvesReflectivities() && (densify || (s.SolveInterval > 0 && it % s.SolveInterval == 0)) &&
       !this->SolveFieldReflectivities(error)))
@@ -540,13 +596,17 @@ bool Trainer::Finish(std::string* error)
   this->Report.LastValidationLoss = last;
   this->Report.BestValidationLoss = this->State.BestFieldLoss;
   this->Report.BestIteration = this->State.BestFieldIteration;
-  if (RestoreBestField(this->State, last))
+  if (this->Report.ValidationJoinedAt < 0 && RestoreBestField(this->State, last))
   {
     this->Poses.ComposePoses(this->State); // the best field's poses
     if (!this->PushState(error))
     {
       return false;
     }
+  }
+  if (!this->JoinValidationFrames(nullptr, error)) // the prune, gap filling and merge see every training frame
+  {
+    return false;
   }
   // The frames not trained (held out) take the smooth part of their neighbours' corrections, if any.
   this->PlaceUntrainedFrames();
@@ -617,7 +677,7 @@ bool Trainer::ReadCheckpoint(const std::string& file, std::string* error)
     this->State); // frames never corrected (held out, or before the corrections moved) stay as tracked
   this->Gamma = gamma;
   this->PixelGrid = false; // a checkpoint comes from a run that takes steps: it goes on with them
-  return this->PushState(error);
+  return this->PushState(error) && (this->InDensificationWindow() || this->JoinValidationFrames(nullptr, error));
 }
 
 } // namespace bigus

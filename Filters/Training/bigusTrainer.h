@@ -71,6 +71,13 @@ struct TrainerReport
     std::int64_t Gaussians = 0;
   };
   std::vector<ValidationRecord> ValidationHistory;
+  /// The frames validation scores: held out of the fit (HeldOutChoiceSettings::ValidationStride) or, where too few
+  /// are, training frames (ValidationFrames).
+  std::vector<int> ValidationFrames;
+  bool ValidationHeldOut = false; ///< whether ValidationFrames were held out of the fit
+  /// The iteration at which the held-out validation frames joined the fit (the densification window closed, or
+  /// Finish); -1 when none was held out. Early stopping and growth decide on the measurements before it.
+  int ValidationJoinedAt = -1;
   /// Pose refinement (RefinePoses): each training frame's correction, rotation vector (rad) then
   /// translation (mm) in its own axes about its centre pixel (bigus::CorrectPose); empty when off.
   using PoseCorrection = FramePoseCorrection;
@@ -134,12 +141,13 @@ public:
   bool Train(const std::function<void(double, int, double, std::int64_t)>& progress, const std::function<bool()>& abort,
     std::string* error);
   /**
-   * Ends a run: early stopping, the final prune (FinalPrune) and the report's totals. Early stopping:
-   * the validation frames (every 8th training frame, at most 8) are rendered every DensifyInterval
-   * steps and once more here; when a field seen during training scored a lower validation loss than
-   * the last one, that field is kept (fresh optimiser moments: Train may go on from it) and the report
-   * says so (BestIteration). A longer run therefore never ends with a higher validation loss than the
-   * best it passed through. Returns false with @p error when the engine fails.
+   * Ends a run: early stopping, the final prune, gap filling, the merge and the report's totals. Early stopping:
+   * the validation frames (TrainerReport::ValidationFrames: on the Adam route held out of the fit until the
+   * densification window closes, HeldOutChoiceSettings::ValidationStride) are rendered every Densification.Interval
+   * steps; when a field seen before they joined the fit scored a lower validation loss than the last one measured
+   * before, that field is kept (fresh optimiser moments) and the report says so (BestIteration). Where they join
+   * during Train, the choice is made there and training goes on from the kept field with them; otherwise it is made
+   * here, and they join before the final prune. Returns false with @p error when the engine fails.
    */
   bool Finish(std::string* error);
   /// Train, then Finish.
@@ -223,6 +231,13 @@ private:
     return (this->Settings.ReflectivitySolve || this->PixelGrid) && !this->Settings.NonNegativeReflectivity;
   }
   bool DensifyAndPrune(double validation, std::string* error);
+  /// The Adam route: the validation frames (HeldOutChoiceSettings::ValidationStride) taken out of the fit, and their
+  /// setting line; too few, the training frames ValidationFrames chooses.
+  void HoldOutValidationFrames();
+  /// The held-out validation frames join the fit (with RefinePoses, from their tracked poses, as they were scored),
+  /// from the best field they scored when the @p last validation loss (if given) is worse (RestoreBestField); after
+  /// this, a validation loss is recorded but no longer decides.
+  bool JoinValidationFrames(const double* last, std::string* error);
   /// One turn of Train's loop: the stop checks, a step, then what the schedule does at its iteration (validation,
   /// densification, solve, convergence, checkpoint, progress). @p stop: the run ends here (the report says why);
   /// false with @p error on an unrecoverable problem.
@@ -262,9 +277,10 @@ private:
     int Count = 0;
     double Previous = -1;
   } Recent;
-  bool DensificationEnded = false; // the last Train call ended past the densification window
-  bool PixelGrid = false;          // the field is the pixel-grid fit (PixelGridFit): Train takes no step
-  bool SigmaByRule = false;        // ElevationSigma came from the rule (MeasureElevationSigma may measure it)
+  bool DensificationEnded = false;    // the last Train call ended past the densification window
+  bool PixelGrid = false;             // the field is the pixel-grid fit (PixelGridFit): Train takes no step
+  std::vector<int> HeldOutValidation; // validation frames out of the fit until JoinValidationFrames; empty after
+  bool SigmaByRule = false;           // ElevationSigma came from the rule (MeasureElevationSigma may measure it)
   PoseRefiner Poses;
   std::vector<float> S; // scratch for RenderFrame
 };

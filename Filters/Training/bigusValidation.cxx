@@ -1,6 +1,11 @@
 // The validation stage (see bigusValidation.h).
 #include "bigusValidation.h"
 
+#include <vtk_fmt.h>
+// clang-format off
+#include VTK_FMT(fmt/printf.h)
+// clang-format on
+
 #include <algorithm>
 
 namespace bigus
@@ -16,6 +21,41 @@ std::vector<int> ValidationFrames(const TrainingData& data)
     frames.push_back(data.TrainFrames[n]);
   }
   return frames;
+}
+
+std::vector<int> ChooseValidationFrames(
+  TrainingData& data, const HeldOutChoiceSettings& settings, bool& heldOut, std::string& line)
+{
+  const HeldOutChoiceSettings& h = settings;
+  const bool holdOut = h.Enabled && h.HoldOutValidationFrames;
+  const int minimum = std::max(2, h.MinimumValidationFrames);
+  std::vector<int> frames =
+    holdOut ? HeldOutFrames(data, h.ValidationStride, h.MaximumValidationFrames) : std::vector<int>();
+  heldOut = static_cast<int>(frames.size()) >= minimum;
+  if (!heldOut)
+  {
+    frames = ValidationFrames(data);
+    line = vtkfmt::sprintf("Validation = %d training frames (%s)", int(frames.size()),
+      holdOut ? vtkfmt::sprintf("too few training frames to hold %d out", minimum).c_str()
+              : "every (T / 8)-th of the T training frames: none is held out of the fit");
+    return frames;
+  }
+  std::vector<int>& train = data.TrainFrames; // both in order
+  train.erase(std::remove_if(
+                train.begin(), train.end(), [&](int f) { return std::binary_search(frames.begin(), frames.end(), f); }),
+    train.end());
+  line = vtkfmt::sprintf("Validation = %d held-out frames (one in %d training frames of a sweep, at most %d): out of "
+                         "the fit until the densification window closes, then in it; growth stops and early stopping "
+                         "keeps a field on them",
+    int(frames.size()), h.ValidationStride, h.MaximumValidationFrames);
+  return frames;
+}
+
+void JoinTrainingFrames(TrainingData& data, const std::vector<int>& frames)
+{
+  std::vector<int>& train = data.TrainFrames;
+  train.insert(train.end(), frames.begin(), frames.end());
+  std::sort(train.begin(), train.end());
 }
 
 bool ValidationLoss(TrainingEngine& engine, const TrainingData& data, const std::vector<int>& frames,

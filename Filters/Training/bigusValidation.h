@@ -8,6 +8,7 @@
 #ifndef bigusValidation_h
 #define bigusValidation_h
 
+#include "bigusHeldOutChoices.h"
 #include "bigusImageLoss.h"
 #include "bigusTrainingEngine.h"
 #include "bigusTrainingModule.h" // For export macro
@@ -24,6 +25,19 @@ namespace bigus
  * to them too, and the end of a sweep is not always among them.
  */
 BIGUSTRAINING_EXPORT std::vector<int> ValidationFrames(const TrainingData& data);
+
+/**
+ * The validation frames of a run that takes steps, by @p settings (TrainerSettings::HeldOut): with
+ * HoldOutValidationFrames, HeldOutFrames(@p data, ValidationStride, MaximumValidationFrames), taken out of @p data's
+ * TrainFrames when there are at least MinimumValidationFrames (and 2) of them (@p heldOut true); otherwise
+ * ValidationFrames(@p data), training frames (@p heldOut false). @p line receives the stage's setting line
+ * ("Validation = ...").
+ */
+BIGUSTRAINING_EXPORT std::vector<int> ChooseValidationFrames(
+  TrainingData& data, const HeldOutChoiceSettings& settings, bool& heldOut, std::string& line);
+
+/// @p frames (held out by ChooseValidationFrames) back into @p data's TrainFrames, in order.
+BIGUSTRAINING_EXPORT void JoinTrainingFrames(TrainingData& data, const std::vector<int>& frames);
 
 /**
  * The mean image loss (@p weights; bigus::ComputeImageLoss inside each frame's mask) of @p engine's field on

@@ -337,3 +337,75 @@ TEST(Trainer, ADensificationAddsResidualSeedsOnTrainingFrames)
     EXPECT_NE(f.Reflectivities[i], 0.f) << "seed " << i;
   }
 }
+
+// The final prune's bound holds for everything it removes together: 50 Gaussians on one spot and 15 apart, each
+// changing any pixel by at most half the tolerance alone (|r| = tolerance / 2, amp <= 1, gamma 1). Removing them all,
+// as a bound per Gaussian would, changes the spot by about 25 tolerances; the prune removes the 15 apart and keeps
+// what would exceed it. The truth is the render: no training pixel moves by more than the tolerance.
+TEST(Densification, TheFinalPrunesBoundHoldsForWhatItRemovesTogether)
+{
+  TrainingData data;
+  data.Width = W;
+  data.Height = H;
+  data.Mask.assign(std::size_t(W) * H, 1);
+  for (int k = 0; k < 10; ++k)
+  {
+    data.Poses.push_back(SweepPose(k));
+    data.TrainFrames.push_back(k);
+  }
+  data.Frames.assign(std::size_t(W) * H * data.Poses.size(), 0.f);
+  const double tolerance = 1.0 / 512;
+  GaussianField field;
+  auto add = [&](double i, double j, double scale, double r) {
+    const std::array<double, 16>& m = data.Poses[5]; // on frame 5's plane, at pixel (i, j)
+    for (int a = 0; a < 3; ++a)
+    {
+      field.Means.push_back(static_cast<float>(m[4 * a] * i + m[4 * a + 1] * j + m[4 * a + 3]));
+      field.LogScales.push_back(static_cast<float>(std::log(scale)));
+    }
+    field.Quaternions.insert(field.Quaternions.end(), { 1.f, 0.f, 0.f, 0.f });
+    field.Reflectivities.push_back(static_cast<float>(r));
+  };
+  for (int k = 0; k < 50; ++k)
+  {
+    add(20, 20, 0.3, 0.5 * tolerance);
+  }
+  for (int a = 0; a < 5; ++a)
+  {
+    for (int b = 0; b < 3; ++b)
+    {
+      add(8 + 10 * a, 36 + 10 * b, 0.3, 0.5 * tolerance);
+    }
+  }
+  add(32, 10, 1.0, 0.5); // a Gaussian no prune removes
+  RenderOptions o;
+  o.ElevationSigma = 0.5;
+  o.Gamma = 1.0;
+  auto render = [&](const GaussianField& f) {
+    std::vector<float> I(data.Frames.size()), S(std::size_t(W) * H);
+    auto renderer = CreateCpuRenderer();
+    for (int k = 0; k < data.Count(); ++k)
+    {
+      const SliceGeometry g = data.Slice(k);
+      EXPECT_TRUE(renderer->Forward(f.View(), &g, 1, o, S.data(), I.data() + std::size_t(W) * H * k, nullptr, nullptr));
+    }
+    return I;
+  };
+  const std::vector<float> before = render(field);
+  OptimizerState G;
+  G.Field = field;
+  G.ResizeToField();
+  const std::int64_t removed = FinalPrune(G, data, o, o.Gamma, tolerance);
+  const std::vector<float> after = render(G.Field);
+  double largest = 0;
+  for (std::size_t p = 0; p < before.size(); ++p)
+  {
+    largest = std::max(largest, std::abs(double(after[p]) - before[p]));
+  }
+  std::printf("removed %lld of %lld; largest change of a training pixel %.3g (tolerance %.3g)\n",
+    static_cast<long long>(removed), static_cast<long long>(field.Count()), largest, tolerance);
+  EXPECT_LE(largest, tolerance * (1 + 1e-3));
+  EXPECT_GE(removed, 15); // the Gaussians apart are removed ...
+  EXPECT_LT(removed, 50); // ... and not the whole spot
+  EXPECT_EQ(G.Field.Count(), field.Count() - removed);
+}

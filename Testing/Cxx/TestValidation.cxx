@@ -1,9 +1,14 @@
 // The validation stage (bigusValidation.h): which training frames a run scores itself on while it trains.
 #include "bigusValidation.h"
 
+#include "bigusHeldOutChoices.h"
+#include "bigusTrainingTestUtilities.h"
+
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <limits>
+#include <random>
 #include <vector>
 
 using namespace bigus;
@@ -74,4 +79,67 @@ TEST(Validation, EarlyStoppingKeepsAndRestoresTheBestFieldWithItsPoses)
   EXPECT_EQ(state.Gaussians.FirstMoment.Reflectivities[0], 0.f) << "fresh moments";
   EXPECT_DOUBLE_EQ(state.PoseCorrections[1][3], 0.2) << "the poses the best field was measured at";
   EXPECT_EQ(state.BestFieldLoss, 0.3) << "the record of the best stays";
+}
+
+// The Adam route's validation frames (HeldOutChoiceSettings::ValidationStride) are held out of the fit until the
+// densification window closes. Two runs whose held-out frames differ (the second's replaced by noise) fit the same
+// field, bit for bit, up to that point: gamma, the seeds and every step see only the fitted frames. A fitted frame
+// changed the same way changes the field (the comparison can fail). After Finish the held-out frames are in the fit.
+TEST(Validation, HeldOutFramesAreNotFittedBeforeTheyJoin)
+{
+  using namespace bigus::synthetic;
+  const GaussianField truth = KnownField(400, 3);
+  std::vector<int> testFrames;
+  const TrainingData data = SyntheticSweep(truth, 0.5, testFrames);
+  TrainerSettings s = ShortSettings(); // the window closes at step 150, the next validation (200) joins
+  s.HeldOut.HoldOutValidationFrames = true;
+  const std::vector<int> held = HeldOutFrames(data, s.HeldOut.ValidationStride, s.HeldOut.MaximumValidationFrames);
+  ASSERT_GE(held.size(), 2u);
+  const std::size_t pixels = std::size_t(data.Width) * data.Height;
+  auto withNoiseOn = [&](int frame) {
+    TrainingData changed = data;
+    std::mt19937_64 rng(5);
+    std::uniform_real_distribution<float> uniform(0.f, 1.f);
+    std::generate_n(changed.Frames.begin() + pixels * frame, pixels, [&]() { return uniform(rng); });
+    return changed;
+  };
+  auto fieldAtStep150 = [&](const TrainingData& d, TrainerReport* report) {
+    Trainer trainer(d, s);
+    std::string error;
+    EXPECT_TRUE(trainer.Initialize(&error)) << error;
+    EXPECT_TRUE(trainer.Train(
+      nullptr, [&]() { return trainer.GetIteration() >= 150; }, &error))
+      << error;
+    EXPECT_EQ(trainer.GetIteration(), 150);
+    for (int f : held)
+    {
+      EXPECT_FALSE(std::binary_search(trainer.GetData().TrainFrames.begin(), trainer.GetData().TrainFrames.end(), f))
+        << "validation frame " << f << " is fitted before the window closes";
+    }
+    if (report)
+    {
+      *report = trainer.GetReport();
+    }
+    return trainer.GetField();
+  };
+  TrainerReport report;
+  const GaussianField reference = fieldAtStep150(data, &report);
+  EXPECT_TRUE(report.ValidationHeldOut);
+  EXPECT_EQ(report.ValidationFrames, held);
+  EXPECT_EQ(report.ValidationJoinedAt, -1);
+  TrainingData noisy = data;
+  for (int f : held)
+  {
+    std::copy_n(withNoiseOn(f).Frames.begin() + pixels * f, pixels, noisy.Frames.begin() + pixels * f);
+  }
+  ExpectSameField(fieldAtStep150(noisy, nullptr), reference);
+  // A fitted frame changed the same way changes the field.
+  const GaussianField changed = fieldAtStep150(withNoiseOn(data.TrainFrames[1]), nullptr);
+  EXPECT_NE(changed.Means, reference.Means);
+
+  Trainer trainer(data, s);
+  std::string error;
+  ASSERT_TRUE(trainer.Initialize(&error) && trainer.Run(nullptr, nullptr, &error)) << error;
+  EXPECT_EQ(trainer.GetReport().ValidationJoinedAt, 200);
+  EXPECT_EQ(trainer.GetData().TrainFrames, data.TrainFrames);
 }
