@@ -410,6 +410,11 @@ int RunBatch(const BatchOptions& o)
   }
   const std::string summaryFolder =
     o.Summary.empty() ? fs::absolute(fs::path(o.Manifest)).parent_path().string() : o.Summary;
+  // Before any job runs: the summary can be written there.
+  if (CheckOutputs({ summaryFolder + "/summary.json", summaryFolder + "/summary.md" }, { o.Manifest }) != 0)
+  {
+    return finish(2);
+  }
   // The batch's own lines go to the terminal even while a job's output goes to its log.
   FILE* console = fdopen(::dup(STDOUT_FILENO), "w");
   std::mutex printing;

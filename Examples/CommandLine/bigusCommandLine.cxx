@@ -17,6 +17,7 @@
 #include "vtkXMLPolyDataWriter.h"
 
 #include <CLI/CLI.hpp>
+#include <vtksys/SystemTools.hxx>
 #include <algorithm>
 #include <cstdlib>
 #include <mpi.h>
@@ -193,14 +194,75 @@ int ThreadsPerRank()
   return std::max(1, static_cast<int>(std::thread::hardware_concurrency()) / local);
 }
 
+int CheckOutputs(const std::vector<std::string>& outputs, const std::vector<std::string>& inputs)
+{
+  using vtksys::SystemTools;
+  for (std::size_t k = 0; k < outputs.size(); ++k)
+  {
+    const std::string& output = outputs[k];
+    if (output.empty())
+    {
+      continue;
+    }
+    const std::string full = SystemTools::CollapseFullPath(output);
+    const bool exists = SystemTools::FileExists(output);
+    if (exists && SystemTools::FileIsDirectory(output))
+    {
+      return Fail(output + ": is a folder, not a file to write");
+    }
+    for (const std::string& input : inputs)
+    {
+      if (!input.empty() && exists && SystemTools::SameFile(output, input))
+      {
+        return Fail(output + ": is also an input (" + input + "); it would be replaced. Write to another file");
+      }
+    }
+    for (std::size_t m = 0; m < k; ++m)
+    {
+      if (!outputs[m].empty() && SystemTools::CollapseFullPath(outputs[m]) == full)
+      {
+        return Fail(output + ": is named for two outputs");
+      }
+    }
+    const std::string folder = SystemTools::GetFilenamePath(full);
+    if (!SystemTools::FileIsDirectory(folder))
+    {
+      return Fail(output + ": the folder " + folder + " does not exist");
+    }
+    if (!SystemTools::TestFileAccess(folder, vtksys::TEST_FILE_WRITE))
+    {
+      return Fail(output + ": the folder " + folder + " is not writable");
+    }
+  }
+  return 0;
+}
+
+namespace
+{
+/// @p writer's XML (written to its output string) into @p temporary, every write and the close checked: a full disk
+/// is found here, not after the rename (VTK's XML writers do not check the close).
+bool WriteXml(vtkXMLWriterBase* writer, const std::string& temporary)
+{
+  writer->WriteToOutputStringOn();
+  if (!writer->Write())
+  {
+    return false;
+  }
+  const std::string text = writer->GetOutputString();
+  std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
+  out.write(text.data(), static_cast<std::streamsize>(text.size()));
+  out.close();
+  return static_cast<bool>(out);
+}
+}
+
 int WriteField(vtkPolyData* field, const std::string& path)
 {
   const std::string temporary = TemporaryName(path);
   vtkNew<vtkXMLPolyDataWriter> writer;
   writer->SetInputData(field);
-  writer->SetFileName(temporary.c_str());
   writer->SetDataModeToAppended();
-  if (!writer->Write() || !Publish(temporary, path))
+  if (!WriteXml(writer, temporary) || !Publish(temporary, path))
   {
     std::remove(temporary.c_str());
     return Fail(path + ": cannot write the field");
@@ -242,8 +304,7 @@ int WriteImage(vtkImageData* image, const std::string& path)
   {
     vtkNew<vtkXMLImageDataWriter> writer;
     writer->SetInputData(image);
-    writer->SetFileName(temporary.c_str());
-    ok = writer->Write() != 0;
+    ok = WriteXml(writer, temporary);
   }
   else
   {

@@ -90,6 +90,14 @@ vtkSmartPointer<vtkUltrasoundSequenceReader> ReadSweep(const SweepOptions& o);
 /// Reads a Gaussian field (.vtp with point data Scale, Rotation, Reflectivity); null after a message.
 vtkSmartPointer<vtkPolyData> ReadField(const std::string& file);
 
+/**
+ * Before any work: each of @p outputs (empty ones skipped) is refused when it is one of @p inputs (the same file,
+ * links resolved: vtksys::SystemTools::SameFile) or another of @p outputs, when it is a folder, or when its folder
+ * is missing or not writable. 0, or 1 after a message naming the output and what is wrong, so that nothing the
+ * user had is replaced and no run is lost to an output it cannot write.
+ */
+int CheckOutputs(const std::vector<std::string>& outputs, const std::vector<std::string>& inputs);
+
 /// Writes @p field (.vtp, appended data) under a temporary name, then renames it to @p path (Publish); 0, or 1
 /// after a message (the temporary file removed, an existing @p path untouched).
 int WriteField(vtkPolyData* field, const std::string& path);

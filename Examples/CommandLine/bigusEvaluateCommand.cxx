@@ -254,6 +254,15 @@ vtkIdType RefinedPosesOf(vtkImageData* sweep, vtkDataArray* poses, double tolera
 
 int RunEvaluate(const EvaluateOptions& o)
 {
+  // Before any work: the report folder exists or is made, and its files replace none of the inputs.
+  if (::mkdir(o.Report.c_str(), 0755) != 0 && errno != EEXIST)
+  {
+    return Fail(o.Report + ": cannot create the report folder");
+  }
+  if (CheckOutputs({ o.Report + "/metrics.json" }, { o.Field, o.Sweep.Sweep, o.Mask }) != 0)
+  {
+    return 1;
+  }
   auto field = ReadField(o.Field);
   auto reader = field ? ReadSweep(o.Sweep) : nullptr;
   if (!reader)
@@ -343,10 +352,6 @@ int RunEvaluate(const EvaluateOptions& o)
     return Fail("rendering failed: " + message);
   }
   vtkImageData* rendered = renderer->GetOutput();
-  if (::mkdir(o.Report.c_str(), 0755) != 0 && errno != EEXIST)
-  {
-    return Fail(o.Report + ": cannot create the report folder");
-  }
   const std::size_t pixels = std::size_t(dims[0]) * dims[1];
   const auto* renderedPixels = static_cast<float*>(rendered->GetScalarPointer());
   std::vector<std::optional<bigus::ImageMetrics>> perFrame;

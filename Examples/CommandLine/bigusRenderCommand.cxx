@@ -32,6 +32,10 @@ struct RenderOptionsCli
 
 int RunRender(const RenderOptionsCli& o)
 {
+  if (CheckOutputs({ o.Output }, { o.Field, o.Poses.Sweep, o.Poses.Calibration }) != 0)
+  {
+    return 1;
+  }
   auto field = ReadField(o.Field);
   if (!field)
   {

@@ -139,6 +139,18 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
       count, o.RefinedPoses.size());
     return 2;
   }
+  // Before any work: no output replaces an input, and every output can be written.
+  // (The checkpoint may be the file a run resumes from.)
+  std::vector<std::string> outputs = o.RefinedPoses, inputs = o.Sweeps;
+  outputs.push_back(o.Output);
+  inputs.insert(inputs.end(), o.Calibrations.begin(), o.Calibrations.end());
+  inputs.insert(inputs.end(), o.Masks.begin(), o.Masks.end());
+  std::vector<std::string> withCheckpoint = outputs;
+  withCheckpoint.push_back(o.Checkpoint);
+  if (CheckOutputs(withCheckpoint, inputs) != 0 || CheckOutputs(outputs, { o.Resume }) != 0)
+  {
+    return 1;
+  }
   vtkNew<vtkGaussianFieldTrainer> trainer;
   std::vector<vtkSmartPointer<vtkUltrasoundSequenceReader>> readers;
   for (std::size_t k = 0; k < count; ++k)

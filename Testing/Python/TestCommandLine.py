@@ -6,6 +6,7 @@ Usage: TestCommandLine.py TESTING_DATA_DIR EXAMPLE_DATA_DIR BIGUS_EXECUTABLE OUT
 import json
 import math
 import os
+import shutil
 import subprocess
 import sys
 
@@ -132,6 +133,48 @@ def check_metrics_write_failure(field, sweep, xml, report):
     assert code == 1 and err.count("\n") == 1 and "metrics.json" in err, (code, err)
     assert not os.path.islink(metrics) and open(metrics, "rb").read() == before
     assert not [f for f in os.listdir(report) if ".tmp" in f], os.listdir(report)
+
+
+def check_outputs_before_any_work(field, sweep, xml, out):
+    """An output that is one of the run's inputs (also through a link) is refused before any work and the input
+    is untouched; so are an output whose folder does not exist (refused before training, not after it) and one file
+    named for two outputs."""
+    copy = os.path.join(out, "sweep_copy.igs.mha")
+    shutil.copyfile(sweep, copy)
+    before = open(copy, "rb").read()
+    link = os.path.join(out, "sweep_link.igs.mha")
+    if not os.path.lexists(link):
+        os.symlink(copy, link)
+    for output in (copy, link):
+        code, out_text, err = run("train", copy, "--calibration", xml, "-o", output, "--iterations", "5")
+        assert code == 1 and err.count("\n") == 1 and "is also an input" in err, (code, err)
+        assert "training " not in out_text and open(copy, "rb").read() == before, out_text
+    code, _, err = run("render", field, "--poses", copy, "--calibration", xml, "-o", link)
+    assert code == 1 and "is also an input" in err and open(copy, "rb").read() == before, (code, err)
+    missing = os.path.join(out, "no-such-folder", "field.vtp")
+    code, out_text, err = run("train", sweep, "--calibration", xml, "-o", missing, "--iterations", "5")
+    assert code == 1 and err.count("\n") == 1 and "does not exist" in err, (code, err)
+    assert "training " not in out_text, out_text
+    twice = os.path.join(out, "twice.vtp")
+    code, _, err = run("train", sweep, "--calibration", xml, "-o", twice, "--checkpoint", twice, "--iterations", "5")
+    assert code == 1 and "two outputs" in err and not os.path.exists(twice), (code, err)
+
+
+def check_field_write_failure(field, sweep, xml, out):
+    """A trained field whose write fails (its temporary a link to /dev/full: a full disk): exit 1 naming the file,
+    the temporary removed, the field already there untouched (VTK's XML writer does not check the close; the
+    command writes the XML itself and checks every write)."""
+    before = open(field, "rb").read()
+    stem = os.path.splitext(field)[0]
+
+    def full_disk_temporary():
+        os.symlink("/dev/full", "%s.tmp%d.vtp" % (stem, os.getpid()))
+
+    code, _, err = run("train", sweep, "--calibration", xml, "-o", field, "--holdout-every", "4", "--holdout-offset",
+                       "2", "--iterations", "5", "--elevation-sigma", "1.0", preexec_fn=full_disk_temporary)
+    assert code == 1 and "cannot write the field" in err, (code, err)
+    assert not os.path.islink(field) and open(field, "rb").read() == before
+    assert not [f for f in os.listdir(out) if ".tmp" in f], os.listdir(out)
 
 
 def check_sweep_without_statuses(field, sweep, xml, out):
@@ -499,6 +542,8 @@ def main():
     check_merge(sweep, xml, out)
     check_refine_poses(sweep, xml, out)
     check_several_sweeps(data, sweep, xml, out)
+    check_outputs_before_any_work(field, sweep, xml, out)
+    check_field_write_failure(field, sweep, xml, out)
 
     rendered = os.path.join(out, "nwire_rendered.igs.mha")
     code, out_text, err = run("render", field, "--poses", sweep, "--calibration", xml, "--frames", "2", "6", "10",
