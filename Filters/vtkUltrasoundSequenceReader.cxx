@@ -20,6 +20,7 @@
 #include "vtkStreamingDemandDrivenPipeline.h"
 #include "vtkUnsignedCharArray.h"
 
+#include <sys/stat.h>
 #include <zlib.h>
 
 #include <algorithm>
@@ -163,6 +164,25 @@ int vtkUltrasoundSequenceReader::Fail(const std::string& message)
   return 0;
 }
 
+namespace
+{
+/// zlib's largest ratio of inflated to deflated bytes (its technical details: 1032:1 at most).
+constexpr std::uint64_t MaximumInflation = 1032;
+
+/// Whether @p path names a regular file (not a folder, a pipe, a device); false when it does not exist.
+bool IsRegularFile(const std::string& path)
+{
+  struct stat s;
+  return ::stat(path.c_str(), &s) == 0 && S_ISREG(s.st_mode);
+}
+
+bool Exists(const std::string& path)
+{
+  struct stat s;
+  return ::stat(path.c_str(), &s) == 0;
+}
+}
+
 int vtkUltrasoundSequenceReader::RequestInformation(
   vtkInformation*, vtkInformationVector**, vtkInformationVector* outputVector)
 {
@@ -179,6 +199,10 @@ int vtkUltrasoundSequenceReader::RequestInformation(
     return this->Fail("vtkUltrasoundSequenceReader: no FileName set");
   }
   const std::string file = this->FileName;
+  if (Exists(file) && !IsRegularFile(file))
+  {
+    return this->Fail(file + ": not a regular file (a folder, a pipe or a device cannot be read as a sequence)");
+  }
   try
   {
     std::ifstream stream(file, std::ios::binary);
@@ -442,6 +466,11 @@ int vtkUltrasoundSequenceReader::RequestData(
     dataPath = layout.ElementDataFile[0] == '/' ? layout.ElementDataFile : DirectoryOf(file) + layout.ElementDataFile;
     offset = 0;
   }
+  if (Exists(dataPath) && !IsRegularFile(dataPath))
+  {
+    return fail(file + ": field ElementDataFile names '" + layout.ElementDataFile + "' (" + dataPath +
+      "), which is not a regular file (a folder, a pipe or a device)");
+  }
   std::ifstream data(dataPath, std::ios::binary | std::ios::ate);
   if (!data)
   {
@@ -451,6 +480,19 @@ int vtkUltrasoundSequenceReader::RequestData(
   const std::uint64_t fileSize = static_cast<std::uint64_t>(data.tellg());
   const std::uint64_t available = fileSize > offset ? fileSize - offset : 0;
   data.seekg(static_cast<std::streamoff>(offset));
+  // The sizes before any allocation: a DimSize the data cannot hold is refused here, not after allocating it.
+  const std::string dims = std::to_string(width) + " x " + std::to_string(height) + " x " + std::to_string(frames);
+  if (!layout.Compressed && available != expected)
+  {
+    return fail(file + ": field DimSize " + dims + " needs " + std::to_string(expected) + " bytes of pixel data but " +
+      dataPath + " holds " + std::to_string(available) + (available < expected ? " (truncated file?)" : ""));
+  }
+  if (layout.Compressed && expected / MaximumInflation > available)
+  {
+    return fail(file + ": field DimSize " + dims + " needs " + std::to_string(expected) +
+      " bytes of pixel data but the compressed body in " + dataPath + " holds " + std::to_string(available) +
+      " bytes, which inflate to at most " + std::to_string(available * MaximumInflation) + " (truncated file?)");
+  }
 
   output->SetExtent(0, width - 1, 0, height - 1, 0, in.Count - 1);
   output->SetSpacing(1, 1, 1);
@@ -466,7 +508,18 @@ int vtkUltrasoundSequenceReader::RequestData(
   }
   scalars->SetName("Intensity");
   scalars->SetNumberOfComponents(1);
-  scalars->SetNumberOfTuples(vtkIdType(width) * height * in.Count);
+  const vtkIdType tuples = vtkIdType(width) * height * in.Count;
+  const bool allocated = scalars->Allocate(tuples) != 0;
+  if (allocated)
+  {
+    scalars->SetNumberOfTuples(tuples);
+  }
+  if (!allocated || scalars->GetNumberOfTuples() != tuples)
+  {
+    return fail(file + ": cannot allocate the " + std::to_string(frameBytes * std::uint64_t(in.Count)) +
+      " bytes that frames " + std::to_string(in.First) + " to " + std::to_string(in.First + in.Count - 1) +
+      " need (field DimSize " + dims + ")");
+  }
   unsigned char* dst = static_cast<unsigned char*>(scalars->GetVoidPointer(0));
 
   const bool flipColumns = layout.Orientation[0] == 'U';
@@ -502,16 +555,8 @@ int vtkUltrasoundSequenceReader::RequestData(
       }
     }
   };
-  const std::string dims = std::to_string(width) + " x " + std::to_string(height) + " x " + std::to_string(frames);
-
   if (!layout.Compressed)
   {
-    if (available != expected)
-    {
-      return fail(file + ": field DimSize " + dims + " needs " + std::to_string(expected) +
-        " bytes of pixel data but " + dataPath + " holds " + std::to_string(available) +
-        (available < expected ? " (truncated file?)" : ""));
-    }
     data.seekg(static_cast<std::streamoff>(offset + std::uint64_t(in.First) * frameBytes));
     for (int k = in.First; k < in.First + in.Count; ++k)
     {

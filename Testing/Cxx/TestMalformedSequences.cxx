@@ -16,13 +16,20 @@
 
 #include <gtest/gtest.h>
 
+#include <sys/stat.h>
+
 #include <cctype>
+#include <cstdio>
+#include <fstream>
+#include <iterator>
+#include <sstream>
 #include <ostream>
 #include <string>
 #include <vector>
 
 using bigus_test::DataPath;
 using bigus_test::MessageCollector;
+using bigus_test::OutputPath;
 using bigus_test::Pose;
 
 namespace
@@ -388,6 +395,61 @@ TEST_F(WellFormedSequence, DirectImageToReferenceMatchesChain)
   ASSERT_TRUE(r.UpdateOk);
   EXPECT_EQ(r.ChainInUse, "ImageToReference");
   ExpectSameSequence(FirstFour, r.Output, 1e-9, "imagetoreference_direct.igs.mha");
+}
+
+// Files that are not what a header says, written here from copy_uncompressed.mhd (issue 56): a DimSize of
+// 16384 x 16384 x 256 (64 GiB; frame fields copied for 256 frames) over its 120 KB of pixels is refused by the sizes
+// before anything is allocated (it was allocated first: std::bad_alloc, or ASan's allocation-size abort); a
+// sequence or an ElementDataFile that is a pipe or a folder is refused at once (a pipe blocked the reader forever).
+TEST(MalformedSequenceSizes, WhatTheFileCannotHoldOrIsNotAFileIsRefusedBeforeReading)
+{
+  std::ifstream in(Corpus("copy_uncompressed.mhd"), std::ios::binary);
+  std::string header((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  auto withLine = [&](const std::string& key, const std::string& value) {
+    std::string text = header;
+    const std::size_t at = text.find(key + " = ");
+    text.replace(at, text.find('\n', at) - at, key + " = " + value);
+    return text;
+  };
+  const std::string raw = Corpus("copy_uncompressed.raw");
+  auto write = [](const std::string& path, const std::string& text) {
+    std::ofstream(path, std::ios::binary | std::ios::trunc) << text;
+    return path;
+  };
+  header = withLine("ElementDataFile", raw);
+  std::string frames; // frame 0's fields again for frames 4 to 255, before the ElementDataFile line
+  std::istringstream lines(header);
+  for (std::string line; std::getline(lines, line);)
+  {
+    for (int k = 4; k < 256 && line.rfind("Seq_Frame0000_", 0) == 0; ++k)
+    {
+      char name[16];
+      std::snprintf(name, sizeof(name), "Seq_Frame%04d", k);
+      frames += name + line.substr(13) + "\n";
+    }
+  }
+  std::string many = withLine("DimSize", "16384 16384 256");
+  many.insert(many.find("ElementDataFile = "), frames);
+  ReadResult r = Read(write(OutputPath("dimsize_huge.mhd"), many));
+  EXPECT_FALSE(r.UpdateOk);
+  EXPECT_NE(
+    r.ErrorText.find("DimSize 16384 x 16384 x 256 needs 68719476736 bytes of pixel data but"), std::string::npos)
+    << r.ErrorText;
+  EXPECT_EQ(r.Output->GetNumberOfPoints(), 0);
+
+  const std::string pipe = OutputPath("sequence_pipe.igs.mha");
+  std::remove(pipe.c_str());
+  ASSERT_EQ(::mkfifo(pipe.c_str(), 0600), 0);
+  r = Read(pipe);
+  EXPECT_FALSE(r.UpdateOk);
+  EXPECT_NE(r.ErrorText.find("not a regular file"), std::string::npos) << r.ErrorText;
+  for (const std::string& data : { pipe, OutputPath("") })
+  {
+    r = Read(write(OutputPath("data_not_a_file.mhd"), withLine("ElementDataFile", data)));
+    EXPECT_FALSE(r.UpdateOk);
+    EXPECT_NE(r.ErrorText.find("which is not a regular file"), std::string::npos) << r.ErrorText;
+  }
+  std::remove(pipe.c_str());
 }
 
 TEST(MalformedSequenceReuse, ErrorIsClearedByTheNextGoodFile)
