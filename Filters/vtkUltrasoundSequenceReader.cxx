@@ -176,6 +176,7 @@ bool IsRegularFile(const std::string& path)
   return ::stat(path.c_str(), &s) == 0 && S_ISREG(s.st_mode);
 }
 
+/// Whether anything (a file, a folder, a pipe ...) is at @p path.
 bool Exists(const std::string& path)
 {
   struct stat s;
