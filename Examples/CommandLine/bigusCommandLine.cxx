@@ -219,7 +219,9 @@ int CheckOutputs(const std::vector<std::string>& outputs, const std::vector<std:
     }
     for (std::size_t m = 0; m < k; ++m)
     {
-      if (!outputs[m].empty() && SystemTools::CollapseFullPath(outputs[m]) == full)
+      if (!outputs[m].empty() &&
+        (SystemTools::CollapseFullPath(outputs[m]) == full ||
+          (exists && SystemTools::FileExists(outputs[m]) && SystemTools::SameFile(output, outputs[m]))))
       {
         return Fail(output + ": is named for two outputs");
       }

@@ -139,9 +139,11 @@ std::int64_t FinalPrune(
     slices.push_back(data.Slice(f));
   }
   std::vector<PreparedSlice> prepared;
-  if (!PrepareSlices(slices.data(), static_cast<int>(slices.size()), o, prepared, nullptr))
+  RenderOptions frames = o;
+  frames.MaximumShearAngle = 90; // every training pose passed Initialize's check; refined ones are rigid changes of it
+  if (!PrepareSlices(slices.data(), static_cast<int>(slices.size()), frames, prepared, nullptr))
   {
-    return 0; // a pose the renderer rejects (Initialize refuses them): nothing is removed
+    return 0; // no frame can be set up (an invalid pose): nothing is removed
   }
   auto reflectivity = [&](const GaussianParams& g) {
     return o.NonNegativeReflectivity ? std::max(g.Reflectivity, 0.0) : std::abs(g.Reflectivity);

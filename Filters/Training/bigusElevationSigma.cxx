@@ -435,7 +435,7 @@ PoseRefinementChoice ChoosePoseRefinement(const std::vector<SweepDecorrelation>&
 double ElevationSigmaSetting(
   double given, const std::function<const std::vector<SweepDecorrelation>&()>& sweeps, bool& byRule, std::string& line)
 {
-  byRule = given <= 0;
+  byRule = !(given > 0); // 0, negative or NaN: the rule
   if (!byRule)
   {
     line = vtkfmt::sprintf("ElevationSigma = %.4g mm (given)", given);

@@ -43,7 +43,8 @@ struct HeldOutChoiceSettings
   double Tolerance = 0.05;
   /// ElevationSigma's candidates: the rule's value times these (small ones included: a volume has no beam).
   std::vector<double> ElevationSigmaFactors = { 0.125, 0.25, 0.5, 1.0, 2.0 };
-  /// The Adam route's validation frames held out of the fit (true), or training frames (false; ValidationFrames).
+  /// The Adam route's validation frames held out of the fit (true), or training frames (false; ValidationFrames);
+  /// a switch of its own, whatever Enabled says.
   /// Off by default: on the liver's main job the frames out of the fit cost more than the honest decisions gave
   /// (300 s: 36.99 dB at the test frames' tracked poses against 37.20; 90 s: 35.75 against 35.99), while on
   /// synthetic truth (16,000 steps) they gave 1.9 dB (docs/FINDINGS.md, "Validation frames held out of the fit").
@@ -52,7 +53,8 @@ struct HeldOutChoiceSettings
   /// ValidationStride-th training frame of a sweep, at most MaximumValidationFrames spread over them (HeldOutFrames),
   /// held out of the fit until the densification window closes, when they join it (Trainer). With fewer than
   /// MinimumValidationFrames such frames the run validates on training frames (ValidationFrames): on the N-wire
-  /// sweep's 2 the decisions followed the noise of two frames (docs/FINDINGS.md, "Validation frames held out of the fit").
+  /// sweep's 2 the decisions followed the noise of two frames (docs/FINDINGS.md, "Validation frames held out of the
+  /// fit").
   int ValidationStride = 8;
   int MaximumValidationFrames = 8;
   int MinimumValidationFrames = 4;

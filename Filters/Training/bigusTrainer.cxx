@@ -132,7 +132,8 @@ bool Trainer::PrepareInitialField(std::string* error)
   }
   if (!plan.PixelGrid)
   {
-    // Before gamma and the seeds: nothing of a held-out frame's pixels goes into the fit.
+    // Before gamma and the seeds, which read only the fitted frames (the rules measured at construction, the seed
+    // count and the pixel spacing read every training frame).
     this->HoldOutValidationFrames();
   }
   if (this->Report.ValidationHeldOut && !GammaOfTrainingFrames(data, this->Gamma, count, gammaLine, error))
@@ -411,6 +412,7 @@ bool Trainer::JoinValidationFrames(const double* last, std::string* error)
   }
   JoinTrainingFrames(*this->Data, this->HeldOutValidation);
   this->HeldOutValidation.clear();
+  this->Recent = LossWindow(); // the joined frames' first losses are no sign of convergence
   this->Report.ValidationJoinedAt = this->State.Iteration;
   return this->Engine->SetData(this->Data.get(), error);
 }
@@ -418,6 +420,15 @@ bool Trainer::JoinValidationFrames(const double* last, std::string* error)
 void Trainer::PlaceUntrainedFrames()
 {
   this->Report.UntrainedCorrections = this->Poses.PlaceUntrainedFrames(this->State); // none unless RefinePoses On
+  // Held-out validation frames stay at their tracked poses while they decide, as every validation scores them.
+  if (!this->HeldOutValidation.empty() && !this->State.PoseCorrections.empty())
+  {
+    for (int f : this->HeldOutValidation)
+    {
+      this->State.PoseCorrections[f] = {};
+    }
+    this->Poses.ComposePoses(this->State);
+  }
 }
 
 bool Trainer::Evaluate(
@@ -604,12 +615,13 @@ bool Trainer::Finish(std::string* error)
       return false;
     }
   }
-  if (!this->JoinValidationFrames(nullptr, error)) // the prune, gap filling and merge see every training frame
+  // The frames not trained (held out, and validation frames that never joined) take the smooth part of their
+  // neighbours' corrections, if any; then the validation frames join: the prune, gap filling and merge see them.
+  this->Report.UntrainedCorrections = this->Poses.PlaceUntrainedFrames(this->State);
+  if (!this->JoinValidationFrames(nullptr, error))
   {
     return false;
   }
-  // The frames not trained (held out) take the smooth part of their neighbours' corrections, if any.
-  this->PlaceUntrainedFrames();
   this->Report.PoseCorrections = this->Poses.Corrections(this->State);
   const std::array<double, 7>& shared = this->State.SharedPoseCorrection;
   this->Report.TimeOffset = shared[6];

@@ -106,7 +106,8 @@ struct TrainerSettings
   GaussianMergeSettings Merge{ 1e-3 };
   // Pose refinement (bigusPoseRefinement.h)
   PoseRefinementSettings Poses;
-  /// The choices measured on held-out frames (bigusHeldOutChoices.h): ElevationSigma on the pixel-grid route.
+  /// The choices measured on held-out frames (bigusHeldOutChoices.h): ElevationSigma on the pixel-grid route, and
+  /// (HoldOutValidationFrames, off by default) the Adam route's validation frames held out of the fit.
   HeldOutChoiceSettings HeldOut;
   // Run
   unsigned Seed = 1;

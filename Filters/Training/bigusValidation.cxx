@@ -27,7 +27,7 @@ std::vector<int> ChooseValidationFrames(
   TrainingData& data, const HeldOutChoiceSettings& settings, bool& heldOut, std::string& line)
 {
   const HeldOutChoiceSettings& h = settings;
-  const bool holdOut = h.Enabled && h.HoldOutValidationFrames;
+  const bool holdOut = h.HoldOutValidationFrames;
   const int minimum = std::max(2, h.MinimumValidationFrames);
   std::vector<int> frames =
     holdOut ? HeldOutFrames(data, h.ValidationStride, h.MaximumValidationFrames) : std::vector<int>();

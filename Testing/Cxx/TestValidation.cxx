@@ -143,3 +143,37 @@ TEST(Validation, HeldOutFramesAreNotFittedBeforeTheyJoin)
   EXPECT_EQ(trainer.GetReport().ValidationJoinedAt, 200);
   EXPECT_EQ(trainer.GetData().TrainFrames, data.TrainFrames);
 }
+
+// With RefinePoses on, a mid-run Evaluate places the frames not trained among their refined neighbours, but the
+// held-out validation frames stay at their tracked poses while they decide (every validation scores them there), so
+// a run's decisions do not depend on when it was evaluated.
+TEST(Validation, HeldOutFramesKeepTheirTrackedPosesThroughAMidRunEvaluation)
+{
+  using namespace bigus::synthetic;
+  std::vector<int> testFrames;
+  const TrainingData data = SyntheticSweep(KnownField(400, 3), 0.5, testFrames);
+  TrainerSettings s = ShortSettings();
+  s.HeldOut.HoldOutValidationFrames = true;
+  s.Poses.RefinePoses = PoseRefinement::On;
+  s.Poses.Start = 0;
+  Trainer trainer(data, s);
+  std::string error;
+  ASSERT_TRUE(trainer.Initialize(&error)) << error;
+  ASSERT_TRUE(trainer.Train(
+    nullptr, [&]() { return trainer.GetIteration() >= 120; }, &error))
+    << error;
+  ImageMetrics metrics;
+  ASSERT_TRUE(trainer.Evaluate(testFrames, metrics, &error)) << error;
+  const std::vector<std::array<double, 16>>& tracked = trainer.GetPoseRefiner().GetTrackedPoses();
+  ASSERT_TRUE(trainer.GetReport().ValidationHeldOut);
+  for (int f : trainer.GetReport().ValidationFrames)
+  {
+    EXPECT_EQ(trainer.GetData().Poses[f], tracked[f]) << "validation frame " << f;
+  }
+  int moved = 0; // the test frames were placed (the comparison can fail)
+  for (int f : testFrames)
+  {
+    moved += trainer.GetData().Poses[f] != tracked[f];
+  }
+  EXPECT_GT(moved, 0);
+}
