@@ -84,21 +84,6 @@ json CompletedJob(const BatchJob& job)
   }
 }
 
-/// Writes @p text to @p path through a temporary file; false when it cannot.
-bool WriteText(const std::string& path, const std::string& text)
-{
-  const std::string temporary = TemporaryName(path);
-  std::ofstream out(temporary);
-  out << text;
-  out.close();
-  if (!out)
-  {
-    std::remove(temporary.c_str());
-    return false;
-  }
-  return Publish(temporary, path);
-}
-
 /// The job's stdout and stderr go to its log.txt while it runs (this process runs one job at a time).
 class LogRedirect
 {

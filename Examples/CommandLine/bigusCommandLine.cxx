@@ -239,43 +239,41 @@ int CheckOutputs(const std::vector<std::string>& outputs, const std::vector<std:
   return 0;
 }
 
-namespace
+bool WriteText(const std::string& path, const std::string& text)
 {
-/// @p writer's XML (written to its output string) into @p temporary, every write and the close checked: a full disk
-/// is found here, not after the rename (VTK's XML writers do not check the close).
-bool WriteXml(vtkXMLWriterBase* writer, const std::string& temporary)
-{
-  writer->WriteToOutputStringOn();
-  if (!writer->Write())
-  {
-    return false;
-  }
-  const std::string text = writer->GetOutputString();
+  const std::string temporary = TemporaryName(path);
   std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
   out.write(text.data(), static_cast<std::streamsize>(text.size()));
   out.close();
-  return static_cast<bool>(out);
+  if (!out)
+  {
+    std::remove(temporary.c_str());
+    return false;
+  }
+  return Publish(temporary, path);
+}
+
+namespace
+{
+/// @p writer's XML, written to its output string, then to @p path by WriteText: a full disk is found before the
+/// rename (VTK's XML writers do not check the close).
+bool WriteXml(vtkXMLWriterBase* writer, const std::string& path)
+{
+  writer->WriteToOutputStringOn();
+  return writer->Write() && WriteText(path, writer->GetOutputString());
 }
 }
 
 int WriteField(vtkPolyData* field, const std::string& path)
 {
-  const std::string temporary = TemporaryName(path);
   vtkNew<vtkXMLPolyDataWriter> writer;
   writer->SetInputData(field);
   writer->SetDataModeToAppended();
-  if (!WriteXml(writer, temporary) || !Publish(temporary, path))
-  {
-    std::remove(temporary.c_str());
-    return Fail(path + ": cannot write the field");
-  }
-  return 0;
+  return WriteXml(writer, path) ? 0 : Fail(path + ": cannot write the field");
 }
 
 int WriteImage(vtkImageData* image, const std::string& path)
 {
-  const std::string temporary = TemporaryName(path);
-  bool ok = false;
   if (EndsWith(path, ".png"))
   {
     int dims[3];
@@ -293,26 +291,23 @@ int WriteImage(vtkImageData* image, const std::string& path)
     }
     return WritePng(png, path) ? 0 : Fail(path + ": cannot write the image");
   }
-  else if (EndsWith(path, ".mha") || EndsWith(path, ".mhd"))
-  {
-    vtkNew<vtkMetaImageWriter> writer;
-    writer->SetInputData(image);
-    writer->SetFileName(temporary.c_str());
-    writer->SetCompression(true);
-    writer->Write();
-    ok = writer->GetErrorCode() == 0;
-  }
-  else if (EndsWith(path, ".vti"))
+  if (EndsWith(path, ".vti"))
   {
     vtkNew<vtkXMLImageDataWriter> writer;
     writer->SetInputData(image);
-    ok = WriteXml(writer, temporary);
+    return WriteXml(writer, path) ? 0 : Fail(path + ": cannot write the image");
   }
-  else
+  if (!EndsWith(path, ".mha") && !EndsWith(path, ".mhd"))
   {
     return Fail(path + ": unknown image format (use .png, .mha or .vti)");
   }
-  if (!ok || !Publish(temporary, path))
+  const std::string temporary = TemporaryName(path);
+  vtkNew<vtkMetaImageWriter> writer;
+  writer->SetInputData(image);
+  writer->SetFileName(temporary.c_str());
+  writer->SetCompression(true);
+  writer->Write();
+  if (writer->GetErrorCode() != 0 || !Publish(temporary, path))
   {
     std::remove(temporary.c_str());
     return Fail(path + ": cannot write the image");

@@ -98,6 +98,10 @@ vtkSmartPointer<vtkPolyData> ReadField(const std::string& file);
  */
 int CheckOutputs(const std::vector<std::string>& outputs, const std::vector<std::string>& inputs);
 
+/// Writes @p text to @p path through a temporary file in its folder, every write and the close checked, then renamed
+/// over @p path (Publish); false when any step failed (the temporary removed, an existing @p path untouched).
+bool WriteText(const std::string& path, const std::string& text);
+
 /// Writes @p field (.vtp, appended data) under a temporary name, then renames it to @p path (Publish); 0, or 1
 /// after a message (the temporary file removed, an existing @p path untouched).
 int WriteField(vtkPolyData* field, const std::string& path);

@@ -478,21 +478,8 @@ int RunEvaluate(const EvaluateOptions& o)
     "mean", mean.PSNR, mean.SSIM, mean.NCC, mean.Speckle, used, frames.size() - used,
     1e3 * renderer->GetSecondsPerFrame());
   const std::string path = o.Report + "/metrics.json";
-  const std::string temporary = TemporaryName(path);
-  std::ofstream out(temporary);
-  out << report.dump(2) << "\n";
-  out.close();
-  // A failed write (disk full) must not be published: the temporary goes, an existing file stays.
-  if (!out)
-  {
-    std::remove(temporary.c_str());
-    return Fail(path + ": cannot write");
-  }
-  if (!Publish(temporary, path))
-  {
-    return Fail(path + ": cannot write");
-  }
-  return 0;
+  // A failed write (disk full) is not published: the temporary goes, an existing file stays.
+  return WriteText(path, report.dump(2) + "\n") ? 0 : Fail(path + ": cannot write");
 }
 }
 

@@ -558,7 +558,6 @@ bool Trainer::Iterate(double start, const std::function<void(double, int, double
   {
     return false;
   }
-
   if ((densify && !this->DensifyAndPrune(validation, error)) ||
     (this->SolvesReflectivities() && (densify || (s.SolveInterval > 0 && it % s.SolveInterval == 0)) &&
       !this->SolveFieldReflectivities(error)))
