@@ -26,8 +26,77 @@
 namespace bigus
 {
 
+namespace
+{
+/**
+ * Every valid frame's ImageToReference is an affine map whose pixel axes have the lengths of the sweep's (the median
+ * over its valid frames, within 1 %): a tracked pose is rigid, and only the pixel spacing scales it. A frame whose
+ * pose is not finite, not affine, or scaled (a ProbeToTracker that is not rigid) is refused with its index.
+ */
+bool CheckRigidPoses(const TrainingData& data, std::string* error)
+{
+  std::vector<double> lengths[2];
+  auto length = [](const std::array<double, 16>& m, int column) {
+    return std::sqrt(m[column] * m[column] + m[4 + column] * m[4 + column] + m[8 + column] * m[8 + column]);
+  };
+  for (int f = 0; f < data.Count(); ++f)
+  {
+    const std::array<double, 16>& m = data.Poses[f];
+    if (!data.IsValid(f))
+    {
+      continue;
+    }
+    const bool finite = std::all_of(m.begin(), m.end(), [](double v) { return std::abs(v) <= 1e9; });
+    if (!finite || m[12] != 0 || m[13] != 0 || m[14] != 0 || m[15] != 1)
+    {
+      *error = "frame " + std::to_string(f) + "'s ImageToReference " +
+        (finite ? "is not affine (its last row is not 0 0 0 1)" : "is not finite within 1e9 mm") +
+        " (mark the frame INVALID, or fix its transforms)";
+      return false;
+    }
+    for (int c = 0; c < 2; ++c)
+    {
+      lengths[c].push_back(length(m, c));
+    }
+  }
+  if (lengths[0].empty())
+  {
+    return true;
+  }
+  double median[2];
+  for (int c = 0; c < 2; ++c)
+  {
+    std::vector<double> sorted = lengths[c];
+    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+    median[c] = sorted[sorted.size() / 2];
+  }
+  for (int f = 0; f < data.Count(); ++f)
+  {
+    if (!data.IsValid(f))
+    {
+      continue;
+    }
+    for (int c = 0; c < 2; ++c)
+    {
+      const double l = length(data.Poses[f], c);
+      if (!(l > 0) || std::abs(l - median[c]) > 0.01 * median[c])
+      {
+        *error = "frame " + std::to_string(f) + "'s ImageToReference is not rigid: its " + (c ? "row" : "column") +
+          " axis is " + std::to_string(l) + " mm a pixel where the sweep's other frames have " +
+          std::to_string(median[c]) + " (a ProbeToTracker or ImageToProbe that scales?)";
+        return false;
+      }
+    }
+  }
+  return true;
+}
+}
+
 bool FieldFromPolyData(vtkPolyData* data, GaussianField& field, FieldModel& model, std::string* error)
 {
+  // Bounds no ultrasound scene reaches, far inside float's range: a standard deviation of 1 km, a position 1000 km
+  // from the origin (their squares and products stay finite in the renderers' float arithmetic).
+  constexpr double MaximumScale = 1e6, MaximumCoordinate = 1e9;
   auto fail = [&](const std::string& why) {
     if (error)
     {
@@ -64,18 +133,31 @@ bool FieldFromPolyData(vtkPolyData* data, GaussianField& field, FieldModel& mode
     for (int k = 0; k < 3; ++k)
     {
       const double s = scale->GetComponent(i, k);
-      if (!(s > 0) || !std::isfinite(s) || !std::isfinite(p[k]))
+      if (!(s > 0) || !(s <= MaximumScale) || !(std::abs(p[k]) <= MaximumCoordinate))
       {
-        return fail("point " + std::to_string(i) + " has a non-positive or non-finite Scale or position");
+        return fail("Gaussian " + std::to_string(i) + " (point " + std::to_string(i) +
+          ") has a Scale that is not in (0, 1e6] mm or a position that is not finite within 1e9 mm");
       }
       field.Means[3 * i + k] = static_cast<float>(p[k]);
       field.LogScales[3 * i + k] = static_cast<float>(std::log(s));
     }
+    double norm = 0;
     for (int k = 0; k < 4; ++k)
     {
-      field.Quaternions[4 * i + k] = static_cast<float>(rotation->GetComponent(i, k));
+      const double q = rotation->GetComponent(i, k);
+      norm += q * q;
+      field.Quaternions[4 * i + k] = static_cast<float>(q);
     }
-    field.Reflectivities[i] = static_cast<float>(reflectivity->GetComponent(i, 0));
+    if (!(norm > 1e-12) || !std::isfinite(norm))
+    {
+      return fail("Gaussian " + std::to_string(i) + " has a Rotation quaternion that is zero or not finite");
+    }
+    const double r = reflectivity->GetComponent(i, 0);
+    if (!std::isfinite(r) || std::abs(r) > VTK_FLOAT_MAX)
+    {
+      return fail("Gaussian " + std::to_string(i) + " has a Reflectivity that is not a finite float");
+    }
+    field.Reflectivities[i] = static_cast<float>(r);
   }
   model = FieldModel();
   auto value = [&](const char* name, double& out) {
@@ -332,10 +414,23 @@ bool TrainingDataFromSequence(vtkImageData* sequence, vtkImageData* mask, Traini
       data.Timestamps.push_back(stamps->GetTuple1(k));
     }
   }
+  if (!CheckRigidPoses(data, error))
+  {
+    return false;
+  }
   data.Mask.resize(maskPixels);
   for (vtkIdType p = 0; p < maskPixels; ++p)
   {
-    data.Mask[p] = maskValues->GetComponent(p, 0) != 0 ? 1 : 0;
+    const double value = maskValues->GetComponent(p, 0);
+    if (!std::isfinite(value))
+    {
+      *error = "the fan mask is not finite at pixel " + std::to_string(p % dims[0]) + ", " +
+        std::to_string(p / dims[0] % dims[1]) +
+        (maskPixels > framePixels ? " of frame " + std::to_string(p / framePixels) : std::string()) +
+        " (a mask is 0 outside the fan and non-zero inside)";
+      return false;
+    }
+    data.Mask[p] = value != 0 ? 1 : 0;
   }
   data.TrainFrames.clear();
   return true;

@@ -45,7 +45,9 @@ struct FieldModel
 
 /**
  * Read a field. Returns false with @p error naming the missing or malformed array (no points, Scale
- * not 3 components, a non-positive or non-finite scale, missing Rotation or Reflectivity).
+ * not 3 components, missing Rotation or Reflectivity) or the first bad Gaussian: a Scale not in (0, 1e6] mm, a
+ * position not finite within 1e9 mm of the origin, a Rotation quaternion that is zero or not finite, a Reflectivity
+ * that is not a finite float.
  */
 BIGUSFILTERS_EXPORT bool FieldFromPolyData(
   vtkPolyData* data, GaussianField& field, FieldModel& model, std::string* error);

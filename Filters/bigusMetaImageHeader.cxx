@@ -158,7 +158,13 @@ MetaImageHeader ParseMetaImageHeader(std::istream& in, const std::string& where)
     std::string field;
     if (SplitFrameKey(key, frame, field))
     {
-      header.FrameFields[frame][field] = value;
+      // Frames are matched by number: Seq_Frame1_X and Seq_Frame0001_X name one field of one frame.
+      if (!header.FrameFields[frame].emplace(field, value).second)
+      {
+        Fail(where,
+          "field " + key + " (line " + std::to_string(lineNumber) + ") names the " + field + " of frame " +
+            std::to_string(frame) + " a second time, under another number's spelling");
+      }
     }
     else
     {

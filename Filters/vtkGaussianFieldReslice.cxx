@@ -2,6 +2,7 @@
 
 #include "bigusGaussianFieldData.h"
 #include "bigusRenderer.h"
+#include "bigusTrainingEngine.h"
 
 #include "vtkFloatArray.h"
 #include "vtkImageData.h"
@@ -106,7 +107,9 @@ void FillDefaults(Grid& g, const bigus::FieldCache& field, vtkMatrix4x4* axes, b
     for (int k = 0; k < 3; ++k)
     {
       g.Extent[2 * k] = 0;
-      g.Extent[2 * k + 1] = static_cast<int>(std::ceil((hi[k] - g.Origin[k]) / g.Spacing[k]));
+      // Held within int: a grid too large to render is refused by RequestData with the memory it needs.
+      const double last = std::ceil((hi[k] - g.Origin[k]) / g.Spacing[k]);
+      g.Extent[2 * k + 1] = last < VTK_INT_MAX - 1 ? static_cast<int>(last) : VTK_INT_MAX - 1;
     }
   }
 }
@@ -318,6 +321,21 @@ int vtkGaussianFieldReslice::RequestData(
   if (this->ResliceAxes)
   {
     axes->DeepCopy(this->ResliceAxes);
+  }
+  // Refused before anything is allocated where the grid cannot be held: the float buffers below, the output's
+  // scalars and arrays (each copied once), against this machine's memory.
+  const double samples =
+    double(extent[1] - extent[0] + 1) * double(extent[3] - extent[2] + 1) * double(extent[5] - extent[4] + 1);
+  const double bytes = samples *
+      (2 * sizeof(float) + (this->OutputScatteringField ? 2 * sizeof(float) : 0) + (coverage ? 2 * sizeof(float) : 0)) +
+    samples / depth * sizeof(float);
+  const double physical = bigus::PhysicalMemoryBytes();
+  if (physical > 0 && bytes > physical)
+  {
+    vtkErrorMacro("the output grid " << grid.ExtentText() << " (" << samples << " samples) needs " << bytes / 1e6
+                                     << " MB and this machine has " << physical / 1e6
+                                     << " MB: choose a coarser OutputSpacing or a smaller OutputExtent");
+    return 0;
   }
   const bigus::RenderOptions& options = render.Options;
   const bigus::FieldView view = render.Field->GetField().View();

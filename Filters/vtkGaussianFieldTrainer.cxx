@@ -122,6 +122,12 @@ bool ReadTrainerInputs(vtkInformationVector** inputVector, int holdOutEvery, int
   {
     return false;
   }
+  if (holdOutEvery > 0 && holdOutOffset >= holdOutEvery && (!frameList || frameList->GetNumberOfIds() == 0))
+  {
+    error = "HoldOutOffset " + std::to_string(holdOutOffset) + " must be below HoldOutEvery " +
+      std::to_string(holdOutEvery) + " (frames with index % HoldOutEvery == HoldOutOffset are held out: none would be)";
+    return false;
+  }
   std::vector<vtkSmartPointer<vtkImageData>> masks(sweepCount);
   std::vector<bigus::SweepInput> sweeps(sweepCount);
   for (int k = 0; k < sweepCount; ++k)
@@ -253,6 +259,7 @@ bigusTrainerSetting(PoseSmoothness, double, Poses.Smoothness, 0.0, 1e12)
 bigusTrainerSetting(PoseRefinementStart, double, Poses.Start, -1.0, 1.0)
 bigusTrainerSetting(RefineTimeOffset, bool, Poses.RefineTimeOffset, bigusAnyValue(bool))
 bigusTrainerSetting(RefineImageToProbe, bool, Poses.RefineImageToProbe, bigusAnyValue(bool))
+bigusTrainerSetting(AnchorPosesToTracked, bool, Poses.AnchorToTrackedPoses, bigusAnyValue(bool))
 bigusTrainerSetting(SparseAdam, bool, SparseAdam, bigusAnyValue(bool))
 bigusTrainerSetting(Iterations, int, Iterations, 0, 100000000)
 bigusTrainerSetting(TimeBudget, double, TimeBudget, 0.0, 1e9)
@@ -456,20 +463,26 @@ int vtkGaussianFieldTrainer::RequestData(
     history->InsertNextTuple(row);
     return true;
   };
-  const bool ok = trainer.Run(
-    [&](double fraction, int iteration, double loss, std::int64_t gaussians) {
-      this->CurrentIteration = iteration;
-      this->CurrentLoss = loss;
-      this->CurrentNumberOfGaussians = gaussians;
-      this->UpdateProgress(fraction);
-      if (this->EvaluationInterval > 0 && !heldOut.empty() && evaluationError.empty() &&
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() >= nextEvaluation)
-      {
-        evaluate();
-        nextEvaluation += this->EvaluationInterval;
-      }
-    },
-    [&]() { return this->AbortExecute != 0 || !evaluationError.empty(); }, &error);
+  const bool ok =
+    trainer.Train(
+      [&](double fraction, int iteration, double loss, std::int64_t gaussians) {
+        this->CurrentIteration = iteration;
+        this->CurrentLoss = loss;
+        this->CurrentNumberOfGaussians = gaussians;
+        this->UpdateProgress(fraction);
+        if (this->EvaluationInterval > 0 && !heldOut.empty() && evaluationError.empty() &&
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() >= nextEvaluation)
+        {
+          evaluate();
+          nextEvaluation += this->EvaluationInterval;
+        }
+      },
+      [&]() { return this->AbortExecute != 0 || !evaluationError.empty(); }, &error) &&
+    // Stopped by AbortExecute (SIGINT in bigus train): the state so far is saved to resume from, before Finish
+    // changes the field (data-parallel: rank 0 writes it, as the trainer's own checkpoints).
+    (!this->AbortExecute || s.CheckpointFile.empty() || (this->Controller && this->Controller->GetLocalProcessId()) ||
+      trainer.SaveCheckpoint(s.CheckpointFile, &error)) &&
+    trainer.Finish(&error);
   if (ok && evaluationError.empty() && this->EvaluationInterval > 0 && !heldOut.empty())
   {
     evaluate();
@@ -550,6 +563,9 @@ int vtkGaussianFieldTrainer::RequestData(
   addText("Backend", this->BackendInUse);
   vtkNew<vtkStringArray> settingsArray;
   settingsArray->SetName("TrainingSettings");
+  // With the lines the end of the run added (PoseAnchor).
+  const std::vector<std::string>& all = report.Settings;
+  settings.insert(settings.end(), all.begin() + std::min(all.size(), settings.size() - 1), all.end());
   for (const std::string& line : settings)
   {
     settingsArray->InsertNextValue(line);
@@ -709,6 +725,7 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "PoseRefinementStart: " << this->GetPoseRefinementStart() << "\n";
   os << indent << "RefineTimeOffset: " << this->GetRefineTimeOffset() << "\n";
   os << indent << "RefineImageToProbe: " << this->GetRefineImageToProbe() << "\n";
+  os << indent << "AnchorPosesToTracked: " << this->GetAnchorPosesToTracked() << "\n";
   os << indent << "SparseAdam: " << this->GetSparseAdam() << "\n";
   os << indent << "Iterations: " << this->GetIterations() << "\n";
   os << indent << "TimeBudget: " << this->GetTimeBudget() << "\n";

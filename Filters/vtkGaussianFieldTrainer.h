@@ -51,7 +51,9 @@
  * per frame and capacity. `bigus benchmark` reports this split for every sweep.
  *
  * Stopping: Iterations, TimeBudget (s) or ConvergenceTolerance, whichever first; AbortExecute is
- * honoured and UpdateProgress called. Checkpoints (CheckpointFile every CheckpointInterval steps)
+ * honoured and UpdateProgress called: set during a run (from a progress observer), it ends training at the next
+ * step, writes a checkpoint to CheckpointFile if one is set, and outputs the field trained so far (StopReason
+ * "aborted"). Checkpoints (CheckpointFile every CheckpointInterval steps)
  * hold the field and the optimiser state; ResumeFile continues a stopped run (same settings).
  * Deterministic for a given Seed and thread count when scheduled by Iterations (a run scheduled by
  * TimeBudget depends on the machine's speed). Errors (no valid frames, empty mask, a training pose the
@@ -190,6 +192,14 @@ public:
   virtual void SetRefineImageToProbe(bool value);
   virtual bool GetRefineImageToProbe() const;
   vtkBooleanMacro(RefineImageToProbe, bool);
+  ///@}
+  ///@{ Where every sweep's poses are refined, move the field and every pose at the end by the rigid motion that
+  /// best maps the refined training frames onto their tracked poses (default on;
+  /// bigus::PoseRefinementSettings::AnchorToTrackedPoses), so that the field renders at tracked poses where the
+  /// refinement left the scene; the PoseAnchor line of TrainingSettings says by how much.
+  virtual void SetAnchorPosesToTracked(bool value);
+  virtual bool GetAnchorPosesToTracked() const;
+  vtkBooleanMacro(AnchorPosesToTracked, bool);
   ///@}
   ///@{ Weight of the smoothness prior on the pose corrections along the sweep (default 0;
   /// bigus::PoseRefinementSettings::Smoothness).

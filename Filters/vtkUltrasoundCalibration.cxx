@@ -9,6 +9,7 @@
 #include "vtkXMLDataParser.h"
 #include "vtkCommand.h"
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <string>
@@ -140,7 +141,35 @@ bool vtkUltrasoundCalibration::Parse()
     {
       return fail(label + ": Matrix is singular or not affine");
     }
-    internals.Transforms.push_back(entry);
+    // A pair given twice (either way round) must say the same thing: which one a lookup finds is not the user's.
+    bool repeated = false;
+    for (const vtkInternals::Transform& earlier : internals.Transforms)
+    {
+      const bool same = earlier.From == entry.From && earlier.To == entry.To;
+      if (!same && !(earlier.From == entry.To && earlier.To == entry.From))
+      {
+        continue;
+      }
+      double other[16];
+      std::copy_n(earlier.Matrix, 16, other);
+      if (!same)
+      {
+        bigus::InvertAffine4x4(earlier.Matrix, other);
+      }
+      for (int k = 0; k < 16; ++k)
+      {
+        if (std::abs(other[k] - entry.Matrix[k]) > 1e-6 * (1 + std::abs(entry.Matrix[k])))
+        {
+          return fail(label + " conflicts with the " + earlier.From + "To" + earlier.To +
+            " given before it (their matrices differ; remove one)");
+        }
+      }
+      repeated = true;
+    }
+    if (!repeated)
+    {
+      internals.Transforms.push_back(entry);
+    }
   }
 
   std::vector<vtkXMLDataElement*> reconstruction;

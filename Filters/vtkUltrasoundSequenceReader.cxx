@@ -44,6 +44,47 @@ std::string DirectoryOf(const std::string& path)
   return slash == std::string::npos ? std::string() : path.substr(0, slash + 1);
 }
 
+/**
+ * Whether the row-major 4x4 @p m is rigid: its 3x3 part R has R^T R = I within 1e-2 (scale within about 1 %), its
+ * last row is 0 0 0 1 and its translation lies within 1e7 mm; otherwise @p why says what is wrong. A singular R
+ * passes here: the chain's inversion and slice-frame checks report it.
+ */
+bool IsRigid(const double m[16], std::string& why)
+{
+  double largest = 0;
+  for (int i = 0; i < 3; ++i)
+  {
+    for (int j = 0; j < 3; ++j)
+    {
+      const double dot = m[i] * m[j] + m[4 + i] * m[4 + j] + m[8 + i] * m[8 + j];
+      largest = std::max(largest, std::abs(dot - (i == j ? 1.0 : 0.0)));
+    }
+  }
+  const double shift = std::sqrt(m[3] * m[3] + m[7] * m[7] + m[11] * m[11]);
+  // A singular 3x3 part is left to the chain's own checks, which name it so.
+  const double det =
+    m[0] * (m[5] * m[10] - m[6] * m[9]) - m[1] * (m[4] * m[10] - m[6] * m[8]) + m[2] * (m[4] * m[9] - m[5] * m[8]);
+  std::ostringstream text;
+  if (std::abs(det) < 1e-9)
+  {
+    return true;
+  }
+  if (m[12] != 0 || m[13] != 0 || m[14] != 0 || m[15] != 1)
+  {
+    text << "its last row is not 0 0 0 1";
+  }
+  else if (!(largest <= 1e-2))
+  {
+    text << "its 3x3 part is not a rotation: R^T R differs from the identity by " << largest;
+  }
+  else if (!(shift <= 1e7))
+  {
+    text << "its translation is " << shift << " mm";
+  }
+  why = text.str();
+  return why.empty();
+}
+
 std::string JoinNames(const std::set<std::string>& names)
 {
   std::string out;
@@ -382,6 +423,17 @@ int vtkUltrasoundSequenceReader::RequestInformation(
           if (!std::isfinite(v))
           {
             return this->Fail(file + ": frame " + std::to_string(k) + ": field " + name + " contains NaN or Inf");
+          }
+        }
+        if (terms[t].Name.rfind("Image", 0) != 0)
+        {
+          // A tracker's transform (a tool or the reference to the tracker) is a rotation and a translation: one
+          // that scales, shears or lies beyond 1e7 mm would train a field of another size or far away.
+          std::string why;
+          if (!IsRigid(m.data(), why))
+          {
+            return this->Fail(file + ": frame " + std::to_string(k) + ": field " + name + " is not rigid (" + why +
+              "); a tracker's transform is a rotation and a translation");
           }
         }
         if (terms[t].Inverse && !bigus::InvertAffine4x4(m.data(), m.data()))

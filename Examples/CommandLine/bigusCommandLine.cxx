@@ -1,6 +1,7 @@
 // What the commands of `bigus` share: failing with a message, reading sweeps, fields and masks, writing images.
 #include "bigusCommandLine.h"
 #include "bigusPlot.h"
+#include "bigusTrainingEngine.h"
 #include "vtkCallbackCommand.h"
 #include "vtkCommand.h"
 #include "vtkDataArray.h"
@@ -17,6 +18,10 @@
 #include "vtkXMLPolyDataWriter.h"
 
 #include <CLI/CLI.hpp>
+#include <vtk_fmt.h>
+// clang-format off
+#include VTK_FMT(fmt/printf.h)
+// clang-format on
 #include <vtksys/SystemTools.hxx>
 #include <algorithm>
 #include <cstdlib>
@@ -24,6 +29,7 @@
 #include <thread>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
@@ -58,6 +64,46 @@ void FilterError::Watch(vtkObject* object)
 bool EndsWith(const std::string& s, const std::string& suffix)
 {
   return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+CLI::Validator FiniteRange(double lowest, double highest, bool positive)
+{
+  const std::string range = highest >= 1e300
+    ? vtkfmt::sprintf("%s %g", positive ? "above" : "at least", lowest)
+    : vtkfmt::sprintf("%s %g and at most %g", positive ? "above" : "at least", lowest, highest);
+  return CLI::Validator(
+    [=](std::string& text) -> std::string {
+      double value = 0;
+      std::size_t used = 0;
+      try
+      {
+        value = std::stod(text, &used);
+      }
+      catch (const std::exception&)
+      {
+        return "'" + text + "' is not a number";
+      }
+      if (used != text.size() || !std::isfinite(value))
+      {
+        return "'" + text + "' is not a finite number";
+      }
+      if (value < lowest || value > highest || (positive && value == lowest))
+      {
+        return "'" + text + "' is not " + range;
+      }
+      return std::string();
+    },
+    "NUMBER " + range);
+}
+
+CLI::Validator FiniteNonNegative(double highest)
+{
+  return FiniteRange(0, highest);
+}
+
+CLI::Validator FinitePositive(double highest)
+{
+  return FiniteRange(0, highest, true);
 }
 
 vtkSmartPointer<vtkUltrasoundSequenceReader> ReadSweep(const SweepOptions& o)
@@ -97,6 +143,15 @@ vtkSmartPointer<vtkImageData> WithOwnFieldData(vtkImageData* sweep)
 
 vtkSmartPointer<vtkPolyData> ReadField(const std::string& file)
 {
+  std::error_code status;
+  if (!std::filesystem::is_regular_file(file, status))
+  {
+    Fail(file +
+      (std::filesystem::exists(file, status)
+          ? ": not a regular file (a folder, pipe or device); a Gaussian field is a .vtp file"
+          : ": cannot open the field file"));
+    return nullptr;
+  }
   std::ifstream probe(file);
   if (!probe)
   {
@@ -105,6 +160,36 @@ vtkSmartPointer<vtkPolyData> ReadField(const std::string& file)
   }
   vtkNew<vtkXMLPolyDataReader> reader;
   reader->SetFileName(file.c_str());
+  // The counts the file claims, against what it holds and what this machine has, before VTK allocates for them.
+  FilterError error;
+  error.Watch(reader);
+  reader->UpdateInformation();
+  if (!error.Text.empty())
+  {
+    Fail(file + ": not a Gaussian field (.vtp): " + error.Text);
+    return nullptr;
+  }
+  reader->SetupUpdateExtent(0, 1, 0);
+  const double points = static_cast<double>(reader->GetNumberOfPoints());
+  const double cells = static_cast<double>(reader->GetNumberOfCells());
+  // Per Gaussian at least 44 bytes (position, Scale, Rotation, Reflectivity as floats), 16 per vertex cell; zlib
+  // packs at most 1032:1; in memory the reader's copy, the command's and the renderer's field.
+  const double stored = 44 * points + 16 * cells;
+  const double fileBytes = static_cast<double>(std::filesystem::file_size(file, status));
+  const double physical = PhysicalMemoryBytes();
+  if (points < 0 || cells < 0 || stored > 1032 * fileBytes)
+  {
+    Fail(vtkfmt::sprintf("%s: claims %.0f Gaussians and %.0f cells, at least %.0f bytes of data even compressed, and "
+                         "the file holds %.0f bytes",
+      file, points, cells, stored / 1032, fileBytes));
+    return nullptr;
+  }
+  if (physical > 0 && 3 * stored > physical)
+  {
+    Fail(vtkfmt::sprintf("%s: its %.0f Gaussians need %.0f MB to read and this machine has %.0f MB", file, points,
+      3 * stored / 1e6, physical / 1e6));
+    return nullptr;
+  }
   reader->Update();
   vtkPolyData* field = reader->GetOutput();
   if (!field || field->GetNumberOfPoints() == 0 || !field->GetPointData()->GetArray("Scale"))
@@ -146,6 +231,32 @@ vtkSmartPointer<vtkImageData> ReadMask(const std::string& file, const int dims[3
   }
   vtkNew<vtkMetaImageReader> reader;
   reader->SetFileName(file.c_str());
+  // The size the header claims, before VTK allocates it: within this machine's memory and, for pixels stored
+  // uncompressed in the file itself (ElementDataFile = LOCAL), within the file (a truncated mask is refused).
+  reader->UpdateInformation();
+  const int* extent = reader->GetDataExtent();
+  const double needed = double(extent[1] - extent[0] + 1) * double(extent[3] - extent[2] + 1) *
+    double(extent[5] - extent[4] + 1) * std::max(1, reader->GetNumberOfScalarComponents()) *
+    std::max(1, vtkDataArray::GetDataTypeSize(reader->GetDataScalarType()));
+  std::string header(65536, '\0');
+  probe.read(&header[0], static_cast<std::streamsize>(header.size()));
+  header.resize(static_cast<std::size_t>(probe.gcount()));
+  const std::size_t dataFile = header.find("ElementDataFile");
+  const std::size_t headerBytes = dataFile == std::string::npos ? 0 : header.find('\n', dataFile) + 1;
+  header.erase(
+    std::remove_if(header.begin(), header.end(), [](char c) { return c == ' ' || c == '\t'; }), header.end());
+  std::error_code status;
+  const double fileBytes = static_cast<double>(std::filesystem::file_size(file, status)) - double(headerBytes);
+  const bool localRaw = header.find("ElementDataFile=LOCAL") != std::string::npos &&
+    header.find("CompressedData=True") == std::string::npos;
+  const double physical = PhysicalMemoryBytes();
+  if ((physical > 0 && 2 * needed > physical) || (localRaw && fileBytes < needed))
+  {
+    Fail(vtkfmt::sprintf("%s: its DimSize %d x %d x %d needs %.0f bytes of pixel data, and %s holds %.0f", file,
+      extent[1] - extent[0] + 1, extent[3] - extent[2] + 1, extent[5] - extent[4] + 1, needed,
+      localRaw && fileBytes < needed ? "the file" : "this machine's memory", localRaw ? fileBytes : physical / 2));
+    return nullptr;
+  }
   reader->Update();
   vtkImageData* mask = reader->GetOutput();
   int size[3] = { 0, 0, 0 };

@@ -24,6 +24,7 @@
 namespace CLI
 {
 class App;
+class Validator;
 }
 class vtkObject;
 
@@ -48,6 +49,17 @@ Command AddMergeCommand(CLI::App& app);
 Command AddBatchCommand(CLI::App& app);
 /// @p sourceDirectory: where `bigus benchmark` finds Examples/Data and Testing/Data unless --data says.
 Command AddBenchmarkCommand(CLI::App& app, const std::string& sourceDirectory);
+
+/**
+ * A number option's check: finite and within [@p lowest, @p highest] (CLI11's NonNegativeNumber, PositiveNumber and
+ * Range let NaN and infinity through, since every comparison with NaN is false). @p positive: @p lowest excluded.
+ * A value outside is refused when the command line is parsed, naming the option, the value and the range.
+ */
+CLI::Validator FiniteRange(double lowest, double highest, bool positive = false);
+/// FiniteRange(0, highest): finite and non-negative.
+CLI::Validator FiniteNonNegative(double highest = 1e300);
+/// FiniteRange(0, highest, true): finite and positive.
+CLI::Validator FinitePositive(double highest = 1e300);
 
 /// Prints "bigus: @p what" on stderr; returns 1 (the exit code of a bad file or a failed step).
 int Fail(const std::string& what);

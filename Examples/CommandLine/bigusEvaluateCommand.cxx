@@ -29,6 +29,7 @@
 #include <optional>
 #include <string>
 #include <sys/stat.h>
+#include <unistd.h>
 #include <vector>
 
 namespace bigus::cli
@@ -252,13 +253,27 @@ vtkIdType RefinedPosesOf(vtkImageData* sweep, vtkDataArray* poses, double tolera
   return -1;
 }
 
+int EvaluateInto(const EvaluateOptions& o);
+
 int RunEvaluate(const EvaluateOptions& o)
 {
-  // Before any work: the report folder exists or is made, and its files replace none of the inputs.
-  if (::mkdir(o.Report.c_str(), 0755) != 0 && errno != EEXIST)
+  // Before any work: the report folder exists or is made; a run that fails leaves no empty folder it made.
+  const bool made = ::mkdir(o.Report.c_str(), 0755) == 0;
+  if (!made && errno != EEXIST)
   {
     return Fail(o.Report + ": cannot create the report folder");
   }
+  const int code = EvaluateInto(o);
+  if (code != 0 && made)
+  {
+    ::rmdir(o.Report.c_str()); // only when empty
+  }
+  return code;
+}
+
+int EvaluateInto(const EvaluateOptions& o)
+{
+  // The report's files replace none of the inputs.
   if (CheckOutputs({ o.Report + "/metrics.json" }, { o.Field, o.Sweep.Sweep, o.Mask }) != 0)
   {
     return 1;
@@ -316,6 +331,11 @@ int RunEvaluate(const EvaluateOptions& o)
       return Fail("--frames: frame " + std::to_string(k) + " is outside the " + std::to_string(dims[2]) +
         " frames of " + o.Sweep.Sweep);
     }
+  }
+  if (o.Frames.empty() && o.HoldOutEvery > 0 && o.HoldOutOffset >= o.HoldOutEvery)
+  {
+    return Fail("--holdout-offset " + std::to_string(o.HoldOutOffset) + " must be below --holdout-every " +
+      std::to_string(o.HoldOutEvery) + ": no frame would be evaluated");
   }
   std::vector<int> frames = ChooseFrames(dims[2], o.HoldOutEvery, o.HoldOutOffset, o.Frames);
   frames.erase(
@@ -491,8 +511,10 @@ Command AddEvaluateCommand(CLI::App& app)
   evaluateCommand->add_option("FIELD", evaluate.Field, "Gaussian field (.vtp)")->required()->check(CLI::ExistingFile);
   evaluateCommand->add_option("SWEEP", evaluate.Sweep.Sweep, "Sequence metafile")->required()->check(CLI::ExistingFile);
   AddSweepOptions(evaluateCommand, evaluate.Sweep, "sweep");
-  evaluateCommand->add_option("--holdout-every", evaluate.HoldOutEvery, "Evaluate frames with index % K == J");
-  evaluateCommand->add_option("--holdout-offset", evaluate.HoldOutOffset, "J of --holdout-every");
+  evaluateCommand->add_option("--holdout-every", evaluate.HoldOutEvery, "Evaluate frames with index % K == J")
+    ->check(FiniteNonNegative());
+  evaluateCommand->add_option("--holdout-offset", evaluate.HoldOutOffset, "J of --holdout-every (0 to K - 1)")
+    ->check(FiniteNonNegative());
   evaluateCommand->add_option("--frames", evaluate.Frames, "Evaluate these frames");
   evaluateCommand->add_option(
     "--mask", evaluate.Mask, "Fan mask .mha (W x H x 1, or W x H x N per frame; default: estimated)");
@@ -506,7 +528,7 @@ Command AddEvaluateCommand(CLI::App& app)
     "refinement is scored at the poses it refined, held-out frames with its shared corrections and the smooth part of "
     "their sweep's)");
   evaluateCommand->add_option("--refine-steps", evaluate.RefineSteps, "Adam steps per frame of --refine-poses")
-    ->check(CLI::PositiveNumber)
+    ->check(FinitePositive())
     ->capture_default_str();
   return { evaluateCommand, [options] {
             EvaluateOptions& evaluate = *options;

@@ -88,24 +88,24 @@ Command AddFillGapsCommand(CLI::App& app)
     ->add_option("--minimum-gap", fillGaps.Settings.MinimumGapSpacings,
       "A gap: consecutive training frames further apart than this many typical frame spacings")
     ->capture_default_str()
-    ->check(CLI::PositiveNumber);
+    ->check(FinitePositive());
   fillGapsCommand
     ->add_option("--clearance", fillGaps.Settings.ClearanceSigmas,
       "Copies stay this many beam widths away from the frames on either side")
     ->capture_default_str()
-    ->check(CLI::NonNegativeNumber);
+    ->check(FiniteNonNegative());
   fillGapsCommand
     ->add_option("--blend-margin", fillGaps.Settings.BlendMarginSigmas,
       "Within this many beam widths of a frame (at most a quarter of the gap) the copies carry that frame alone; "
       "between the margins the blend is linear")
     ->capture_default_str()
-    ->check(CLI::NonNegativeNumber);
+    ->check(FiniteNonNegative());
   fillGapsCommand
     ->add_option("--max-gaussians", fillGaps.Settings.MaximumGaussians,
       "The most Gaussians the filled field may hold (0: no limit); where a gap's copies would exceed it, only the "
       "strongest Gaussians of its two frames whose copies fit are copied")
     ->capture_default_str()
-    ->check(CLI::NonNegativeNumber);
+    ->check(FiniteNonNegative());
   return { fillGapsCommand, [options] {
             FillGapsOptions& fillGaps = *options;
             if (fillGaps.Output == fillGaps.Field)

@@ -75,17 +75,17 @@ Command AddMergeCommand(CLI::App& app)
     ->add_option("--tolerance", merge.Tolerance,
       "Largest relative integrated squared error of a merge, ||a + b - merged||^2 / ||a + b||^2 over 3D")
     ->capture_default_str()
-    ->check(CLI::Range(1e-12, 1.0));
+    ->check(FiniteRange(1e-12, 1.0));
   mergeCommand
     ->add_option(
       "--neighbours", merge.Neighbours, "Candidates of each Gaussian: the Gaussians with the nearest centres")
     ->capture_default_str()
-    ->check(CLI::Range(1, 64));
+    ->check(FiniteRange(1, 64));
   mergeCommand
     ->add_option(
       "--passes", merge.Passes, "Most passes over the field (each merges a Gaussian once); errors add up over passes")
     ->capture_default_str()
-    ->check(CLI::Range(1, 100));
+    ->check(FiniteRange(1, 100));
   return { mergeCommand, [options] {
             MergeOptions& merge = *options;
             if (merge.Output == merge.Field)

@@ -156,9 +156,14 @@ Command AddRenderCommand(CLI::App& app)
     ->check(CLI::ExistingFile);
   AddSweepOptions(renderCommand, render.Poses, "pose sweep");
   renderCommand->add_option("--frames", render.Frames, "Frames of the pose sweep (default: all)");
-  renderCommand->add_option("--plane", render.Plane, "Plane origin and normal, mm: OX OY OZ NX NY NZ")->expected(6);
-  renderCommand->add_option("--size", render.Size, "Plane size in pixels: W H")->expected(2);
-  renderCommand->add_option("--spacing", render.Spacing, "Pixel spacing, mm");
+  renderCommand->add_option("--plane", render.Plane, "Plane origin and normal, mm: OX OY OZ NX NY NZ")
+    ->expected(6)
+    ->check(FiniteRange(-1e9, 1e9));
+  renderCommand->add_option("--size", render.Size, "Plane size in pixels: W H (1 to 65536 each)")
+    ->expected(2)
+    ->check(FiniteRange(1, 65536));
+  renderCommand->add_option("--spacing", render.Spacing, "Pixel spacing, mm (default: the field's)")
+    ->check(FinitePositive(1e6));
   renderCommand->add_option("--backend", render.Backend, "Rendering backend: auto, cpu or cuda (as registered)");
   renderCommand->add_flag("--volume", render.Volume, "Render a stack of parallel slices covering the field");
   return { renderCommand, [options] {

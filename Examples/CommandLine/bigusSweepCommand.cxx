@@ -152,14 +152,22 @@ Command AddSweepCommand(CLI::App& app)
   sweepCommand->add_option("--protocol", sweep.Protocol, "parallel, oblique or orthogonal")
     ->check(CLI::IsMember({ "parallel", "oblique", "orthogonal" }))
     ->capture_default_str();
-  sweepCommand->add_option("--frames", sweep.Frames, "Number of slices (the paper: 160 and 80)")->capture_default_str();
+  sweepCommand->add_option("--frames", sweep.Frames, "Number of slices (the paper: 160 and 80)")
+    ->capture_default_str()
+    ->check(FiniteRange(1, 100000));
   sweepCommand->add_option("--axis", sweep.Axis, "Axis the parallel slices step along (0, 1, 2)")
-    ->capture_default_str();
+    ->capture_default_str()
+    ->check(FiniteRange(0, 2));
   sweepCommand->add_option("--offset", sweep.Offset, "Shift in slice spacings, [0, 1): 0.5 = in-between slices")
-    ->capture_default_str();
-  sweepCommand->add_option("--tilt", sweep.Tilt, "Oblique: largest tilt, degrees")->capture_default_str();
+    ->capture_default_str()
+    ->check(FiniteRange(0, 1));
+  sweepCommand->add_option("--tilt", sweep.Tilt, "Oblique: largest tilt, degrees (0 to 89)")
+    ->capture_default_str()
+    ->check(FiniteRange(0, 89));
   sweepCommand->add_option("--seed", sweep.Seed, "Oblique: random seed")->capture_default_str();
-  sweepCommand->add_option("--spacing", sweep.Spacing, "Pixel spacing, mm (0: the volume's)")->capture_default_str();
+  sweepCommand->add_option("--spacing", sweep.Spacing, "Pixel spacing, mm (0: the volume's)")
+    ->capture_default_str()
+    ->check(FiniteNonNegative(1e6));
   return { sweepCommand, [options] {
             SweepFromVolumeOptions& sweep = *options;
             return RunSweepFromVolume(sweep);

@@ -16,6 +16,7 @@
 #include "vtkMath.h"
 #include "vtkNew.h"
 #include "vtkSMPTools.h"
+#include "vtkStringArray.h"
 #include "vtkUltrasoundSequenceReader.h"
 #include "vtkUltrasoundSequenceWriter.h"
 
@@ -23,6 +24,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <memory>
 #include <mpi.h>
@@ -40,6 +42,7 @@ struct TrainOptions
   std::vector<std::string> Sweeps, Calibrations, Masks; ///< one calibration / mask for all, or one per sweep
   std::string Chain;                                    ///< --transform, for every sweep
   std::string Output, Checkpoint, Resume, Backend = "auto";
+  int CheckpointInterval = 200; ///< steps between checkpoints written to Checkpoint
   int HoldOutEvery = 0, HoldOutOffset = 0, HoldOutSweep = -1, Threads = 0;
   bool Distributed = false;
   std::vector<int> Frames; ///< explicit training frames (empty: the hold-out rule)
@@ -48,6 +51,45 @@ struct TrainOptions
   /// The trainer's settings, the options bound to them: their defaults are the trainer's own.
   TrainerSettings Settings;
 };
+
+/// The signal (SIGINT, SIGTERM) that asked the run to stop, 0 while none did; a second one ends the process at once.
+volatile std::sig_atomic_t StopSignal = 0;
+
+void OnStopSignal(int signal)
+{
+  StopSignal = signal;
+}
+
+/// While it lives, SIGINT and SIGTERM ask the training to stop (StopSignal) instead of ending the process; the
+/// handlers reset to the default after one signal (SA_RESETHAND), so a second one ends the process as before.
+struct StopSignals
+{
+  struct sigaction Previous[2];
+  StopSignals()
+  {
+    StopSignal = 0;
+    struct sigaction action = {};
+    action.sa_handler = OnStopSignal;
+    action.sa_flags = SA_RESETHAND;
+    sigemptyset(&action.sa_mask);
+    sigaction(SIGINT, &action, &this->Previous[0]);
+    sigaction(SIGTERM, &action, &this->Previous[1]);
+  }
+  ~StopSignals()
+  {
+    sigaction(SIGINT, &this->Previous[0], nullptr);
+    sigaction(SIGTERM, &this->Previous[1], nullptr);
+  }
+  StopSignals(const StopSignals&) = delete;
+  StopSignals& operator=(const StopSignals&) = delete;
+};
+
+/// The name of the field trained until a signal stopped the run: F.interrupted.vtp for F.vtp.
+std::string InterruptedName(const std::string& output)
+{
+  const std::string stem = EndsWith(output, ".vtp") ? output.substr(0, output.size() - 4) : output;
+  return stem + ".interrupted.vtp";
+}
 
 /// --distributed under mpirun: the MPI controller of the run (finalised when the command ends), this rank.
 struct Processes
@@ -204,8 +246,9 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
     trainer->SetTrainingFrameList(frames);
   }
   TrainerSettings settings = o.Settings;
-  settings.CheckpointFile = o.Checkpoint;
-  settings.CheckpointInterval = o.Checkpoint.empty() ? 0 : 200;
+  // Without --checkpoint, a run stopped by a signal still leaves one to resume from (only then is it written).
+  settings.CheckpointFile = o.Checkpoint.empty() ? o.Output + ".checkpoint" : o.Checkpoint;
+  settings.CheckpointInterval = o.Checkpoint.empty() ? 0 : o.CheckpointInterval;
   trainer->SetTrainerSettings(settings);
   trainer->SetController(processes.Controller);
   trainer->SetEvaluationInterval(o.EvaluationInterval);
@@ -232,6 +275,10 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
     const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - c.Start).count();
     const double eta = fraction > 0 ? elapsed * (1 - fraction) / fraction : 0;
     auto* t = static_cast<vtkGaussianFieldTrainer*>(caller);
+    if (StopSignal)
+    {
+      t->SetAbortExecute(1); // the trainer stops at its next step, saves a checkpoint and outputs the field so far
+    }
     if (t->GetCurrentIteration() == 0)
     {
       return; // the pipeline's own 0 % and 100 % events, also sent when training fails before a step
@@ -266,10 +313,33 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
   trainer->AddObserver(vtkGaussianFieldTrainer::SettingsChosenEvent, chosen);
   FilterError error;
   error.Watch(trainer);
+  const StopSignals signals;
   trainer->Update();
   if (terminal)
   {
     std::printf("\n");
+  }
+  if (StopSignal && trainer->GetNumberOfGaussians() > 0 && std::string(trainer->GetStopReason()) == "aborted")
+  {
+    // Stopped by a signal: the field so far under its own name (the output the user asked for is untouched), the
+    // checkpoint, and how to go on.
+    const int code = 128 + StopSignal;
+    if (processes.Rank != 0)
+    {
+      return code;
+    }
+    const std::string interrupted = InterruptedName(o.Output);
+    const std::string checkpoint = trainer->GetCheckpointFile() ? trainer->GetCheckpointFile() : "";
+    if (WriteField(trainer->GetOutput(), interrupted) != 0)
+    {
+      return code;
+    }
+    std::fprintf(stderr,
+      "bigus: %s at iteration %d after %.1f s: the field trained so far is in %s and the run's state in %s; go on "
+      "with the same command and --resume %s\n",
+      StopSignal == SIGINT ? "interrupted (SIGINT)" : "terminated (SIGTERM)", trainer->GetCompletedIterations(),
+      trainer->GetTrainingSeconds(), interrupted.c_str(), checkpoint.c_str(), checkpoint.c_str());
+    return code;
   }
   if (trainer->GetNumberOfGaussians() == 0)
   {
@@ -356,6 +426,16 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
                 "mean %.3f, largest %.3f mm\n",
       static_cast<long long>(n), sum[0] / std::max<vtkIdType>(1, n), largest[0], sum[1] / std::max<vtkIdType>(1, n),
       largest[1]);
+  }
+  if (vtkStringArray* lines = vtkStringArray::SafeDownCast(fd->GetAbstractArray("TrainingSettings")))
+  {
+    for (vtkIdType i = 0; i < lines->GetNumberOfValues(); ++i)
+    {
+      if (lines->GetValue(i).rfind("PoseAnchor = ", 0) == 0)
+      {
+        std::printf("               %s\n", lines->GetValue(i).c_str());
+      }
+    }
   }
   if (vtkDataArray* untrained = fd->GetArray("UntrainedPoseCorrection"))
   {
@@ -455,13 +535,16 @@ Command AddTrainCommand(CLI::App& app)
       "Fan mask .mha (W x H x 1, or W x H x N per frame; default: estimated): one for every sweep, or one per sweep "
       "(repeat the option)")
     ->allow_extra_args(false);
-  trainCommand->add_option("--holdout-every", train.HoldOutEvery,
-    "Hold out frames with index % K == J, the index within each sweep (0: none)");
-  trainCommand->add_option("--holdout-offset", train.HoldOutOffset, "J of --holdout-every");
+  trainCommand
+    ->add_option("--holdout-every", train.HoldOutEvery,
+      "Hold out frames with index % K == J, the index within each sweep (0: none)")
+    ->check(FiniteNonNegative());
+  trainCommand->add_option("--holdout-offset", train.HoldOutOffset, "J of --holdout-every (0 to K - 1)")
+    ->check(FiniteNonNegative());
   trainCommand
     ->add_option("--holdout-sweep", train.HoldOutSweep,
       "Hold out every frame of sweep K (0 = the first SWEEP): leave-one-sweep-out")
-    ->check(CLI::NonNegativeNumber);
+    ->check(FiniteNonNegative());
   trainCommand
     ->add_option("--frames", train.Frames,
       "Train on these frames only (indices, counting the sweeps' frames in turn); the others are held out")
@@ -470,39 +553,39 @@ Command AddTrainCommand(CLI::App& app)
   trainCommand
     ->add_option("--time-budget", settings.TimeBudget,
       "Wall-clock budget for training, seconds (0: none); alone, it is the whole schedule (learning-rate decay, "
-      "densification window) and training runs until it")
-    ->check(CLI::NonNegativeNumber);
+      "densification window) and training runs until it; at most 1e7 (116 days)")
+    ->check(FiniteNonNegative(1e7));
   auto* iterations =
     trainCommand
       ->add_option("--iterations", settings.Iterations, "Optimisation steps (with --time-budget: whichever ends first)")
       ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+      ->check(FiniteNonNegative());
   trainCommand
     ->add_option(
       "--max-gaussians", settings.MaximumGaussians, "Hard maximum of Gaussians (gap filling's copies included)")
     ->capture_default_str()
-    ->check(CLI::PositiveNumber);
+    ->check(FinitePositive());
   trainCommand
     ->add_option("--initial-gaussians", settings.Seeding.InitialGaussians,
       "Seeds (0: chosen from the training frames' fan pixels; the InitialGaussians setting line says how)")
     ->capture_default_str()
-    ->check(CLI::NonNegativeNumber);
+    ->check(FiniteNonNegative());
   trainCommand
     ->add_option("--growth-margin", settings.Densification.GrowthMargin,
       "Growth stops when the validation loss improves by less than this (relative) on the best so far ...")
     ->capture_default_str()
-    ->check(CLI::Range(0.0, 1.0));
+    ->check(FiniteRange(0.0, 1.0));
   trainCommand
     ->add_option(
       "--growth-patience", settings.Densification.GrowthPatience, "... over this many densification intervals in a row")
     ->capture_default_str()
-    ->check(CLI::PositiveNumber);
+    ->check(FinitePositive());
   trainCommand
     ->add_option("--residual-seeds", settings.Densification.ResidualSeedShare,
       "New Gaussians where the residual is largest at each densification, as a share of those split or cloned, "
       "their reflectivity the residual (Image-GS; 0: off)")
     ->capture_default_str()
-    ->check(CLI::Range(0.0, 100.0));
+    ->check(FiniteRange(0.0, 100.0));
   trainCommand->add_flag("--reflectivity-solve", settings.ReflectivitySolve,
     "Variable projection: solve the reflectivities by least squares after seeding and after every densification, "
     "Adam between the solves (default: Adam alone)");
@@ -510,7 +593,7 @@ Command AddTrainCommand(CLI::App& app)
     ->add_option("--solve-iterations", settings.Solve.MaximumIterations,
       "CGLS iterations of each reflectivity solve (each a forward and a backward pass over every training frame)")
     ->capture_default_str()
-    ->check(CLI::PositiveNumber);
+    ->check(FinitePositive());
   trainCommand->add_flag_callback(
     "--no-held-out-choices", [&settings] { settings.HeldOut.Enabled = false; },
     "Take ElevationSigma's rule untested (default: where the fit is the pixel grid's solve, the rule's value times "
@@ -526,14 +609,14 @@ Command AddTrainCommand(CLI::App& app)
       "passes over stored weights instead of renders of every training frame; where it needs more, or with 0, the "
       "products are matrix free)")
     ->capture_default_str()
-    ->check(CLI::Range(0.0, 1.0));
+    ->check(FiniteRange(0.0, 1.0));
   trainCommand
     ->add_option("--solve-l1", settings.Solve.L1,
       "An L1 term in each reflectivity solve (the pixel-grid fit's, variable projection's), as a share of the weight "
       "that sets every reflectivity to 0 (FISTA; the Gaussians it zeroes are removed and the others refitted by "
       "least squares; default 0: none, CGLS)")
     ->capture_default_str()
-    ->check(CLI::Range(0.0, 1.0));
+    ->check(FiniteRange(0.0, 1.0));
   trainCommand->add_flag_callback(
     "--dense-adam", [&settings] { settings.SparseAdam = false; },
     "Adam moves every Gaussian every step on its momentum (the ablation; default: only the Gaussians a step "
@@ -561,6 +644,13 @@ Command AddTrainCommand(CLI::App& app)
   trainCommand->add_flag("--refine-image-to-probe", settings.Poses.RefineImageToProbe,
     "Refine one correction of ImageToProbe shared by every frame (printed, and in the field data)");
   trainCommand
+    ->add_flag_callback(
+      "--no-pose-anchor", [&settings] { settings.Poses.AnchorToTrackedPoses = false; },
+      "Where every sweep's poses are refined, leave the field where the refined poses put it (default: moved at the "
+      "end with every pose by the rigid motion that best maps the refined training frames onto their tracked poses, "
+      "as the PoseAnchor setting line says)")
+    ->excludes("--no-refine-poses");
+  trainCommand
     ->add_option("--refined-poses", train.RefinedPoses,
       "Write the sweep with its frames' ImageToReference as refined (.igs.mha; held-out "
       "frames take the shared corrections and the smooth part of their sweep's); one per sweep, in their order (repeat "
@@ -570,14 +660,14 @@ Command AddTrainCommand(CLI::App& app)
     ->add_option("--pose-smoothness", settings.Poses.Smoothness,
       "Where poses are refined: weight of the prior that keeps the corrections smooth along the sweep (0: none)")
     ->excludes("--no-refine-poses")
-    ->check(CLI::NonNegativeNumber);
+    ->check(FiniteNonNegative());
   trainCommand
     ->add_option("--pose-refinement-start", settings.Poses.Start,
       "Where poses are refined: the share of the schedule (0 to 1) trained on the tracked poses before the corrections "
       "move; -1: chosen from the tracked path's jitter (bigus::ChoosePoseRefinementStart; its setting line says why)")
     ->capture_default_str()
     ->excludes("--no-refine-poses")
-    ->check(CLI::Range(-1.0, 1.0));
+    ->check(FiniteRange(-1.0, 1.0));
   trainCommand->add_flag_callback(
     "--no-fill-gaps", [&settings] { settings.FillGaps = false; },
     "Leave gaps between training frames wider than the beam empty (default: bridged, as bigus fill-gaps does)");
@@ -586,29 +676,31 @@ Command AddTrainCommand(CLI::App& app)
       "Last, merge neighbouring Gaussians whose moment-matched merge has a relative integrated squared error "
       "below this (as bigus merge does); 0: off")
     ->capture_default_str()
-    ->check(CLI::Range(0.0, 1.0));
+    ->check(FiniteRange(0.0, 1.0));
   trainCommand
     ->add_option("--elevation-sigma", settings.ElevationSigma,
       "Elevation beam sigma, mm (FWHM / 2.355); 0: chosen from the sweep (bigus::ChooseElevationSigma; its setting "
       "line "
       "says why)")
     ->capture_default_str()
-    ->check(CLI::NonNegativeNumber);
+    ->check(FiniteNonNegative());
   trainCommand->add_option("--backend", train.Backend, "Training backend: auto, cpu or cuda (as registered)")
     ->capture_default_str();
-  trainCommand->add_option("--threads", train.Threads,
-    "Threads (0: all cores; with --distributed, the cores divided among the ranks on each machine)");
+  trainCommand
+    ->add_option("--threads", train.Threads,
+      "Threads (0: all cores; with --distributed, the cores divided among the ranks on each machine)")
+    ->check(FiniteNonNegative());
   trainCommand
     ->add_option("--frames-per-step", settings.FramesPerStep,
       "Training frames rendered per step (per rank with --distributed); their losses are averaged")
     ->capture_default_str()
-    ->check(CLI::Range(1, 4096));
+    ->check(FiniteRange(1, 4096));
   trainCommand
     ->add_option("--coarse-fraction", settings.CoarseFraction,
       "The resolution schedule: the first fraction (0 to 1) of the schedule steps on every second pixel and row of "
       "its frames; 0: off")
     ->capture_default_str()
-    ->check(CLI::Range(0.0, 1.0));
+    ->check(FiniteRange(0.0, 1.0));
   trainCommand
     ->add_flag("--coarse-low-pass", settings.CoarseLowPass,
       "The coarse steps' frames as 2 x 2 averages, each Gaussian rendered through the pixel's low-pass, instead of "
@@ -619,13 +711,22 @@ Command AddTrainCommand(CLI::App& app)
     "gradients are summed every step (MPI_Allreduce through vtkMPIController); rank 0 writes the field and "
     "checkpoints. Resume with the same P");
   trainCommand->add_option("--seed", settings.Seed, "Random seed")->capture_default_str();
-  trainCommand->add_option("--checkpoint", train.Checkpoint, "Checkpoint file, written every 200 steps");
+  trainCommand->add_option("--checkpoint", train.Checkpoint,
+    "Checkpoint file, written every --checkpoint-interval steps (and when SIGINT or SIGTERM stops the run; without "
+    "this option that one goes to OUTPUT.checkpoint)");
+  trainCommand
+    ->add_option("--checkpoint-interval", train.CheckpointInterval, "Steps between checkpoints (0: only on a signal)")
+    ->capture_default_str()
+    ->needs("--checkpoint")
+    ->check(FiniteNonNegative(1e9));
   trainCommand
     ->add_option("--resume", train.Resume,
       "Continue from this checkpoint (same settings; the seconds trained before it count towards --time-budget)")
     ->check(CLI::ExistingFile);
-  trainCommand->add_option(
-    "--evaluate-every", train.EvaluationInterval, "Record the held-out PSNR every S seconds (field data HeldOutPSNR)");
+  trainCommand
+    ->add_option("--evaluate-every", train.EvaluationInterval,
+      "Record the held-out PSNR every S seconds (field data HeldOutPSNR; 0: never)")
+    ->check(FiniteNonNegative());
   return { trainCommand, [options, iterations] {
             TrainOptions& train = *options;
             if (iterations->count() == 0 && train.Settings.TimeBudget > 0)

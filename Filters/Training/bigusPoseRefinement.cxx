@@ -9,6 +9,8 @@
 #include VTK_FMT(fmt/printf.h)
 // clang-format on
 
+#include <Eigen/Geometry>
+
 #include <algorithm>
 #include <cmath>
 
@@ -250,12 +252,8 @@ void PoseRefiner::ComposePose(int frame, const TrainingState& state)
     return; // a pose the renderer rejects (an invalid frame) stays as it was recorded
   }
   const std::array<double, 7>& shared = state.SharedPoseCorrection;
-  std::array<double, 16> pose = this->TrackedPoses[frame];
+  std::array<double, 16> pose = this->UncorrectedPose(frame, state);
   const int width = this->Data->Width, height = this->Data->Height;
-  if (s.RefineTimeOffset)
-  {
-    this->Timeline.PoseAt(frame, shared[6], pose.data());
-  }
   if (s.RefinePoses == PoseRefinement::On)
   {
     // The frame's own correction: stepped (a training frame) or set (a held-out one, CorrectUntrainedFrames).
@@ -270,6 +268,133 @@ void PoseRefiner::ComposePose(int frame, const TrainingState& state)
     CorrectPose(pose.data(), width, height, shared.data(), pose.data());
   }
   this->Data->Poses[frame] = pose;
+}
+
+std::array<double, 16> PoseRefiner::UncorrectedPose(int frame, const TrainingState& state) const
+{
+  std::array<double, 16> pose = this->TrackedPoses[frame];
+  if (this->Settings.RefineTimeOffset)
+  {
+    this->Timeline.PoseAt(frame, state.SharedPoseCorrection[6], pose.data());
+  }
+  return pose;
+}
+
+PoseAnchor PoseRefiner::AnchorToTrackedPoses(TrainingState& state, GaussianField& field)
+{
+  PoseAnchor anchor;
+  const PoseRefinementSettings& s = this->Settings;
+  const TrainingData& data = *this->Data;
+  if (s.RefinePoses != PoseRefinement::On)
+  {
+    return anchor;
+  }
+  if (!s.AnchorToTrackedPoses)
+  {
+    anchor.Line = "PoseAnchor = off (given: the field stays where the refined poses put it)";
+    return anchor;
+  }
+  if (s.RefineTimeOffset || s.RefineImageToProbe)
+  {
+    // Refined to correct what the tracker gets wrong for every frame alike, the shared corrections move the scene on
+    // purpose, and the per-frame corrections take part of it up (docs/FINDINGS.md, "Anchoring the refined scene").
+    anchor.Line = "PoseAnchor = off (a shared correction is refined: the tracked poses are not where the scene lies)";
+    return anchor;
+  }
+  std::vector<int> frames;
+  for (int f : data.TrainFrames)
+  {
+    if (!this->IsSweepRefined(data.SweepOf(f)))
+    {
+      anchor.Line = "PoseAnchor = off (a sweep with trusted poses fixes where the scene lies)";
+      return anchor;
+    }
+    if (this->TrackedValid[f])
+    {
+      frames.push_back(f);
+    }
+  }
+  if (frames.empty())
+  {
+    return anchor;
+  }
+  // The four corners of every refined training frame, under its refined pose (a) and its tracked pose (b).
+  const double width = data.Width - 1.0, height = data.Height - 1.0;
+  Eigen::Matrix3Xd a(3, 4 * frames.size()), b(3, 4 * frames.size());
+  Eigen::Index c = 0;
+  for (int f : frames)
+  {
+    const double* p = data.Poses[f].data();
+    const double* q = this->TrackedPoses[f].data();
+    for (double i : { 0.0, width })
+    {
+      for (double j : { 0.0, height })
+      {
+        for (int k = 0; k < 3; ++k)
+        {
+          a(k, c) = p[4 * k] * i + p[4 * k + 1] * j + p[4 * k + 3];
+          b(k, c) = q[4 * k] * i + q[4 * k + 1] * j + q[4 * k + 3];
+        }
+        ++c;
+      }
+    }
+  }
+  const Eigen::Matrix4d T = Eigen::umeyama(a, b, false);
+  const Eigen::Matrix3d R = T.topLeftCorner<3, 3>();
+  const Eigen::Vector3d t = T.topRightCorner<3, 1>();
+  const Eigen::Matrix3Xd moved = (R * a).colwise() + t;
+  auto rms = [&](const Eigen::Matrix3Xd& x, const Eigen::Matrix3Xd& y) {
+    return std::sqrt((x - y).colwise().squaredNorm().mean());
+  };
+  anchor.Frames = static_cast<int>(frames.size());
+  anchor.BeforeMillimetres = rms(a, b);
+  anchor.AfterMillimetres = rms(moved, b);
+  anchor.MovedMillimetres = rms(moved, a);
+  anchor.RotationDegrees = Eigen::AngleAxisd(R).angle() * 180 / M_PI;
+  // Each refined training frame's correction puts it at T times its refined pose: CorrectPose moves a pose in its
+  // own axes, so CorrectPose(T P, xi) = T CorrectPose(P, xi) and the ImageToProbe correction composed last follows.
+  for (int f : frames)
+  {
+    std::array<double, 16> corrected = this->UncorrectedPose(f, state);
+    CorrectPose(corrected.data(), data.Width, data.Height, state.PoseCorrections[f].data(), corrected.data());
+    Eigen::Matrix4d P;
+    for (int k = 0; k < 16; ++k)
+    {
+      P(k / 4, k % 4) = corrected[k];
+    }
+    const Eigen::Matrix4d TP = T * P;
+    std::array<double, 16> target;
+    for (int k = 0; k < 16; ++k)
+    {
+      target[k] = TP(k / 4, k % 4);
+    }
+    const std::array<double, 16> from = this->UncorrectedPose(f, state);
+    PoseCorrectionBetween(from.data(), target.data(), data.Width, data.Height, state.PoseCorrections[f].data());
+  }
+  this->ComposePoses(state);
+  // The field: mu' = R mu + t, each Gaussian's rotation R' = R R_i (quaternions as stored, w x y z, norm kept).
+  const Eigen::Quaterniond rotation(R);
+  for (std::int64_t i = 0; i < field.Count(); ++i)
+  {
+    float* mean = &field.Means[3 * i];
+    const Eigen::Vector3d m = R * Eigen::Vector3d(mean[0], mean[1], mean[2]) + t;
+    float* q = &field.Quaternions[4 * i];
+    const Eigen::Quaterniond r = rotation * Eigen::Quaterniond(q[0], q[1], q[2], q[3]);
+    for (int k = 0; k < 3; ++k)
+    {
+      mean[k] = static_cast<float>(m[k]);
+    }
+    q[0] = static_cast<float>(r.w());
+    q[1] = static_cast<float>(r.x());
+    q[2] = static_cast<float>(r.y());
+    q[3] = static_cast<float>(r.z());
+  }
+  anchor.Applied = true;
+  anchor.Line = vtkfmt::sprintf("PoseAnchor = on (the field and poses moved by %.3g degrees and %.3g mm rms onto "
+                                "the tracked poses of %d refined training frames; their corners lay %.3g mm rms from "
+                                "the tracked ones, %.3g mm after the motion)",
+    anchor.RotationDegrees, anchor.MovedMillimetres, anchor.Frames, anchor.BeforeMillimetres, anchor.AfterMillimetres);
+  return anchor;
 }
 
 UntrainedCorrection PoseRefiner::PlaceUntrainedFrames(TrainingState& state)

@@ -75,6 +75,12 @@ struct BIGUSTRAINING_EXPORT PoseRefinementSettings
   /// ProbeToReference ImageToProbe C), so its gradient is the sum of the frames' pose gradients. The rates, sigmas
   /// and prior of the per-frame corrections. Held-out frames take it too. From Start.
   bool RefineImageToProbe = false;
+  /// Where every sweep's training frames are refined (RefinePoses On), the field and every pose are moved at the end
+  /// by the rigid motion that best maps the refined training frames onto their tracked poses
+  /// (PoseRefiner::AnchorToTrackedPoses): the images fix the refined poses only up to a motion of the whole scene,
+  /// and a user renders the field at tracked poses. The training frames' renders are unchanged by it. Not where a
+  /// shared correction is refined (RefineTimeOffset, RefineImageToProbe).
+  bool AnchorToTrackedPoses = true;
   /// Whether any of the pose corrections is refined (RefinePoses not Off, RefineTimeOffset, RefineImageToProbe).
   bool Any() const
   {
@@ -87,6 +93,18 @@ struct FramePoseCorrection
 {
   int Frame = 0;
   std::array<double, 6> Xi{}; ///< rotation vector (rad) then translation (mm) in the frame's axes (CorrectPose)
+};
+
+/// What PoseRefiner::AnchorToTrackedPoses did (TrainerReport::PoseAnchor; its line in TrainerReport::Settings).
+struct PoseAnchor
+{
+  bool Applied = false;         ///< the field and the poses were moved
+  int Frames = 0;               ///< the refined training frames whose corners decided the motion
+  double RotationDegrees = 0;   ///< the angle of the motion's rotation
+  double MovedMillimetres = 0;  ///< rms distance the refined frames' corners moved
+  double BeforeMillimetres = 0; ///< rms distance of the refined corners from the tracked ones, before
+  double AfterMillimetres = 0;  ///< the same after: the part of the corrections that is not one rigid motion
+  std::string Line;             ///< the `PoseAnchor = ...` line (why not, where not applied)
 };
 
 /**
@@ -135,6 +153,19 @@ public:
   /// The frames not trained on take the smooth part of their sweep's training corrections (CorrectUntrainedFrames)
   /// where RefinePoses is On; returns what was chosen (empty otherwise).
   UntrainedCorrection PlaceUntrainedFrames(TrainingState& state);
+  /**
+   * Moves @p field (means and rotations) and every pose by the rigid motion T that best maps the corners of the
+   * refined training frames (their pixel-grid corners under the refined poses) onto the same corners under the
+   * tracked poses (least squares, Umeyama, IEEE TPAMI 13(4), 1991, without scaling): the corrections keep what
+   * distinguishes the frames and lose the motion of the whole scene, which no image fixes (docs/FINDINGS.md, "Pose
+   * refinement on synthetic truth, scored fairly"). Each refined training frame's correction becomes the one that
+   * puts it at T times its refined pose, so a training frame renders the moved field at its moved pose exactly as
+   * before (rounding aside). Applied where RefinePoses is On, AnchorToTrackedPoses is set, every sweep is refined
+   * (a trusted sweep anchors the scene already) and no shared correction (RefineTimeOffset, RefineImageToProbe) is:
+   * those correct an error common to every tracked pose, which the anchor would put back. Call it before
+   * PlaceUntrainedFrames.
+   */
+  PoseAnchor AnchorToTrackedPoses(TrainingState& state, GaussianField& field);
   /// The training frames' corrections, for the report (refined sweeps only).
   std::vector<FramePoseCorrection> Corrections(const TrainingState& state) const;
   /// Whether a checkpoint's state @p loaded holds the corrections this run refines (same settings, same sweep);
@@ -145,6 +176,8 @@ private:
   /// Frame @p frame's pose in the data: its tracked pose at its timestamp plus the time offset, then its own
   /// correction, then the ImageToProbe correction (each when refined).
   void ComposePose(int frame, const TrainingState& state);
+  /// Frame @p frame's tracked pose at its timestamp plus the time offset: the pose its own correction moves.
+  std::array<double, 16> UncorrectedPose(int frame, const TrainingState& state) const;
 
   TrainingData* Data = nullptr;
   PoseRefinementSettings Settings;

@@ -614,8 +614,19 @@ bool Trainer::Finish(std::string* error)
       return false;
     }
   }
-  // The frames not trained (held out, and validation frames that never joined) take the smooth part of their
-  // neighbours' corrections, if any; then the validation frames join: the prune, gap filling and merge see them.
+  if (!this->PullState(error))
+  {
+    return false;
+  }
+  // The stages that end a run, on the host field: the refined scene moved onto the tracked poses; the frames not
+  // trained (held out, and validation frames that never joined) take the smooth part of their neighbours'
+  // corrections, if any; the validation frames join, so that the final prune, gap filling and merge see them.
+  OptimizerState& G = this->State.Gaussians;
+  this->Report.Anchor = this->Poses.AnchorToTrackedPoses(this->State, G.Field);
+  if (!this->Report.Anchor.Line.empty())
+  {
+    this->Report.Settings.push_back(this->Report.Anchor.Line);
+  }
   this->Report.UntrainedCorrections = this->Poses.PlaceUntrainedFrames(this->State);
   if (!this->JoinValidationFrames(nullptr, error))
   {
@@ -625,12 +636,6 @@ bool Trainer::Finish(std::string* error)
   const std::array<double, 7>& shared = this->State.SharedPoseCorrection;
   this->Report.TimeOffset = shared[6];
   std::copy_n(shared.begin(), 6, this->Report.ImageToProbeCorrection.begin());
-  if (!this->PullState(error))
-  {
-    return false;
-  }
-  // The stages that end a run, on the host field: the final prune, gap filling, the merge.
-  OptimizerState& G = this->State.Gaussians;
   this->Report.PrunedAtEnd = bigus::FinalPrune(G, *this->Data, this->Options(), this->Gamma, s.FinalPruneTolerance);
   if (s.FillGaps && s.BeamIntegration)
   {

@@ -85,6 +85,9 @@ struct TrainerReport
   /// RefinePoses: how the frames not trained (held out) were placed among the refined ones
   /// (bigus::CorrectUntrainedFrames).
   UntrainedCorrection UntrainedCorrections;
+  /// RefinePoses: the rigid motion that moved the field and the poses onto the tracked poses at the end
+  /// (PoseRefiner::AnchorToTrackedPoses); its line is in Settings.
+  PoseAnchor Anchor;
   /// RefineTimeOffset: the offset (s) added to every frame's timestamp to find its tracked pose.
   double TimeOffset = 0;
   /// RefineImageToProbe: the correction of every frame (rotation vector, rad; translation, mm; CorrectPose).

@@ -803,3 +803,116 @@ TEST(Trainer, RefiningPosesBringsPerturbedTrainingPosesTowardsTheTruth)
   EXPECT_GT(smooth.GetReport().UntrainedCorrections.Bandwidth, 0);
   EXPECT_EQ(smooth.GetReport().UntrainedCorrections.Frames, static_cast<int>(heldOut.size()));
 }
+
+TEST(PoseRefinement, TheAnchorMovesTheRefinedSceneOntoTheTrackedPosesAndKeepsEveryTrainingRender)
+{
+  // A refinement that moved the whole scene: the field and every training pose moved by one rigid motion M (2
+  // degrees, 1.4 mm), which no image can tell, plus (second case) an independent error per frame, which it can. The
+  // anchor must take M away, so that the field lies where the tracked poses say, and render every training frame
+  // as before.
+  std::vector<int> heldOut;
+  const GaussianField field = KnownField(200, 7);
+  const TrainingData truth = SyntheticSweep(field, 0.5, heldOut);
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(2 * M_PI / 180, Eigen::Vector3d(1, 2, -1).normalized()).matrix();
+  const Eigen::Vector3d t(1.0, -0.5, 0.8);
+  auto moved = [&](const std::array<double, 16>& pose) {
+    Eigen::Matrix4d P, M = Eigen::Matrix4d::Identity();
+    for (int k = 0; k < 16; ++k)
+    {
+      P(k / 4, k % 4) = pose[k];
+    }
+    M.topLeftCorner<3, 3>() = R;
+    M.topRightCorner<3, 1>() = t;
+    const Eigen::Matrix4d out = M * P;
+    std::array<double, 16> result;
+    for (int k = 0; k < 16; ++k)
+    {
+      result[k] = out(k / 4, k % 4);
+    }
+    return result;
+  };
+  GaussianField movedField = field;
+  const Eigen::Quaterniond rotation(R);
+  for (std::int64_t i = 0; i < movedField.Count(); ++i)
+  {
+    float* m = &movedField.Means[3 * i];
+    const Eigen::Vector3d p = R * Eigen::Vector3d(m[0], m[1], m[2]) + t;
+    float* q = &movedField.Quaternions[4 * i];
+    const Eigen::Quaterniond r = rotation * Eigen::Quaterniond(q[0], q[1], q[2], q[3]);
+    const double values[7] = { p[0], p[1], p[2], r.w(), r.x(), r.y(), r.z() };
+    std::copy_n(values, 3, m);
+    std::copy_n(values + 3, 4, q);
+  }
+  RenderOptions o;
+  o.ElevationSigma = 0.5;
+  o.Gamma = 1;
+  auto render = [&](const GaussianField& f, const TrainingData& d) {
+    auto renderer = CreateCpuRenderer();
+    const std::size_t pixels = std::size_t(W) * H;
+    std::vector<float> all, S(pixels), I(pixels);
+    for (int frame : d.TrainFrames)
+    {
+      const SliceGeometry g = d.Slice(frame);
+      EXPECT_TRUE(renderer->Forward(f.View(), &g, 1, o, S.data(), I.data(), nullptr, nullptr));
+      all.insert(all.end(), I.begin(), I.end());
+    }
+    return all;
+  };
+  for (const double noise : { 0.0, 0.3 })
+  {
+    TrainingData data = truth;
+    PoseRefinementSettings settings;
+    settings.RefinePoses = PoseRefinement::On;
+    settings.Start = 0;
+    PoseRefiner refiner;
+    TrainingState state;
+    std::vector<std::string> lines;
+    refiner.Configure(&data, settings, nullptr, state, lines);
+    // Each training frame's correction takes its tracked pose to M times its tracked pose, then errs by noise.
+    std::mt19937_64 rng(5);
+    std::normal_distribution<double> normal(0.0, 1.0);
+    for (int f : data.TrainFrames)
+    {
+      const std::array<double, 16> target = moved(truth.Poses[f]);
+      ASSERT_EQ(PoseCorrectionBetween(truth.Poses[f].data(), target.data(), W, H, state.PoseCorrections[f].data()),
+        PoseStatus::Ok);
+      for (int k = 0; k < 6; ++k)
+      {
+        state.PoseCorrections[f][k] += noise * normal(rng) * (k < 3 ? M_PI / 180 : 1.0);
+      }
+    }
+    refiner.ComposePoses(state);
+    GaussianField anchored = movedField;
+    const std::vector<float> before = render(anchored, data);
+    const PoseAnchor anchor = refiner.AnchorToTrackedPoses(state, anchored);
+    ASSERT_TRUE(anchor.Applied) << anchor.Line;
+    const std::vector<float> after = render(anchored, data);
+    float largest = 0;
+    for (std::size_t k = 0; k < before.size(); ++k)
+    {
+      largest = std::max(largest, std::abs(after[k] - before[k]));
+    }
+    const double error = CornerError(data, truth, data.TrainFrames, W, H);
+    std::printf("noise %.1f: %s; training renders change by at most %.2g; corners %.4f mm from the tracked ones\n",
+      noise, anchor.Line.c_str(), largest, error);
+    EXPECT_LT(largest, 1e-4) << "a rigid motion of the scene and of every pose changes no render";
+    EXPECT_NEAR(anchor.RotationDegrees, 2.0, noise > 0 ? 0.5 : 1e-9);
+    if (noise == 0)
+    {
+      // M taken away exactly: the poses are the tracked ones, the field the one M moved.
+      EXPECT_LT(anchor.AfterMillimetres, 1e-9);
+      EXPECT_LT(error, 1e-9);
+      for (std::int64_t i = 0; i < 3 * field.Count(); ++i)
+      {
+        ASSERT_NEAR(anchored.Means[i], field.Means[i], 1e-4) << "mean " << i / 3;
+      }
+    }
+    else
+    {
+      // What is not one motion stays: the corrections keep what tells the frames apart.
+      EXPECT_GT(anchor.AfterMillimetres, 0.1);
+      EXPECT_LT(anchor.AfterMillimetres, anchor.BeforeMillimetres);
+      EXPECT_NEAR(error, anchor.AfterMillimetres, 0.5 * anchor.AfterMillimetres);
+    }
+  }
+}

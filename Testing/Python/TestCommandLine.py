@@ -7,8 +7,10 @@ import json
 import math
 import os
 import shutil
+import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import vtk  # noqa: F401
@@ -175,6 +177,42 @@ def check_field_write_failure(field, sweep, xml, out):
     assert code == 1 and "cannot write the field" in err, (code, err)
     assert not os.path.islink(field) and open(field, "rb").read() == before
     assert not [f for f in os.listdir(out) if ".tmp" in f], os.listdir(out)
+
+
+def check_signal_stop(sweep, xml, out):
+    """SIGINT during training: the run stops at its next step, writes the field trained so far as
+    OUTPUT.interrupted.vtp and the run's state to OUTPUT.checkpoint (no --checkpoint given), leaves OUTPUT alone and
+    exits 130 saying how to go on; the same command with --resume ends normally from there."""
+    target = os.path.join(out, "stopped.vtp")
+    interrupted = os.path.join(out, "stopped.interrupted.vtp")
+    checkpoint = target + ".checkpoint"
+    for stale in (target, interrupted, checkpoint):
+        if os.path.exists(stale):
+            os.remove(stale)
+    args = ["train", sweep, "--calibration", xml, "-o", target, "--no-pixel-grid-fit", "--elevation-sigma", "1.0",
+            "--holdout-every", "4", "--holdout-offset", "2"]
+    process = subprocess.Popen([BIGUS, *args, "--iterations", "1000000"], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+    for line in process.stdout:
+        if line.startswith("setting"):
+            break  # the trainer is made; its steps follow
+    time.sleep(2)
+    process.send_signal(signal.SIGINT)
+    out_text, err = process.communicate(timeout=300)
+    assert process.returncode == 130, (process.returncode, err)
+    assert "interrupted (SIGINT) at iteration" in err and "--resume " + checkpoint in err, err
+    assert not os.path.exists(target) and os.path.exists(checkpoint), os.listdir(out)
+    reader = vtk.vtkXMLPolyDataReader()
+    reader.SetFileName(interrupted)
+    reader.Update()
+    stopped = reader.GetOutput()
+    assert stopped.GetNumberOfPoints() > 0
+    assert stopped.GetFieldData().GetAbstractArray("StopReason").GetValue(0) == "aborted"
+    steps = int(err.split("at iteration ")[1].split()[0])
+    assert 0 < steps < 1000000, err
+    code, out_text, err = run(*args, "--iterations", str(steps + 20), "--resume", checkpoint)
+    assert code == 0 and os.path.exists(target), (code, err)
+    assert "after %d iterations" % (steps + 20) in out_text, out_text
 
 
 def check_sweep_without_statuses(field, sweep, xml, out):
@@ -544,6 +582,7 @@ def main():
     check_several_sweeps(data, sweep, xml, out)
     check_outputs_before_any_work(field, sweep, xml, out)
     check_field_write_failure(field, sweep, xml, out)
+    check_signal_stop(sweep, xml, out)
 
     rendered = os.path.join(out, "nwire_rendered.igs.mha")
     code, out_text, err = run("render", field, "--poses", sweep, "--calibration", xml, "--frames", "2", "6", "10",
