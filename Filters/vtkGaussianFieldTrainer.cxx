@@ -563,9 +563,10 @@ int vtkGaussianFieldTrainer::RequestData(
   addText("Backend", this->BackendInUse);
   vtkNew<vtkStringArray> settingsArray;
   settingsArray->SetName("TrainingSettings");
-  // With the lines the end of the run added (PoseAnchor).
-  const std::vector<std::string>& all = report.Settings;
-  settings.insert(settings.end(), all.begin() + std::min(all.size(), settings.size() - 1), all.end());
+  // The lines as the run left them (the pose-refinement trial rewrites RefinePoses; the end adds PoseAnchor), after
+  // the fan mask's.
+  settings.resize(1);
+  settings.insert(settings.end(), report.Settings.begin(), report.Settings.end());
   for (const std::string& line : settings)
   {
     settingsArray->InsertNextValue(line);

@@ -431,9 +431,12 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
   {
     for (vtkIdType i = 0; i < lines->GetNumberOfValues(); ++i)
     {
-      if (lines->GetValue(i).rfind("PoseAnchor = ", 0) == 0)
+      // What the run decided after its settings were printed: the pose-refinement trial, the anchor.
+      const std::string& line = lines->GetValue(i);
+      if (line.rfind("PoseAnchor = ", 0) == 0 ||
+        (line.rfind("RefinePoses = ", 0) == 0 && line.find("measured: ") != std::string::npos))
       {
-        std::printf("               %s\n", lines->GetValue(i).c_str());
+        std::printf("               %s\n", line.c_str());
       }
     }
   }

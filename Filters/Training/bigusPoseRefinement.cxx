@@ -46,6 +46,7 @@ void PoseRefiner::Configure(TrainingData* data, const PoseRefinementSettings& se
     this->RefinedSweeps = choice.Sweeps;
     s.RefinePoses = choice.Any() ? PoseRefinement::On : PoseRefinement::Off;
     refinedBy = "chosen: " + choice.Reason;
+    this->TrialPending = choice.Any() && s.TrialSteps > 0;
     if (!choice.Any())
     {
       lines.push_back("RefinePoses = off (" + refinedBy + ")");
@@ -133,6 +134,7 @@ void PoseRefiner::TurnOffCorrections(TrainingState& state, std::vector<std::stri
   }
   // The field says so too: no RefinedPoses where no frame moved.
   this->Settings.RefinePoses = PoseRefinement::Off;
+  this->TrialPending = false;
   std::fill(this->RefinedSweeps.begin(), this->RefinedSweeps.end(), 0);
   state.PoseCorrections.clear();
   state.PoseFirstMoment.clear();

@@ -81,6 +81,12 @@ struct BIGUSTRAINING_EXPORT PoseRefinementSettings
   /// and a user renders the field at tracked poses. The training frames' renders are unchanged by it. Not where a
   /// shared correction is refined (RefineTimeOffset, RefineImageToProbe).
   bool AnchorToTrackedPoses = true;
+  /// Auto, where the rule would refine: the choice is measured on the Adam route (Trainer::TryPoseRefinement). From
+  /// the refinement's start, TrialSteps steps are taken on the tracked poses and TrialSteps steps with refinement
+  /// from the same state, each scored on the held-out validation frames at their tracked poses (a user renders at
+  /// tracked poses); the better one goes on. 0: the rule decides alone. The rule's sweeps refine alike on every
+  /// route; where no validation frames can be held out, the rule decides and its line says so.
+  int TrialSteps = 400;
   /// Whether any of the pose corrections is refined (RefinePoses not Off, RefineTimeOffset, RefineImageToProbe).
   bool Any() const
   {
@@ -130,8 +136,17 @@ public:
 
   /// The settings as resolved by Configure (RefinePoses On or Off, Start in [0, 1]).
   const PoseRefinementSettings& GetSettings() const { return this->Settings; }
-  /// Whether a step at @p fraction of the schedule moves the corrections.
-  bool RefinesAt(double fraction) const { return this->Settings.Any() && fraction >= this->Settings.Start; }
+  /// Whether a step at @p fraction of the schedule moves the corrections (never while Suspend holds them).
+  bool RefinesAt(double fraction) const
+  {
+    return this->Settings.Any() && fraction >= this->Settings.Start && !this->Suspended;
+  }
+  /// While @p suspended, no step moves the corrections (the trusted branch of Trainer::TryPoseRefinement).
+  void Suspend(bool suspended) { this->Suspended = suspended; }
+  /// Whether RefinePoses Auto chose to refine and the choice is still to be measured (TrialSteps > 0); EndTrial
+  /// clears it, whatever the trial found.
+  bool IsTrialPending() const { return this->TrialPending; }
+  void EndTrial() { this->TrialPending = false; }
   /// Whether the training frames of sweep @p sweep (TrainingData::Sweeps) have their poses refined.
   bool IsSweepRefined(int sweep) const
   {
@@ -185,6 +200,8 @@ private:
   std::vector<bool> TrackedValid;  // the renderer accepts the tracked pose (others are never corrected)
   PoseTimeline Timeline;           // RefineTimeOffset
   std::vector<char> RefinedSweeps; // RefinePoses: 1 for each sweep whose training frames are refined
+  bool Suspended = false;
+  bool TrialPending = false;
 };
 
 /**

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <limits>
 
 namespace bigus
@@ -387,7 +388,10 @@ void Trainer::HoldOutValidationFrames()
 {
   TrainerReport& r = this->Report;
   std::string line;
-  r.ValidationFrames = ChooseValidationFrames(*this->Data, this->Settings.HeldOut, r.ValidationHeldOut, line);
+  // The pose-refinement trial scores on held-out frames too (TryPoseRefinement).
+  HeldOutChoiceSettings held = this->Settings.HeldOut;
+  held.HoldOutValidationFrames = held.HoldOutValidationFrames || this->Poses.IsTrialPending();
+  r.ValidationFrames = ChooseValidationFrames(*this->Data, held, r.ValidationHeldOut, line);
   r.Settings.push_back(line);
   if (r.ValidationHeldOut)
   {
@@ -528,6 +532,10 @@ bool Trainer::Iterate(double start, const std::function<void(double, int, double
     this->Report.StopReason = aborted ? "aborted" : "time budget";
     return true;
   }
+  if (this->Poses.IsTrialPending() && !this->InPoseTrial && this->Poses.RefinesAt(this->ScheduleFraction()))
+  {
+    return this->TryPoseRefinement(start, progress, abort, stop, error);
+  }
   double loss = 0;
   if (this->Step(&loss, error) == StepStatus::Failed)
   {
@@ -554,7 +562,7 @@ bool Trainer::Iterate(double start, const std::function<void(double, int, double
   const bool window = this->InDensificationWindow();
   const bool densify = d.Enabled && it >= d.Start && it % d.Interval == 0 && window;
   // The choices made on the held-out frames end here: the fit goes on from the best field they scored, with them.
-  if (!window && it % d.Interval == 0 && !this->JoinValidationFrames(&validation, error))
+  if (!window && !this->InPoseTrial && it % d.Interval == 0 && !this->JoinValidationFrames(&validation, error))
   {
     return false;
   }
@@ -576,7 +584,7 @@ bool Trainer::Iterate(double start, const std::function<void(double, int, double
     recent = LossWindow{ 0.0, 0, mean };
   }
   // Data-parallel: rank 0 writes the checkpoint, and the others learn whether it could.
-  if (s.CheckpointInterval > 0 && !s.CheckpointFile.empty() && it % s.CheckpointInterval == 0 &&
+  if (s.CheckpointInterval > 0 && !s.CheckpointFile.empty() && it % s.CheckpointInterval == 0 && !this->InPoseTrial &&
     !this->Agree(
       (this->Reduction && this->Reduction->Rank() != 0) || this->SaveCheckpoint(s.CheckpointFile, error), error))
   {
@@ -587,6 +595,128 @@ bool Trainer::Iterate(double start, const std::function<void(double, int, double
     progress(this->ScheduleFraction(), it, std::isfinite(loss) ? loss : 0.0, state.Gaussians.Count());
   }
   return true;
+}
+
+bool Trainer::TryPoseRefinement(double start, const std::function<void(double, int, double, std::int64_t)>& progress,
+  const std::function<bool()>& abort, bool& stop, std::string* error)
+{
+  this->Poses.EndTrial(); // one trial, whatever it finds
+  const std::vector<int> frames = this->HeldOutValidation;
+  auto rewrite = [&](const std::string& how) {
+    for (std::string& line : this->Report.Settings)
+    {
+      if (line.rfind("RefinePoses = on (", 0) == 0)
+      {
+        line.insert(std::strlen("RefinePoses = on ("), how + "; ");
+      }
+    }
+  };
+  if (frames.empty() || this->Reduction)
+  {
+    rewrite(this->Reduction ? "untested: data-parallel runs keep the rule's choice"
+                            : "untested: too few training frames to hold any out for the trial");
+    return this->EndPoseTrial("", error);
+  }
+  // Both branches from the state at the refinement's start.
+  if (!this->PullState(error))
+  {
+    return false;
+  }
+  const int from = this->State.Iteration, steps = this->Settings.Poses.TrialSteps;
+  const TrainingState initial = this->State;
+  const TrainerReport report = this->Report;
+  const LossWindow recent = this->Recent;
+  this->InPoseTrial = true;
+  auto branch = [&](double& psnr) {
+    const int limit = this->Settings.Iterations;
+    for (int k = 0; k < steps && !stop && (limit <= 0 || this->State.Iteration < limit); ++k)
+    {
+      if (!this->Iterate(start, progress, abort, stop, error))
+      {
+        return false;
+      }
+    }
+    ImageMetrics metrics;
+    if (!this->EvaluateOn(*this->Data, frames, metrics, error) || !this->PullState(error))
+    {
+      return false;
+    }
+    psnr = metrics.PSNR;
+    return true;
+  };
+  double trusted = 0, refined = -std::numeric_limits<double>::infinity();
+  this->Poses.Suspend(true);
+  const bool ok = branch(trusted);
+  this->Poses.Suspend(false);
+  if (!ok)
+  {
+    this->InPoseTrial = false;
+    return false;
+  }
+  TrainingState trustedState = this->State;
+  TrainerReport trustedReport = this->Report;
+  const LossWindow trustedRecent = this->Recent;
+  if (!stop)
+  {
+    this->State = initial;
+    this->Report = report;
+    this->Recent = recent;
+    this->Poses.ComposePoses(this->State);
+    if (!this->PushState(error))
+    {
+      this->InPoseTrial = false;
+      return false;
+    }
+    this->Engine->Snapshot();
+    if (!branch(refined))
+    {
+      this->InPoseTrial = false;
+      return false;
+    }
+  }
+  this->InPoseTrial = false;
+  const std::string how = vtkfmt::sprintf("measured: %d steps each way from step %d on %zu held-out frames at "
+                                          "their tracked poses, refined %.2f dB, trusted %.2f dB",
+    steps, from, frames.size(), refined, trusted);
+  if (refined > trusted)
+  {
+    rewrite(how);
+    return this->EndPoseTrial(how, error);
+  }
+  // The trusted branch goes on: its state, report and poses (every correction 0: the tracked poses).
+  this->State = std::move(trustedState);
+  this->Report = std::move(trustedReport);
+  this->Recent = trustedRecent;
+  this->Poses.ComposePoses(this->State);
+  if (!this->PushState(error))
+  {
+    return false;
+  }
+  this->Engine->Snapshot();
+  this->Poses.TurnOffCorrections(this->State, this->Report.Settings, how);
+  this->Settings.Poses = this->Poses.GetSettings();
+  return this->EndPoseTrial(how, error);
+}
+
+bool Trainer::EndPoseTrial(const std::string& how, std::string* error)
+{
+  if (this->Settings.HeldOut.HoldOutValidationFrames || this->HeldOutValidation.empty())
+  {
+    return true;
+  }
+  // Held out for the trial alone: they join the fit, and validation goes on with them as training frames.
+  JoinTrainingFrames(*this->Data, this->HeldOutValidation);
+  this->HeldOutValidation.clear();
+  this->Report.ValidationHeldOut = false;
+  for (std::string& line : this->Report.Settings)
+  {
+    if (line.rfind("Validation = ", 0) == 0)
+    {
+      line += vtkfmt::sprintf("; held out for the pose-refinement trial%s, then fitted from step %d",
+        how.empty() ? " (not run)" : "", this->State.Iteration);
+    }
+  }
+  return this->Engine->SetData(this->Data.get(), error);
 }
 
 bool Trainer::Finish(std::string* error)
@@ -684,7 +814,24 @@ bool Trainer::ReadCheckpoint(const std::string& file, std::string* error)
   {
     return false;
   }
-  if (!this->Poses.CheckCheckpoint(loaded, file, error))
+  // A checkpoint written after the pose-refinement trial goes on with its choice: no corrections, trusted; a
+  // correction that moved, refined.
+  bool trialDone = false;
+  if (this->Poses.IsTrialPending() && loaded.PoseCorrections.empty())
+  {
+    this->Poses.TurnOffCorrections(
+      this->State, this->Report.Settings, "measured before the checkpoint " + file + " was written");
+    this->Settings.Poses = this->Poses.GetSettings();
+    trialDone = true;
+  }
+  else if (this->Poses.IsTrialPending() &&
+    std::any_of(loaded.PoseSteps.begin(), loaded.PoseSteps.end(), [](int steps) { return steps > 0; }))
+  {
+    this->Poses.EndTrial();
+    trialDone = true;
+  }
+  if (!this->Poses.CheckCheckpoint(loaded, file, error) ||
+    (trialDone && !this->EndPoseTrial("before the checkpoint", error)))
   {
     return false;
   }

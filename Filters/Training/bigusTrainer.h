@@ -246,6 +246,17 @@ private:
   /// false with @p error on an unrecoverable problem.
   bool Iterate(double start, const std::function<void(double, int, double, std::int64_t)>& progress,
     const std::function<bool()>& abort, bool& stop, std::string* error);
+  /**
+   * RefinePoses Auto, where the rule chose to refine, at the refinement's start (PoseRefinementSettings::TrialSteps):
+   * TrialSteps steps on the tracked poses, then from the same state TrialSteps steps with refinement, each scored by
+   * the PSNR of the held-out validation frames at their tracked poses; the better branch goes on (the other's steps
+   * are spent time) and the RefinePoses line says what each scored. Without held-out frames (or data-parallel) the
+   * rule stands, its line says untested. The frames then join the fit unless HoldOutValidationFrames keeps them out.
+   */
+  bool TryPoseRefinement(double start, const std::function<void(double, int, double, std::int64_t)>& progress,
+    const std::function<bool()>& abort, bool& stop, std::string* error);
+  /// After the trial: the validation frames held out for it alone join the fit (validation goes on with them).
+  bool EndPoseTrial(const std::string& how, std::string* error);
   /// Measures the validation loss; keeps a copy of the field when it is the best so far.
   bool CheckValidation(double& loss, std::string* error);
   /**
@@ -285,7 +296,8 @@ private:
   std::vector<int> HeldOutValidation; // validation frames out of the fit until JoinValidationFrames; empty after
   bool SigmaByRule = false;           // ElevationSigma came from the rule (MeasureElevationSigma may measure it)
   PoseRefiner Poses;
-  std::vector<float> S; // scratch for RenderFrame
+  bool InPoseTrial = false; // TryPoseRefinement is running its branches: no checkpoint, no join
+  std::vector<float> S;     // scratch for RenderFrame
 };
 
 } // namespace bigus

@@ -3,6 +3,7 @@
 #include "bigusElevationSigma.h"
 #include "bigusTrainer.h"
 #include "bigusTrainingTestUtilities.h"
+#include "bigusValidation.h"
 
 #include <gtest/gtest.h>
 
@@ -237,6 +238,7 @@ TEST(PoseRefinementChoice, TheTrainerRefinesTheSweepsTheRuleChooses)
   s.Seeding.PixelGridFit = false;
   s.Seeding.InitialGaussians = 2000;
   s.Iterations = 100;
+  s.Poses.TrialSteps = 0; // the rule alone (its trial on held-out frames: the next test)
   ASSERT_EQ(s.Poses.RefinePoses, PoseRefinement::Auto);
   Trainer trainer(data, s);
   EXPECT_EQ(trainer.GetSettings().Poses.RefinePoses, PoseRefinement::On);
@@ -272,5 +274,77 @@ TEST(PoseRefinementChoice, TheTrainerRefinesTheSweepsTheRuleChooses)
     Trainer fixed(data, s);
     EXPECT_EQ(fixed.GetSettings().Poses.RefinePoses, given);
     EXPECT_EQ(fixed.GetPoseRefiner().IsSweepRefined(1), given == PoseRefinement::On);
+  }
+}
+
+// Auto where the rule would refine (speckle correlates): the choice is measured, TrialSteps steps each way from the
+// refinement's start, on held-out frames at their tracked poses (issue 54's tests). Exact poses: refinement ends off
+// (or moves no pose by more than 0.02 mm). Training poses moved by 0.5 degrees and 0.5 mm each at random (the
+// held-out frames' tracked poses exact): refinement stays on.
+TEST(PoseRefinementChoice, AutoRefinementIsMeasuredOnHeldOutFramesAtTheirTrackedPoses)
+{
+  const GaussianField truth = SpeckleField(12000, 20.0, 7);
+  std::vector<int> heldOut;
+  const TrainingData exact = Sweep(truth, 0.6, 0.2, 80, heldOut);
+  TrainerSettings s;
+  s.ElevationSigma = 0.6;
+  s.Seeding.PixelGridFit = false;
+  s.Seeding.InitialGaussians = 3000;
+  s.Iterations = 1200;
+  s.Poses.Start = 0.1;
+  s.Poses.TrialSteps = 300;
+  // The frames the trainer will hold out for the trial (every 8th training frame), so that only the others err.
+  TrainingData copy = exact;
+  HeldOutChoiceSettings held = s.HeldOut;
+  held.HoldOutValidationFrames = true;
+  bool heldOutOk = false;
+  std::string line;
+  const std::vector<int> trial = ChooseValidationFrames(copy, held, heldOutOk, line);
+  ASSERT_TRUE(heldOutOk) << line;
+  std::vector<int> fitted;
+  for (int f : exact.TrainFrames)
+  {
+    if (!std::binary_search(trial.begin(), trial.end(), f))
+    {
+      fitted.push_back(f);
+    }
+  }
+  const TrainingData perturbed = PerturbedPoses(exact, fitted, 0.5, 0.5, 21, W, H);
+  for (const bool moved : { false, true })
+  {
+    Trainer trainer(moved ? perturbed : exact, s);
+    ASSERT_EQ(trainer.GetSettings().Poses.RefinePoses, PoseRefinement::On) << "the rule refines this sweep";
+    std::string error;
+    ASSERT_TRUE(trainer.Initialize(&error)) << error;
+    ASSERT_TRUE(trainer.Run(nullptr, nullptr, &error)) << error;
+    std::string said;
+    for (const std::string& l : trainer.GetReport().Settings)
+    {
+      said += l.rfind("RefinePoses = ", 0) == 0 ? l : "";
+    }
+    std::printf("%s poses: %s\n", moved ? "perturbed" : "exact", said.c_str());
+    EXPECT_NE(said.find("measured: 300 steps each way"), std::string::npos) << said;
+    double largest = 0;
+    for (const TrainerReport::PoseCorrection& p : trainer.GetReport().PoseCorrections)
+    {
+      const double r = std::sqrt(p.Xi[0] * p.Xi[0] + p.Xi[1] * p.Xi[1] + p.Xi[2] * p.Xi[2]);
+      const double t = std::sqrt(p.Xi[3] * p.Xi[3] + p.Xi[4] * p.Xi[4] + p.Xi[5] * p.Xi[5]);
+      largest = std::max(largest, t + r * 0.5 * W * Pixel); // the corners' displacement, at most
+    }
+    if (moved)
+    {
+      EXPECT_EQ(trainer.GetSettings().Poses.RefinePoses, PoseRefinement::On) << said;
+      EXPECT_LT(CornerError(trainer.GetData(), exact, fitted, W, H), CornerError(perturbed, exact, fitted, W, H));
+    }
+    else
+    {
+      EXPECT_TRUE(trainer.GetSettings().Poses.RefinePoses == PoseRefinement::Off || largest < 0.02)
+        << said << "; largest correction " << largest << " mm";
+    }
+    // The frames held out for the trial joined the fit afterwards.
+    for (int f : trial)
+    {
+      EXPECT_TRUE(std::binary_search(trainer.GetData().TrainFrames.begin(), trainer.GetData().TrainFrames.end(), f));
+    }
   }
 }
