@@ -333,6 +333,7 @@ constexpr int JobTag = 2;     ///< rank 0 -> worker: the index of its next job, 
 
 int RunBatch(const BatchOptions& o)
 {
+  SetGracefulStop(false); // a signal ends the batch and its jobs; a rerun goes on with the queue
   const auto start = std::chrono::steady_clock::now();
   int rank = 0, ranks = 1, threads = 0;
   const bool mpi = LaunchedByMpi();

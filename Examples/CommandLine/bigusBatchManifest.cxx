@@ -28,12 +28,16 @@ struct ManifestLines
   std::vector<int> Jobs;
   std::vector<std::map<std::string, int>> JobKeys;
   std::map<std::string, int> DefaultKeys;
+  /// The first key given twice in one object ("\"key\" appears twice, lines A and B"; JSON parsers keep the
+  /// last), empty when none is.
+  std::string Duplicate;
 };
 
 ManifestLines LocateLines(const std::string& text)
 {
   ManifestLines lines;
   std::vector<std::string> openedBy; // per open container: the top-level key whose value it is
+  std::map<std::string, int> topLevel;
   std::string key;
   int line = 1;
   for (std::size_t i = 0; i < text.size(); ++i)
@@ -55,13 +59,17 @@ ManifestLines LocateLines(const std::string& text)
       {
         key = text.substr(start, i - start);
         const std::size_t depth = openedBy.size();
-        if (depth == 3 && openedBy[1] == "jobs" && !lines.JobKeys.empty())
+        std::map<std::string, int>* keys = depth == 3 && openedBy[1] == "jobs" && !lines.JobKeys.empty()
+          ? &lines.JobKeys.back()
+          : (depth == 2 && openedBy[1] == "defaults" ? &lines.DefaultKeys : (depth == 1 ? &topLevel : nullptr));
+        if (keys)
         {
-          lines.JobKeys.back()[key] = line;
-        }
-        else if (depth == 2 && openedBy[1] == "defaults")
-        {
-          lines.DefaultKeys[key] = line;
+          const auto seen = keys->emplace(key, line);
+          if (!seen.second && lines.Duplicate.empty())
+          {
+            lines.Duplicate = "\"" + key + "\" appears twice in one object (lines " +
+              std::to_string(seen.first->second) + " and " + std::to_string(line) + "); give it once";
+          }
         }
       }
     }
@@ -310,6 +318,11 @@ bool ReadManifest(const std::string& file, std::vector<BatchJob>& jobs, std::str
   }
   const json defaults = manifest.value("defaults", json::object());
   const ManifestLines lines = LocateLines(text);
+  if (!lines.Duplicate.empty())
+  {
+    error = file + ": " + lines.Duplicate;
+    return false;
+  }
   if (!defaults.is_object() || lines.Jobs.size() != manifest["jobs"].size())
   {
     error = file + ": \"defaults\" must be an object and every entry of \"jobs\" an object";
@@ -317,6 +330,7 @@ bool ReadManifest(const std::string& file, std::vector<BatchJob>& jobs, std::str
   }
   const fs::path folder = fs::absolute(fs::path(file)).parent_path();
   std::map<std::string, std::size_t> outputs; // canonical output folder -> job
+  std::map<std::string, std::size_t> names;   // job name -> job
   // The options bigus train declares, to tell an unknown key from a misspelt one before anything runs.
   CLI::App scratch;
   const CLI::App* train = AddTrainCommand(scratch).App;
@@ -363,6 +377,13 @@ bool ReadManifest(const std::string& file, std::vector<BatchJob>& jobs, std::str
       return false;
     }
     outputs[canonical] = j;
+    if (names.count(job.Name))
+    {
+      error = where("name") + "job name \"" + job.Name + "\" is also job " + std::to_string(names[job.Name]) +
+        "'s (line " + std::to_string(lines.Jobs[names[job.Name]]) + "): the summary names each job once";
+      return false;
+    }
+    names[job.Name] = j;
     const std::string problem = ReadJob(settings, folder, *train, job);
     if (!problem.empty())
     {

@@ -39,6 +39,9 @@ struct Command
 
 Command AddInfoCommand(CLI::App& app);
 Command AddTrainCommand(CLI::App& app);
+/// Whether `bigus train` takes SIGINT and SIGTERM as a request to stop with a checkpoint (true, the default) or
+/// leaves them to end the process (`bigus batch`: its jobs end with the process, and a rerun resumes the queue).
+void SetGracefulStop(bool graceful);
 Command AddRenderCommand(CLI::App& app);
 Command AddEvaluateCommand(CLI::App& app);
 Command AddSweepCommand(CLI::App& app);

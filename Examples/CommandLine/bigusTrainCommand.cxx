@@ -54,6 +54,7 @@ struct TrainOptions
 
 /// The signal (SIGINT, SIGTERM) that asked the run to stop, 0 while none did; a second one ends the process at once.
 volatile std::sig_atomic_t StopSignal = 0;
+bool GracefulStop = true; // SetGracefulStop
 
 void OnStopSignal(int signal)
 {
@@ -65,9 +66,15 @@ void OnStopSignal(int signal)
 struct StopSignals
 {
   struct sigaction Previous[2];
+  bool Installed = false;
   StopSignals()
   {
     StopSignal = 0;
+    this->Installed = GracefulStop;
+    if (!this->Installed)
+    {
+      return;
+    }
     struct sigaction action = {};
     action.sa_handler = OnStopSignal;
     action.sa_flags = SA_RESETHAND;
@@ -77,6 +84,10 @@ struct StopSignals
   }
   ~StopSignals()
   {
+    if (!this->Installed)
+    {
+      return;
+    }
     sigaction(SIGINT, &this->Previous[0], nullptr);
     sigaction(SIGTERM, &this->Previous[1], nullptr);
   }
@@ -513,6 +524,11 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
 }
 }
 
+void SetGracefulStop(bool graceful)
+{
+  GracefulStop = graceful;
+}
+
 Command AddTrainCommand(CLI::App& app)
 {
   auto options = std::make_shared<TrainOptions>();
@@ -646,6 +662,15 @@ Command AddTrainCommand(CLI::App& app)
     "from sweeps whose frames cross, not from one smooth sweep: docs/FINDINGS.md)");
   trainCommand->add_flag("--refine-image-to-probe", settings.Poses.RefineImageToProbe,
     "Refine one correction of ImageToProbe shared by every frame (printed, and in the field data)");
+  trainCommand
+    ->add_option("--pose-trial-steps", settings.Poses.TrialSteps,
+      "Where the default (Auto) would refine the poses: steps taken each way (on the tracked poses, with refinement) "
+      "from the refinement's start, scored on held-out frames at their tracked poses, the better going on (0: the "
+      "speckle rule alone; the RefinePoses setting line says what each scored)")
+    ->capture_default_str()
+    ->excludes("--no-refine-poses")
+    ->excludes("--refine-poses")
+    ->check(FiniteNonNegative(1e6));
   trainCommand
     ->add_flag_callback(
       "--no-pose-anchor", [&settings] { settings.Poses.AnchorToTrackedPoses = false; },

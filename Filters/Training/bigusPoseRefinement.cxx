@@ -149,6 +149,18 @@ void PoseRefiner::TurnOffCorrections(TrainingState& state, std::vector<std::stri
   }
 }
 
+void PoseRefiner::AnnotateChoice(std::vector<std::string>& lines, const std::string& how)
+{
+  const std::string on = "RefinePoses = on (";
+  for (std::string& line : lines)
+  {
+    if (line.rfind(on, 0) == 0)
+    {
+      line.insert(on.size(), how + "; ");
+    }
+  }
+}
+
 void PoseRefiner::Step(
   const std::vector<int>& frames, const std::vector<double>& gradients, double rateScale, TrainingState& state)
 {

@@ -147,6 +147,8 @@ public:
   /// clears it, whatever the trial found.
   bool IsTrialPending() const { return this->TrialPending; }
   void EndTrial() { this->TrialPending = false; }
+  /// Adds what the trial found (@p how) to the `RefinePoses = on (...)` line of @p lines.
+  static void AnnotateChoice(std::vector<std::string>& lines, const std::string& how);
   /// Whether the training frames of sweep @p sweep (TrainingData::Sweeps) have their poses refined.
   bool IsSweepRefined(int sweep) const
   {

@@ -9,7 +9,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
 #include <limits>
 
 namespace bigus
@@ -133,6 +132,16 @@ bool Trainer::PrepareInitialField(std::string* error)
   }
   if (!plan.PixelGrid)
   {
+    // A schedule of Iterations alone too short for the pose-refinement trial keeps the rule's choice (no frame is
+    // held out for it).
+    const TrainerSettings& s = this->Settings;
+    const double left = (1 - this->Poses.GetSettings().Start) * s.Iterations;
+    if (this->Poses.IsTrialPending() && s.TimeBudget <= 0 && s.Iterations > 0 && left < 4.0 * s.Poses.TrialSteps)
+    {
+      this->Poses.EndTrial();
+      PoseRefiner::AnnotateChoice(this->Report.Settings,
+        vtkfmt::sprintf("untested: the schedule leaves %.0f steps, fewer than 4 x %d", left, s.Poses.TrialSteps));
+    }
     // Before gamma and the seeds, which read only the fitted frames (the rules measured at construction, the seed
     // count and the pixel spacing read every training frame).
     this->HoldOutValidationFrames();
@@ -595,128 +604,6 @@ bool Trainer::Iterate(double start, const std::function<void(double, int, double
     progress(this->ScheduleFraction(), it, std::isfinite(loss) ? loss : 0.0, state.Gaussians.Count());
   }
   return true;
-}
-
-bool Trainer::TryPoseRefinement(double start, const std::function<void(double, int, double, std::int64_t)>& progress,
-  const std::function<bool()>& abort, bool& stop, std::string* error)
-{
-  this->Poses.EndTrial(); // one trial, whatever it finds
-  const std::vector<int> frames = this->HeldOutValidation;
-  auto rewrite = [&](const std::string& how) {
-    for (std::string& line : this->Report.Settings)
-    {
-      if (line.rfind("RefinePoses = on (", 0) == 0)
-      {
-        line.insert(std::strlen("RefinePoses = on ("), how + "; ");
-      }
-    }
-  };
-  if (frames.empty() || this->Reduction)
-  {
-    rewrite(this->Reduction ? "untested: data-parallel runs keep the rule's choice"
-                            : "untested: too few training frames to hold any out for the trial");
-    return this->EndPoseTrial("", error);
-  }
-  // Both branches from the state at the refinement's start.
-  if (!this->PullState(error))
-  {
-    return false;
-  }
-  const int from = this->State.Iteration, steps = this->Settings.Poses.TrialSteps;
-  const TrainingState initial = this->State;
-  const TrainerReport report = this->Report;
-  const LossWindow recent = this->Recent;
-  this->InPoseTrial = true;
-  auto branch = [&](double& psnr) {
-    const int limit = this->Settings.Iterations;
-    for (int k = 0; k < steps && !stop && (limit <= 0 || this->State.Iteration < limit); ++k)
-    {
-      if (!this->Iterate(start, progress, abort, stop, error))
-      {
-        return false;
-      }
-    }
-    ImageMetrics metrics;
-    if (!this->EvaluateOn(*this->Data, frames, metrics, error) || !this->PullState(error))
-    {
-      return false;
-    }
-    psnr = metrics.PSNR;
-    return true;
-  };
-  double trusted = 0, refined = -std::numeric_limits<double>::infinity();
-  this->Poses.Suspend(true);
-  const bool ok = branch(trusted);
-  this->Poses.Suspend(false);
-  if (!ok)
-  {
-    this->InPoseTrial = false;
-    return false;
-  }
-  TrainingState trustedState = this->State;
-  TrainerReport trustedReport = this->Report;
-  const LossWindow trustedRecent = this->Recent;
-  if (!stop)
-  {
-    this->State = initial;
-    this->Report = report;
-    this->Recent = recent;
-    this->Poses.ComposePoses(this->State);
-    if (!this->PushState(error))
-    {
-      this->InPoseTrial = false;
-      return false;
-    }
-    this->Engine->Snapshot();
-    if (!branch(refined))
-    {
-      this->InPoseTrial = false;
-      return false;
-    }
-  }
-  this->InPoseTrial = false;
-  const std::string how = vtkfmt::sprintf("measured: %d steps each way from step %d on %zu held-out frames at "
-                                          "their tracked poses, refined %.2f dB, trusted %.2f dB",
-    steps, from, frames.size(), refined, trusted);
-  if (refined > trusted)
-  {
-    rewrite(how);
-    return this->EndPoseTrial(how, error);
-  }
-  // The trusted branch goes on: its state, report and poses (every correction 0: the tracked poses).
-  this->State = std::move(trustedState);
-  this->Report = std::move(trustedReport);
-  this->Recent = trustedRecent;
-  this->Poses.ComposePoses(this->State);
-  if (!this->PushState(error))
-  {
-    return false;
-  }
-  this->Engine->Snapshot();
-  this->Poses.TurnOffCorrections(this->State, this->Report.Settings, how);
-  this->Settings.Poses = this->Poses.GetSettings();
-  return this->EndPoseTrial(how, error);
-}
-
-bool Trainer::EndPoseTrial(const std::string& how, std::string* error)
-{
-  if (this->Settings.HeldOut.HoldOutValidationFrames || this->HeldOutValidation.empty())
-  {
-    return true;
-  }
-  // Held out for the trial alone: they join the fit, and validation goes on with them as training frames.
-  JoinTrainingFrames(*this->Data, this->HeldOutValidation);
-  this->HeldOutValidation.clear();
-  this->Report.ValidationHeldOut = false;
-  for (std::string& line : this->Report.Settings)
-  {
-    if (line.rfind("Validation = ", 0) == 0)
-    {
-      line += vtkfmt::sprintf("; held out for the pose-refinement trial%s, then fitted from step %d",
-        how.empty() ? " (not run)" : "", this->State.Iteration);
-    }
-  }
-  return this->Engine->SetData(this->Data.get(), error);
 }
 
 bool Trainer::Finish(std::string* error)

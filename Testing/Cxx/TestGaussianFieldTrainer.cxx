@@ -24,6 +24,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -126,7 +127,16 @@ TEST(GaussianFieldTrainer, PipelineOutputsTheFieldOfTheDataModel)
   {
     stored += settings->GetValue(k) + "\n";
   }
-  EXPECT_EQ(stored, announced.Text);
+  // The lines announced before training, as stored: the run's later decisions rewrite the RefinePoses and
+  // Validation lines (the pose-refinement trial) and add lines at the end (PoseAnchor).
+  std::istringstream storedLines(stored), announcedLines(announced.Text);
+  for (std::string said, kept; std::getline(announcedLines, said);)
+  {
+    ASSERT_TRUE(static_cast<bool>(std::getline(storedLines, kept))) << said;
+    const std::string key = said.substr(0, said.find(" = ") + 3);
+    EXPECT_TRUE(kept == said || (kept.rfind(key, 0) == 0 && (key == "RefinePoses = " || key == "Validation = ")))
+      << "announced: " << said << "\nstored: " << kept;
+  }
   for (const char* line : { "FanMask = estimated from the frames", "ElevationSigma = ", "(chosen: ", "Gamma = ",
          "InitialGaussians = 500 (given", "Iterations = 150", "Densification = every 200 steps" })
   {

@@ -65,6 +65,12 @@ def bad_manifests():
         "a job trained on every rank": (json.dumps({"jobs": [dict(good, distributed=True)]}, indent=2),
                                         ["line 8", "\"distributed\"", "not a batch option"]),
         "bad option value": (json.dumps({"jobs": [dict(good, iterations="many")]}, indent=2), ["line 3", "iterations"]),
+        "negative iterations": (json.dumps({"jobs": [dict(good, iterations=-5)]}, indent=2),
+                                ["line 3", "--iterations: '-5' is not at least 0"]),
+        "duplicate name": (json.dumps({"jobs": [dict(good, name="x"), dict(good, name="x", output="b")]}, indent=2),
+                           ["job 1", "\"name\"", "job name \"x\" is also job 0's (line 3)"]),
+        "duplicate key": ('{\n  "jobs": [\n    {"sweep": "%s",\n     "output": "a",\n     "output": "b"}\n  ]\n}\n'
+                          % SWEEP, ["\"output\" appears twice in one object (lines 4 and 5)"]),
     }
     for name, (text, expected) in cases.items():
         manifest = write_manifest(os.path.join(folder, name.replace(" ", "_")), None, text=text)

@@ -1,0 +1,147 @@
+// The pose-refinement trial of the trainer (Trainer::TryPoseRefinement, bigusTrainer.h; DESIGN section 4.9): where
+// RefinePoses Auto's rule would refine, both choices are tried from the refinement's start and scored on held-out
+// frames at their tracked poses. A part of the trainer's schedule, kept beside it in its own file.
+#include "bigusTrainer.h"
+
+#include "bigusValidation.h"
+
+#include <vtk_fmt.h>
+// clang-format off
+#include VTK_FMT(fmt/printf.h)
+// clang-format on
+
+#include <limits>
+
+namespace bigus
+{
+
+bool Trainer::TryPoseRefinement(double start, const std::function<void(double, int, double, std::int64_t)>& progress,
+  const std::function<bool()>& abort, bool& stop, std::string* error)
+{
+  this->Poses.EndTrial(); // one trial, whatever it finds
+  const std::vector<int> frames = this->HeldOutValidation;
+  auto rewrite = [&](const std::string& how) { PoseRefiner::AnnotateChoice(this->Report.Settings, how); };
+  // The steps the schedule has left: at most Iterations', and at the rate so far what the budget's seconds allow.
+  const TrainerSettings& s = this->Settings;
+  const int steps = s.Poses.TrialSteps, from = this->State.Iteration;
+  double left = s.Iterations > 0 ? s.Iterations - from : std::numeric_limits<double>::infinity();
+  const double seconds = this->TrainingSeconds();
+  if (s.TimeBudget > 0 && seconds > 0)
+  {
+    left = std::min(left, (s.TimeBudget - seconds) * from / seconds);
+  }
+  if (frames.empty() || this->Reduction || left < 4.0 * steps)
+  {
+    rewrite(this->Reduction ? "untested: data-parallel runs keep the rule's choice"
+        : frames.empty()
+        ? "untested: too few training frames to hold any out for the trial"
+        : vtkfmt::sprintf("untested: the schedule leaves about %.0f steps, fewer than 4 x %d", left, steps));
+    return this->EndPoseTrial("", error);
+  }
+  // Both branches from the state at the refinement's start.
+  if (!this->PullState(error))
+  {
+    return false;
+  }
+  const TrainingState initial = this->State;
+  const TrainerReport report = this->Report;
+  const LossWindow recent = this->Recent;
+  this->InPoseTrial = true;
+  auto branch = [&](double& psnr) {
+    for (int k = 0; k < steps && !stop; ++k)
+    {
+      if (!this->Iterate(start, progress, abort, stop, error))
+      {
+        return false;
+      }
+    }
+    ImageMetrics metrics;
+    if (!this->EvaluateOn(*this->Data, frames, metrics, error) || !this->PullState(error))
+    {
+      return false;
+    }
+    psnr = metrics.PSNR;
+    return true;
+  };
+  double trusted = 0, refined = -std::numeric_limits<double>::infinity();
+  this->Poses.Suspend(true);
+  const bool ok = branch(trusted);
+  this->Poses.Suspend(false);
+  if (!ok)
+  {
+    this->InPoseTrial = false;
+    return false;
+  }
+  TrainingState trustedState = this->State;
+  TrainerReport trustedReport = this->Report;
+  const LossWindow trustedRecent = this->Recent;
+  if (!stop)
+  {
+    this->State = initial;
+    this->Report = report;
+    this->Recent = recent;
+    this->Poses.ComposePoses(this->State);
+    if (!this->PushState(error))
+    {
+      this->InPoseTrial = false;
+      return false;
+    }
+    this->Engine->Snapshot();
+    if (!branch(refined))
+    {
+      this->InPoseTrial = false;
+      return false;
+    }
+  }
+  this->InPoseTrial = false;
+  const std::string how = vtkfmt::sprintf("measured: %d steps each way from step %d on %zu held-out frames at "
+                                          "their tracked poses, refined %.2f dB, trusted %.2f dB",
+    steps, from, frames.size(), refined, trusted);
+  if (refined > trusted)
+  {
+    rewrite(how);
+    return this->EndPoseTrial(how, error);
+  }
+  // The trusted branch goes on: its state, report and poses (every correction 0: the tracked poses).
+  this->State = std::move(trustedState);
+  this->Report = std::move(trustedReport);
+  this->Recent = trustedRecent;
+  this->Poses.ComposePoses(this->State);
+  if (!this->PushState(error))
+  {
+    return false;
+  }
+  this->Engine->Snapshot();
+  std::string rule;
+  const std::string on = "RefinePoses = on (";
+  for (const std::string& line : this->Report.Settings)
+  {
+    rule = line.rfind(on, 0) == 0 ? line.substr(on.size(), line.size() - on.size() - 1) : rule;
+  }
+  this->Poses.TurnOffCorrections(this->State, this->Report.Settings, how + "; the rule alone: on, " + rule);
+  this->Settings.Poses = this->Poses.GetSettings();
+  return this->EndPoseTrial(how, error);
+}
+
+bool Trainer::EndPoseTrial(const std::string& how, std::string* error)
+{
+  if (this->Settings.HeldOut.HoldOutValidationFrames || this->HeldOutValidation.empty())
+  {
+    return true;
+  }
+  // Held out for the trial alone: they join the fit, and validation goes on with them as training frames.
+  JoinTrainingFrames(*this->Data, this->HeldOutValidation);
+  this->HeldOutValidation.clear();
+  this->Report.ValidationHeldOut = false;
+  for (std::string& line : this->Report.Settings)
+  {
+    if (line.rfind("Validation = ", 0) == 0)
+    {
+      line += vtkfmt::sprintf("; held out for the pose-refinement trial%s, then fitted from step %d",
+        how.empty() ? " (not run)" : "", this->State.Iteration);
+    }
+  }
+  return this->Engine->SetData(this->Data.get(), error);
+}
+
+} // namespace bigus
