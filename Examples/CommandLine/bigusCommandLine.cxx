@@ -223,6 +223,12 @@ std::vector<int> ChooseFrames(int count, int every, int offset, const std::vecto
 
 vtkSmartPointer<vtkImageData> ReadMask(const std::string& file, const int dims[3])
 {
+  std::error_code status;
+  if (std::filesystem::exists(file, status) && !std::filesystem::is_regular_file(file, status))
+  {
+    Fail(file + ": not a regular file (a folder, pipe or device); a mask is a .mha or .mhd file");
+    return nullptr;
+  }
   std::ifstream probe(file);
   if (!probe)
   {
@@ -245,16 +251,16 @@ vtkSmartPointer<vtkImageData> ReadMask(const std::string& file, const int dims[3
   const std::size_t headerBytes = dataFile == std::string::npos ? 0 : header.find('\n', dataFile) + 1;
   header.erase(
     std::remove_if(header.begin(), header.end(), [](char c) { return c == ' ' || c == '\t'; }), header.end());
-  std::error_code status;
   const double fileBytes = static_cast<double>(std::filesystem::file_size(file, status)) - double(headerBytes);
   const bool localRaw = header.find("ElementDataFile=LOCAL") != std::string::npos &&
     header.find("CompressedData=True") == std::string::npos;
   const double physical = PhysicalMemoryBytes();
-  if ((physical > 0 && 2 * needed > physical) || (localRaw && fileBytes < needed))
+  const bool truncated = localRaw && fileBytes < needed;
+  if (truncated || (physical > 0 && 2 * needed > physical))
   {
     Fail(vtkfmt::sprintf("%s: its DimSize %d x %d x %d needs %.0f bytes of pixel data, and %s holds %.0f", file,
       extent[1] - extent[0] + 1, extent[3] - extent[2] + 1, extent[5] - extent[4] + 1, needed,
-      localRaw && fileBytes < needed ? "the file" : "this machine's memory", localRaw ? fileBytes : physical / 2));
+      truncated ? "the file" : "this machine's memory (half of it)", truncated ? fileBytes : physical / 2));
     return nullptr;
   }
   reader->Update();

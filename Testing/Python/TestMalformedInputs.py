@@ -255,6 +255,7 @@ def cases(f):
                          ("mask_wrong_size", "mask"), ("mask_truncated", "the file holds"),
                          ("mask_huge_dimsize", "16384 x 16384 x 256")]:
         case("train " + name, train + ["--mask", f[name]], [expect], [out + "_train.vtp"])
+    case("train mask is a pipe", train + ["--mask", f["fifo"]], ["not a regular file"], [out + "_train.vtp"])
     case("train conflicting calibration", ["train", SWEEP, "--calibration", f["calibration_conflicting"], "-o",
                                            out + "_train.vtp"], ["conflicts with"], [out + "_train.vtp"])
     case("train calibration not XML", ["train", SWEEP, "--calibration", f["calibration_not_xml"], "-o",
