@@ -142,13 +142,15 @@ bool FieldFromPolyData(vtkPolyData* data, GaussianField& field, FieldModel& mode
       field.LogScales[3 * i + k] = static_cast<float>(std::log(s));
     }
     double norm = 0;
+    bool representable = true;
     for (int k = 0; k < 4; ++k)
     {
       const double q = rotation->GetComponent(i, k);
       norm += q * q;
-      field.Quaternions[4 * i + k] = static_cast<float>(q);
+      representable = representable && std::abs(q) <= VTK_FLOAT_MAX;
+      field.Quaternions[4 * i + k] = representable ? static_cast<float>(q) : 0.f;
     }
-    if (!(norm > 1e-12) || !std::isfinite(norm))
+    if (!(norm > 1e-12) || !std::isfinite(norm) || !representable)
     {
       return fail("Gaussian " + std::to_string(i) + " has a Rotation quaternion that is zero or not finite");
     }

@@ -480,7 +480,9 @@ int vtkGaussianFieldTrainer::RequestData(
       [&]() { return this->AbortExecute != 0 || !evaluationError.empty(); }, &error) &&
     // Stopped by AbortExecute (SIGINT in bigus train): the state so far is saved to resume from, before Finish
     // changes the field (data-parallel: rank 0 writes it, as the trainer's own checkpoints).
-    (!this->AbortExecute || s.CheckpointFile.empty() || (this->Controller && this->Controller->GetLocalProcessId()) ||
+    // (Not data-parallel: a process that could not write it would leave the others waiting in Finish.)
+    (!this->AbortExecute || s.CheckpointFile.empty() ||
+      (this->Controller && this->Controller->GetNumberOfProcesses() > 1) ||
       trainer.SaveCheckpoint(s.CheckpointFile, &error)) &&
     trainer.Finish(&error);
   if (ok && evaluationError.empty() && this->EvaluationInterval > 0 && !heldOut.empty())

@@ -61,11 +61,16 @@ bool IsRigid(const double m[16], std::string& why)
     }
   }
   const double shift = std::sqrt(m[3] * m[3] + m[7] * m[7] + m[11] * m[11]);
-  // A singular 3x3 part is left to the chain's own checks, which name it so.
+  // A singular 3x3 part (relative to its columns' lengths) is left to the chain's own checks, which name it so.
   const double det =
     m[0] * (m[5] * m[10] - m[6] * m[9]) - m[1] * (m[4] * m[10] - m[6] * m[8]) + m[2] * (m[4] * m[9] - m[5] * m[8]);
+  double columns = 1;
+  for (int j = 0; j < 3; ++j)
+  {
+    columns *= std::sqrt(m[j] * m[j] + m[4 + j] * m[4 + j] + m[8 + j] * m[8 + j]);
+  }
   std::ostringstream text;
-  if (std::abs(det) < 1e-9)
+  if (!(std::abs(det) > 1e-9 * columns))
   {
     return true;
   }
@@ -76,6 +81,10 @@ bool IsRigid(const double m[16], std::string& why)
   else if (!(largest <= 1e-2))
   {
     text << "its 3x3 part is not a rotation: R^T R differs from the identity by " << largest;
+  }
+  else if (det < 0)
+  {
+    text << "its 3x3 part is a reflection (determinant " << det << ")";
   }
   else if (!(shift <= 1e7))
   {

@@ -368,7 +368,10 @@ bool ReadManifest(const std::string& file, std::vector<BatchJob>& jobs, std::str
       return false;
     }
     job.Output = (folder / settings["output"].get<std::string>()).lexically_normal().string();
-    job.Name = settings.value("name", fs::path(job.Output).filename().string());
+    // The job's name: given, or its output folder's own name (a trailing separator dropped).
+    const fs::path leaf = fs::path(job.Output).filename().empty() ? fs::path(job.Output).parent_path().filename()
+                                                                  : fs::path(job.Output).filename();
+    job.Name = settings.value("name", leaf.string());
     const std::string canonical = fs::weakly_canonical(job.Output).string();
     if (outputs.count(canonical))
     {
@@ -379,8 +382,10 @@ bool ReadManifest(const std::string& file, std::vector<BatchJob>& jobs, std::str
     outputs[canonical] = j;
     if (names.count(job.Name))
     {
-      error = where("name") + "job name \"" + job.Name + "\" is also job " + std::to_string(names[job.Name]) +
-        "'s (line " + std::to_string(lines.Jobs[names[job.Name]]) + "): the summary names each job once";
+      error = where(settings.contains("name") ? "name" : "output") + "job name \"" + job.Name + "\"" +
+        (settings.contains("name") ? "" : " (its output folder's name)") + " is also job " +
+        std::to_string(names[job.Name]) + "'s (line " + std::to_string(lines.Jobs[names[job.Name]]) +
+        "): the summary names each job once; give each a \"name\"";
       return false;
     }
     names[job.Name] = j;

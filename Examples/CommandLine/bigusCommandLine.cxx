@@ -79,6 +79,10 @@ CLI::Validator FiniteRange(double lowest, double highest, bool positive)
       {
         value = std::stod(text, &used);
       }
+      catch (const std::out_of_range&)
+      {
+        return "'" + text + "' is not a finite number";
+      }
       catch (const std::exception&)
       {
         return "'" + text + "' is not a number";
@@ -251,9 +255,10 @@ vtkSmartPointer<vtkImageData> ReadMask(const std::string& file, const int dims[3
   const std::size_t headerBytes = dataFile == std::string::npos ? 0 : header.find('\n', dataFile) + 1;
   header.erase(
     std::remove_if(header.begin(), header.end(), [](char c) { return c == ' ' || c == '\t'; }), header.end());
+  std::transform(header.begin(), header.end(), header.begin(), [](unsigned char c) { return std::tolower(c); });
   const double fileBytes = static_cast<double>(std::filesystem::file_size(file, status)) - double(headerBytes);
-  const bool localRaw = header.find("ElementDataFile=LOCAL") != std::string::npos &&
-    header.find("CompressedData=True") == std::string::npos;
+  const bool localRaw = header.find("elementdatafile=local") != std::string::npos &&
+    header.find("compresseddata=true") == std::string::npos && header.find("compresseddata=1") == std::string::npos;
   const double physical = PhysicalMemoryBytes();
   const bool truncated = localRaw && fileBytes < needed;
   if (truncated || (physical > 0 && 2 * needed > physical))

@@ -82,7 +82,9 @@ struct StopSignals
     sigaction(SIGINT, &action, &this->Previous[0]);
     sigaction(SIGTERM, &action, &this->Previous[1]);
   }
-  ~StopSignals()
+  ~StopSignals() { this->Restore(); }
+  /// The handlers as they were before.
+  void Restore()
   {
     if (!this->Installed)
     {
@@ -90,6 +92,7 @@ struct StopSignals
     }
     sigaction(SIGINT, &this->Previous[0], nullptr);
     sigaction(SIGTERM, &this->Previous[1], nullptr);
+    this->Installed = false;
   }
   StopSignals(const StopSignals&) = delete;
   StopSignals& operator=(const StopSignals&) = delete;
@@ -324,8 +327,16 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
   trainer->AddObserver(vtkGaussianFieldTrainer::SettingsChosenEvent, chosen);
   FilterError error;
   error.Watch(trainer);
-  const StopSignals signals;
+  StopSignals signals;
   trainer->Update();
+  if (StopSignal && std::string(trainer->GetStopReason()) != "aborted")
+  {
+    // The signal came where no step could take it (reading, seeding, the pixel-grid fit, the end stages): it ends
+    // the process as it would have without the handler, before any output is written.
+    const int signal = StopSignal;
+    signals.Restore();
+    std::raise(signal);
+  }
   if (terminal)
   {
     std::printf("\n");

@@ -46,7 +46,9 @@ void PoseRefiner::Configure(TrainingData* data, const PoseRefinementSettings& se
     this->RefinedSweeps = choice.Sweeps;
     s.RefinePoses = choice.Any() ? PoseRefinement::On : PoseRefinement::Off;
     refinedBy = "chosen: " + choice.Reason;
-    this->TrialPending = choice.Any() && s.TrialSteps > 0;
+    // (Not with a shared correction refined: the branches would differ in it too, and the held-out frames are scored
+    // at poses it moves.)
+    this->TrialPending = choice.Any() && s.TrialSteps > 0 && !s.RefineTimeOffset && !s.RefineImageToProbe;
     if (!choice.Any())
     {
       lines.push_back("RefinePoses = off (" + refinedBy + ")");

@@ -26,7 +26,7 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
   const int steps = s.Poses.TrialSteps, from = this->State.Iteration;
   double left = s.Iterations > 0 ? s.Iterations - from : std::numeric_limits<double>::infinity();
   const double seconds = this->TrainingSeconds();
-  if (s.TimeBudget > 0 && seconds > 0)
+  if (s.TimeBudget > 0 && seconds > 0 && from > 0) // no step yet: the rate is unknown, the trial goes ahead
   {
     left = std::min(left, (s.TimeBudget - seconds) * from / seconds);
   }
@@ -63,7 +63,7 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
     psnr = metrics.PSNR;
     return true;
   };
-  double trusted = 0, refined = -std::numeric_limits<double>::infinity();
+  double trusted = 0, refined = 0;
   this->Poses.Suspend(true);
   const bool ok = branch(trusted);
   this->Poses.Suspend(false);
@@ -72,26 +72,38 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
     this->InPoseTrial = false;
     return false;
   }
+  // A run that stops inside a branch (budget, abort, convergence) ends in it: no choice is made, and its stop
+  // reason stands.
+  auto stopped = [&]() {
+    this->InPoseTrial = false;
+    rewrite("untested: the run stopped during the trial");
+    return this->EndPoseTrial("", error);
+  };
+  if (stop)
+  {
+    return stopped();
+  }
   TrainingState trustedState = this->State;
   TrainerReport trustedReport = this->Report;
   const LossWindow trustedRecent = this->Recent;
-  if (!stop)
+  this->State = initial;
+  this->Report = report;
+  this->Recent = recent;
+  this->Poses.ComposePoses(this->State);
+  if (!this->PushState(error))
   {
-    this->State = initial;
-    this->Report = report;
-    this->Recent = recent;
-    this->Poses.ComposePoses(this->State);
-    if (!this->PushState(error))
-    {
-      this->InPoseTrial = false;
-      return false;
-    }
-    this->Engine->Snapshot();
-    if (!branch(refined))
-    {
-      this->InPoseTrial = false;
-      return false;
-    }
+    this->InPoseTrial = false;
+    return false;
+  }
+  this->Engine->Snapshot();
+  if (!branch(refined))
+  {
+    this->InPoseTrial = false;
+    return false;
+  }
+  if (stop)
+  {
+    return stopped();
   }
   this->InPoseTrial = false;
   const std::string how = vtkfmt::sprintf("measured: %d steps each way from step %d on %zu held-out frames at "
@@ -133,6 +145,7 @@ bool Trainer::EndPoseTrial(const std::string& how, std::string* error)
   JoinTrainingFrames(*this->Data, this->HeldOutValidation);
   this->HeldOutValidation.clear();
   this->Report.ValidationHeldOut = false;
+  this->Recent = LossWindow(); // the joined frames' first losses are no sign of convergence
   for (std::string& line : this->Report.Settings)
   {
     if (line.rfind("Validation = ", 0) == 0)

@@ -571,7 +571,8 @@ bool Trainer::Iterate(double start, const std::function<void(double, int, double
   const bool window = this->InDensificationWindow();
   const bool densify = d.Enabled && it >= d.Start && it % d.Interval == 0 && window;
   // The choices made on the held-out frames end here: the fit goes on from the best field they scored, with them.
-  if (!window && !this->InPoseTrial && it % d.Interval == 0 && !this->JoinValidationFrames(&validation, error))
+  if (!window && !this->InPoseTrial && !this->Poses.IsTrialPending() && it % d.Interval == 0 &&
+    !this->JoinValidationFrames(&validation, error))
   {
     return false;
   }
@@ -717,14 +718,17 @@ bool Trainer::ReadCheckpoint(const std::string& file, std::string* error)
     this->Poses.EndTrial();
     trialDone = true;
   }
-  if (!this->Poses.CheckCheckpoint(loaded, file, error) ||
-    (trialDone && !this->EndPoseTrial("before the checkpoint", error)))
+  if (!this->Poses.CheckCheckpoint(loaded, file, error))
   {
     return false;
   }
   this->State = std::move(loaded);
   this->Poses.ComposePoses(
     this->State); // frames never corrected (held out, or before the corrections moved) stay as tracked
+  if (trialDone && !this->EndPoseTrial("before the checkpoint", error))
+  {
+    return false;
+  }
   this->Gamma = gamma;
   this->PixelGrid = false; // a checkpoint comes from a run that takes steps: it goes on with them
   return this->PushState(error) && (this->InDensificationWindow() || this->JoinValidationFrames(nullptr, error));
