@@ -256,6 +256,7 @@ bigusTrainerSetting(HeldOutChoices, bool, HeldOut.Enabled, bigusAnyValue(bool))
 bigusTrainerSetting(DenseInitialisation, bool, Seeding.DenseInitialisation, bigusAnyValue(bool))
 bigusTrainerSetting(PixelGridFit, bool, Seeding.PixelGridFit, bigusAnyValue(bool))
 bigusTrainerSetting(PoseSmoothness, double, Poses.Smoothness, 0.0, 1e12)
+bigusTrainerSetting(PoseTrialSteps, int, Poses.TrialSteps, 0, 1000000)
 bigusTrainerSetting(PoseRefinementStart, double, Poses.Start, -1.0, 1.0)
 bigusTrainerSetting(RefineTimeOffset, bool, Poses.RefineTimeOffset, bigusAnyValue(bool))
 bigusTrainerSetting(RefineImageToProbe, bool, Poses.RefineImageToProbe, bigusAnyValue(bool))
@@ -729,6 +730,7 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "RefineTimeOffset: " << this->GetRefineTimeOffset() << "\n";
   os << indent << "RefineImageToProbe: " << this->GetRefineImageToProbe() << "\n";
   os << indent << "AnchorPosesToTracked: " << this->GetAnchorPosesToTracked() << "\n";
+  os << indent << "PoseTrialSteps: " << this->GetPoseTrialSteps() << "\n";
   os << indent << "SparseAdam: " << this->GetSparseAdam() << "\n";
   os << indent << "Iterations: " << this->GetIterations() << "\n";
   os << indent << "TimeBudget: " << this->GetTimeBudget() << "\n";

@@ -201,6 +201,13 @@ public:
   virtual bool GetAnchorPosesToTracked() const;
   vtkBooleanMacro(AnchorPosesToTracked, bool);
   ///@}
+  ///@{ RefinePoses Auto, where the speckle rule would refine: steps taken each way (on the tracked poses, with
+  /// refinement) from the refinement's start, scored on held-out frames at their tracked poses, the better going on
+  /// (default 400; 0: the rule alone; bigus::PoseRefinementSettings::TrialSteps). TrainingSettings' RefinePoses line
+  /// gives both scores.
+  virtual void SetPoseTrialSteps(int value);
+  virtual int GetPoseTrialSteps() const;
+  ///@}
   ///@{ Weight of the smoothness prior on the pose corrections along the sweep (default 0;
   /// bigus::PoseRefinementSettings::Smoothness).
   virtual void SetPoseSmoothness(double value);
