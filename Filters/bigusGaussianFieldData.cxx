@@ -475,6 +475,18 @@ bool TrainingDataFromSweeps(const std::vector<SweepInput>& sweeps, TrainingData&
       *error = sweeps[s].Name + ": " + *error;
       return false;
     }
+    // No valid frame first: then the estimated mask is empty too, and that is not the cause.
+    bool anyValid = false;
+    for (int f = 0; f < l.Data.Count() && !anyValid; ++f)
+    {
+      anyValid = l.Data.IsValid(f);
+    }
+    if (!anyValid)
+    {
+      *error = sweeps[s].Name + ": every one of its " + std::to_string(l.Data.Count()) +
+        " frames is marked INVALID (FrameValid 0: a tracker or image status), so the sweep has nothing to train on";
+      return false;
+    }
     if (std::none_of(l.Data.Mask.begin(), l.Data.Mask.end(), [](unsigned char v) { return v != 0; }))
     {
       *error = sweeps[s].Name + ": the fan mask is empty (no imaged pixel), so the sweep has nothing to train on";

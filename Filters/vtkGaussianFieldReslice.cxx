@@ -293,6 +293,16 @@ int vtkGaussianFieldReslice::RequestData(
     vtkErrorMacro("empty output extent " << grid.ExtentText());
     return 0;
   }
+  const bool planar = this->OutputDimensionality == 2;
+  for (int k = 0; k < (planar ? 2 : 3); ++k)
+  {
+    if (!(grid.Spacing[k] > 0) || !std::isfinite(grid.Spacing[k]))
+    {
+      vtkErrorMacro("OutputSpacing " << grid.Spacing[0] << " " << grid.Spacing[1] << " " << grid.Spacing[2]
+                                     << ": each must be a positive, finite number of mm");
+      return 0;
+    }
+  }
   int extent[6], announced[6];
   double announcedSpacing[3], announcedOrigin[3];
   outInfo->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT(), announced);

@@ -396,6 +396,33 @@ std::unique_ptr<Renderer> CountingFactory(std::string*)
 }
 }
 
+TEST(GaussianFieldReslice, AZeroOrNegativeOutputSpacingIsAnErrorThatNamesIt)
+{
+  // (It blamed "ImageToReference is singular" before: the spacing is what the caller set wrong.)
+  reference::FieldD exact;
+  vtkNew<vtkGaussianFieldReslice> reslice;
+  reslice->SetInputData(RandomField(50, 6, exact));
+  reslice->SetOutputOrigin(0, 0, 5);
+  reslice->SetOutputExtent(0, 19, 0, 19, 0, 0);
+  vtkNew<bigus_test::MessageCollector> messages;
+  messages->Watch(reslice);
+  const double bad[3][3] = { { 0, 0.1, 0.1 }, { 0.1, -1, 0.1 }, { 0.1, 0.1, std::nan("") } };
+  for (int c = 0; c < 3; ++c)
+  {
+    reslice->SetOutputDimensionality(c == 2 ? 3 : 2);
+    reslice->SetOutputSpacing(bad[c][0], bad[c][1], bad[c][2]);
+    reslice->Update();
+    ASSERT_EQ(messages->Errors.size(), std::size_t(c + 1));
+    EXPECT_NE(messages->Errors[c].find("OutputSpacing"), std::string::npos) << messages->Errors[c];
+    EXPECT_EQ(messages->Errors[c].find("singular"), std::string::npos) << messages->Errors[c];
+    EXPECT_EQ(reslice->GetOutput()->GetNumberOfPoints(), 0);
+  }
+  reslice->SetOutputDimensionality(2);
+  reslice->SetOutputSpacing(0.5, 0.5, 1);
+  reslice->Update();
+  EXPECT_EQ(reslice->GetOutput()->GetNumberOfPoints(), 400);
+}
+
 TEST(GaussianFieldReslice, AnUnavailableBackendIsAnErrorThatNamesIt)
 {
   reference::FieldD exact;

@@ -188,6 +188,8 @@ def make_fixtures():
     f["sweep_scaled_frame1"] = sweep_variant("sweep_scaled_frame1", scaled)
     f["sweep_far_frame2"] = sweep_variant("sweep_far_frame2", far)
     f["sweep_frame1_twice"] = sweep_variant("sweep_frame1_twice", renumbered)
+    f["sweep_all_invalid"] = sweep_variant(
+        "sweep_all_invalid", lambda lines: [l.replace("TransformStatus = OK", "TransformStatus = INVALID") for l in lines])
     f["sweep_dimsize_huge"] = sweep_variant("sweep_dimsize_huge", set_field("DimSize", "16384 16384 4"))
     f["sweep_fifo"] = os.path.join(FIXTURES, "pipe.igs.mha")
     os.mkfifo(f["sweep_fifo"])
@@ -256,6 +258,8 @@ def cases(f):
                          ("mask_huge_dimsize", "16384 x 16384 x 256")]:
         case("train " + name, train + ["--mask", f[name]], [expect], [out + "_train.vtp"])
     case("train mask is a pipe", train + ["--mask", f["fifo"]], ["not a regular file"], [out + "_train.vtp"])
+    case("train every frame INVALID", ["train", f["sweep_all_invalid"], "--calibration", XML, "-o", out + "_train.vtp"],
+         ["every one of its 4 frames is marked INVALID"], [out + "_train.vtp"])
     case("train conflicting calibration", ["train", SWEEP, "--calibration", f["calibration_conflicting"], "-o",
                                            out + "_train.vtp"], ["conflicts with"], [out + "_train.vtp"])
     case("train calibration not XML", ["train", SWEEP, "--calibration", f["calibration_not_xml"], "-o",
