@@ -52,11 +52,11 @@
  *
  * Stopping: Iterations, TimeBudget (s) or ConvergenceTolerance, whichever first; AbortExecute is
  * honoured and UpdateProgress called: set during a run (from a progress observer), it ends training at the next
- * step, writes a checkpoint to CheckpointFile if one is set, and outputs the field trained so far (StopReason
- * "aborted"). Checkpoints (CheckpointFile every CheckpointInterval steps)
- * hold the field and the optimiser state; ResumeFile continues a stopped run (same settings).
- * Deterministic for a given Seed and thread count when scheduled by Iterations (a run scheduled by
- * TimeBudget depends on the machine's speed). Errors (no valid frames, empty mask, a training pose the
+ * step, writes a checkpoint to CheckpointFile if one is set (not data-parallel: a process that could not write it
+ * would leave the others waiting), and outputs the field trained so far (StopReason "aborted"). Checkpoints
+ * (CheckpointFile every CheckpointInterval steps) hold the field and the optimiser state; ResumeFile continues a
+ * stopped run (same settings). Deterministic for a given Seed and thread count when scheduled by Iterations (a run
+ * scheduled by TimeBudget depends on the machine's speed). Errors (no valid frames, empty mask, a training pose the
  * renderer rejects, an unavailable Backend, an unreadable checkpoint) fail the request with
  * vtkErrorMacro and an empty output.
  */

@@ -356,11 +356,14 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
     {
       return code;
     }
-    std::fprintf(stderr,
-      "bigus: %s at iteration %d after %.1f s: the field trained so far is in %s and the run's state in %s; go on "
-      "with the same command and --resume %s\n",
+    // (Data-parallel runs write no checkpoint when stopped: vtkGaussianFieldTrainer's description.)
+    const bool distributed = processes.Controller && processes.Controller->GetNumberOfProcesses() > 1;
+    std::fprintf(stderr, "bigus: %s at iteration %d after %.1f s: the field trained so far is in %s; %s %s\n",
       StopSignal == SIGINT ? "interrupted (SIGINT)" : "terminated (SIGTERM)", trainer->GetCompletedIterations(),
-      trainer->GetTrainingSeconds(), interrupted.c_str(), checkpoint.c_str(), checkpoint.c_str());
+      trainer->GetTrainingSeconds(), interrupted.c_str(),
+      distributed ? "a data-parallel run saves no state when stopped; the last periodic checkpoint, if any, is"
+                  : "the run's state is in",
+      (checkpoint + (distributed ? "" : "; go on with the same command and --resume " + checkpoint)).c_str());
     return code;
   }
   if (trainer->GetNumberOfGaussians() == 0)
