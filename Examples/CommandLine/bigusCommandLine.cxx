@@ -145,15 +145,26 @@ vtkSmartPointer<vtkImageData> WithOwnFieldData(vtkImageData* sweep)
   return copy;
 }
 
-vtkSmartPointer<vtkPolyData> ReadField(const std::string& file)
+namespace
+{
+/// True after a message when @p file is there but is not a regular file (a folder, pipe or device: opening a pipe
+/// would block); @p kind says what the file should be. A missing file is left to the caller's open.
+bool RefuseIrregularFile(const std::string& file, const std::string& kind)
 {
   std::error_code status;
-  if (!std::filesystem::is_regular_file(file, status))
+  if (!std::filesystem::exists(file, status) || std::filesystem::is_regular_file(file, status))
   {
-    Fail(file +
-      (std::filesystem::exists(file, status)
-          ? ": not a regular file (a folder, pipe or device); a Gaussian field is a .vtp file"
-          : ": cannot open the field file"));
+    return false;
+  }
+  Fail(file + ": not a regular file (a folder, pipe or device); " + kind);
+  return true;
+}
+}
+
+vtkSmartPointer<vtkPolyData> ReadField(const std::string& file)
+{
+  if (RefuseIrregularFile(file, "a Gaussian field is a .vtp file"))
+  {
     return nullptr;
   }
   std::ifstream probe(file);
@@ -179,6 +190,7 @@ vtkSmartPointer<vtkPolyData> ReadField(const std::string& file)
   // Per Gaussian at least 44 bytes (position, Scale, Rotation, Reflectivity as floats), 16 per vertex cell; zlib
   // packs at most 1032:1; in memory the reader's copy, the command's and the renderer's field.
   const double stored = 44 * points + 16 * cells;
+  std::error_code status;
   const double fileBytes = static_cast<double>(std::filesystem::file_size(file, status));
   const double physical = PhysicalMemoryBytes();
   if (points < 0 || cells < 0 || stored > 1032 * fileBytes)
@@ -227,10 +239,8 @@ std::vector<int> ChooseFrames(int count, int every, int offset, const std::vecto
 
 vtkSmartPointer<vtkImageData> ReadMask(const std::string& file, const int dims[3])
 {
-  std::error_code status;
-  if (std::filesystem::exists(file, status) && !std::filesystem::is_regular_file(file, status))
+  if (RefuseIrregularFile(file, "a mask is a .mha or .mhd file"))
   {
-    Fail(file + ": not a regular file (a folder, pipe or device); a mask is a .mha or .mhd file");
     return nullptr;
   }
   std::ifstream probe(file);
@@ -256,6 +266,7 @@ vtkSmartPointer<vtkImageData> ReadMask(const std::string& file, const int dims[3
   header.erase(
     std::remove_if(header.begin(), header.end(), [](char c) { return c == ' ' || c == '\t'; }), header.end());
   std::transform(header.begin(), header.end(), header.begin(), [](unsigned char c) { return std::tolower(c); });
+  std::error_code status;
   const double fileBytes = static_cast<double>(std::filesystem::file_size(file, status)) - double(headerBytes);
   const bool localRaw = header.find("elementdatafile=local") != std::string::npos &&
     header.find("compresseddata=true") == std::string::npos && header.find("compresseddata=1") == std::string::npos;

@@ -369,22 +369,13 @@ PoseAnchor PoseRefiner::AnchorToTrackedPoses(TrainingState& state, GaussianField
   anchor.RotationDegrees = Eigen::AngleAxisd(R).angle() * 180 / M_PI;
   // Each refined training frame's correction puts it at T times its refined pose: CorrectPose moves a pose in its
   // own axes, so CorrectPose(T P, xi) = T CorrectPose(P, xi) and the ImageToProbe correction composed last follows.
+  using RowMajor = Eigen::Matrix<double, 4, 4, Eigen::RowMajor>; // the poses' layout
   for (int f : frames)
   {
-    std::array<double, 16> corrected = this->UncorrectedPose(f, state);
-    CorrectPose(corrected.data(), data.Width, data.Height, state.PoseCorrections[f].data(), corrected.data());
-    Eigen::Matrix4d P;
-    for (int k = 0; k < 16; ++k)
-    {
-      P(k / 4, k % 4) = corrected[k];
-    }
-    const Eigen::Matrix4d TP = T * P;
-    std::array<double, 16> target;
-    for (int k = 0; k < 16; ++k)
-    {
-      target[k] = TP(k / 4, k % 4);
-    }
     const std::array<double, 16> from = this->UncorrectedPose(f, state);
+    std::array<double, 16> corrected, target;
+    CorrectPose(from.data(), data.Width, data.Height, state.PoseCorrections[f].data(), corrected.data());
+    Eigen::Map<RowMajor>(target.data()) = T * Eigen::Map<const RowMajor>(corrected.data());
     PoseCorrectionBetween(from.data(), target.data(), data.Width, data.Height, state.PoseCorrections[f].data());
   }
   this->ComposePoses(state);
