@@ -2,6 +2,7 @@
 #include "bigusCudaTrainingEngine.h"
 
 #include "bigusBasisNorms.h"
+#include "bigusCudaAssembledBasis.h"
 #include "bigusCudaDeviceRenderer.h"
 #include "bigusFieldLayout.h"
 #include "bigusImageLoss.h"
@@ -11,6 +12,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <utility>
 #include <vector>
 
@@ -125,6 +127,7 @@ public:
   bool SetData(const TrainingData* data, std::string*) override
   {
     this->Data = data;
+    this->Assembled.reset();
     return true;
   }
 
@@ -142,6 +145,15 @@ public:
     std::string* error) override;
   bool BasisNorms(const float* weights, const int* frames, int count, const RenderOptions& options, double* out,
     std::string* error) override;
+  void SetBasisMemoryLimit(std::int64_t bytes) override
+  {
+    this->BasisMemoryLimit = bytes;
+    if (this->Assembled && this->Assembled->PersistentBytes() > std::max<std::int64_t>(0, bytes))
+    {
+      this->Assembled.reset();
+    }
+  }
+  std::string DescribeBasisProducts() const override { return this->BasisProducts; }
 
 private:
   /// The device field, or with @p reflectivities those in place of the field's.
@@ -160,6 +172,16 @@ private:
   bool DownloadField(int which, GaussianField& field, std::string* error);
   /// Reserves the solve's buffers (SolveBytes per Gaussian) before allocating.
   bool PrepareSolve(std::string* error);
+  /**
+   * Whether the basis products of @p frames with @p options run over A assembled on the device (DeviceBasis),
+   * assembling it when the field, the frames or the options changed: true where BasisMemoryLimit allows one (above
+   * 0) and it fits in both that limit and the device's free memory; false for the matrix-free products, and false
+   * with @p ok false and @p error for a pose the renderer refuses or a CUDA error. BasisProducts says which.
+   */
+  bool UseAssembled(const int* frames, int count, const RenderOptions& options, bool& ok, std::string* error);
+  /// A^T y (@p transpose true) or diag(A^T W A) over the assembled A, @p pixelValues the [count, H, W] y or W on the
+  /// host: added to @p out [N].
+  bool AssembledColumnProduct(const float* pixelValues, bool transpose, double* out, std::string* error);
   /// Copies the recorded frames and masks of the step's frames to the device (LossTargets, LossMasks) and reserves
   /// the image loss's scratch, checked before allocating.
   bool StageLossTargets(const TrainingData& data, const StepRequest& request, std::string* error);
@@ -190,10 +212,17 @@ private:
   std::vector<float> I, LossGradient;
   ImageLossWorkspace LossWorkspace;
   GaussianField HostField; // BasisNorms's copy of the field
+  // The basis products' A assembled on the device, for AssembledKey; dropped when the field changes (Push, Step,
+  // Restore) or the data (SetData).
+  std::unique_ptr<DeviceBasis> Assembled;
+  BasisKey AssembledKey;
+  std::int64_t BasisMemoryLimit = 0;
+  std::string BasisProducts = "matrix free (no product run yet)";
 };
 
 bool CudaTrainingEngine::Push(const OptimizerState& input, std::string* error)
 {
+  this->Assembled.reset();
   OptimizerState state = input;
   state.ResizeToField();
   const std::int64_t n = state.Count();
@@ -294,6 +323,7 @@ void CudaTrainingEngine::Snapshot()
 
 void CudaTrainingEngine::Restore()
 {
+  this->Assembled.reset();
   cudaMemcpyAsync(this->State.Data, this->Saved.Data, sizeof(float) * 3 * FieldParameters * this->N,
     cudaMemcpyDeviceToDevice, this->Device.GetStream());
 }
@@ -356,6 +386,7 @@ bool CudaTrainingEngine::StageLossTargets(const TrainingData& data, const StepRe
 
 StepStatus CudaTrainingEngine::Step(const StepRequest& request, double* loss, std::string* error)
 {
+  this->Assembled.reset(); // the step moves the geometry
   const TrainingData& data = request.Data ? *request.Data : *this->Data;
   const std::size_t pixels = std::size_t(data.Width) * data.Height;
   const std::int64_t n = this->N;
@@ -517,15 +548,29 @@ bool CudaTrainingEngine::ApplyBasis(
 {
   const std::size_t pixels = std::size_t(this->Data->Width) * this->Data->Height;
   const RenderOptions linear = LinearBasisOptions(options);
+  bool ok = true;
+  const bool assembled = this->UseAssembled(frames, count, options, ok, error);
+  if (!ok)
+  {
+    return false;
+  }
   std::vector<PreparedSlice> prepared;
-  if (!PrepareFrames(*this->Data, frames, count, linear, prepared, error) ||
-    !this->Reserve(prepared, false, false, error) || !this->PrepareSolve(error) ||
+  if ((!assembled &&
+        (!PrepareFrames(*this->Data, frames, count, linear, prepared, error) ||
+          !this->Reserve(prepared, false, false, error))) ||
+    !this->PrepareSolve(error) ||
     (this->N > 0 &&
       !Check(cudaMemcpyAsync(
                this->SolveValues.Data, r, sizeof(float) * this->N, cudaMemcpyHostToDevice, this->Device.GetStream()),
         "copying reflectivities to the device", error)))
   {
     return false;
+  }
+  if (assembled)
+  {
+    this->Assembled->Apply(this->SolveValues.As<float>(), this->Device.GetStream());
+    return Check(cudaGetLastError(), "assembled product kernel", error) &&
+      this->Download(S, this->Assembled->PixelVector(), sizeof(float) * pixels * count, "copying S to the host", error);
   }
   const DeviceField field = this->Field(this->SolveValues.As<float>());
   for (int k = 0; k < count; ++k)
@@ -546,8 +591,13 @@ bool CudaTrainingEngine::ApplyBasisTranspose(
   const std::size_t pixels = std::size_t(this->Data->Width) * this->Data->Height;
   const RenderOptions linear = LinearBasisOptions(options);
   const cudaStream_t stream = this->Device.GetStream();
+  bool ok = true;
+  if (this->UseAssembled(frames, count, options, ok, error))
+  {
+    return this->AssembledColumnProduct(y, true, out, error);
+  }
   std::vector<PreparedSlice> prepared;
-  if (!PrepareFrames(*this->Data, frames, count, linear, prepared, error) ||
+  if (!ok || !PrepareFrames(*this->Data, frames, count, linear, prepared, error) ||
     !this->Reserve(prepared, true, false, error) || !this->PrepareSolve(error) ||
     !Check(cudaMemsetAsync(this->SolveSum.Data, 0, sizeof(double) * n, stream), "clearing the solve's sum", error))
   {
@@ -593,8 +643,13 @@ bool CudaTrainingEngine::ApplyBasisTranspose(
 bool CudaTrainingEngine::BasisNorms(
   const float* weights, const int* frames, int count, const RenderOptions& options, double* out, std::string* error)
 {
-  // Once per solve: on the host, over a copy of the field.
-  if (!this->PullField(this->HostField, error))
+  bool ok = true;
+  if (this->UseAssembled(frames, count, options, ok, error))
+  {
+    return this->AssembledColumnProduct(weights, false, out, error);
+  }
+  // Matrix free: once per solve, on the host, over a copy of the field.
+  if (!ok || !this->PullField(this->HostField, error))
   {
     return false;
   }
@@ -606,6 +661,84 @@ bool CudaTrainingEngine::BasisNorms(
     {
       return TrainingFrameError(frames[k], error);
     }
+  }
+  return true;
+}
+
+bool CudaTrainingEngine::UseAssembled(
+  const int* frames, int count, const RenderOptions& options, bool& ok, std::string* error)
+{
+  ok = true;
+  if (this->BasisMemoryLimit <= 0)
+  {
+    this->BasisProducts = "matrix free (no memory allowed for the assembled basis)";
+    return false;
+  }
+  const BasisKey key(frames, count, options);
+  if (this->Assembled && this->AssembledKey == key)
+  {
+    return true;
+  }
+  this->Assembled.reset();
+  const double start = SteadySeconds();
+  const RenderOptions linear = LinearBasisOptions(options);
+  std::vector<PreparedSlice> prepared;
+  if (!PrepareFrames(*this->Data, frames, count, linear, prepared, error))
+  {
+    ok = false;
+    return false;
+  }
+  std::unique_ptr<DeviceBasis> basis(new DeviceBasis);
+  std::string why;
+  bool tooLarge = false;
+  if (!basis->Assemble(this->Field(), prepared, EffectiveElevationSigma(linear), linear.Cutoff, this->BasisMemoryLimit,
+        this->Device, &why, &tooLarge))
+  {
+    // Refused before allocating its weights when it does not fit (matrix free then); a CUDA error fails the product.
+    this->BasisProducts = "matrix free (" + why + ")";
+    ok = tooLarge;
+    if (!ok && error)
+    {
+      *error = why;
+    }
+    return false;
+  }
+  this->Assembled = std::move(basis);
+  this->AssembledKey = key;
+  this->BasisProducts = AssembledBasisText(
+    this->Assembled->GetEntries(), this->Assembled->PersistentBytes(), SteadySeconds() - start, "on the device");
+  return true;
+}
+
+bool CudaTrainingEngine::AssembledColumnProduct(
+  const float* pixelValues, bool transpose, double* out, std::string* error)
+{
+  const std::int64_t n = this->N;
+  const cudaStream_t stream = this->Device.GetStream();
+  if (!this->PrepareSolve(error) ||
+    !Check(cudaMemcpyAsync(this->Assembled->PixelVector(), pixelValues, sizeof(float) * this->Assembled->GetPixels(),
+             cudaMemcpyHostToDevice, stream),
+      "copying pixel values to the device", error))
+  {
+    return false;
+  }
+  if (transpose)
+  {
+    this->Assembled->ApplyTranspose(this->SolveSum.As<double>(), stream);
+  }
+  else
+  {
+    this->Assembled->Norms(this->SolveSum.As<double>(), stream);
+  }
+  std::vector<double> sum(n);
+  if (!Check(cudaGetLastError(), "assembled product kernel", error) ||
+    (n > 0 && !this->Download(sum.data(), this->SolveSum.Data, sizeof(double) * n, "copying A^T y to the host", error)))
+  {
+    return false;
+  }
+  for (std::int64_t i = 0; i < n; ++i)
+  {
+    out[i] += sum[i];
   }
   return true;
 }

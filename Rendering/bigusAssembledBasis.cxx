@@ -17,52 +17,6 @@ namespace
 {
 constexpr std::int64_t GaussianChunk = 4096; // Gaussians per task of the assembly
 
-/// What a cheap elevation test needs of a Gaussian: its mean and largest variance (mm^2); Known false for a
-/// log-scale that is not finite (SetupFootprint decides those).
-struct Reach
-{
-  double Mean[3];
-  double LargestVariance;
-  bool Known;
-};
-
-Reach ReachOf(const FieldView& field, std::int64_t i)
-{
-  Reach r;
-  double largest = MinimumLogScale;
-  r.Known = true;
-  for (int k = 0; k < 3; ++k)
-  {
-    r.Mean[k] = field.Means[3 * i + k];
-    const double l = field.LogScales[3 * i + k];
-    r.Known = r.Known && std::isfinite(l);
-    largest = std::max(largest, std::min(l, MaximumLogScale));
-  }
-  r.LargestVariance = std::exp(2 * largest);
-  return r;
-}
-
-/**
- * True when the Gaussian cannot reach the slice: its mean lies further from the plane than the cut-off times the
- * largest elevation standard deviation it can have (its largest scale, with the beam), so SetupFootprint would find
- * it invisible (its test with the actual elevation variance, which is at most this one). Saves the set-up of the
- * many (slice, Gaussian) pairs of a grid whose Gaussians each reach a few slices.
- */
-bool OutOfReach(const Reach& g, const PreparedSlice& s, double sigmaE, double cutoff)
-{
-  if (!g.Known)
-  {
-    return false;
-  }
-  double m = 0, norm = 0;
-  for (int k = 0; k < 3; ++k)
-  {
-    m += s.Frame.F[2][k] * (g.Mean[k] - s.Frame.Origin[k]);
-    norm += s.Frame.F[2][k] * s.Frame.F[2][k];
-  }
-  return m * m > 1.0001 * cutoff * cutoff * (g.LargestVariance * norm + sigmaE * sigmaE);
-}
-
 /**
  * ForEachFootprintSpan for Gaussian @p i on slice @p s after the cheap test of OutOfReach and the set-up; false when
  * it is not visible there.

@@ -219,6 +219,56 @@ BIGUS_HD void RowSpan(
   end = end > first ? end : first;
 }
 
+/// What a cheap elevation test needs of a Gaussian: its mean and largest variance (mm^2); Known false for a
+/// log-scale that is not finite (SetupFootprint decides those).
+struct Reach
+{
+  double Mean[3];
+  double LargestVariance;
+  bool Known;
+};
+
+/// The Reach of Gaussian @p i of @p field (FieldView on the host, cuda::DeviceField on the device: Means [N, 3] and
+/// LogScales [N, 3]).
+template <typename Field>
+BIGUS_HD Reach ReachOf(const Field& field, std::int64_t i)
+{
+  Reach r;
+  double largest = MinimumLogScale;
+  r.Known = true;
+  for (int k = 0; k < 3; ++k)
+  {
+    r.Mean[k] = field.Means[3 * i + k];
+    const double l = field.LogScales[3 * i + k];
+    r.Known = r.Known && l - l == 0.0; // false for NaN and +-Inf
+    const double held = l < MaximumLogScale ? l : MaximumLogScale;
+    largest = largest < held ? held : largest;
+  }
+  r.LargestVariance = std::exp(2 * largest);
+  return r;
+}
+
+/**
+ * True when the Gaussian cannot reach slice @p s: its mean lies further from the plane than the cut-off times the
+ * largest elevation standard deviation it can have (its largest scale, with the beam), so SetupFootprint would find
+ * it invisible (its test with the actual elevation variance, which is at most this one). Saves the set-up of the
+ * many (slice, Gaussian) pairs of a grid whose Gaussians each reach a few slices.
+ */
+BIGUS_HD bool OutOfReach(const Reach& g, const PreparedSlice& s, double sigmaE, double cutoff)
+{
+  if (!g.Known)
+  {
+    return false;
+  }
+  double m = 0, norm = 0;
+  for (int k = 0; k < 3; ++k)
+  {
+    m += s.Frame.F[2][k] * (g.Mean[k] - s.Frame.Origin[k]);
+    norm += s.Frame.F[2][k] * s.Frame.F[2][k];
+  }
+  return m * m > 1.0001 * cutoff * cutoff * (g.LargestVariance * norm + sigmaE * sigmaE);
+}
+
 /**
  * The pixels of the visible footprint @p f on slice @p s as the backward pass visits them (host): each row of its
  * box (FootprintBox, into @p box) that meets the cut-off ellipse (RowSpan) as @p span(row, first, last, weight),

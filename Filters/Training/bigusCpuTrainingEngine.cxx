@@ -232,11 +232,10 @@ private:
   std::vector<float> S, I, LossGradient, Gradients;
   std::vector<int> Seen; // a data-parallel step's seen counts, before they are summed
   ImageLossWorkspace LossWorkspace;
-  // The basis products' assembled A: for AssembledFrames and AssembledOptions' elevation sigma and cut-off, dropped
+  // The basis products' assembled A, for AssembledKey's frames, elevation sigma and cut-off, dropped
   // when the field changes (Push, Step, Restore) or the data (SetData).
   std::unique_ptr<AssembledBasis> Assembled;
-  std::vector<int> AssembledFrames;
-  double AssembledSigma = 0, AssembledCutoff = 0;
+  BasisKey AssembledKey;
   std::int64_t BasisMemoryLimit = 0;
   std::string BasisProducts = "matrix free (no product run yet)";
 };
@@ -250,9 +249,8 @@ bool CpuTrainingEngine::UseAssembled(
     this->BasisProducts = "matrix free (no memory allowed for the assembled basis)";
     return false;
   }
-  const double sigma = EffectiveElevationSigma(options);
-  if (this->Assembled && this->AssembledFrames == std::vector<int>(frames, frames + count) &&
-    this->AssembledSigma == sigma && this->AssembledCutoff == options.Cutoff)
+  const BasisKey key(frames, count, options);
+  if (this->Assembled && this->AssembledKey == key)
   {
     return true;
   }
@@ -279,15 +277,9 @@ bool CpuTrainingEngine::UseAssembled(
     return false;
   }
   this->Assembled = std::move(basis);
-  this->AssembledFrames.assign(frames, frames + count);
-  this->AssembledSigma = sigma;
-  this->AssembledCutoff = options.Cutoff;
-  const double seconds = SteadySeconds() - start;
+  this->AssembledKey = key;
   const AssembledBasis::Size& size = this->Assembled->GetSize();
-  char text[200];
-  std::snprintf(text, sizeof(text), "assembled (%lld weights, %.0f MB, built in %.2f s)",
-    static_cast<long long>(size.Weights), size.Bytes() / 1e6, seconds);
-  this->BasisProducts = text;
+  this->BasisProducts = AssembledBasisText(size.Weights, size.Bytes(), SteadySeconds() - start);
   return true;
 }
 

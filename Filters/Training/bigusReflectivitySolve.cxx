@@ -144,7 +144,7 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
     return Fail(
       error, "nothing to solve: the fan masks of the " + std::to_string(allFrames.size()) + " frames are empty");
   }
-  // The products over A assembled once for this solve where it fits beside the vectors (the CPU engine).
+  // The products over A assembled once for this solve where it fits beside the vectors.
   const double allowed = settings.AssembledMemoryShare * (physical > 0 ? physical : 0.0) - needed;
   engine.SetBasisMemoryLimit(settings.AssembledMemoryShare > 0 && physical <= 0
       ? std::numeric_limits<std::int64_t>::max()

@@ -13,9 +13,10 @@
  * with lambda = Ridge * mean_i diag(A^T G A) (Tikhonov). The solver is CGLS (Hestenes and Stiefel 1952;
  * Paige and Saunders 1982, section 7.1) on the column-scaled system, Jacobi-preconditioned with
  * diag(A^T G A) + lambda (BasisNorms), through the TrainingEngine's ApplyBasis (A) and ApplyBasisTranspose (A^T),
- * so a CUDA or distributed engine solves by implementing the same products. The CPU engine assembles A once per
- * solve where it fits (AssembledBasis, ReflectivitySolveSettings::AssembledMemoryShare), so that a product is a
- * pass over stored weights; elsewhere every product renders the frames (matrix free).
+ * so a CUDA or distributed engine solves by implementing the same products. The CPU and CUDA engines assemble A
+ * once per solve where it fits (AssembledBasis on the host, DeviceBasis on the device;
+ * ReflectivitySolveSettings::AssembledMemoryShare), so that a product is a pass over stored weights; elsewhere every
+ * product renders the frames (matrix free).
  * In exact arithmetic each iteration lowers the objective; it starts from the field's reflectivities.
  *
  * With an L1 term (ReflectivitySolveSettings::L1) the objective gains mu sum_i |r_i| / P_i, a lasso whose
@@ -62,7 +63,8 @@ struct ReflectivitySolveSettings
   double L1 = 0;
   /// Share of the machine's physical memory that the engine may hold as the assembled basis (AssembledBasis: A built
   /// once per geometry, each product then a pass over its weights instead of a render of every frame); where A needs
-  /// more, or with 0, the products are matrix free. Engines without an assembled path (CUDA) ignore it.
+  /// more, or with 0, the products are matrix free. The CUDA engine holds its A on the device (DeviceBasis) within
+  /// the same bytes and the device's free memory.
   double AssembledMemoryShare = 0.25;
 };
 

@@ -30,6 +30,14 @@ std::string TrainingEngine::DescribeBasisProducts() const
   return std::string("matrix free (the ") + this->GetName() + " engine renders every product)";
 }
 
+std::string AssembledBasisText(std::int64_t weights, std::int64_t bytes, double seconds, const char* where)
+{
+  char text[200];
+  std::snprintf(text, sizeof(text), "assembled%s%s (%lld weights, %.0f MB, built in %.2f s)", where ? " " : "",
+    where ? where : "", static_cast<long long>(weights), bytes / 1e6, seconds);
+  return text;
+}
+
 bool TrainingEngine::SetReduction(ProcessReduction* reduction, std::string* error)
 {
   if (reduction && reduction->Size() > 1)

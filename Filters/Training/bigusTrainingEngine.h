@@ -236,6 +236,29 @@ inline RenderOptions LinearBasisOptions(RenderOptions options)
   return options;
 }
 
+/// For engines with an assembled basis: the frames, effective elevation sigma and cut-off that an assembled A was
+/// built for; a product on the same ones reuses it.
+struct BasisKey
+{
+  std::vector<int> Frames;
+  double ElevationSigma = -1, Cutoff = -1;
+  BasisKey() = default;
+  BasisKey(const int* frames, int count, const RenderOptions& options)
+    : Frames(frames, frames + count)
+    , ElevationSigma(EffectiveElevationSigma(options))
+    , Cutoff(options.Cutoff)
+  {}
+  bool operator==(const BasisKey& other) const
+  {
+    return this->Frames == other.Frames && this->ElevationSigma == other.ElevationSigma && this->Cutoff == other.Cutoff;
+  }
+};
+
+/// For engines: DescribeBasisProducts's text for an assembled A of @p weights stored weights and @p bytes bytes built
+/// in @p seconds: "assembled (W weights, B MB, built in S s)", with @p where ("on the device") after "assembled".
+BIGUSTRAINING_EXPORT std::string AssembledBasisText(
+  std::int64_t weights, std::int64_t bytes, double seconds, const char* where = nullptr);
+
 /// For engines: @p error (the renderer's message for a call it refused) prefixed with "training frame F: ".
 /// Returns false.
 inline bool TrainingFrameError(int frame, std::string* error)

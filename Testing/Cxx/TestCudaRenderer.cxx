@@ -962,6 +962,105 @@ TEST(CudaTrainingEngine, TheSolveOperatorsMatchTheCpuEngineAndAreAdjoint)
   EXPECT_NEAR(left, right, 1e-5 * std::abs(right)) << "<A x, y> against <x, A^T y>";
 }
 
+TEST(CudaTrainingEngine, TheAssembledSolveProductsAreTheMatrixFreeOnesAndRepeatBitForBit)
+{
+  // The basis assembled on the device (DeviceBasis, allowed by SetBasisMemoryLimit) against the device's matrix-free
+  // products (renders; the norms through the host's AccumulateBasisNorms) and the CPU engine's assembled basis, on
+  // frames 2, 40 and 70: A x, A^T y and diag(A^T W A); repeated products and a second assembly give the same bits;
+  // <A x, y> = <x, A^T y>; a limit too small for the matrix gives the matrix-free products; a moved field (Push) is
+  // assembled again.
+  EngineCase c;
+  std::unique_ptr<TrainingEngine> engines[3] = { c.Engine("cuda"), c.Engine("cuda"), c.Engine("cpu") };
+  ASSERT_TRUE(engines[0] && engines[1] && engines[2]);
+  const std::int64_t unlimited = std::int64_t(1) << 40;
+  engines[0]->SetBasisMemoryLimit(unlimited);
+  engines[2]->SetBasisMemoryLimit(unlimited);
+  const int frames[3] = { 2, 40, 70 };
+  const std::size_t pixels = 3 * std::size_t(c.Data.Width) * c.Data.Height;
+  const std::int64_t n = c.State.Count();
+  std::mt19937 rng(12);
+  std::normal_distribution<float> normal(0.f, 1.f);
+  std::vector<float> x(n), y(pixels), weights(pixels);
+  for (float& v : x)
+  {
+    v = normal(rng);
+  }
+  for (std::size_t p = 0; p < pixels; ++p)
+  {
+    y[p] = normal(rng);
+    weights[p] = std::abs(normal(rng));
+  }
+  struct Products
+  {
+    std::vector<double> Ax, Aty, Norms;
+  };
+  auto products = [&](TrainingEngine& engine) {
+    Products out;
+    std::vector<float> ax(pixels, 0.f);
+    out.Aty.assign(n, 0.25); // += semantics
+    out.Norms.assign(n, 0.0);
+    std::string error;
+    EXPECT_TRUE(engine.ApplyBasisTranspose(y.data(), frames, 3, c.Request.Options, out.Aty.data(), &error)) << error;
+    EXPECT_TRUE(engine.ApplyBasis(x.data(), frames, 3, c.Request.Options, ax.data(), &error)) << error;
+    EXPECT_TRUE(engine.BasisNorms(weights.data(), frames, 3, c.Request.Options, out.Norms.data(), &error)) << error;
+    out.Ax.assign(ax.begin(), ax.end());
+    return out;
+  };
+  const Products assembled = products(*engines[0]);
+  EXPECT_EQ(engines[0]->DescribeBasisProducts().rfind("assembled on the device (", 0), 0u)
+    << engines[0]->DescribeBasisProducts();
+  const Products free = products(*engines[1]);
+  EXPECT_EQ(engines[1]->DescribeBasisProducts().rfind("matrix free", 0), 0u) << engines[1]->DescribeBasisProducts();
+  const Products cpu = products(*engines[2]);
+  EXPECT_EQ(engines[2]->DescribeBasisProducts().rfind("assembled (", 0), 0u) << engines[2]->DescribeBasisProducts();
+  EXPECT_GT(std::count_if(assembled.Norms.begin(), assembled.Norms.end(), [](double v) { return v > 0; }), 20);
+  EXPECT_LT(RelativeDifference(assembled.Ax, free.Ax), 1e-5) << "A x against the device's renders";
+  EXPECT_LT(RelativeDifference(assembled.Aty, free.Aty), 1e-5) << "A^T y against the device's backward pass";
+  EXPECT_LT(RelativeDifference(assembled.Norms, free.Norms), 1e-5) << "the norms against the host's";
+  EXPECT_LT(RelativeDifference(assembled.Ax, cpu.Ax), 1e-5) << "A x against the CPU's assembled basis";
+  EXPECT_LT(RelativeDifference(assembled.Aty, cpu.Aty), 1e-5) << "A^T y against the CPU's assembled basis";
+  EXPECT_LT(RelativeDifference(assembled.Norms, cpu.Norms), 1e-5) << "the norms against the CPU's assembled basis";
+  double left = 0, right = 0;
+  for (std::size_t p = 0; p < pixels; ++p)
+  {
+    left += assembled.Ax[p] * y[p];
+  }
+  for (std::int64_t i = 0; i < n; ++i)
+  {
+    right += double(x[i]) * (assembled.Aty[i] - 0.25);
+  }
+  EXPECT_NEAR(left, right, 1e-5 * std::abs(right)) << "<A x, y> against <x, A^T y>";
+  // The same products again (the basis kept), then after a Push of the same state (assembled anew): the same bits.
+  const Products again = products(*engines[0]);
+  std::string error;
+  ASSERT_TRUE(engines[0]->Push(c.State, &error)) << error;
+  const Products rebuilt = products(*engines[0]);
+  for (const Products* p : { &again, &rebuilt })
+  {
+    EXPECT_EQ(p->Ax, assembled.Ax);
+    EXPECT_EQ(p->Aty, assembled.Aty);
+    EXPECT_EQ(p->Norms, assembled.Norms);
+  }
+  // A limit below the matrix's bytes: matrix free, the device's renders.
+  engines[0]->SetBasisMemoryLimit(1000);
+  const Products refused = products(*engines[0]);
+  EXPECT_NE(engines[0]->DescribeBasisProducts().find("matrix free (the assembled basis of"), std::string::npos)
+    << engines[0]->DescribeBasisProducts();
+  EXPECT_LT(RelativeDifference(refused.Aty, free.Aty), 1e-12);
+  // A moved field: assembled again for it, as the matrix-free products of an engine given the same field.
+  engines[0]->SetBasisMemoryLimit(unlimited);
+  OptimizerState moved = c.State;
+  for (float& m : moved.Field.Means)
+  {
+    m += 0.3f;
+  }
+  ASSERT_TRUE(engines[0]->Push(moved, &error) && engines[1]->Push(moved, &error)) << error;
+  const Products movedAssembled = products(*engines[0]), movedFree = products(*engines[1]);
+  EXPECT_GT(RelativeDifference(movedAssembled.Aty, assembled.Aty), 1e-3) << "the field moved";
+  EXPECT_LT(RelativeDifference(movedAssembled.Aty, movedFree.Aty), 1e-5);
+  EXPECT_LT(RelativeDifference(movedAssembled.Ax, movedFree.Ax), 1e-5);
+}
+
 TEST(CudaTrainingEngine, DataParallelStepsOnTwoProcessesAreTheStepsOfOne)
 {
   // Two processes on this GPU (threads with a ThreadReduction, as the ranks of mpirun): CreateTrainingEngine with

@@ -1,15 +1,20 @@
 #!/bin/bash
-# The GPU checks of a session lent a device (issue 58): the CUDA tests, a fixed-step A/B of the CUDA training engine
-# against an older build of it, and held-out PSNR against time on the GPU and on the CPU cores beside it.
+# The GPU checks of a session lent a device (issue 58), in sections; no argument runs them all:
+#   tests    the CUDA tests (machine.txt, tests.log)
+#   ab       a fixed-step A/B of the CUDA training engine against an older build of its library (ab.log; only when
+#            .bundle/old-libbigusCuda.so.0.1.0 is there, built against the same headers)
+#   series   held-out PSNR against time on the GPU and on the CPU cores beside it (series-*.log, eval.log)
+#   solve    the reflectivity solve on the device: the volume protocol's pixel-grid fit (80 slices) and a 2 M-unknown
+#            one (the same volume at 0.18 mm pixels), --backend cuda against cpu on all cores (solve.log)
+#   tracked  the main job at 60 s on the GPU scored at the held-out frames' tracked poses and fair (tracked.log)
+#   routes   the same with variable projection and with the pixel-grid fit of every fan pixel (routes.log)
 #
 # Here (a build with CUDA in build/):
 #   ../shared/tools/device-bundle.sh build .bundle/bt bigus TestCudaRenderer TestCudaDevice TestGaussianMathCuda \
 #     TestBackendCheck TestCudaBackendRegistry
 #   (cd .bundle && tar cJf bt.tar.xz bt && rm -rf bt)
-#   optionally: cp OLD_BUILD/lib/libbigusCuda.so.0.1.0 .bundle/old-libbigusCuda.so.0.1.0   (the A/B's "old")
-# On the device (the `device` tool's run, carry [".bundle"]): bash Testing/Device/gpu_checks.sh
-# Writes machine.txt, tests.log, ab.log, series-cuda.log, series-cpu.log and eval.log to $OUT (or ./gpu-checks).
-# About 7 minutes on an H200. docs/FINDINGS.md, "The image loss on the device", has what it printed there.
+# On the device (the `device` tool's run, carry [".bundle"]): bash Testing/Device/gpu_checks.sh [SECTION...]
+# Writes to $OUT (or ./gpu-checks). docs/FINDINGS.md has what each section printed on a device.
 cd "$(dirname "$0")/../.." || exit 1
 root=$PWD
 out=${OUT:-$root/gpu-checks}
@@ -20,15 +25,22 @@ tar xJf .bundle/bt.tar.xz -C /tmp && . /tmp/bt/env.sh || exit 1
 mkdir -p /work/main/Testing/Output
 L=$root/Examples/Data/liver/liver_sweep.igs.mha
 H="--holdout-every 4 --holdout-offset 2"
+sections=${*:-tests ab series solve tracked routes}
 { nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv; lscpu | grep -E "Model name|^CPU\(s\)"; } \
   >"$out/machine.txt" 2>&1
-{
-  for t in TestCudaDevice TestGaussianMathCuda TestCudaBackendRegistry TestBackendCheck; do
-    echo "== $t"; timeout 120 $t 2>&1 | tail -4; echo "rc=${PIPESTATUS[0]}"
-  done
-  echo "== TestCudaRenderer"; timeout 200 TestCudaRenderer 2>&1 | grep -vE "^\[ +(RUN|OK) "; echo "rc=${PIPESTATUS[0]}"
-} >"$out/tests.log" 2>&1
-if [ -f .bundle/old-libbigusCuda.so.0.1.0 ]; then
+TIMEFORMAT="wall %R s" # bash's time keyword: the wall time of a command (the device has no bc)
+
+if [[ " $sections " == *" tests "* ]]; then
+  {
+    for t in TestCudaDevice TestGaussianMathCuda TestCudaBackendRegistry TestBackendCheck; do
+      echo "== $t"; timeout 120 $t 2>&1 | tail -4; echo "rc=${PIPESTATUS[0]}"
+    done
+    echo "== TestCudaRenderer"; timeout 300 TestCudaRenderer 2>&1 | grep -vE "^\[ +(RUN|OK) "
+    echo "rc=${PIPESTATUS[0]}"
+  } >"$out/tests.log" 2>&1
+fi
+
+if [[ " $sections " == *" ab "* ]] && [ -f .bundle/old-libbigusCuda.so.0.1.0 ]; then
   cp -r /tmp/bt/lib /tmp/oldlib && cp .bundle/old-libbigusCuda.so.0.1.0 /tmp/oldlib/libbigusCuda.so.0.1.0
   for k in new old; do
     lib=/tmp/bt/lib; [ $k = old ] && lib=/tmp/oldlib
@@ -36,18 +48,62 @@ if [ -f .bundle/old-libbigusCuda.so.0.1.0 ]; then
     LD_LIBRARY_PATH=$lib bigus train "$L" -o /tmp/w/ab-$k.vtp $H --iterations 2500 --backend cuda 2>&1 | grep -v "^training "
   done >"$out/ab.log" 2>&1
 fi
-series() { # backend, cores, threads
-  for B in 10 30 60 100; do
-    echo "== $1 $B s"
-    taskset -c "$2" bigus train "$L" -o /tmp/w/$1-$B.vtp $H --time-budget $B --backend $1 --threads $3 2>&1 |
-      grep -v "^training "
-  done
+
+if [[ " $sections " == *" series "* ]]; then
+  series() { # backend, cores, threads
+    for B in 10 30 60 100; do
+      echo "== $1 $B s"
+      taskset -c "$2" bigus train "$L" -o /tmp/w/$1-$B.vtp $H --time-budget $B --backend $1 --threads $3 2>&1 |
+        grep -v "^training "
+    done
+  }
+  series cuda 0-3 4 >"$out/series-cuda.log" 2>&1 &
+  series cpu 4-15 12 >"$out/series-cpu.log" 2>&1 &
+  wait
+  for f in /tmp/w/cuda-*.vtp /tmp/w/cpu-*.vtp; do
+    echo "== $f"
+    bigus evaluate "$f" "$L" $H --backend cuda --refine-poses --tracked-poses --report /tmp/w/r-$(basename "$f" .vtp) 2>&1
+  done >"$out/eval.log" 2>&1
+fi
+
+if [[ " $sections " == *" solve "* ]]; then
+  V=$root/Testing/Data/spine-phantom/SpinePhantomFreehandReconstructed.mha
+  cd /tmp/w || exit 1
+  {
+    for case in "80 0" "80 0.18"; do
+      set -- $case
+      tag=s$2
+      bigus sweep "$V" -o $tag.igs.mha --mask-output $tag-mask.mha --frames $1 --spacing $2 >/dev/null &&
+        bigus sweep "$V" -o $tag-obl.igs.mha --mask-output $tag-obl-mask.mha --protocol oblique --frames 40 \
+          --spacing $2 >/dev/null || echo "sweep failed"
+      for backend in cuda cpu; do
+        echo "== $tag $backend"
+        { time bigus train $tag.igs.mha --mask $tag-mask.mha -o $tag-$backend.vtp --no-fill-gaps --backend $backend \
+          --max-gaussians 2100000; } 2>&1 | grep -E "ElevationSigma|InitialGaussians|^field|^merge|^solves|^backend|wall|rror"
+        bigus evaluate $tag-$backend.vtp $tag-obl.igs.mha --mask $tag-obl-mask.mha --backend cuda \
+          --report r-$tag-$backend 2>&1 | grep -E "^  mean|rror"
+      done
+    done
+  } >"$out/solve.log" 2>&1
+  cd "$root" || exit 1
+fi
+
+# The main job at 60 s on the GPU scored at the held-out frames' tracked poses and fair: the defaults (tracked),
+# variable projection (routes: --reflectivity-solve), the pixel-grid fit of every fan pixel (routes: a MaximumGaussians
+# of half the liver's 29.4 M fan pixels, the assembled basis allowed 3/4 of the memory).
+main60() { # name, options...
+  local name=$1; shift
+  echo "== $name: $*"
+  { time timeout 200 bigus train "$L" -o /tmp/w/$name.vtp $H --time-budget 60 --backend cuda "$@"; } 2>&1 |
+    grep -E "^field|^early|RefinePoses|InitialGaussians|ElevationSigma|^merge|^solves|pose|wall|rror"
+  bigus evaluate /tmp/w/$name.vtp "$L" $H --backend cuda --refine-poses --tracked-poses --report /tmp/w/r-$name 2>&1 |
+    grep -vE "^ +[0-9]+ "
 }
-series cuda 0-3 4 >"$out/series-cuda.log" 2>&1 &
-series cpu 4-15 12 >"$out/series-cpu.log" 2>&1 &
-wait
-for f in /tmp/w/*.vtp; do
-  echo "== $f"
-  bigus evaluate "$f" "$L" $H --backend cuda --refine-poses --report /tmp/w/r-$(basename "$f" .vtp) 2>&1
-done >"$out/eval.log" 2>&1
+[[ " $sections " == *" tracked "* ]] && main60 t60 >"$out/tracked.log" 2>&1
+if [[ " $sections " == *" routes "* ]]; then
+  {
+    main60 vp60 --reflectivity-solve
+    main60 grid --max-gaussians 15000000 --solve-memory 0.75
+  } >"$out/routes.log" 2>&1
+fi
 echo done
