@@ -4,7 +4,9 @@
 #include "bigusRenderer.h"
 #include "bigusTrainingEngine.h"
 
+#include "vtkAbstractTransform.h"
 #include "vtkFloatArray.h"
+#include "vtkHomogeneousTransform.h"
 #include "vtkImageData.h"
 #include "vtkInformation.h"
 #include "vtkInformationVector.h"
@@ -23,13 +25,11 @@
 vtkStandardNewMacro(vtkGaussianFieldReslice);
 vtkCxxSetObjectMacro(vtkGaussianFieldReslice, ResliceAxes, vtkMatrix4x4);
 vtkCxxSetObjectMacro(vtkGaussianFieldReslice, InformationInput, vtkImageData);
+vtkCxxSetObjectMacro(vtkGaussianFieldReslice, ResliceTransform, vtkAbstractTransform);
 
 namespace
 {
-constexpr double Unset = VTK_DOUBLE_MAX;
-constexpr int UnsetExtent = VTK_INT_MIN;
-
-/// An output grid in the reslice frame (mm, voxel indices); Unset / UnsetExtent where a default applies.
+/// An output grid in the reslice frame (mm, voxel indices).
 struct Grid
 {
   double Spacing[3];
@@ -51,43 +51,38 @@ struct Grid
   }
 };
 
-/// Whether a default that only the field can give (bounds, pixel spacing) is still unset.
-bool NeedsField(const Grid& g, bool planar)
+/// Which parts of the grid take their default (vtkGaussianFieldReslice's Compute flags).
+struct Computed
 {
-  return g.Spacing[0] == Unset || g.Spacing[1] == Unset || (!planar && g.Spacing[2] == Unset) || g.Origin[0] == Unset ||
-    g.Origin[1] == Unset || (!planar && g.Origin[2] == Unset) || g.Extent[0] == UnsetExtent;
-}
+  bool Spacing, Origin, Extent;
+  bool Any() const { return this->Spacing || this->Origin || this->Extent; }
+};
 
-/**
- * The field's defaults for the unset parts of @p g: spacing = PixelSpacing or 0.5 mm; origin and extent
- * = the means' bounds padded by three times the largest scale, in the reslice frame of @p axes
- * (null = identity); a planar grid passes through the axes' origin (z = 0).
- */
-void FillDefaults(Grid& g, const bigus::FieldCache& field, vtkMatrix4x4* axes, bool planar)
+/// @p axes (null: identity) as a matrix, and its inverse.
+void AxesAndInverse(vtkMatrix4x4* axes, vtkMatrix4x4* matrix, vtkMatrix4x4* inverse)
 {
-  const double step = field.GetModel().PixelSpacing > 0 ? field.GetModel().PixelSpacing : 0.5;
-  for (int k = 0; k < 3; ++k)
-  {
-    g.Spacing[k] = g.Spacing[k] == Unset ? step : g.Spacing[k];
-  }
-  const double* world = field.GetBounds();
-  const double pad = 3 * field.GetLargestScale();
-  vtkNew<vtkMatrix4x4> inverse;
   if (axes)
   {
-    vtkMatrix4x4::Invert(axes, inverse);
+    matrix->DeepCopy(axes);
   }
-  double lo[3] = { VTK_DOUBLE_MAX, VTK_DOUBLE_MAX, VTK_DOUBLE_MAX };
-  double hi[3] = { -VTK_DOUBLE_MAX, -VTK_DOUBLE_MAX, -VTK_DOUBLE_MAX };
+  vtkMatrix4x4::Invert(matrix, inverse);
+}
+
+/// The bounds in the reslice frame (inverse of the axes @p inverse) of the world box @p world.
+void BoxInFrame(const double world[6], vtkMatrix4x4* inverse, double lo[3], double hi[3])
+{
+  for (int k = 0; k < 3; ++k)
+  {
+    lo[k] = VTK_DOUBLE_MAX;
+    hi[k] = -VTK_DOUBLE_MAX;
+  }
   for (int c = 0; c < 8; ++c)
   {
-    double p[4] = { 0, 0, 0, 1 };
+    double p[4] = { 0, 0, 0, 1 }, q[4];
     for (int k = 0; k < 3; ++k)
     {
-      const int upper = (c >> k) & 1;
-      p[k] = world[2 * k + upper] + (upper ? pad : -pad);
+      p[k] = world[2 * k + ((c >> k) & 1)];
     }
-    double q[4];
     inverse->MultiplyPoint(p, q);
     for (int k = 0; k < 3; ++k)
     {
@@ -95,37 +90,183 @@ void FillDefaults(Grid& g, const bigus::FieldCache& field, vtkMatrix4x4* axes, b
       hi[k] = std::max(hi[k], q[k]);
     }
   }
+}
+
+/**
+ * The field's defaults for the computed parts of @p g: spacing = PixelSpacing or 0.5 mm; origin and extent = the
+ * means' bounds padded by three times the largest scale, in the reslice frame of @p axes (null = identity).
+ */
+void FieldDefaults(Grid& g, const Computed& computed, const bigus::FieldCache& field, vtkMatrix4x4* axes)
+{
+  const double step = field.GetModel().PixelSpacing > 0 ? field.GetModel().PixelSpacing : 0.5;
+  const double* bounds = field.GetBounds();
+  const double pad = 3 * field.GetLargestScale();
+  const double world[6] = { bounds[0] - pad, bounds[1] + pad, bounds[2] - pad, bounds[3] + pad, bounds[4] - pad,
+    bounds[5] + pad };
+  vtkNew<vtkMatrix4x4> matrix, inverse;
+  AxesAndInverse(axes, matrix, inverse);
+  double lo[3], hi[3];
+  BoxInFrame(world, inverse, lo, hi);
   for (int k = 0; k < 3; ++k)
   {
-    if (g.Origin[k] == Unset)
-    {
-      g.Origin[k] = (planar && k == 2) ? 0.0 : lo[k];
-    }
-  }
-  if (g.Extent[0] == UnsetExtent)
-  {
-    for (int k = 0; k < 3; ++k)
+    g.Spacing[k] = computed.Spacing ? step : g.Spacing[k];
+    g.Origin[k] = computed.Origin ? lo[k] : g.Origin[k];
+    if (computed.Extent)
     {
       g.Extent[2 * k] = 0;
-      // Held within int: a grid too large to render is refused by RequestData with the memory it needs.
       const double last = std::ceil((hi[k] - g.Origin[k]) / g.Spacing[k]);
       g.Extent[2 * k + 1] = last < VTK_INT_MAX - 1 ? static_cast<int>(last) : VTK_INT_MAX - 1;
     }
   }
 }
 
-/// Pose of slice k of @p extent: pixel (i, j) -> axes * (origin + (extent[0] + i, extent[2] + j,
-/// extent[4] + k) * spacing), with the low-pass @p pixelLowPass (pixels^2).
-bigus::SliceGeometry SliceAt(
-  vtkMatrix4x4* axes, const double spacing[3], const double origin[3], const int extent[6], int k, double pixelLowPass)
+/**
+ * vtkImageReslice's defaults for the computed parts of @p g with @p image as its input (its RequestInformation):
+ * the image's spacing, extent and centre carried into the reslice frame of @p axes, each output axis taking the
+ * input axes it is made of weighted by the squared direction cosines (TransformInputSampling; without it, the
+ * image's own), the extent rounded from the first index's image and the length, the origin centring the extent on
+ * the image's centre (without TransformInputSampling: the image's origin); with AutoCropOutput the extent and origin
+ * cover the image's box in the frame.
+ */
+void ImageDefaults(
+  Grid& g, const Computed& computed, vtkImageData* image, vtkMatrix4x4* axes, bool transformSampling, bool autoCrop)
+{
+  int inExtent[6];
+  double inSpacing[3], inOrigin[3];
+  image->GetExtent(inExtent);
+  image->GetSpacing(inSpacing);
+  image->GetOrigin(inOrigin);
+  vtkNew<vtkMatrix4x4> matrix, inverse;
+  AxesAndInverse(axes, matrix, inverse);
+  double centre[4] = { 0, 0, 0, 1 }, world[6];
+  for (int j = 0; j < 3; ++j)
+  {
+    const double a = inOrigin[j] + inExtent[2 * j] * inSpacing[j], b = inOrigin[j] + inExtent[2 * j + 1] * inSpacing[j];
+    centre[j] = 0.5 * (a + b);
+    world[2 * j] = std::min(a, b);
+    world[2 * j + 1] = std::max(a, b);
+  }
+  double c[4], lo[3], hi[3];
+  inverse->MultiplyPoint(centre, c);
+  BoxInFrame(world, inverse, lo, hi);
+  for (int i = 0; i < 3; ++i)
+  {
+    double s = inSpacing[i], d = (inExtent[2 * i + 1] - inExtent[2 * i]) * inSpacing[i], e = inExtent[2 * i];
+    if (transformSampling)
+    {
+      double r = 0;
+      s = d = e = 0;
+      for (int j = 0; j < 3; ++j)
+      {
+        const double w = matrix->GetElement(j, i) * matrix->GetElement(j, i);
+        s += w * std::fabs(inSpacing[j]);
+        d += w * (inExtent[2 * j + 1] - inExtent[2 * j]) * std::fabs(inSpacing[j]);
+        e += w * inExtent[2 * j];
+        r += w;
+      }
+      s /= r;
+      d /= r * std::sqrt(r);
+      e /= r;
+    }
+    g.Spacing[i] = computed.Spacing ? s : g.Spacing[i];
+    if (computed.Extent)
+    {
+      d = autoCrop ? hi[i] - lo[i] : d;
+      g.Extent[2 * i] = static_cast<int>(std::floor(e + 0.5));
+      const double last = g.Extent[2 * i] + std::fabs(d / g.Spacing[i]);
+      g.Extent[2 * i + 1] = last < VTK_INT_MAX - 1 ? static_cast<int>(std::floor(last + 0.5)) : VTK_INT_MAX - 1;
+    }
+    if (computed.Origin)
+    {
+      g.Origin[i] = autoCrop ? lo[i] - g.Extent[2 * i] * g.Spacing[i]
+        : transformSampling  ? c[i] - 0.5 * (g.Extent[2 * i] + g.Extent[2 * i + 1]) * g.Spacing[i]
+                             : inOrigin[i];
+    }
+  }
+}
+
+/// The matrix of the sampling grid's frame: ResliceTransform's matrix times ResliceAxes; false with @p error for a
+/// non-linear transform.
+bool FrameMatrix(vtkMatrix4x4* axes, vtkAbstractTransform* transform, vtkMatrix4x4* frame, std::string& error)
+{
+  if (axes)
+  {
+    frame->DeepCopy(axes);
+  }
+  if (!transform)
+  {
+    return true;
+  }
+  auto* linear = vtkHomogeneousTransform::SafeDownCast(transform);
+  if (!linear)
+  {
+    error = std::string("ResliceTransform: a ") + transform->GetClassName() +
+      " is not linear; a field's slice is rendered as a plane, so only linear (homogeneous) transforms are supported";
+    return false;
+  }
+  linear->Update();
+  vtkMatrix4x4::Multiply4x4(linear->GetMatrix(), frame, frame);
+  return true;
+}
+
+/// Slice @p in of a slab, of weight @p w, into @p out ([n]) by SlabMode @p mode (@p first: the slab's first slice).
+void CombineSlab(int mode, bool first, double w, const float* in, float* out, std::size_t n)
+{
+  for (std::size_t p = 0; p < n; ++p)
+  {
+    const float v = in[p];
+    if (mode == VTK_IMAGE_SLAB_MIN)
+    {
+      out[p] = first ? v : std::min(out[p], v);
+    }
+    else if (mode == VTK_IMAGE_SLAB_MAX)
+    {
+      out[p] = first ? v : std::max(out[p], v);
+    }
+    else
+    {
+      out[p] = static_cast<float>((first ? 0.0 : out[p]) + w * v);
+    }
+  }
+}
+
+/// @p level into the samples of @p slice ([H, W] in @p I) that lie outside the field's bounds padded by three times
+/// its largest scale (the box of its default grid).
+void FillBackground(const bigus::FieldCache& field, const bigus::SliceGeometry& slice, double level, float* I)
+{
+  const double* b = field.GetBounds();
+  const double pad = 3 * field.GetLargestScale();
+  const double* m = slice.ImageToReference; // row-major: pixel (i, j) -> m (i, j, 0, 1)
+  for (int j = 0; j < slice.Height; ++j)
+  {
+    for (int i = 0; i < slice.Width; ++i)
+    {
+      bool inside = true;
+      for (int r = 0; r < 3; ++r)
+      {
+        const double x = m[4 * r] * i + m[4 * r + 1] * j + m[4 * r + 3];
+        inside = inside && x >= b[2 * r] - pad && x <= b[2 * r + 1] + pad;
+      }
+      if (!inside)
+      {
+        I[std::size_t(j) * slice.Width + i] = static_cast<float>(level);
+      }
+    }
+  }
+}
+
+/// Pose of slice k of @p extent, @p offset mm along its normal: pixel (i, j) -> frame * (origin + (extent[0] + i,
+/// extent[2] + j, extent[4] + k) * spacing + (0, 0, offset)), with the low-pass @p pixelLowPass (pixels^2).
+bigus::SliceGeometry SliceAt(vtkMatrix4x4* frame, const double spacing[3], const double origin[3], const int extent[6],
+  int k, double offset, double pixelLowPass)
 {
   vtkNew<vtkMatrix4x4> grid, pose;
   grid->SetElement(0, 0, spacing[0]);
   grid->SetElement(1, 1, spacing[1]);
   grid->SetElement(0, 3, origin[0] + extent[0] * spacing[0]);
   grid->SetElement(1, 3, origin[1] + extent[2] * spacing[1]);
-  grid->SetElement(2, 3, origin[2] + (extent[4] + k) * spacing[2]);
-  vtkMatrix4x4::Multiply4x4(axes, grid, pose);
+  grid->SetElement(2, 3, origin[2] + (extent[4] + k) * spacing[2] + offset);
+  vtkMatrix4x4::Multiply4x4(frame, grid, pose);
   bigus::SliceGeometry slice;
   std::copy(pose->GetData(), pose->GetData() + 16, slice.ImageToReference);
   slice.Width = extent[1] - extent[0] + 1;
@@ -133,70 +274,120 @@ bigus::SliceGeometry SliceAt(
   slice.PixelLowPass = pixelLowPass;
   return slice;
 }
+}
 
 /**
- * The output grid of @p self: its settings, an InformationInput's geometry over them, and for what is
- * still unset the defaults of the field @p input holds (converted into @p field only then). Returns
- * false when a default is needed and @p input holds no valid field.
+ * The output grid of @p self: its settings where set, for the computed parts an InformationInput's defaults
+ * (ImageDefaults) or the field's (FieldDefaults, the field @p input holds converted into @p field only then), and
+ * OutputDimensionality's zeroed axes. Returns false when the field's defaults are needed and @p input holds no valid
+ * field.
  */
-bool OutputGrid(vtkGaussianFieldReslice* self, bigus::FieldCache& field, vtkPolyData* input, Grid& g)
+bool vtkGaussianFieldReslice::ComputeOutputGrid(vtkPolyData* input, double spacing[3], double origin[3], int extent[6])
 {
-  const double* spacing = self->GetOutputSpacing();
-  const double* origin = self->GetOutputOrigin();
-  const int* extent = self->GetOutputExtent();
-  std::copy(spacing, spacing + 3, g.Spacing);
-  std::copy(origin, origin + 3, g.Origin);
-  std::copy(extent, extent + 6, g.Extent);
-  if (vtkImageData* reference = self->GetInformationInput())
+  bigus::FieldCache& field = this->GetFieldCache();
+  Grid g;
+  std::copy(this->OutputSpacing, this->OutputSpacing + 3, g.Spacing);
+  std::copy(this->OutputOrigin, this->OutputOrigin + 3, g.Origin);
+  std::copy(this->OutputExtent, this->OutputExtent + 6, g.Extent);
+  const Computed computed{ this->ComputeOutputSpacing, this->ComputeOutputOrigin, this->ComputeOutputExtent };
+  if (this->InformationInput)
   {
-    reference->GetSpacing(g.Spacing);
-    reference->GetOrigin(g.Origin);
-    reference->GetExtent(g.Extent);
+    ImageDefaults(g, computed, this->InformationInput, this->ResliceAxes, this->TransformInputSampling != 0,
+      this->AutoCropOutput != 0);
   }
-  const bool planar = self->GetOutputDimensionality() == 2;
-  if (NeedsField(g, planar))
+  else if (computed.Any())
   {
     if (!field.Update(input, nullptr))
     {
       return false;
     }
-    FillDefaults(g, field, self->GetResliceAxes(), planar);
+    FieldDefaults(g, computed, field, this->ResliceAxes);
   }
-  if (planar)
+  for (int i = std::max(0, this->OutputDimensionality); i < 3; ++i)
   {
-    g.Extent[5] = g.Extent[4];
-    g.Spacing[2] = g.Spacing[2] == Unset ? 1.0 : g.Spacing[2];
+    g.Extent[2 * i] = g.Extent[2 * i + 1] = 0;
+    g.Origin[i] = 0;
   }
+  std::copy(g.Spacing, g.Spacing + 3, spacing);
+  std::copy(g.Origin, g.Origin + 3, origin);
+  std::copy(g.Extent, g.Extent + 6, extent);
   return true;
-}
 }
 
 vtkGaussianFieldReslice::vtkGaussianFieldReslice()
 {
-  this->SetOutputSpacingToDefault();
-  this->SetOutputOriginToDefault();
-  this->SetOutputExtentToDefault();
+  this->GetResliceAxesDirectionCosines(this->ResliceAxesDirectionCosines);
+  this->GetResliceAxesOrigin(this->ResliceAxesOrigin);
 }
 
 vtkGaussianFieldReslice::~vtkGaussianFieldReslice()
 {
   this->SetResliceAxes(nullptr);
+  this->SetResliceTransform(nullptr);
   this->SetInformationInput(nullptr);
+}
+
+void vtkGaussianFieldReslice::SetOutputSpacing(double x, double y, double z)
+{
+  const double v[3] = { x, y, z };
+  if (this->ComputeOutputSpacing || !std::equal(v, v + 3, this->OutputSpacing))
+  {
+    std::copy(v, v + 3, this->OutputSpacing);
+    this->ComputeOutputSpacing = false;
+    this->Modified();
+  }
+}
+
+void vtkGaussianFieldReslice::SetOutputOrigin(double x, double y, double z)
+{
+  const double v[3] = { x, y, z };
+  if (this->ComputeOutputOrigin || !std::equal(v, v + 3, this->OutputOrigin))
+  {
+    std::copy(v, v + 3, this->OutputOrigin);
+    this->ComputeOutputOrigin = false;
+    this->Modified();
+  }
+}
+
+void vtkGaussianFieldReslice::SetOutputExtent(int a, int b, int c, int d, int e, int f)
+{
+  const int v[6] = { a, b, c, d, e, f };
+  if (this->ComputeOutputExtent || !std::equal(v, v + 6, this->OutputExtent))
+  {
+    std::copy(v, v + 6, this->OutputExtent);
+    this->ComputeOutputExtent = false;
+    this->Modified();
+  }
 }
 
 void vtkGaussianFieldReslice::SetOutputSpacingToDefault()
 {
-  this->SetOutputSpacing(Unset, Unset, Unset);
+  if (!this->ComputeOutputSpacing)
+  {
+    std::fill(this->OutputSpacing, this->OutputSpacing + 3, 1.0);
+    this->ComputeOutputSpacing = true;
+    this->Modified();
+  }
 }
 
 void vtkGaussianFieldReslice::SetOutputOriginToDefault()
 {
-  this->SetOutputOrigin(Unset, Unset, Unset);
+  if (!this->ComputeOutputOrigin)
+  {
+    std::fill(this->OutputOrigin, this->OutputOrigin + 3, 0.0);
+    this->ComputeOutputOrigin = true;
+    this->Modified();
+  }
 }
 
 void vtkGaussianFieldReslice::SetOutputExtentToDefault()
 {
-  this->SetOutputExtent(UnsetExtent, UnsetExtent, UnsetExtent, UnsetExtent, UnsetExtent, UnsetExtent);
+  if (!this->ComputeOutputExtent)
+  {
+    std::fill(this->OutputExtent, this->OutputExtent + 6, 0);
+    this->ComputeOutputExtent = true;
+    this->Modified();
+  }
 }
 
 void vtkGaussianFieldReslice::SetResliceAxesDirectionCosines(
@@ -218,6 +409,18 @@ void vtkGaussianFieldReslice::SetResliceAxesDirectionCosines(
   this->Modified();
 }
 
+void vtkGaussianFieldReslice::GetResliceAxesDirectionCosines(double x[3], double y[3], double z[3])
+{
+  double* columns[3] = { x, y, z };
+  for (int c = 0; c < 3; ++c)
+  {
+    for (int r = 0; r < 3; ++r)
+    {
+      columns[c][r] = this->ResliceAxes ? this->ResliceAxes->GetElement(r, c) : (r == c ? 1.0 : 0.0);
+    }
+  }
+}
+
 void vtkGaussianFieldReslice::SetResliceAxesOrigin(double x, double y, double z)
 {
   if (!this->ResliceAxes)
@@ -231,12 +434,39 @@ void vtkGaussianFieldReslice::SetResliceAxesOrigin(double x, double y, double z)
   this->Modified();
 }
 
+void vtkGaussianFieldReslice::GetResliceAxesOrigin(double xyz[3])
+{
+  for (int r = 0; r < 3; ++r)
+  {
+    xyz[r] = this->ResliceAxes ? this->ResliceAxes->GetElement(r, 3) : 0.0;
+  }
+}
+
+const char* vtkGaussianFieldReslice::GetSlabModeAsString()
+{
+  switch (this->SlabMode)
+  {
+    case VTK_IMAGE_SLAB_MIN:
+      return "Min";
+    case VTK_IMAGE_SLAB_MAX:
+      return "Max";
+    case VTK_IMAGE_SLAB_SUM:
+      return "Sum";
+    default:
+      return "Mean";
+  }
+}
+
 vtkMTimeType vtkGaussianFieldReslice::GetMTime()
 {
   vtkMTimeType t = this->Superclass::GetMTime();
   if (this->ResliceAxes)
   {
     t = std::max(t, this->ResliceAxes->GetMTime());
+  }
+  if (this->ResliceTransform)
+  {
+    t = std::max(t, this->ResliceTransform->GetMTime());
   }
   if (this->InformationInput)
   {
@@ -253,7 +483,7 @@ int vtkGaussianFieldReslice::RequestInformation(
   Grid grid;
   vtkInformation* outInfo = outputVector->GetInformationObject(0);
   vtkDataObject::SetPointDataActiveScalarInfo(outInfo, this->OutputScalarType, 1);
-  if (!OutputGrid(this, this->GetFieldCache(), vtkPolyData::GetData(inputVector[0], 0), grid))
+  if (!this->ComputeOutputGrid(vtkPolyData::GetData(inputVector[0], 0), grid.Spacing, grid.Origin, grid.Extent))
   {
     // No field yet (its producer has not run): nothing to announce until RequestData knows the grid.
     const int empty[6] = { 0, -1, 0, -1, 0, -1 };
@@ -287,14 +517,14 @@ int vtkGaussianFieldReslice::RequestData(
   const bigus::TrainingCoverage* coverage = render.Coverage;
 
   Grid grid;
-  OutputGrid(this, this->GetFieldCache(), vtkPolyData::GetData(inputVector[0], 0), grid);
+  this->ComputeOutputGrid(vtkPolyData::GetData(inputVector[0], 0), grid.Spacing, grid.Origin, grid.Extent);
   if (grid.IsEmpty())
   {
     vtkErrorMacro("empty output extent " << grid.ExtentText());
     return 0;
   }
-  const bool planar = this->OutputDimensionality == 2;
-  for (int k = 0; k < (planar ? 2 : 3); ++k)
+  const int slab = this->SlabNumberOfSlices;
+  for (int k = 0; k < (this->OutputDimensionality < 3 && slab == 1 ? 2 : 3); ++k)
   {
     if (!(grid.Spacing[k] > 0) || !std::isfinite(grid.Spacing[k]))
     {
@@ -327,10 +557,12 @@ int vtkGaussianFieldReslice::RequestData(
   const std::size_t slicePixels = std::size_t(extent[1] - extent[0] + 1) * (extent[3] - extent[2] + 1);
   const std::size_t pixels = slicePixels * depth;
 
-  vtkNew<vtkMatrix4x4> axes;
-  if (this->ResliceAxes)
+  vtkNew<vtkMatrix4x4> frame;
+  std::string error;
+  if (!FrameMatrix(this->ResliceAxes, this->ResliceTransform, frame, error))
   {
-    axes->DeepCopy(this->ResliceAxes);
+    vtkErrorMacro(<< error);
+    return 0;
   }
   // Refused before anything is allocated where the grid cannot be held: the float buffers below, the output's
   // scalars and arrays (each copied once), against this machine's memory.
@@ -349,9 +581,10 @@ int vtkGaussianFieldReslice::RequestData(
   }
   const bigus::RenderOptions& options = render.Options;
   const bigus::FieldView view = render.Field->GetField().View();
-  std::string error;
   // S is kept whole only when it is an output; otherwise one slice of scratch.
   std::vector<float> I(pixels), S(this->OutputScatteringField ? pixels : slicePixels), C(coverage ? pixels : 0);
+  // A slab's slices, each rendered into scratch and combined (SlabMode) into the output slice.
+  std::vector<float> slabI(slab > 1 ? slicePixels : 0), slabS(slabI.size()), slabC(coverage ? slabI.size() : 0);
   for (int k = 0; k < depth; ++k)
   {
     if (this->GetAbortExecute())
@@ -359,16 +592,53 @@ int vtkGaussianFieldReslice::RequestData(
       // The output stays empty, so the pipeline does not take it for the requested extent.
       return 1;
     }
-    const bigus::SliceGeometry slice = SliceAt(axes, grid.Spacing, grid.Origin, extent, k, this->PixelLowPass);
+    float* i = I.data() + k * slicePixels;
     float* s = S.data() + (this->OutputScatteringField ? k * slicePixels : 0);
-    if (!render.Backend->Forward(view, &slice, 1, options, s, I.data() + k * slicePixels, nullptr, &error))
+    float* c = coverage ? C.data() + k * slicePixels : nullptr;
+    double weights = 0;
+    for (int t = 0; t < slab; ++t)
     {
-      vtkErrorMacro("ResliceAxes: " << error);
-      return 0;
+      const double offset = (t - 0.5 * (slab - 1)) * this->SlabSliceSpacingFraction * grid.Spacing[2];
+      const bigus::SliceGeometry slice =
+        SliceAt(frame, grid.Spacing, grid.Origin, extent, k, offset, this->PixelLowPass);
+      float* ti = slab > 1 ? slabI.data() : i;
+      float* ts = slab > 1 ? slabS.data() : s;
+      float* tc = slab > 1 ? slabC.data() : c;
+      if (!render.Backend->Forward(view, &slice, 1, options, ts, ti, nullptr, &error))
+      {
+        vtkErrorMacro(<< (this->ResliceTransform ? "ResliceAxes and ResliceTransform: " : "ResliceAxes: ") << error);
+        return 0;
+      }
+      if (coverage)
+      {
+        coverage->Compute(slice, options.ElevationSigma, tc);
+      }
+      if (slab > 1)
+      {
+        const double w = this->SlabTrapezoidIntegration && (t == 0 || t == slab - 1) ? 0.5 : 1.0;
+        CombineSlab(this->SlabMode, t == 0, w, slabI.data(), i, slicePixels);
+        CombineSlab(this->SlabMode, t == 0, w, slabS.data(), s, slicePixels);
+        if (coverage)
+        {
+          CombineSlab(this->SlabMode, t == 0, w, slabC.data(), c, slicePixels);
+        }
+        weights += w;
+      }
     }
-    if (coverage)
+    if (slab > 1 && this->SlabMode == VTK_IMAGE_SLAB_MEAN)
     {
-      coverage->Compute(slice, options.ElevationSigma, C.data() + k * slicePixels);
+      for (float* a : { i, s, c })
+      {
+        for (std::size_t p = 0; a && p < slicePixels; ++p)
+        {
+          a[p] = static_cast<float>(a[p] / weights);
+        }
+      }
+    }
+    if (this->BackgroundColor[0] != 0)
+    {
+      const double level = this->BackgroundColor[0] / (this->OutputScalarType == VTK_UNSIGNED_CHAR ? 255.0 : 1.0);
+      FillBackground(*render.Field, SliceAt(frame, grid.Spacing, grid.Origin, extent, k, 0, 0), level, i);
     }
     this->UpdateProgress(double(k + 1) / depth);
   }
@@ -399,9 +669,9 @@ void vtkGaussianFieldReslice::PrintSelf(ostream& os, vtkIndent indent)
   {
     this->ResliceAxes->PrintSelf(os, indent.GetNextIndent());
   }
-  auto vec = [&](const char* name, const double* v) {
+  auto vec = [&](const char* name, const double* v, bool computed) {
     os << indent << name << ": ";
-    if (v[0] == Unset)
+    if (computed)
     {
       os << "(default)\n";
     }
@@ -410,10 +680,10 @@ void vtkGaussianFieldReslice::PrintSelf(ostream& os, vtkIndent indent)
       os << v[0] << " " << v[1] << " " << v[2] << "\n";
     }
   };
-  vec("OutputSpacing", this->OutputSpacing);
-  vec("OutputOrigin", this->OutputOrigin);
+  vec("OutputSpacing", this->OutputSpacing, this->ComputeOutputSpacing);
+  vec("OutputOrigin", this->OutputOrigin, this->ComputeOutputOrigin);
   os << indent << "OutputExtent: ";
-  if (this->OutputExtent[0] == UnsetExtent)
+  if (this->ComputeOutputExtent)
   {
     os << "(default)\n";
   }
@@ -425,6 +695,19 @@ void vtkGaussianFieldReslice::PrintSelf(ostream& os, vtkIndent indent)
     }
   }
   os << indent << "OutputDimensionality: " << this->OutputDimensionality << "\n";
+  os << indent << "ResliceTransform: " << (this->ResliceTransform ? this->ResliceTransform->GetClassName() : "(none)")
+     << "\n";
+  os << indent << "TransformInputSampling: " << this->TransformInputSampling << "\n";
+  os << indent << "AutoCropOutput: " << this->AutoCropOutput << "\n";
+  os << indent << "BackgroundColor: " << this->BackgroundColor[0] << " " << this->BackgroundColor[1] << " "
+     << this->BackgroundColor[2] << " " << this->BackgroundColor[3] << "\n";
+  os << indent << "SlabMode: " << this->GetSlabModeAsString() << "\n";
+  os << indent << "SlabNumberOfSlices: " << this->SlabNumberOfSlices << "\n";
+  os << indent << "SlabSliceSpacingFraction: " << this->SlabSliceSpacingFraction << "\n";
+  os << indent << "SlabTrapezoidIntegration: " << this->SlabTrapezoidIntegration << "\n";
+  os << indent << "InterpolationMode, Wrap, Mirror, Border, BorderThickness, Optimization (no effect on a field): "
+     << this->InterpolationMode << " " << this->Wrap << " " << this->Mirror << " " << this->Border << " "
+     << this->BorderThickness << " " << this->Optimization << "\n";
   os << indent << "InformationInput: " << (this->InformationInput ? "set" : "(none)") << "\n";
   os << indent << "PixelLowPass: " << this->PixelLowPass << "\n";
   os << indent << "OutputScatteringField: " << this->OutputScatteringField << "\n";

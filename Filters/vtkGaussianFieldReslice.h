@@ -4,19 +4,36 @@
  *
  * Input: a Gaussian field (vtkPolyData, DESIGN section 2; vtkGaussianFieldTrainer's output).
  * Output: vtkImageData in the coordinates of the reslice axes, with the vocabulary and meaning of
- * vtkImageReslice: output voxel (i, j, k) lies at ResliceAxes * (OutputOrigin + (i, j, k) * OutputSpacing, 1)
- * in the field's reference frame (mm). ResliceAxes columns are the x axis, the y axis, the normal and
- * the origin. OutputDimensionality 2 renders one slice (k = 0), 3 a stack of parallel slices: a volume
- * for vtkImageReslice or a volume mapper. SetInformationInput copies spacing, origin and extent from a
- * reference image.
+ * vtkImageReslice: output voxel (i, j, k) lies at ResliceTransform(ResliceAxes * (OutputOrigin + (i, j, k) *
+ * OutputSpacing, 1)) in the field's reference frame (mm). ResliceAxes columns are the x axis, the y axis, the
+ * normal and the origin. OutputDimensionality 2 renders one slice, 3 a stack of parallel slices: a volume for
+ * vtkImageReslice or a volume mapper. As in vtkImageReslice, dimensionality 2 forces the output's z extent to
+ * (0, 0) and its z origin to 0 (the slice passes through the axes' origin: move ResliceAxesOrigin to move it),
+ * dimensionality 1 also the y extent and origin, 0 the x ones. The one difference: the default dimensionality is 2
+ * (vtkImageReslice's is 3), because a field has no voxels and a default stack renders every slice of its bounds.
+ * The API of vtkImageReslice and what each call does on a field: README, "vtkGaussianFieldReslice and
+ * vtkImageReslice".
  *
  * Point data (vtkGaussianFieldRenderer): scalars "Intensity", with OutputScatteringField on a second
  * array "ScatteringField" holding the signed scattering field S (float), and "Coverage" (OutputCoverage).
  *
  * Defaults when nothing is set: identity axes; spacing = the field's PixelSpacing (its training frames'
  * pixel spacing) or 0.5 mm; origin and extent = the field's bounds in the reslice frame (points, padded
- * by three times the largest scale); for OutputDimensionality 2 the slice passes through the axes'
- * origin (z = 0).
+ * by three times the largest scale: vtkImageReslice's AutoCropOutput of a volume that holds the field).
+ * With an InformationInput the defaults are vtkImageReslice's for that image as its input: its spacing, origin
+ * and extent permuted through the ResliceAxes (TransformInputSampling, AutoCropOutput as there). Values set
+ * with SetOutputSpacing, SetOutputOrigin and SetOutputExtent override either; the getters return them, or
+ * vtkImageReslice's (1, 1, 1), (0, 0, 0) and (0, 0, 0, 0, 0, 0) while the default applies.
+ *
+ * BackgroundColor (its first component, BackgroundLevel, in the output's scalar units: [0, 1] for float, 0 to
+ * 255 for unsigned char) fills the samples outside the field's padded bounds, where vtkImageReslice fills the
+ * samples outside its input volume; inside, a field renders 0 where it has no Gaussian. SlabMode (min, max,
+ * mean, sum) combines SlabNumberOfSlices slices SlabSliceSpacingFraction x the output's z spacing apart,
+ * centred on each output slice (SlabTrapezoidIntegration halves the two end slices' weights for mean and sum),
+ * the intensity, the scattering field and the coverage alike.
+ *
+ * Accepted and stored, without effect on a field (it has no voxels to interpolate, wrap or mirror):
+ * InterpolationMode (and Interpolate), Wrap, Mirror, Border, BorderThickness, Optimization.
  *
  * Pipeline: RequestInformation never executes the input. With spacing, origin and extent all set (or
  * an InformationInput) the output grid is pure metadata. A default grid needs the field's bounds, which
@@ -43,7 +60,9 @@
 #include "bigusFiltersModule.h" // For export macro
 #include "vtkGaussianFieldRenderer.h"
 
+class vtkAbstractTransform;
 class vtkMatrix4x4;
+class vtkPolyData;
 
 class BIGUSFILTERS_EXPORT vtkGaussianFieldReslice : public vtkGaussianFieldRenderer
 {
@@ -60,9 +79,53 @@ public:
    */
   virtual void SetResliceAxes(vtkMatrix4x4*);
   vtkGetObjectMacro(ResliceAxes, vtkMatrix4x4);
+  ///@}
+
+  ///@{
+  /**
+   * The axes' direction cosines (the first three elements of each of the first three columns) and origin (the
+   * first three of the last), as vtkImageReslice's: setting them creates ResliceAxes if there is none; the
+   * getters give the identity's without one.
+   */
   void SetResliceAxesDirectionCosines(
     double x0, double x1, double x2, double y0, double y1, double y2, double z0, double z1, double z2);
+  void SetResliceAxesDirectionCosines(const double x[3], const double y[3], const double z[3])
+  {
+    this->SetResliceAxesDirectionCosines(x[0], x[1], x[2], y[0], y[1], y[2], z[0], z[1], z[2]);
+  }
+  void SetResliceAxesDirectionCosines(const double xyz[9])
+  {
+    this->SetResliceAxesDirectionCosines(xyz[0], xyz[1], xyz[2], xyz[3], xyz[4], xyz[5], xyz[6], xyz[7], xyz[8]);
+  }
+  void GetResliceAxesDirectionCosines(double x[3], double y[3], double z[3]);
+  void GetResliceAxesDirectionCosines(double xyz[9])
+  {
+    this->GetResliceAxesDirectionCosines(&xyz[0], &xyz[3], &xyz[6]);
+  }
+  double* GetResliceAxesDirectionCosines() VTK_SIZEHINT(9)
+  {
+    this->GetResliceAxesDirectionCosines(this->ResliceAxesDirectionCosines);
+    return this->ResliceAxesDirectionCosines;
+  }
   void SetResliceAxesOrigin(double x, double y, double z);
+  void SetResliceAxesOrigin(const double xyz[3]) { this->SetResliceAxesOrigin(xyz[0], xyz[1], xyz[2]); }
+  void GetResliceAxesOrigin(double xyz[3]);
+  double* GetResliceAxesOrigin() VTK_SIZEHINT(3)
+  {
+    this->GetResliceAxesOrigin(this->ResliceAxesOrigin);
+    return this->ResliceAxesOrigin;
+  }
+  ///@}
+
+  ///@{
+  /**
+   * A transform applied to the sampling grid after ResliceAxes, as vtkImageReslice's: a linear one
+   * (vtkLinearTransform, or a vtkHomogeneousTransform without perspective) is composed with the axes, so that
+   * each slice is rendered in its transformed plane. A non-linear transform fails the update with an error
+   * naming it (a field's slice is rendered as a plane). Held: its changes re-execute the filter.
+   */
+  virtual void SetResliceTransform(vtkAbstractTransform*);
+  vtkGetObjectMacro(ResliceTransform, vtkAbstractTransform);
   ///@}
 
   ///@{
@@ -71,23 +134,103 @@ public:
    * OutputDimensionality 2 (default, one slice at z = OutputOrigin[2]) or 3 (a stack along the
    * normal). The ...ToDefault methods restore the defaults of the class description.
    */
-  vtkSetVector3Macro(OutputSpacing, double);
+  virtual void SetOutputSpacing(double x, double y, double z);
+  virtual void SetOutputSpacing(const double a[3]) { this->SetOutputSpacing(a[0], a[1], a[2]); }
   vtkGetVector3Macro(OutputSpacing, double);
-  vtkSetVector3Macro(OutputOrigin, double);
+  virtual void SetOutputOrigin(double x, double y, double z);
+  virtual void SetOutputOrigin(const double a[3]) { this->SetOutputOrigin(a[0], a[1], a[2]); }
   vtkGetVector3Macro(OutputOrigin, double);
-  vtkSetVector6Macro(OutputExtent, int);
+  virtual void SetOutputExtent(int a, int b, int c, int d, int e, int f);
+  virtual void SetOutputExtent(const int a[6]) { this->SetOutputExtent(a[0], a[1], a[2], a[3], a[4], a[5]); }
   vtkGetVector6Macro(OutputExtent, int);
   void SetOutputSpacingToDefault();
   void SetOutputOriginToDefault();
   void SetOutputExtentToDefault();
-  vtkSetClampMacro(OutputDimensionality, int, 2, 3);
+  vtkSetClampMacro(OutputDimensionality, int, 0, 3);
   vtkGetMacro(OutputDimensionality, int);
   ///@}
 
   ///@{
   /**
-   * Copy spacing, origin and extent from this image (its data object, as vtkImageReslice does);
-   * they take precedence over OutputSpacing, OutputOrigin and OutputExtent.
+   * With an InformationInput, as vtkImageReslice's: TransformInputSampling (default on) permutes and rotates the
+   * image's spacing and extent into the reslice frame; AutoCropOutput (default off) makes the default extent and
+   * origin cover the whole image in that frame. The field's own default grid is always its bounds in the frame.
+   */
+  vtkSetMacro(TransformInputSampling, vtkTypeBool);
+  vtkGetMacro(TransformInputSampling, vtkTypeBool);
+  vtkBooleanMacro(TransformInputSampling, vtkTypeBool);
+  vtkSetMacro(AutoCropOutput, vtkTypeBool);
+  vtkGetMacro(AutoCropOutput, vtkTypeBool);
+  vtkBooleanMacro(AutoCropOutput, vtkTypeBool);
+  ///@}
+
+  ///@{
+  /**
+   * The value of the samples outside the field's padded bounds (see the class description), in the output's
+   * scalar units; BackgroundLevel is BackgroundColor's first component. Default 0.
+   */
+  vtkSetVector4Macro(BackgroundColor, double);
+  vtkGetVector4Macro(BackgroundColor, double);
+  void SetBackgroundLevel(double v) { this->SetBackgroundColor(v, v, v, v); }
+  double GetBackgroundLevel() { return this->BackgroundColor[0]; }
+  ///@}
+
+  ///@{
+  /**
+   * Slab rendering, as vtkImageReslice's (see the class description): SlabMode VTK_IMAGE_SLAB_MIN, _MAX, _MEAN
+   * (default) or _SUM; SlabNumberOfSlices (default 1: no slab); SlabSliceSpacingFraction of the output's z
+   * spacing between the slab's slices (default 1); SlabTrapezoidIntegration (default off).
+   */
+  vtkSetClampMacro(SlabMode, int, VTK_IMAGE_SLAB_MIN, VTK_IMAGE_SLAB_SUM);
+  vtkGetMacro(SlabMode, int);
+  void SetSlabModeToMin() { this->SetSlabMode(VTK_IMAGE_SLAB_MIN); }
+  void SetSlabModeToMax() { this->SetSlabMode(VTK_IMAGE_SLAB_MAX); }
+  void SetSlabModeToMean() { this->SetSlabMode(VTK_IMAGE_SLAB_MEAN); }
+  void SetSlabModeToSum() { this->SetSlabMode(VTK_IMAGE_SLAB_SUM); }
+  const char* GetSlabModeAsString();
+  vtkSetClampMacro(SlabNumberOfSlices, int, 1, 1000);
+  vtkGetMacro(SlabNumberOfSlices, int);
+  vtkSetClampMacro(SlabSliceSpacingFraction, double, 1e-6, 1e6);
+  vtkGetMacro(SlabSliceSpacingFraction, double);
+  vtkSetMacro(SlabTrapezoidIntegration, vtkTypeBool);
+  vtkGetMacro(SlabTrapezoidIntegration, vtkTypeBool);
+  vtkBooleanMacro(SlabTrapezoidIntegration, vtkTypeBool);
+  ///@}
+
+  ///@{
+  /**
+   * Accepted for scripts written for vtkImageReslice and stored; no effect on a field (the class description).
+   */
+  vtkSetClampMacro(InterpolationMode, int, VTK_NEAREST_INTERPOLATION, VTK_CUBIC_INTERPOLATION);
+  vtkGetMacro(InterpolationMode, int);
+  void SetInterpolationModeToNearestNeighbor() { this->SetInterpolationMode(VTK_NEAREST_INTERPOLATION); }
+  void SetInterpolationModeToLinear() { this->SetInterpolationMode(VTK_LINEAR_INTERPOLATION); }
+  void SetInterpolationModeToCubic() { this->SetInterpolationMode(VTK_CUBIC_INTERPOLATION); }
+  void SetInterpolate(int t) { this->SetInterpolationMode(t ? VTK_LINEAR_INTERPOLATION : VTK_NEAREST_INTERPOLATION); }
+  void InterpolateOn() { this->SetInterpolate(1); }
+  void InterpolateOff() { this->SetInterpolate(0); }
+  int GetInterpolate() { return this->InterpolationMode != VTK_NEAREST_INTERPOLATION; }
+  vtkSetMacro(Wrap, vtkTypeBool);
+  vtkGetMacro(Wrap, vtkTypeBool);
+  vtkBooleanMacro(Wrap, vtkTypeBool);
+  vtkSetMacro(Mirror, vtkTypeBool);
+  vtkGetMacro(Mirror, vtkTypeBool);
+  vtkBooleanMacro(Mirror, vtkTypeBool);
+  vtkSetMacro(Border, vtkTypeBool);
+  vtkGetMacro(Border, vtkTypeBool);
+  vtkBooleanMacro(Border, vtkTypeBool);
+  vtkSetMacro(BorderThickness, double);
+  vtkGetMacro(BorderThickness, double);
+  vtkSetMacro(Optimization, vtkTypeBool);
+  vtkGetMacro(Optimization, vtkTypeBool);
+  vtkBooleanMacro(Optimization, vtkTypeBool);
+  ///@}
+
+  ///@{
+  /**
+   * An image whose geometry gives the default spacing, origin and extent, as vtkImageReslice's (see the class
+   * description): permuted through the ResliceAxes; values set with SetOutputSpacing, SetOutputOrigin and
+   * SetOutputExtent override it.
    */
   virtual void SetInformationInput(vtkImageData*);
   vtkGetObjectMacro(InformationInput, vtkImageData);
@@ -115,7 +258,7 @@ public:
   ///@}
 
   /**
-   * Includes the ResliceAxes matrix and the information input.
+   * Includes the ResliceAxes matrix, the ResliceTransform and the information input.
    */
   vtkMTimeType GetMTime() override;
 
@@ -126,12 +269,40 @@ protected:
   int RequestInformation(vtkInformation*, vtkInformationVector**, vtkInformationVector*) override;
   int RequestData(vtkInformation*, vtkInformationVector**, vtkInformationVector*) override;
 
+  /**
+   * The output grid (spacing and origin in mm, extent): the settings where set; for the computed parts an
+   * InformationInput's defaults or those of the field @p input holds (converted then); OutputDimensionality's
+   * zeroed axes (the class description). Extents too large for int are held at VTK_INT_MAX - 1 (RequestData
+   * refuses them with the memory they need). False when the field's defaults are needed and @p input holds no valid
+   * field.
+   */
+  bool ComputeOutputGrid(vtkPolyData* input, double spacing[3], double origin[3], int extent[6]);
+
   vtkMatrix4x4* ResliceAxes = nullptr;
+  vtkAbstractTransform* ResliceTransform = nullptr;
   vtkImageData* InformationInput = nullptr;
-  double OutputSpacing[3];
-  double OutputOrigin[3];
-  int OutputExtent[6];
+  double ResliceAxesDirectionCosines[9];
+  double ResliceAxesOrigin[3];
+  double OutputSpacing[3] = { 1, 1, 1 };
+  double OutputOrigin[3] = { 0, 0, 0 };
+  int OutputExtent[6] = { 0, 0, 0, 0, 0, 0 };
+  bool ComputeOutputSpacing = true;
+  bool ComputeOutputOrigin = true;
+  bool ComputeOutputExtent = true;
   int OutputDimensionality = 2;
+  vtkTypeBool TransformInputSampling = 1;
+  vtkTypeBool AutoCropOutput = 0;
+  double BackgroundColor[4] = { 0, 0, 0, 0 };
+  int SlabMode = VTK_IMAGE_SLAB_MEAN;
+  int SlabNumberOfSlices = 1;
+  double SlabSliceSpacingFraction = 1;
+  vtkTypeBool SlabTrapezoidIntegration = 0;
+  int InterpolationMode = VTK_NEAREST_INTERPOLATION;
+  vtkTypeBool Wrap = 0;
+  vtkTypeBool Mirror = 0;
+  vtkTypeBool Border = 1;
+  double BorderThickness = 0.5;
+  vtkTypeBool Optimization = 1;
   double PixelLowPass = 0.0;
   bool OutputScatteringField = false;
 

@@ -263,7 +263,8 @@ TEST(GaussianFieldReslice, DefaultsCoverTheFieldAndAStackIsAVolumeForImageReslic
   EXPECT_DOUBLE_EQ(volume->GetSpacing()[0], 0.5) << "no PixelSpacing in this field: 0.5 mm";
 
   // vtkImageReslice takes it as any volume: cutting grid plane 10 of the stack gives exactly what a
-  // 2D vtkGaussianFieldReslice renders on that plane.
+  // one-slice vtkGaussianFieldReslice renders on that plane (OutputDimensionality 3 with a z extent of one
+  // slice: as in vtkImageReslice, dimensionality 2 would put the slice through the axes' origin).
   const double* origin = volume->GetOrigin();
   const int* extent = volume->GetExtent();
   const double z = origin[2] + 10 * 0.5;
@@ -277,6 +278,7 @@ TEST(GaussianFieldReslice, DefaultsCoverTheFieldAndAStackIsAVolumeForImageReslic
   vtkNew<vtkGaussianFieldReslice> plane;
   plane->SetInputData(reslice->GetInput());
   plane->SetOutputScalarTypeToUnsignedChar();
+  plane->SetOutputDimensionality(3);
   plane->SetOutputSpacing(0.5, 0.5, 0.5);
   plane->SetOutputOrigin(origin[0], origin[1], z);
   plane->SetOutputExtent(extent[0], extent[1], extent[2], extent[3], 0, 0);
