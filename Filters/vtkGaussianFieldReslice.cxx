@@ -478,14 +478,22 @@ vtkMTimeType vtkGaussianFieldReslice::GetMTime()
 int vtkGaussianFieldReslice::RequestInformation(
   vtkInformation*, vtkInformationVector** inputVector, vtkInformationVector* outputVector)
 {
-  // Metadata only: the input is never executed from here. A default grid uses the field the input
-  // holds now (converted once and kept); RequestData corrects it if the field changes in this update.
+  // A default grid uses the field the input holds now (converted once and kept); RequestData corrects it if
+  // the field changes in this update. An input that holds no field yet is produced first (the class description).
   Grid grid;
   vtkInformation* outInfo = outputVector->GetInformationObject(0);
   vtkDataObject::SetPointDataActiveScalarInfo(outInfo, this->OutputScalarType, 1);
-  if (!this->ComputeOutputGrid(vtkPolyData::GetData(inputVector[0], 0), grid.Spacing, grid.Origin, grid.Extent))
+  bool known = this->ComputeOutputGrid(vtkPolyData::GetData(inputVector[0], 0), grid.Spacing, grid.Origin, grid.Extent);
+  int producerPort = 0;
+  vtkAlgorithm* producer = known ? nullptr : this->GetInputAlgorithm(0, 0, producerPort);
+  if (producer)
   {
-    // No field yet (its producer has not run): nothing to announce until RequestData knows the grid.
+    producer->Update(producerPort);
+    known = this->ComputeOutputGrid(vtkPolyData::GetData(inputVector[0], 0), grid.Spacing, grid.Origin, grid.Extent);
+  }
+  if (!known)
+  {
+    // No field (the producer gave none, or failed): nothing to announce; RequestData reports the error.
     const int empty[6] = { 0, -1, 0, -1, 0, -1 };
     const double unit[3] = { 1, 1, 1 }, zero[3] = { 0, 0, 0 };
     outInfo->Set(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT(), empty, 6);

@@ -35,16 +35,16 @@
  * Accepted and stored, without effect on a field (it has no voxels to interpolate, wrap or mirror):
  * InterpolationMode (and Interpolate), Wrap, Mirror, Border, BorderThickness, Optimization.
  *
- * Pipeline: RequestInformation never executes the input. With spacing, origin and extent all set (or
- * an InformationInput) the output grid is pure metadata. A default grid needs the field's bounds, which
- * are data, not pipeline information: RequestInformation takes them from the field the input holds at
- * that moment (exact for SetInputData and for an input that is already up to date), and RequestData
- * takes them from the up-to-date field; when the two differ (the field was not there yet, or changed
- * in this update) RequestData renders the grid of the up-to-date field and writes it into the output
- * information, as vtkGaussianSplatter does with its automatic bounds. A filter downstream that plans
- * from the whole extent during that same update saw the earlier grid (reader -> this filter with a
- * default grid -> vtkImageReslice, first Update): set the grid, or update this filter before the
- * downstream one.
+ * Pipeline: with spacing, origin and extent all set (or an InformationInput) the output grid is pure
+ * metadata. A default grid needs the field's bounds, which are data, not pipeline information:
+ * RequestInformation takes them from the field the input holds at that moment (exact for SetInputData and
+ * for an input that is already up to date); when the input holds no field yet (its producer has not run,
+ * as on the first update through a reader), RequestInformation runs the producer once, so that the grid a
+ * downstream filter plans from is the field's. RequestData takes the bounds from the up-to-date field; when
+ * they differ from those RequestInformation saw (the field changed in this update) it renders the grid of
+ * the up-to-date field and writes it into the output information, as vtkGaussianSplatter does with its
+ * automatic bounds (a downstream filter that planned from the earlier grid sees the new one at its next
+ * update).
  *
  * Interactive use: the renderer and the converted field are kept between executes
  * (vtkGaussianFieldRenderer), so moving the plane (ResliceAxes) re-renders without converting the
