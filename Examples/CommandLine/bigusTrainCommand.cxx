@@ -763,7 +763,8 @@ Command AddTrainCommand(CLI::App& app)
     ->check(FiniteNonNegative(1e9));
   trainCommand
     ->add_option("--resume", train.Resume,
-      "Continue from this checkpoint (same settings; the seconds trained before it count towards --time-budget)")
+      "Continue from this checkpoint (the same sweeps and settings, else refused naming the difference; a longer "
+      "schedule is fine; the seconds trained before it count towards --time-budget)")
     ->check(CLI::ExistingFile);
   trainCommand
     ->add_option("--evaluate-every", train.EvaluationInterval,

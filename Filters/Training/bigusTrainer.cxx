@@ -26,6 +26,8 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
   : Data(new TrainingData(std::move(data)))
   , Settings(ScheduledSettings(settings))
   , Engine(engine ? std::move(engine) : CreateTrainingEngine("cpu", nullptr))
+  , RunSettings(ResumeSettings(settings))
+  , Digest(TrainingDataDigest(*this->Data))
 {
   this->State.Random.seed(settings.Seed);
   this->PixelSpacing = MeanTrainingPixelSpacing(*this->Data);
@@ -684,6 +686,8 @@ bool Trainer::Run(const std::function<void(double, int, double, std::int64_t)>& 
 bool Trainer::SaveCheckpoint(const std::string& file, std::string* error)
 {
   this->State.TrainingSeconds = this->TrainingSeconds();
+  this->State.DataDigest = this->Digest;
+  this->State.RunSettings = this->RunSettings;
   return this->PullState(error) && this->State.Save(file, this->Gamma, error);
 }
 
@@ -700,6 +704,19 @@ bool Trainer::ReadCheckpoint(const std::string& file, std::string* error)
   double gamma = this->Gamma;
   if (!loaded.Load(file, gamma, error))
   {
+    return false;
+  }
+  // Written for this run's data and settings (a file without them, from before "BIGUSCK6", cannot be checked).
+  const std::string changed = ResumeSettingsDifference(loaded.RunSettings, this->RunSettings);
+  if ((loaded.DataDigest != 0 && loaded.DataDigest != this->Digest) || !changed.empty())
+  {
+    if (error)
+    {
+      *error = file + ": the checkpoint was written by a run " +
+        (changed.empty() ? std::string("on other training data (the frames, poses, masks, calibration or held-out "
+                                       "frames differ); resume with the sweeps and options it was written with")
+                         : "with other settings (" + changed + "); resume with the options it was written with");
+    }
     return false;
   }
   // A checkpoint written after the pose-refinement trial goes on with its choice: no corrections, trusted; a

@@ -276,6 +276,8 @@ private:
   std::unique_ptr<TrainingData> Data; // on the heap: the engine keeps a pointer to it
   TrainerSettings Settings;
   std::unique_ptr<TrainingEngine> Engine;
+  std::string RunSettings;     // ResumeSettings of the settings as requested: what a checkpoint must share to resume
+  std::uint64_t Digest = 0;    // TrainingDataDigest of the data as given (before held-out frames or pose corrections)
   mutable TrainingState State; // host copy, current when HostCurrent
   mutable bool HostCurrent = true;
   double Gamma = 1;

@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
+#include <sstream>
 
 #include <vtk_fmt.h>
 // clang-format off
@@ -11,6 +13,60 @@
 
 namespace bigus
 {
+
+std::string ResumeSettings(const TrainerSettings& s)
+{
+  std::string text;
+  auto line = [&text](const char* name, double value) { text += vtkfmt::sprintf("%s = %.17g\n", name, value); };
+  line("ElevationSigma", s.ElevationSigma);
+  line("BeamIntegration", s.BeamIntegration);
+  line("NonNegativeReflectivity", s.NonNegativeReflectivity);
+  line("Cutoff", s.Cutoff);
+  line("Seeding.HarrisInitialisation", s.Seeding.HarrisInitialisation);
+  line("Seeding.InitialGaussians", static_cast<double>(s.Seeding.InitialGaussians));
+  line("Seeding.DenseInitialisation", s.Seeding.DenseInitialisation);
+  line("Seeding.PixelGridFit", s.Seeding.PixelGridFit);
+  line("Loss.L1", s.Loss.L1);
+  line("Loss.DSSIM", s.Loss.DSSIM);
+  line("Loss.FFL", s.Loss.FFL);
+  line("SparseAdam", s.SparseAdam);
+  line("MaximumGaussians", static_cast<double>(s.MaximumGaussians));
+  line("ReflectivitySolve", s.ReflectivitySolve);
+  line("RefinePoses", static_cast<double>(s.Poses.RefinePoses));
+  line("Seed", s.Seed);
+  return text;
+}
+
+std::string ResumeSettingsDifference(const std::string& written, const std::string& current)
+{
+  auto lines = [](const std::string& text) {
+    std::map<std::string, std::string> values;
+    std::istringstream in(text);
+    std::string row;
+    while (std::getline(in, row))
+    {
+      const std::size_t at = row.find(" = ");
+      if (at != std::string::npos)
+      {
+        values[row.substr(0, at)] = row.substr(at + 3);
+      }
+    }
+    return values;
+  };
+  const std::map<std::string, std::string> then = lines(written), now = lines(current);
+  std::string difference;
+  for (const auto& entry : then)
+  {
+    const auto found = now.find(entry.first);
+    const std::string value = found == now.end() ? "(none)" : found->second;
+    if (value != entry.second)
+    {
+      difference +=
+        (difference.empty() ? "" : "; ") + entry.first + ": " + entry.second + " in the checkpoint, " + value + " now";
+    }
+  }
+  return difference;
+}
 
 std::vector<std::string> DescribeTrainerSettings(const TrainerSettings& s)
 {

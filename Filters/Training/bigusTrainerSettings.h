@@ -123,6 +123,22 @@ struct TrainerSettings
  */
 BIGUSTRAINING_EXPORT std::vector<std::string> DescribeTrainerSettings(const TrainerSettings& s);
 
+/**
+ * The settings a resumed run must share with the run that wrote its checkpoint (TrainingState::RunSettings), one
+ * "name = value" line each, from the settings as requested (before the rules and measured choices): the rendering
+ * model (ElevationSigma, BeamIntegration, NonNegativeReflectivity, Cutoff), the seeding, the loss, the optimiser's
+ * form, MaximumGaussians, ReflectivitySolve, RefinePoses and Seed. Not the schedule's length (Iterations,
+ * TimeBudget: a resume may train longer), nor FramesPerStep (a run on P processes takes P times each one's frames: a
+ * checkpoint of one process resumes on two with half the frames each), nor checkpointing.
+ */
+BIGUSTRAINING_EXPORT std::string ResumeSettings(const TrainerSettings& s);
+
+/**
+ * The lines of @p written (ResumeSettings of a checkpoint) that @p current does not have, each as "NAME: VALUE in
+ * the checkpoint, VALUE now"; empty when they agree.
+ */
+BIGUSTRAINING_EXPORT std::string ResumeSettingsDifference(const std::string& written, const std::string& current);
+
 /// @p s as a run uses it: FramesPerStep at least 1, Iterations DefaultIterations when neither it nor a TimeBudget
 /// is given.
 BIGUSTRAINING_EXPORT TrainerSettings ScheduledSettings(TrainerSettings s);

@@ -429,12 +429,48 @@ bool ReadField(std::istream& in, GaussianField& f, std::int64_t n)
 }
 }
 
+std::uint64_t TrainingDataDigest(const TrainingData& data)
+{
+  // FNV-1a over 64-bit words (the bytes of each array, padded with zeros to a whole word), each array preceded by
+  // its length, so that moving bytes between arrays changes the digest.
+  std::uint64_t h = 14695981039346656037ull;
+  auto word = [&h](std::uint64_t w) {
+    h ^= w;
+    h *= 1099511628211ull;
+  };
+  auto bytes = [&](const void* data, std::size_t size) {
+    word(size);
+    const auto* b = static_cast<const unsigned char*>(data);
+    std::size_t k = 0;
+    for (; k + 8 <= size; k += 8)
+    {
+      std::uint64_t w;
+      std::memcpy(&w, b + k, 8);
+      word(w);
+    }
+    std::uint64_t last = 0;
+    std::memcpy(&last, b + k, size - k);
+    word(last);
+  };
+  word(std::uint64_t(data.Width));
+  word(std::uint64_t(data.Height));
+  bytes(data.Frames.data(), data.Frames.size() * sizeof(float));
+  bytes(data.Poses.data(), data.Poses.size() * sizeof(data.Poses[0]));
+  bytes(data.Mask.data(), data.Mask.size());
+  bytes(data.TrainFrames.data(), data.TrainFrames.size() * sizeof(int));
+  bytes(data.Sweeps.data(), data.Sweeps.size() * sizeof(int));
+  bytes(data.Timestamps.data(), data.Timestamps.size() * sizeof(double));
+  bytes(data.Valid.data(), data.Valid.size());
+  bytes(&data.PixelLowPass, sizeof(double));
+  return h;
+}
+
 bool TrainingState::Save(const std::string& file, double gamma, std::string* error) const
 {
   const std::string temporary = file + ".tmp";
   {
     std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
-    out.write("BIGUSCK5", 8);
+    out.write("BIGUSCK6", 8);
     Put(out, std::int32_t(this->Iteration));
     Put(out, this->LearningRateScale);
     Put(out, gamma);
@@ -481,6 +517,9 @@ bool TrainingState::Save(const std::string& file, double gamma, std::string* err
       out.write(reinterpret_cast<const char*>(xi.data()), sizeof(double) * 6);
     }
     out.write(reinterpret_cast<const char*>(this->BestSharedPoseCorrection.data()), sizeof(double) * 7);
+    Put(out, this->DataDigest);
+    Put(out, std::uint32_t(this->RunSettings.size()));
+    out.write(this->RunSettings.data(), static_cast<std::streamsize>(this->RunSettings.size()));
     out.close();
     if (!out)
     {
@@ -519,12 +558,12 @@ bool TrainingState::Load(const std::string& file, double& gamma, std::string* er
     return fail("cannot open the checkpoint");
   }
   char magic[8];
-  if (!in.read(magic, 8) || std::memcmp(magic, "BIGUSCK", 7) != 0 || magic[7] < '1' || magic[7] > '5')
+  if (!in.read(magic, 8) || std::memcmp(magic, "BIGUSCK", 7) != 0 || magic[7] < '1' || magic[7] > '6')
   {
     return fail("not a BIGUS checkpoint (bad magic)");
   }
   const bool withBest = magic[7] >= '2', withSeconds = magic[7] >= '3', withPoses = magic[7] >= '4',
-             withShared = magic[7] >= '5';
+             withShared = magic[7] >= '5', withRun = magic[7] >= '6';
   TrainingState s;
   std::int32_t iteration, growing, stalled, rolled;
   double storedGamma;
@@ -622,6 +661,16 @@ bool TrainingState::Load(const std::string& file, double& gamma, std::string* er
     {
       return fail("truncated or invalid best field's pose corrections");
     }
+  }
+  std::uint32_t settingsLength = 0;
+  if (withRun && (!Get(in, s.DataDigest) || !Get(in, settingsLength) || settingsLength > (1u << 20)))
+  {
+    return fail("truncated data digest or run settings");
+  }
+  s.RunSettings.assign(settingsLength, '\0');
+  if (settingsLength > 0 && !in.read(&s.RunSettings[0], settingsLength))
+  {
+    return fail("truncated run settings");
   }
   s.BestFieldIteration = bestIteration;
   std::istringstream state(text);

@@ -174,10 +174,13 @@ struct BIGUSTRAINING_EXPORT TrainingState
   /// them with it. Empty / zero without pose refinement.
   std::vector<std::array<double, 6>> BestPoseCorrections;
   std::array<double, 7> BestSharedPoseCorrection{};
+  // What the state was trained on, so that a resume on other data or settings is refused (Trainer::LoadCheckpoint):
+  std::uint64_t DataDigest = 0; ///< TrainingDataDigest of the run's data; 0: unknown (a file before "BIGUSCK6")
+  std::string RunSettings;      ///< the settings a resume must share, "name = value" lines; empty: unknown
 
   /**
    * Writes the state to @p file (written to FILE.tmp, then renamed; the previous file survives a
-   * failure). Little-endian binary, "BIGUSCK5" | int32 iteration | float64 learning-rate scale |
+   * failure). Little-endian binary, "BIGUSCK6" | int32 iteration | float64 learning-rate scale |
    * float64 gamma | int32 growing | float64 best validation loss | int32 stalled growth steps |
    * int32 rolled-back steps | uint32 length + text of the random engine state | int64 N | field, Adam
    * m, Adam v: each [N,3] means, [N,3] log-scales, [N,4] quaternions, [N] reflectivities as float32 |
@@ -185,10 +188,11 @@ struct BIGUSTRAINING_EXPORT TrainingState
    * field's validation loss | int32 its iteration | int64 M | best field as above | float64 training
    * seconds | int64 P (frames with a pose correction; 0 without pose refinement) | P x (6 float64
    * correction, 6 float64 Adam m, 6 float64 Adam v, int32 steps) | 7 float64 shared correction, 7 Adam m,
-   * 7 Adam v, int32 steps | int64 B + B x 6 float64 and 7 float64: the corrections of the best field. Load also reads
-   * "BIGUSCK4" files (no shared correction), "BIGUSCK3" files (no pose corrections), "BIGUSCK2" files (no training
-   * seconds either: a time budget starts afresh) and "BIGUSCK1" files (neither those nor a best field: early stopping
-   * starts afresh too). Returns false with @p error naming the file.
+   * 7 Adam v, int32 steps | int64 B + B x 6 float64 and 7 float64: the corrections of the best field | uint64 data
+   * digest | uint32 length + text of the run settings. Load also reads "BIGUSCK5" files (no data digest or run
+   * settings: a resume cannot check them), "BIGUSCK4" files (no shared correction), "BIGUSCK3" files (no pose
+   * corrections), "BIGUSCK2" files (no training seconds either: a time budget starts afresh) and "BIGUSCK1" files
+   * (neither those nor a best field: early stopping starts afresh too). Returns false with @p error naming the file.
    */
   bool Save(const std::string& file, double gamma, std::string* error) const;
   /// Reads a state written by Save; on failure (@p error names the file and what is wrong: bad magic,
@@ -433,6 +437,14 @@ public:
   virtual bool BasisNorms(const float* weights, const int* frames, int count, const RenderOptions& options, double* out,
     std::string* error) = 0;
 };
+
+/**
+ * A 64-bit digest of everything in @p data a training run reads (grid, frames, poses, masks, training frames,
+ * sweeps, timestamps, validity, low-pass): two data give the same digest when they are the same, and different ones
+ * with probability 1 - 2^-64. For checkpoints (TrainingState::DataDigest): one pass over the frames, 8 bytes at a
+ * time (FNV-1a on 64-bit words).
+ */
+BIGUSTRAINING_EXPORT std::uint64_t TrainingDataDigest(const TrainingData& data);
 
 /// Seconds on the monotonic clock (std::chrono::steady_clock): the durations the trainer and its stages report.
 inline double SteadySeconds()

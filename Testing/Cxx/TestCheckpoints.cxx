@@ -51,6 +51,62 @@ TEST(Trainer, ResumingFromACheckpointGivesTheSameField)
   EXPECT_NE(error.find("bad magic"), std::string::npos) << error;
 }
 
+TEST(Trainer, AResumeOnOtherDataOrWithOtherSettingsIsRefusedNamingWhatDiffers)
+{
+  // A checkpoint holds the digest of its run's data and the settings a resume must share: another sweep, or another
+  // ElevationSigma, is refused with the reason; a longer schedule is accepted; a file of the format before them
+  // ("BIGUSCK5") cannot be checked and is accepted.
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(200, 6), 0.5, heldOut);
+  const TrainerSettings settings = ShortSettings();
+  std::string error;
+  Trainer first(data, settings);
+  ASSERT_TRUE(first.Initialize(&error)) << error;
+  ASSERT_TRUE(first.Train(
+    nullptr, [&]() { return first.GetIteration() >= 50; }, &error))
+    << error;
+  const std::string file = std::string(BIGUS_TEST_OUTPUT) + "/identity.ckpt";
+  ASSERT_TRUE(first.SaveCheckpoint(file, &error)) << error;
+  EXPECT_EQ(first.GetState().DataDigest, TrainingDataDigest(data));
+
+  TrainingData otherData = data;
+  otherData.Frames[otherData.Frames.size() / 2] += 0.01f; // one pixel of one frame
+  EXPECT_NE(TrainingDataDigest(otherData), TrainingDataDigest(data));
+  Trainer other(otherData, settings);
+  ASSERT_TRUE(other.Initialize(&error)) << error;
+  EXPECT_FALSE(other.LoadCheckpoint(file, &error));
+  EXPECT_NE(error.find("other training data"), std::string::npos) << error;
+
+  TrainerSettings wider = settings;
+  wider.ElevationSigma = 0.75;
+  Trainer changed(data, wider);
+  ASSERT_TRUE(changed.Initialize(&error)) << error;
+  EXPECT_FALSE(changed.LoadCheckpoint(file, &error));
+  EXPECT_NE(error.find("ElevationSigma: 0.5 in the checkpoint, 0.75 now"), std::string::npos) << error;
+
+  TrainerSettings longer = settings;
+  longer.Iterations = 400;
+  Trainer resumed(data, longer);
+  ASSERT_TRUE(resumed.Initialize(&error)) << error;
+  EXPECT_TRUE(resumed.LoadCheckpoint(file, &error)) << error;
+  EXPECT_EQ(resumed.GetIteration(), 50);
+
+  // The same state in the previous format: the magic "BIGUSCK5" and no digest or settings at the end.
+  std::ifstream in(file, std::ios::binary);
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::size_t identity = 8 + 4 + first.GetState().RunSettings.size();
+  ASSERT_GT(bytes.size(), identity);
+  bytes = bytes.substr(0, bytes.size() - identity);
+  bytes[7] = '5';
+  std::ofstream(file + ".v5", std::ios::binary) << bytes;
+  Trainer old(otherData, settings);
+  ASSERT_TRUE(old.Initialize(&error)) << error;
+  EXPECT_TRUE(old.LoadCheckpoint(file + ".v5", &error)) << error;
+  EXPECT_EQ(old.GetIteration(), 50);
+  std::remove(file.c_str());
+  std::remove((file + ".v5").c_str());
+}
+
 TEST(Trainer, AResumedRunGoesOnWithThePoseCorrectionsOfItsCheckpoint)
 {
   // With pose refinement, the corrections and their Adam moments are part of the state: a run stopped at step
@@ -106,7 +162,7 @@ TEST(Trainer, AResumedRunGoesOnWithThePoseCorrectionsOfItsCheckpoint)
   Trainer other(data, trusted);
   ASSERT_TRUE(other.Initialize(&error));
   EXPECT_FALSE(other.LoadCheckpoint(checkpoint, &error));
-  EXPECT_NE(error.find("pose corrections of"), std::string::npos) << error;
+  EXPECT_NE(error.find("RefinePoses: "), std::string::npos) << error; // the run settings differ
 }
 
 TEST(Trainer, AResumedRunCountsTheSecondsBeforeItsCheckpointTowardsItsTimeBudget)
@@ -155,7 +211,17 @@ TEST(Trainer, AResumedRunCountsTheSecondsBeforeItsCheckpointTowardsItsTimeBudget
   // ends with their count 0) with the training seconds, version 2 (no training seconds either) with none.
   std::ifstream in(checkpoint, std::ios::binary);
   std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  ASSERT_EQ(bytes.compare(0, 8, "BIGUSCK5"), 0);
+  ASSERT_EQ(bytes.compare(0, 8, "BIGUSCK6"), 0);
+  // Version 5: no data digest and run settings (the file ends with them).
+  bytes =
+    bytes.substr(0, bytes.size() - sizeof(std::uint64_t) - sizeof(std::uint32_t) - first.GetState().RunSettings.size());
+  bytes[7] = '5';
+  std::ofstream(checkpoint + ".v5", std::ios::binary) << bytes;
+  TrainingState five;
+  double fiveGamma = 0;
+  ASSERT_TRUE(five.Load(checkpoint + ".v5", fiveGamma, &error)) << error;
+  EXPECT_EQ(five.TrainingSeconds, saved);
+  EXPECT_EQ(five.DataDigest, 0u);
   bytes = bytes.substr(0, bytes.size() - 28 * sizeof(double) - sizeof(std::int32_t) - sizeof(std::int64_t));
   bytes[7] = '4';
   std::ofstream(checkpoint + ".v4", std::ios::binary) << bytes;
@@ -178,6 +244,7 @@ TEST(Trainer, AResumedRunCountsTheSecondsBeforeItsCheckpointTowardsItsTimeBudget
   std::remove(checkpoint.c_str());
   std::remove((checkpoint + ".v2").c_str());
   std::remove((checkpoint + ".v4").c_str());
+  std::remove((checkpoint + ".v5").c_str());
 }
 
 TEST(Trainer, CheckpointHoldsTheWholeTrainingState)
