@@ -54,8 +54,8 @@ struct Grid
 /// Which parts of the grid take their default (vtkGaussianFieldReslice's Compute flags).
 struct Computed
 {
-  bool Spacing, Origin, Extent;
-  bool Any() const { return this->Spacing || this->Origin || this->Extent; }
+  bool Spacing[3], Origin, Extent;
+  bool Any() const { return this->Spacing[0] || this->Spacing[1] || this->Spacing[2] || this->Origin || this->Extent; }
 };
 
 /// @p axes (null: identity) as a matrix, and its inverse.
@@ -109,7 +109,7 @@ void FieldDefaults(Grid& g, const Computed& computed, const bigus::FieldCache& f
   BoxInFrame(world, inverse, lo, hi);
   for (int k = 0; k < 3; ++k)
   {
-    g.Spacing[k] = computed.Spacing ? step : g.Spacing[k];
+    g.Spacing[k] = computed.Spacing[k] ? step : g.Spacing[k];
     g.Origin[k] = computed.Origin ? lo[k] : g.Origin[k];
     if (computed.Extent)
     {
@@ -168,7 +168,7 @@ void ImageDefaults(
       d /= r * std::sqrt(r);
       e /= r;
     }
-    g.Spacing[i] = computed.Spacing ? s : g.Spacing[i];
+    g.Spacing[i] = computed.Spacing[i] ? s : g.Spacing[i];
     if (computed.Extent)
     {
       d = autoCrop ? hi[i] - lo[i] : d;
@@ -289,7 +289,9 @@ bool vtkGaussianFieldReslice::ComputeOutputGrid(vtkPolyData* input, double spaci
   std::copy(this->OutputSpacing, this->OutputSpacing + 3, g.Spacing);
   std::copy(this->OutputOrigin, this->OutputOrigin + 3, g.Origin);
   std::copy(this->OutputExtent, this->OutputExtent + 6, g.Extent);
-  const Computed computed{ this->ComputeOutputSpacing, this->ComputeOutputOrigin, this->ComputeOutputExtent };
+  const Computed computed{ { this->ComputeOutputSpacing[0], this->ComputeOutputSpacing[1],
+                             this->ComputeOutputSpacing[2] },
+    this->ComputeOutputOrigin, this->ComputeOutputExtent };
   if (this->InformationInput)
   {
     ImageDefaults(g, computed, this->InformationInput, this->ResliceAxes, this->TransformInputSampling != 0,
@@ -330,10 +332,28 @@ vtkGaussianFieldReslice::~vtkGaussianFieldReslice()
 void vtkGaussianFieldReslice::SetOutputSpacing(double x, double y, double z)
 {
   const double v[3] = { x, y, z };
-  if (this->ComputeOutputSpacing || !std::equal(v, v + 3, this->OutputSpacing))
+  const bool* computed = this->ComputeOutputSpacing;
+  if (computed[0] || computed[1] || computed[2] || !std::equal(v, v + 3, this->OutputSpacing))
   {
     std::copy(v, v + 3, this->OutputSpacing);
-    this->ComputeOutputSpacing = false;
+    std::fill(this->ComputeOutputSpacing, this->ComputeOutputSpacing + 3, false);
+    this->Modified();
+  }
+}
+
+void vtkGaussianFieldReslice::SetOutputSpacingComponents(const double spacing[3])
+{
+  bool changed = false;
+  for (int k = 0; k < 3; ++k)
+  {
+    const bool compute = !(spacing[k] > 0);
+    const double value = compute ? 1.0 : spacing[k];
+    changed = changed || compute != this->ComputeOutputSpacing[k] || value != this->OutputSpacing[k];
+    this->ComputeOutputSpacing[k] = compute;
+    this->OutputSpacing[k] = value;
+  }
+  if (changed)
+  {
     this->Modified();
   }
 }
@@ -362,12 +382,8 @@ void vtkGaussianFieldReslice::SetOutputExtent(int a, int b, int c, int d, int e,
 
 void vtkGaussianFieldReslice::SetOutputSpacingToDefault()
 {
-  if (!this->ComputeOutputSpacing)
-  {
-    std::fill(this->OutputSpacing, this->OutputSpacing + 3, 1.0);
-    this->ComputeOutputSpacing = true;
-    this->Modified();
-  }
+  const double none[3] = { 0, 0, 0 };
+  this->SetOutputSpacingComponents(none);
 }
 
 void vtkGaussianFieldReslice::SetOutputOriginToDefault()
@@ -688,7 +704,12 @@ void vtkGaussianFieldReslice::PrintSelf(ostream& os, vtkIndent indent)
       os << v[0] << " " << v[1] << " " << v[2] << "\n";
     }
   };
-  vec("OutputSpacing", this->OutputSpacing, this->ComputeOutputSpacing);
+  const bool* spacing = this->ComputeOutputSpacing;
+  os << indent << "OutputSpacing: ";
+  for (int k = 0; k < 3; ++k)
+  {
+    os << (spacing[k] ? "(default)" : std::to_string(this->OutputSpacing[k])) << (k < 2 ? " " : "\n");
+  }
   vec("OutputOrigin", this->OutputOrigin, this->ComputeOutputOrigin);
   os << indent << "OutputExtent: ";
   if (this->ComputeOutputExtent)

@@ -278,6 +278,13 @@ protected:
    */
   bool ComputeOutputGrid(vtkPolyData* input, double spacing[3], double origin[3], int extent[6]);
 
+  /**
+   * For subclasses (the ParaView filter, whose SliceSpacing 0 means "the default" per axis): the components of
+   * @p spacing above 0 set, the others computed as by SetOutputSpacingToDefault. vtkImageReslice has no such call (its
+   * spacing is set or computed whole).
+   */
+  void SetOutputSpacingComponents(const double spacing[3]);
+
   vtkMatrix4x4* ResliceAxes = nullptr;
   vtkAbstractTransform* ResliceTransform = nullptr;
   vtkImageData* InformationInput = nullptr;
@@ -286,7 +293,7 @@ protected:
   double OutputSpacing[3] = { 1, 1, 1 };
   double OutputOrigin[3] = { 0, 0, 0 };
   int OutputExtent[6] = { 0, 0, 0, 0, 0, 0 };
-  bool ComputeOutputSpacing = true;
+  bool ComputeOutputSpacing[3] = { true, true, true };
   bool ComputeOutputOrigin = true;
   bool ComputeOutputExtent = true;
   int OutputDimensionality = 2;

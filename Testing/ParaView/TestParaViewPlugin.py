@@ -89,6 +89,14 @@ def main():
     intensity = image.GetPointData().GetArray("Intensity")
     if intensity is None or intensity.GetRange()[1] <= 0:
         fail("slice: no Intensity, or all zero")
+    # A spacing of 0 takes the field's own (its training frames' pixel spacing) on that axis, the others as given.
+    pixel = trainer.GetClientSideObject().GetOutputDataObject(0).GetFieldData().GetArray("PixelSpacing").GetValue(0)
+    partly = pvs.GaussianFieldSlice(Input=trainer, SliceOrigin=plane["origin"], SliceNormal=[0, 0, 1],
+                                    SliceSpacing=[0.3, 0.0, 1.0], SliceDimensions=[0, 0, 1])
+    partly.UpdatePipeline()
+    spacing = partly.GetClientSideObject().GetOutputDataObject(0).GetSpacing()
+    if abs(spacing[0] - 0.3) > 1e-12 or abs(spacing[1] - pixel) > 1e-12:
+        fail("slice with SliceSpacing (0.3, 0, 1): spacing %s, expected (0.3, %g, ...)" % (spacing, pixel))
     pvs.SaveData(os.path.join(output, "paraview_slice.vti"), proxy=slice_filter)
     with open(os.path.join(output, "paraview_plane.json"), "w") as f:
         json.dump(plane, f)

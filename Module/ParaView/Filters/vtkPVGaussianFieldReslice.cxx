@@ -151,14 +151,7 @@ void vtkPVGaussianFieldReslice::UpdateAxesAndGrid()
   {
     this->SetOutputOriginToDefault();
     this->SetOutputExtentToDefault();
-    this->SetOutputSpacingToDefault();
-    double spacing[3];
-    this->GetOutputSpacing(spacing);
-    for (int k = 0; k < 3; ++k)
-    {
-      spacing[k] = this->SliceSpacing[k] > 0 ? this->SliceSpacing[k] : spacing[k];
-    }
-    this->SetOutputSpacing(spacing);
+    this->SetOutputSpacingComponents(this->SliceSpacing); // 0: the field's default on that axis
   }
 }
 
