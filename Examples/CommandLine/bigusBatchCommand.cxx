@@ -186,8 +186,24 @@ json RunJob(const BatchJob& job, int rank, int threads)
       {
         train.insert(train.end(), { "--threads", std::to_string(threads) });
       }
+      // A job stopped before its outputs were complete goes on from its checkpoint (the job's "checkpoint" key);
+      // one the resume refuses (written with options the manifest has changed since, or broken) is trained afresh.
+      const auto at = std::find(train.begin(), train.end(), "--checkpoint");
+      bool resumed = false;
+      if (at != train.end() && at + 1 != train.end() && fs::exists(*(at + 1)))
+      {
+        std::vector<std::string> resume = train;
+        resume.insert(resume.end(), { "--resume", *(at + 1) });
+        std::printf("batch: resuming from the checkpoint %s\n", (at + 1)->c_str());
+        resumed = RunCommand(resume, false) == 0;
+        if (!resumed)
+        {
+          std::printf(
+            "batch: the checkpoint %s could not be resumed (above); training from the start\n", (at + 1)->c_str());
+        }
+      }
       std::vector<std::string> evaluate = job.EvaluateArguments;
-      code = RunCommand(train, false);
+      code = resumed ? 0 : RunCommand(train, false);
       code = code == 0 && !job.TrainingFrames.empty() ? AddHeldOutFrames(job.TrainingFrames, evaluate) : code;
       code = code == 0 ? RunCommand(evaluate, false) : code;
     }

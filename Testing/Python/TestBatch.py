@@ -2,7 +2,7 @@
 refused before any job starts with the line that is wrong; the same fields and metrics from 2 ranks as from one
 process; a job with a malformed sweep reported while the others complete; a rank killed half-way ends the run
 (no hang) and a rerun trains only the jobs without complete outputs (missing, or a field cut short); a job
-whose arguments changed is trained again.
+whose arguments changed is trained again; an interrupted job with a checkpoint resumes from it.
 
 Usage: TestBatch.py TESTING_DATA_DIR BIGUS_EXECUTABLE MPIEXEC OUTPUT_DIR
 """
@@ -181,6 +181,36 @@ def rank_killed_then_rerun():
           f"changed arguments: exit {result.returncode}, kept {summary['kept']} done {summary['done']}")
 
 
+def interrupted_job_resumes_from_its_checkpoint():
+    """A job whose outputs are not complete but whose checkpoint is there goes on from it: the first run's checkpoint
+    (written every 20 steps) is kept, its job.json removed as a kill would leave it, and the rerun resumes at the
+    checkpoint's step; a checkpoint written with other options is refused, naming them, and the job trained afresh."""
+    folder = os.path.join(OUT, "resume")
+    shutil.rmtree(folder, ignore_errors=True)
+    job = {"sweep": SWEEP, "output": "runs/job", "holdout-every": 4, "holdout-offset": 2, "no-pixel-grid-fit": True,
+           "iterations": 60, "checkpoint": "state.ckpt", "checkpoint-interval": 20}
+    manifest = write_manifest(folder, [job], DEFAULTS)
+    result = batch(manifest)
+    check(result.returncode == 0, f"first run: exit {result.returncode}: {result.stderr}")
+    run = os.path.join(folder, "runs", "job")
+    check(os.path.exists(os.path.join(run, "state.ckpt")), "no checkpoint written")
+    os.remove(os.path.join(run, "job.json"))
+    result = batch(manifest)
+    with open(os.path.join(run, "log.txt")) as f:
+        log = f.read()
+    check(result.returncode == 0 and read_summary(folder)["done"] == 1, f"rerun: exit {result.returncode}")
+    check("resuming from the checkpoint" in log and "after 60 iterations" in log,
+          f"the rerun did not resume: {log[-800:]}")
+    os.remove(os.path.join(run, "job.json"))
+    job["elevation-sigma"] = 0.9
+    write_manifest(folder, [job], DEFAULTS)
+    result = batch(manifest)
+    with open(os.path.join(run, "log.txt")) as f:
+        log = f.read()
+    check(result.returncode == 0 and read_summary(folder)["done"] == 1 and "ElevationSigma" in log and
+          "could not be resumed" in log, f"a checkpoint of other options: exit {result.returncode}, log {log[-600:]}")
+
+
 def read_summary(folder):
     with open(os.path.join(folder, "summary.json")) as f:
         return json.load(f)
@@ -189,4 +219,5 @@ def read_summary(folder):
 bad_manifests()
 same_jobs_on_one_process_and_two_ranks()
 rank_killed_then_rerun()
+interrupted_job_resumes_from_its_checkpoint()
 finish()
