@@ -58,6 +58,15 @@ struct Computed
   bool Any() const { return this->Spacing[0] || this->Spacing[1] || this->Spacing[2] || this->Origin || this->Extent; }
 };
 
+/// The voxel index @p index held within int (NaN as the largest): a grid too large to render is refused by RequestData
+/// with the memory it needs, a bad spacing with its own error.
+int HeldIndex(double index)
+{
+  const double largest = VTK_INT_MAX - 1;
+  return index >= -largest && index <= largest ? static_cast<int>(index)
+                                               : (index < 0 ? -VTK_INT_MAX + 1 : VTK_INT_MAX - 1);
+}
+
 /// @p axes (null: identity) as a matrix, and its inverse.
 void AxesAndInverse(vtkMatrix4x4* axes, vtkMatrix4x4* matrix, vtkMatrix4x4* inverse)
 {
@@ -114,8 +123,7 @@ void FieldDefaults(Grid& g, const Computed& computed, const bigus::FieldCache& f
     if (computed.Extent)
     {
       g.Extent[2 * k] = 0;
-      const double last = std::ceil((hi[k] - g.Origin[k]) / g.Spacing[k]);
-      g.Extent[2 * k + 1] = last < VTK_INT_MAX - 1 ? static_cast<int>(last) : VTK_INT_MAX - 1;
+      g.Extent[2 * k + 1] = HeldIndex(std::ceil((hi[k] - g.Origin[k]) / g.Spacing[k]));
     }
   }
 }
@@ -172,9 +180,8 @@ void ImageDefaults(
     if (computed.Extent)
     {
       d = autoCrop ? hi[i] - lo[i] : d;
-      g.Extent[2 * i] = static_cast<int>(std::floor(e + 0.5));
-      const double last = g.Extent[2 * i] + std::fabs(d / g.Spacing[i]);
-      g.Extent[2 * i + 1] = last < VTK_INT_MAX - 1 ? static_cast<int>(std::floor(last + 0.5)) : VTK_INT_MAX - 1;
+      g.Extent[2 * i] = HeldIndex(std::floor(e + 0.5));
+      g.Extent[2 * i + 1] = HeldIndex(std::floor(g.Extent[2 * i] + std::fabs(d / g.Spacing[i]) + 0.5));
     }
     if (computed.Origin)
     {
