@@ -449,7 +449,10 @@ std::uint64_t TrainingDataDigest(const TrainingData& data)
       word(w);
     }
     std::uint64_t last = 0;
-    std::memcpy(&last, b + k, size - k);
+    if (size > k) // (an empty array's data() may be null, which memcpy must not be given)
+    {
+      std::memcpy(&last, b + k, size - k);
+    }
     word(last);
   };
   word(std::uint64_t(data.Width));
