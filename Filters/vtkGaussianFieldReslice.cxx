@@ -101,6 +101,18 @@ void BoxInFrame(const double world[6], vtkMatrix4x4* inverse, double lo[3], doub
   }
 }
 
+/// The box that holds the field's footprint, as x0 x1 y0 y1 z0 z1 (mm): the means' bounds padded by three times the
+/// largest scale. The field's default grid covers it; BackgroundColor fills the samples outside it.
+void PaddedFieldBox(const bigus::FieldCache& field, double box[6])
+{
+  const double* bounds = field.GetBounds();
+  const double pad = 3 * field.GetLargestScale();
+  for (int k = 0; k < 6; ++k)
+  {
+    box[k] = bounds[k] + (k % 2 ? pad : -pad);
+  }
+}
+
 /**
  * The field's defaults for the computed parts of @p g: spacing = PixelSpacing or 0.5 mm; origin and extent = the
  * means' bounds padded by three times the largest scale, in the reslice frame of @p axes (null = identity).
@@ -108,10 +120,8 @@ void BoxInFrame(const double world[6], vtkMatrix4x4* inverse, double lo[3], doub
 void FieldDefaults(Grid& g, const Computed& computed, const bigus::FieldCache& field, vtkMatrix4x4* axes)
 {
   const double step = field.GetModel().PixelSpacing > 0 ? field.GetModel().PixelSpacing : 0.5;
-  const double* bounds = field.GetBounds();
-  const double pad = 3 * field.GetLargestScale();
-  const double world[6] = { bounds[0] - pad, bounds[1] + pad, bounds[2] - pad, bounds[3] + pad, bounds[4] - pad,
-    bounds[5] + pad };
+  double world[6];
+  PaddedFieldBox(field, world);
   vtkNew<vtkMatrix4x4> matrix, inverse;
   AxesAndInverse(axes, matrix, inverse);
   double lo[3], hi[3];
@@ -237,12 +247,11 @@ void CombineSlab(int mode, bool first, double w, const float* in, float* out, st
   }
 }
 
-/// @p level into the samples of @p slice ([H, W] in @p I) that lie outside the field's bounds padded by three times
-/// its largest scale (the box of its default grid).
+/// @p level into the samples of @p slice ([H, W] in @p I) that lie outside the field's PaddedFieldBox.
 void FillBackground(const bigus::FieldCache& field, const bigus::SliceGeometry& slice, double level, float* I)
 {
-  const double* b = field.GetBounds();
-  const double pad = 3 * field.GetLargestScale();
+  double b[6];
+  PaddedFieldBox(field, b);
   const double* m = slice.ImageToReference; // row-major: pixel (i, j) -> m (i, j, 0, 1)
   for (int j = 0; j < slice.Height; ++j)
   {
@@ -252,7 +261,7 @@ void FillBackground(const bigus::FieldCache& field, const bigus::SliceGeometry& 
       for (int r = 0; r < 3; ++r)
       {
         const double x = m[4 * r] * i + m[4 * r + 1] * j + m[4 * r + 3];
-        inside = inside && x >= b[2 * r] - pad && x <= b[2 * r + 1] + pad;
+        inside = inside && x >= b[2 * r] && x <= b[2 * r + 1];
       }
       if (!inside)
       {
