@@ -629,9 +629,11 @@ Command AddTrainCommand(CLI::App& app)
     ->check(FinitePositive());
   trainCommand->add_flag_callback(
     "--no-held-out-choices", [&settings] { settings.HeldOut.Enabled = false; },
-    "Take ElevationSigma's rule untested (default: where the fit is the pixel grid's solve, the rule's value times "
-    "1/8, 1/4, 1/2, 1 and 2 are each fitted without every second training frame and scored on those; the narrowest "
-    "within 0.05 dB of the best held-out PSNR is taken)");
+    "Take the rules' values untested (default: where the fit is the pixel grid's solve, candidates are each fitted "
+    "without every second training frame and scored on those: ElevationSigma by rule times 1/8, 1/4, 1/2, 1 and 2 "
+    "(the narrowest within 0.05 dB of the best held-out PSNR is taken), then the solve's ridge times 1, 10 and 100 "
+    "(the default's unless another is more than 0.05 dB better); the final prune and the merge are then kept only "
+    "where they cost at most 0.05 dB on those frames)");
   trainCommand->add_flag("--held-out-validation", settings.HeldOut.HoldOutValidationFrames,
     "Validate on frames held out of the fit until the densification window closes (one in 8 training frames of a "
     "sweep, 4 to 8 of them), then joined to it: growth stops and early stopping keeps a field on frames the fit has "

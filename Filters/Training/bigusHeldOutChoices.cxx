@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <cstdlib>
+#include <functional>
 #include <limits>
 #include <map>
 #include <memory>
@@ -103,7 +104,7 @@ std::string HeldOutChoice::Describe(const char* unit) const
   for (std::size_t k = 0; k < this->Candidates.size(); ++k)
   {
     const HeldOutCandidate& c = this->Candidates[k];
-    text += vtkfmt::sprintf("%s %.3g %s %.2f dB", k == 0 ? "" : ",", c.Value, unit, c.PSNR);
+    text += vtkfmt::sprintf("%s %.3g%s%s %.2f dB", k == 0 ? "" : ",", c.Value, *unit ? " " : "", unit, c.PSNR);
     seconds += c.Seconds;
   }
   return text + vtkfmt::sprintf(" (%.1f s)", seconds);
@@ -126,27 +127,10 @@ void HeldOutChoice::RewriteSettingLine(std::vector<std::string>& lines, const ch
       continue;
     }
     const double rule = std::atof(ruleLine.c_str() + prefix.size());
-    ruleLine =
-      vtkfmt::sprintf("%s = %.4g %s (%s; the rule's value %.4g %s, %s)", name, this->Candidates[this->Chosen].Value,
-        unit, this->Describe(unit).c_str(), rule, unit, ruleLine.substr(open + 1, close - open - 1).c_str());
+    ruleLine = vtkfmt::sprintf("%s = %.4g%s%s (%s; the rule's value %.4g%s%s, %s)", name,
+      this->Candidates[this->Chosen].Value, *unit ? " " : "", unit, this->Describe(unit).c_str(), rule,
+      *unit ? " " : "", unit, ruleLine.substr(open + 1, close - open - 1).c_str());
   }
-}
-
-bool ElevationSigmaOnHeldOutFrames(const TrainingData& data, const TrainerSettings& settings, bool pixelGrid,
-  double ruleSigma, HeldOutChoice& choice, std::string* error)
-{
-  choice = HeldOutChoice();
-  if (!settings.HeldOut.Enabled)
-  {
-    choice.Untested = "the held-out choices are off";
-    return true;
-  }
-  if (!pixelGrid)
-  {
-    choice.Untested = "a candidate's fit on this route is an Adam run, which the budget does not repeat per candidate";
-    return true;
-  }
-  return ChooseElevationSigmaOnHeldOutFrames(data, settings, ruleSigma, choice, error);
 }
 
 bool FitWithoutHeldOutFrames(const TrainingData& data, const std::vector<int>& heldOut, const TrainerSettings& settings,
@@ -161,59 +145,241 @@ bool FitWithoutHeldOutFrames(const TrainingData& data, const std::vector<int>& h
   return true;
 }
 
-bool ChooseElevationSigmaOnHeldOutFrames(const TrainingData& data, const TrainerSettings& settings, double ruleSigma,
-  HeldOutChoice& choice, std::string* error)
+namespace
 {
-  choice = HeldOutChoice();
-  choice.Stride = std::max(2, settings.HeldOut.Stride);
-  // Every candidate is fitted without any held-out frame and scored on up to MaximumFrames of them.
-  const std::vector<int> heldOut = HeldOutFrames(data, settings.HeldOut.Stride, 0);
-  choice.Frames = HeldOutFrames(data, settings.HeldOut.Stride, settings.HeldOut.MaximumFrames);
-  if (choice.Frames.size() < 2)
-  {
-    choice.Untested =
-      vtkfmt::sprintf("%zu training frames leave fewer than 2 to hold out between them", data.TrainFrames.size());
-    return true;
-  }
-  for (double factor : settings.HeldOut.ElevationSigmaFactors)
-  {
-    const double start = SteadySeconds();
-    HeldOutCandidate c;
-    c.Value = ruleSigma * factor;
-    TrainerSettings s = settings;
-    s.ElevationSigma = c.Value;
-    const std::unique_ptr<Trainer> trainer = FitCandidate(data, heldOut, s, error);
-    ImageMetrics metrics;
-    if (!trainer || !trainer->EvaluateOn(data, choice.Frames, metrics, error))
-    {
-      if (error)
-      {
-        *error = vtkfmt::sprintf("ElevationSigma candidate %.4g mm: ", c.Value) + *error;
-      }
-      return false;
-    }
-    c.PSNR = metrics.PSNR;
-    c.Count = trainer->GetField().Count();
-    c.Seconds = SteadySeconds() - start;
-    choice.Candidates.push_back(c);
-  }
-  // The narrowest beam within Tolerance of the best score: the held-out frames lie twice as far from the fitted
-  // ones as the final field's in-between views from its frames, which favours a wider beam.
+/// The index of the first candidate of @p candidates within @p tolerance dB of the best; -1 when there is none.
+int FirstWithinTolerance(const std::vector<HeldOutCandidate>& candidates, double tolerance)
+{
   double best = -std::numeric_limits<double>::infinity();
-  for (const HeldOutCandidate& c : choice.Candidates)
+  for (const HeldOutCandidate& c : candidates)
   {
     best = std::max(best, c.PSNR);
   }
-  for (std::size_t k = 0; k < choice.Candidates.size(); ++k)
+  for (std::size_t k = 0; k < candidates.size(); ++k)
   {
-    const HeldOutCandidate& c = choice.Candidates[k];
-    if (c.PSNR >= best - settings.HeldOut.Tolerance &&
-      (choice.Chosen < 0 || c.Value < choice.Candidates[choice.Chosen].Value))
+    if (candidates[k].PSNR >= best - tolerance)
     {
-      choice.Chosen = static_cast<int>(k);
+      return static_cast<int>(k);
     }
   }
-  return true;
+  return -1;
+}
+
+/// What the candidates of one choice share: the data, the frames held out of their fits and those scored.
+struct CandidateFits
+{
+  const TrainingData& Data;
+  std::vector<int> HeldOut; ///< every frame left out of the fits
+  std::vector<int> Scored;  ///< the held-out frames rendered and scored
+  double Tolerance = 0;
+  /// The fit of the candidate chosen so far, kept for the next choice and the reduction.
+  std::unique_ptr<Trainer> Kept;
+
+  /**
+   * Fits and scores a candidate of @p settings for each of @p values (@p apply sets one into the settings), after
+   * @p choice's candidates already there, keeping the fit of the one chosen so far (the first within the tolerance
+   * of the best); the one chosen at the end is refitted when an earlier best displaced it.
+   */
+  bool Measure(const TrainerSettings& settings, const std::vector<double>& values,
+    const std::function<void(TrainerSettings&, double)>& apply, const char* name, HeldOutChoice& choice,
+    std::string* error)
+  {
+    for (double value : values)
+    {
+      const double start = SteadySeconds();
+      TrainerSettings s = settings;
+      apply(s, value);
+      std::unique_ptr<Trainer> fit = FitCandidate(this->Data, this->HeldOut, s, error);
+      HeldOutCandidate c;
+      c.Value = value;
+      ImageMetrics metrics;
+      if (!fit || !fit->EvaluateOn(this->Data, this->Scored, metrics, error))
+      {
+        if (error)
+        {
+          *error = vtkfmt::sprintf("%s candidate %.4g: ", name, value) + *error;
+        }
+        return false;
+      }
+      c.PSNR = metrics.PSNR;
+      c.Count = fit->GetField().Count();
+      c.Seconds = SteadySeconds() - start;
+      const int before = choice.Chosen;
+      choice.Candidates.push_back(c);
+      choice.Chosen = FirstWithinTolerance(choice.Candidates, this->Tolerance);
+      if (choice.Chosen == static_cast<int>(choice.Candidates.size()) - 1)
+      {
+        this->Kept = std::move(fit);
+      }
+      else if (choice.Chosen != before)
+      {
+        this->Kept.reset(); // an earlier candidate, whose fit was not kept, is chosen now
+      }
+    }
+    if (!this->Kept)
+    {
+      TrainerSettings s = settings;
+      apply(s, choice.Candidates[choice.Chosen].Value);
+      this->Kept = FitCandidate(this->Data, this->HeldOut, s, error);
+    }
+    return this->Kept != nullptr;
+  }
+
+  /// The final prune, then the merge, of the kept fit (its PSNR @p wholePSNR), scored on the held-out frames.
+  bool MeasureReduction(const TrainerSettings& settings, double wholePSNR, HeldOutReduction& r, std::string* error)
+  {
+    const double start = SteadySeconds();
+    Trainer& fit = *this->Kept;
+    const GaussianField whole = fit.GetField();
+    auto score = [&](const GaussianField& field, double& psnr) {
+      ImageMetrics metrics;
+      if (!fit.SetField(field, error) || !fit.EvaluateOn(this->Data, this->Scored, metrics, error))
+      {
+        return false;
+      }
+      psnr = metrics.PSNR;
+      return true;
+    };
+    r.Frames = static_cast<int>(this->Scored.size());
+    r.WholePSNR = wholePSNR;
+    r.Whole = whole.Count();
+    OptimizerState G;
+    G.Field = whole;
+    G.ResizeToField();
+    FinalPrune(G, fit.GetData(), fit.Options(), fit.GetGamma(), settings.FinalPruneTolerance);
+    r.Pruned = G.Field.Count();
+    if (!score(G.Field, r.PrunedPSNR))
+    {
+      return false;
+    }
+    r.KeepPrune = r.PrunedPSNR >= r.WholePSNR - this->Tolerance;
+    if (!r.KeepPrune)
+    {
+      G.Field = whole;
+      G.ResizeToField();
+    }
+    r.MergeMeasured = settings.Merge.Tolerance > 0;
+    if (r.MergeMeasured)
+    {
+      MergeGaussians(G, settings.Merge);
+      r.Merged = G.Field.Count();
+      if (!score(G.Field, r.MergedPSNR))
+      {
+        return false;
+      }
+      r.KeepMerge = r.MergedPSNR >= (r.KeepPrune ? r.PrunedPSNR : r.WholePSNR) - this->Tolerance;
+    }
+    r.Seconds = SteadySeconds() - start;
+    return true;
+  }
+};
+}
+
+void HeldOutReduction::RewriteSettingLines(std::vector<std::string>& lines) const
+{
+  for (std::string& line : lines)
+  {
+    const bool prune = line.rfind("FinalPrune = ", 0) == 0;
+    const bool merge = line.rfind("Merge = ", 0) == 0 && (!this->Untested.empty() || this->MergeMeasured);
+    if (!prune && !merge)
+    {
+      continue;
+    }
+    if (!this->Untested.empty())
+    {
+      line += "; untested on held-out frames: " + this->Untested;
+      continue;
+    }
+    const bool keep = prune ? this->KeepPrune : this->KeepMerge;
+    const double before = prune || !this->KeepPrune ? this->WholePSNR : this->PrunedPSNR;
+    const double after = prune ? this->PrunedPSNR : this->MergedPSNR;
+    const std::int64_t from = prune || !this->KeepPrune ? this->Whole : this->Pruned;
+    const std::int64_t to = prune ? this->Pruned : this->Merged;
+    if (!keep)
+    {
+      line = line.substr(0, line.find(" = ")) + " = off (was: " + line.substr(line.find(" = ") + 3) + ")";
+    }
+    line += vtkfmt::sprintf("; %s on %d held-out frames, the chosen candidate's fit: %.2f dB with %lld Gaussians, "
+                            "%.2f dB with %lld after it (%.1f s)",
+      keep ? "kept" : "dropped", this->Frames, before, static_cast<long long>(from), after, static_cast<long long>(to),
+      this->Seconds);
+  }
+}
+
+bool ChooseOnHeldOutFrames(const TrainingData& data, const TrainerSettings& settings, bool pixelGrid, bool sigmaByRule,
+  HeldOutChoices& choices, std::string* error)
+{
+  choices = HeldOutChoices();
+  const HeldOutChoiceSettings& h = settings.HeldOut;
+  CandidateFits fits{ data, HeldOutFrames(data, h.Stride, 0), HeldOutFrames(data, h.Stride, h.MaximumFrames),
+    h.Tolerance, nullptr };
+  std::string untested = !h.Enabled ? "the held-out choices are off"
+    : !pixelGrid ? "a candidate's fit on this route is an Adam run, which the budget does not repeat per candidate"
+    : fits.Scored.size() < 2
+    ? vtkfmt::sprintf("%zu training frames leave fewer than 2 to hold out between them", data.TrainFrames.size())
+    : std::string();
+  for (HeldOutChoice* choice : { &choices.ElevationSigma, &choices.Ridge })
+  {
+    choice->Stride = std::max(2, h.Stride);
+    choice->Frames = fits.Scored;
+    choice->Untested = untested;
+  }
+  choices.Reduction.Untested = h.Enabled && !pixelGrid
+    ? "on this route no frame is held out at the end (the validation frames join the fit)"
+    : !untested.empty()  ? untested
+    : h.MeasureReduction ? std::string()
+                         : "its measurement is off (MeasureReduction)";
+  if (!untested.empty())
+  {
+    return true;
+  }
+  std::vector<double> sigmas{ settings.ElevationSigma };
+  if (sigmaByRule)
+  {
+    sigmas.clear();
+    for (double factor : h.ElevationSigmaFactors)
+    {
+      sigmas.push_back(settings.ElevationSigma * factor);
+    }
+  }
+  HeldOutChoice& sigma = choices.ElevationSigma;
+  if (!fits.Measure(
+        settings, sigmas, [](TrainerSettings& s, double v) { s.ElevationSigma = v; }, "ElevationSigma", sigma, error))
+  {
+    return false;
+  }
+  TrainerSettings chosen = settings;
+  chosen.ElevationSigma = sigma.Candidates[sigma.Chosen].Value;
+  // The ridge's first candidate, the rule's ridge at the chosen sigma, is that sigma's fit, already scored (and kept).
+  HeldOutChoice& ridge = choices.Ridge;
+  HeldOutCandidate fitted = sigma.Candidates[sigma.Chosen];
+  if (!sigmaByRule)
+  {
+    sigma = HeldOutChoice(); // given: measured only as the ridge's first candidate
+    sigma.Untested = "given";
+  }
+  std::vector<double> ridges;
+  for (double factor : h.RidgeFactors)
+  {
+    ridges.push_back(settings.Solve.Ridge * factor);
+  }
+  if (!ridges.empty() && h.RidgeFactors.front() == 1.0)
+  {
+    fitted.Value = ridges.front();
+    fitted.Seconds = sigmaByRule ? 0.0 : fitted.Seconds; // counted in ElevationSigma's where that was measured
+    ridge.Candidates.push_back(fitted);
+    ridge.Chosen = 0;
+    ridges.erase(ridges.begin());
+  }
+  if (!fits.Measure(
+        chosen, ridges, [](TrainerSettings& s, double v) { s.Solve.Ridge = v; }, "Ridge", ridge, error))
+  {
+    return false;
+  }
+  chosen.Solve.Ridge = ridge.Candidates[ridge.Chosen].Value;
+  return choices.Reduction.Untested.empty()
+    ? fits.MeasureReduction(chosen, ridge.Candidates[ridge.Chosen].PSNR, choices.Reduction, error)
+    : true;
 }
 
 } // namespace bigus

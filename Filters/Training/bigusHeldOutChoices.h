@@ -5,10 +5,11 @@
  *        along each sweep, and scoring the candidates' fits on the frames they did not see; the final fit then uses
  *        every training frame with the candidate chosen.
  *
- * Today one choice is measured this way: ElevationSigma on the pixel-grid route (bigusSeeding.h, PlanSeeding), where
- * a candidate's whole fit is one reflectivity solve (a second or two with the assembled basis, AssembledBasis). The
- * rule of bigusElevationSigma.h gives the centre of the candidates. Where a candidate's fit would be a whole Adam
- * run (the Harris route), the rule's value is taken untested and its setting line says so.
+ * Measured this way on the pixel-grid route (bigusSeeding.h, PlanSeeding), where a candidate's whole fit is one
+ * reflectivity solve (a second or two with the assembled basis, AssembledBasis): ElevationSigma (the rule of
+ * bigusElevationSigma.h gives the centre of the candidates), the solve's ridge, and whether the final prune and the
+ * merge are kept. Where a candidate's fit would be a whole Adam run (the Harris route), the rules' values are taken
+ * untested and the setting lines say so.
  *
  * Part of BIGUS::Training (public, not wrapped for Python).
  */
@@ -43,6 +44,12 @@ struct HeldOutChoiceSettings
   double Tolerance = 0.05;
   /// ElevationSigma's candidates: the rule's value times these (small ones included: a volume has no beam).
   std::vector<double> ElevationSigmaFactors = { 0.125, 0.25, 0.5, 1.0, 2.0 };
+  /// The reflectivity solve's ridge candidates: ReflectivitySolveSettings::Ridge times these (the first, the
+  /// default's own, is kept unless another scores more than Tolerance higher).
+  std::vector<double> RidgeFactors = { 1.0, 10.0, 100.0 };
+  /// Measure the final prune and the merge on held-out frames (HeldOutReduction) and keep each only where it costs
+  /// at most Tolerance.
+  bool MeasureReduction = true;
   /// The Adam route's validation frames held out of the fit (true), or training frames (false; ValidationFrames);
   /// a switch of its own, whatever Enabled says.
   /// Off by default: on the liver's main job the frames out of the fit cost more than the honest decisions gave
@@ -105,23 +112,53 @@ struct HeldOutChoice
 BIGUSTRAINING_EXPORT bool FitWithoutHeldOutFrames(const TrainingData& data, const std::vector<int>& heldOut,
   const TrainerSettings& settings, GaussianField& field, std::string* error);
 
-/**
- * The ElevationSigma choice of a run whose rule gave @p ruleSigma: ChooseElevationSigmaOnHeldOutFrames where
- * settings.HeldOut is on and the route is the pixel grid's (@p pixelGrid); otherwise @p choice says why it is
- * untested. False with @p error when a candidate's fit fails.
- */
-BIGUSTRAINING_EXPORT bool ElevationSigmaOnHeldOutFrames(const TrainingData& data, const TrainerSettings& settings,
-  bool pixelGrid, double ruleSigma, HeldOutChoice& choice, std::string* error);
+/// The end-of-run reduction measured on held-out frames: the final prune, then the merge, applied to the chosen
+/// candidate's fit as Trainer::Finish applies them, each kept only where it costs at most the tolerance there.
+struct HeldOutReduction
+{
+  std::string Untested;       ///< why it was not measured (empty: measured)
+  std::int64_t Whole = 0;     ///< Gaussians of the chosen candidate's fit
+  std::int64_t Pruned = 0;    ///< after the final prune (FinalPruneTolerance)
+  std::int64_t Merged = 0;    ///< after the merge too (Merge), on what the prune left where it is kept
+  double WholePSNR = 0;       ///< dB, mean masked PSNR of the held-out frames
+  double PrunedPSNR = 0;      ///< dB
+  double MergedPSNR = 0;      ///< dB
+  bool KeepPrune = true;      ///< the prune cost at most HeldOutChoiceSettings::Tolerance
+  bool KeepMerge = true;      ///< the merge cost at most that on top of what was kept
+  bool MergeMeasured = false; ///< the merge is on (Merge.Tolerance > 0) and was measured
+  double Seconds = 0;         ///< the prune, the merge and their scoring
+  int Frames = 0;             ///< held-out frames scored
+  /**
+   * Appends the measurement to the `FinalPrune = ` and `Merge = ` lines of @p lines (each turned to "off" where
+   * it was not kept), or why it is untested.
+   */
+  void RewriteSettingLines(std::vector<std::string>& lines) const;
+};
+
+/// The choices measured on held-out frames before the final fit (ChooseOnHeldOutFrames).
+struct HeldOutChoices
+{
+  HeldOutChoice ElevationSigma; ///< mm; Chosen -1: untested (or given: no candidates)
+  HeldOutChoice Ridge;          ///< ReflectivitySolveSettings::Ridge, a share of the mean basis norm
+  HeldOutReduction Reduction;   ///< the final prune and the merge
+};
 
 /**
- * ElevationSigma measured on held-out frames: each candidate (@p ruleSigma times settings.HeldOut's factors) fitted
- * by FitWithoutHeldOutFrames without every HeldOutFrames(stride) frame and scored by the mean masked PSNR of up to
- * MaximumFrames of them rendered from its field; the
- * narrowest candidate within HeldOut.Tolerance dB of the best wins. With fewer than 2 held-out frames nothing is
- * measured (choice.Untested says why). False with @p error when a fit fails.
+ * The choices a pixel-grid run (@p pixelGrid) makes on held-out frames (HeldOutFrames(settings.HeldOut.Stride)):
+ * each candidate is fitted by a Trainer's Initialize on the other training frames (FitWithoutHeldOutFrames) and
+ * scored by the mean masked PSNR of up to MaximumFrames held-out frames; of the candidates within
+ * HeldOut.Tolerance dB of the best, the first in its list is taken. In turn:
+ * - ElevationSigma, where the rule gave it (@p sigmaByRule): settings.ElevationSigma times
+ *   HeldOut.ElevationSigmaFactors (ascending: the narrowest beam within the tolerance);
+ * - the solve's ridge: Solve.Ridge times HeldOut.RidgeFactors (the rule's first), at the sigma chosen;
+ * - the reduction (HeldOutReduction): the final prune and then the merge of the chosen fit, each kept where it
+ *   costs at most HeldOut.Tolerance.
+ * Where the held-out choices are off, the route is Harris seeds and Adam (a candidate's fit would be a whole Adam
+ * run) or fewer than 2 frames can be held out, nothing is measured and each Untested says why. False with
+ * @p error when a candidate's fit fails.
  */
-BIGUSTRAINING_EXPORT bool ChooseElevationSigmaOnHeldOutFrames(const TrainingData& data, const TrainerSettings& settings,
-  double ruleSigma, HeldOutChoice& choice, std::string* error);
+BIGUSTRAINING_EXPORT bool ChooseOnHeldOutFrames(const TrainingData& data, const TrainerSettings& settings,
+  bool pixelGrid, bool sigmaByRule, HeldOutChoices& choices, std::string* error);
 
 } // namespace bigus
 

@@ -118,7 +118,7 @@ bool Trainer::PrepareInitialField(std::string* error)
   {
     return false;
   }
-  if (this->SigmaByRule && !this->MeasureElevationSigma(count, plan, error))
+  if (!this->MeasureOnHeldOutFrames(count, plan, error))
   {
     return false;
   }
@@ -266,25 +266,45 @@ SeedShape Trainer::SeedShapeOf() const
   return bigus::SeedShapeOf(this->Settings, this->PixelSpacing, this->Gamma);
 }
 
-bool Trainer::MeasureElevationSigma(std::int64_t fanPixels, SeedingPlan& plan, std::string* error)
+bool Trainer::MeasureOnHeldOutFrames(std::int64_t fanPixels, SeedingPlan& plan, std::string* error)
 {
-  const double rule = this->Settings.ElevationSigma;
-  HeldOutChoice& choice = this->Report.ElevationSigmaChoice;
-  if (!ElevationSigmaOnHeldOutFrames(*this->Data, this->Settings, plan.PixelGrid, rule, choice, error))
+  HeldOutChoices& choices = this->Report.HeldOut;
+  if (!ChooseOnHeldOutFrames(*this->Data, this->Settings, plan.PixelGrid, this->SigmaByRule, choices, error))
   {
     return false;
   }
-  const double sigma = choice.Chosen < 0 ? rule : choice.Candidates[choice.Chosen].Value;
-  choice.RewriteSettingLine(this->Report.Settings, "ElevationSigma", "mm");
+  TrainerSettings& s = this->Settings;
+  std::vector<std::string>& lines = this->Report.Settings;
+  if (plan.PixelGrid)
+  {
+    lines.push_back(
+      vtkfmt::sprintf("Ridge = %.4g (the solve's: lambda as a share of the mean diag(A^T G A))", s.Solve.Ridge));
+    choices.Ridge.RewriteSettingLine(lines, "Ridge", "");
+  }
+  choices.Reduction.RewriteSettingLines(lines);
+  if (choices.Ridge.Chosen >= 0)
+  {
+    s.Solve.Ridge = choices.Ridge.Candidates[choices.Ridge.Chosen].Value;
+  }
+  s.FinalPruneTolerance = choices.Reduction.KeepPrune ? s.FinalPruneTolerance : 0.0;
+  s.Merge.Tolerance = choices.Reduction.KeepMerge ? s.Merge.Tolerance : 0.0;
+  if (!this->SigmaByRule)
+  {
+    return true;
+  }
+  const double rule = s.ElevationSigma;
+  const double sigma =
+    choices.ElevationSigma.Chosen < 0 ? rule : choices.ElevationSigma.Candidates[choices.ElevationSigma.Chosen].Value;
+  choices.ElevationSigma.RewriteSettingLine(lines, "ElevationSigma", "mm");
   if (sigma == rule)
   {
     return true;
   }
   // The seeding plan of the chosen sigma (the grid's elevation scale follows it).
-  this->Settings.ElevationSigma = sigma;
+  s.ElevationSigma = sigma;
   this->Report.ElevationSigma = sigma;
-  return PlanSeeding(*this->Data, this->Settings.Seeding, this->Settings.MaximumGaussians,
-    this->Settings.NonNegativeReflectivity, this->SeedShapeOf(), fanPixels, plan, error);
+  return PlanSeeding(
+    *this->Data, s.Seeding, s.MaximumGaussians, s.NonNegativeReflectivity, this->SeedShapeOf(), fanPixels, plan, error);
 }
 
 double Trainer::TrainingSeconds() const

@@ -53,9 +53,9 @@ struct TrainerReport
   ReflectivitySolveReport LastL1Solve;
   std::int64_t LastL1Removed = 0;
   double Gamma = 0;
-  double LastLoss = 0;                ///< mean loss of the last 50 steps
-  double ElevationSigma = 0;          ///< mm, the sigma trained with (given or chosen)
-  HeldOutChoice ElevationSigmaChoice; ///< how ElevationSigma was measured on held-out frames (Chosen -1: it was not)
+  double LastLoss = 0;       ///< mean loss of the last 50 steps
+  double ElevationSigma = 0; ///< mm, the sigma trained with (given or chosen)
+  HeldOutChoices HeldOut;    ///< the choices measured on held-out frames (ChooseOnHeldOutFrames)
   /// Early stopping: the iteration whose field Finish kept (the best on the validation frames; a field
   /// measured just before a densification carries that densification's iteration), the validation
   /// loss there and that of the last field (equal when the last was kept).
@@ -216,10 +216,11 @@ private:
   SeedShape SeedShapeOf() const;
   /// Initialize's part on this process alone: the data's checks, gamma, the memory check and the seeded field.
   bool PrepareInitialField(std::string* error);
-  /// With ElevationSigma by rule: on the pixel-grid route the measured choice (ChooseElevationSigmaOnHeldOutFrames)
-  /// and @p plan made again for the chosen sigma (@p fanPixels: the training frames'); elsewhere why it is untested;
-  /// the setting line either way.
-  bool MeasureElevationSigma(std::int64_t fanPixels, SeedingPlan& plan, std::string* error);
+  /// The choices measured on held-out frames (ChooseOnHeldOutFrames: on the pixel-grid route ElevationSigma where
+  /// the rule gave it, the ridge, the final prune and the merge; elsewhere why they are untested), taken into the
+  /// settings, @p plan made again for a sigma chosen (@p fanPixels: the training frames'), the setting lines
+  /// rewritten.
+  bool MeasureOnHeldOutFrames(std::int64_t fanPixels, SeedingPlan& plan, std::string* error);
   /// The engine takes the seeded field; its reflectivities are then solved (ReflectivitySolve) or scaled.
   bool FitInitialReflectivities(std::string* error);
   /// LoadCheckpoint's part on this process alone.
@@ -296,7 +297,7 @@ private:
   bool DensificationEnded = false;    // the last Train call ended past the densification window
   bool PixelGrid = false;             // the field is the pixel-grid fit (PixelGridFit): Train takes no step
   std::vector<int> HeldOutValidation; // validation frames out of the fit until JoinValidationFrames; empty after
-  bool SigmaByRule = false;           // ElevationSigma came from the rule (MeasureElevationSigma may measure it)
+  bool SigmaByRule = false;           // ElevationSigma came from the rule (MeasureOnHeldOutFrames may measure it)
   PoseRefiner Poses;
   bool InPoseTrial = false; // TryPoseRefinement is running its branches: no checkpoint, no join
   std::vector<float> S;     // scratch for RenderFrame

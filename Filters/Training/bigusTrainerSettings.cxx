@@ -77,6 +77,11 @@ std::vector<std::string> DescribeTrainerSettings(const TrainerSettings& s)
       (s.Iterations > 0 ? "whichever ends first; " : "") + "the schedule follows the one further along)";
   }
   return { schedule, DescribeDensification(s.Densification, s.MaximumGaussians),
+    s.FinalPruneTolerance > 0
+      ? vtkfmt::sprintf("FinalPrune = on (at the end, the Gaussians whose removal together changes no training "
+                        "pixel by more than %.3g in intensity)",
+          s.FinalPruneTolerance)
+      : std::string("FinalPrune = off"),
     DescribeGapFillingSettings(s.FillGaps, s.BeamIntegration, s.GapFilling), DescribeGaussianMergeSettings(s.Merge),
     DescribeReflectivitySolve(s.ReflectivitySolve, s.NonNegativeReflectivity, s.Solve, s.SolveInterval),
     vtkfmt::sprintf("Seed = %u, FramesPerStep = %d, Cutoff = %.3g, SparseAdam = %s%s", s.Seed, s.FramesPerStep,

@@ -100,7 +100,7 @@ TEST(HeldOutChoices, TheChosenBeamRendersFramesNoChoiceSawAsWellAsTheBestCandida
   std::string error;
   ASSERT_TRUE(trainer.Initialize(&error)) << error;
   const TrainerReport& report = trainer.GetReport();
-  const HeldOutChoice& choice = report.ElevationSigmaChoice;
+  const HeldOutChoice& choice = report.HeldOut.ElevationSigma;
   ASSERT_EQ(choice.Candidates.size(), settings.HeldOut.ElevationSigmaFactors.size());
   ASSERT_GE(choice.Chosen, 0);
   double bestHeldOut = -1e300;
@@ -142,7 +142,7 @@ TEST(HeldOutChoices, TheChosenBeamRendersFramesNoChoiceSawAsWellAsTheBestCandida
   Trainer untested(data, settings);
   ASSERT_TRUE(untested.Initialize(&error)) << error;
   EXPECT_EQ(untested.GetReport().ElevationSigma, rule);
-  EXPECT_EQ(untested.GetReport().ElevationSigmaChoice.Chosen, -1);
+  EXPECT_EQ(untested.GetReport().HeldOut.ElevationSigma.Chosen, -1);
   const std::vector<std::string>& lines = untested.GetReport().Settings;
   const auto ruleLine =
     std::find_if(lines.begin(), lines.end(), [](const std::string& l) { return l.rfind("ElevationSigma = ", 0) == 0; });
@@ -150,4 +150,62 @@ TEST(HeldOutChoices, TheChosenBeamRendersFramesNoChoiceSawAsWellAsTheBestCandida
   EXPECT_NE(ruleLine->find("(chosen: "), std::string::npos) << *ruleLine;
   EXPECT_NE(ruleLine->find("; untested on held-out frames: the held-out choices are off)"), std::string::npos)
     << *ruleLine;
+}
+
+TEST(HeldOutChoices, TheFinalPruneAndTheMergeAreKeptOnlyWhereHeldOutFramesSayTheyCostLittle)
+{
+  // The pixel grid of 24 frames with the beam given: the ridge and the reduction are still measured. With the default
+  // tolerances both reductions are kept where they cost at most 0.05 dB on the held-out frames; a final prune of
+  // 0.3 in intensity removes most of the field, costs far more and is dropped, so the run ends unpruned, while the
+  // same prune taken untested removes Gaussians.
+  const TrainingData data = GridSweep();
+  TrainerSettings settings;
+  settings.ElevationSigma = 0.3;
+  settings.Poses.RefinePoses = PoseRefinement::Off;
+  settings.FinalPruneTolerance = 0.3;
+  std::string error;
+  Trainer trainer(data, settings);
+  ASSERT_TRUE(trainer.Initialize(&error)) << error;
+  const HeldOutChoices& choices = trainer.GetReport().HeldOut;
+  EXPECT_EQ(choices.ElevationSigma.Untested, "given");
+  ASSERT_EQ(choices.Ridge.Candidates.size(), settings.HeldOut.RidgeFactors.size());
+  EXPECT_EQ(choices.Ridge.Candidates[0].Value, settings.Solve.Ridge);
+  ASSERT_GE(choices.Ridge.Chosen, 0);
+  EXPECT_EQ(trainer.GetSettings().Solve.Ridge, choices.Ridge.Candidates[choices.Ridge.Chosen].Value);
+  const HeldOutReduction& r = choices.Reduction;
+  ASSERT_TRUE(r.Untested.empty()) << r.Untested;
+  std::printf("whole %.2f dB (%lld), pruned %.2f dB (%lld), merged %.2f dB (%lld)\n", r.WholePSNR,
+    static_cast<long long>(r.Whole), r.PrunedPSNR, static_cast<long long>(r.Pruned), r.MergedPSNR,
+    static_cast<long long>(r.Merged));
+  EXPECT_LT(r.Pruned, r.Whole / 2) << "a prune of 0.3 in intensity removes most of the grid";
+  EXPECT_LT(r.PrunedPSNR, r.WholePSNR - settings.HeldOut.Tolerance);
+  EXPECT_FALSE(r.KeepPrune);
+  EXPECT_EQ(trainer.GetSettings().FinalPruneTolerance, 0.0);
+  EXPECT_EQ(r.KeepMerge, r.MergedPSNR >= r.WholePSNR - settings.HeldOut.Tolerance);
+  const std::vector<std::string>& lines = trainer.GetReport().Settings;
+  const auto prune =
+    std::find_if(lines.begin(), lines.end(), [](const std::string& l) { return l.rfind("FinalPrune = ", 0) == 0; });
+  ASSERT_NE(prune, lines.end());
+  std::printf("%s\n", prune->c_str());
+  EXPECT_EQ(prune->rfind("FinalPrune = off (was: on", 0), 0u) << *prune;
+  EXPECT_NE(prune->find("dropped on " + std::to_string(r.Frames) + " held-out frames"), std::string::npos) << *prune;
+  ASSERT_TRUE(trainer.Finish(&error)) << error;
+  EXPECT_EQ(trainer.GetReport().PrunedAtEnd, 0);
+
+  settings.HeldOut.MeasureReduction = false;
+  Trainer untested(data, settings);
+  ASSERT_TRUE(untested.Initialize(&error) && untested.Finish(&error)) << error;
+  EXPECT_GT(untested.GetReport().PrunedAtEnd, r.Whole / 4);
+
+  // The default prune and merge cost nothing measurable here and are kept.
+  settings = TrainerSettings();
+  settings.ElevationSigma = 0.3;
+  settings.Poses.RefinePoses = PoseRefinement::Off;
+  Trainer defaults(data, settings);
+  ASSERT_TRUE(defaults.Initialize(&error)) << error;
+  const HeldOutReduction& kept = defaults.GetReport().HeldOut.Reduction;
+  EXPECT_TRUE(kept.KeepPrune && kept.KeepMerge) << kept.WholePSNR << " " << kept.PrunedPSNR << " " << kept.MergedPSNR;
+  EXPECT_TRUE(kept.MergeMeasured);
+  EXPECT_EQ(defaults.GetSettings().FinalPruneTolerance, settings.FinalPruneTolerance);
+  EXPECT_EQ(defaults.GetSettings().Merge.Tolerance, settings.Merge.Tolerance);
 }
