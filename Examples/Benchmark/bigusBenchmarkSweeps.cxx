@@ -4,6 +4,7 @@
 #include "bigusGaussianFieldData.h"
 
 #include "vtkDataArray.h"
+#include "vtkImageData.h"
 #include "vtkFieldData.h"
 #include "vtkMetaImageReader.h"
 #include "vtkNew.h"
@@ -14,6 +15,9 @@
 #include "vtkUltrasoundSequenceReslice.h"
 #include "vtkUltrasoundVolumeCompounder.h"
 
+#include <algorithm>
+#include <array>
+#include <cmath>
 #include <sstream>
 
 namespace bigus::benchmark
@@ -188,7 +192,7 @@ std::vector<Sweep> BundledSweeps(const std::string& root, bool quick)
   return sweeps;
 }
 
-bool MakeVolumeProtocol(const std::string& root, bool quick, VolumeProtocol& vp, std::string* error)
+bool MakeVolumeProtocol(const std::string& root, bool quick, VolumeProtocol& vp, std::string* error, int trainFrames)
 {
   vp.File = root + "/Testing/Data/spine-phantom/SpinePhantomFreehandReconstructed.mha";
   vtkNew<vtkMetaImageReader> volumeReader;
@@ -201,7 +205,7 @@ bool MakeVolumeProtocol(const std::string& root, bool quick, VolumeProtocol& vp,
   {
     return Failed(vp.File + ": cannot read the volume", error);
   }
-  const int trainFrames = quick ? 40 : 80;
+  trainFrames = trainFrames > 0 ? trainFrames : quick ? 40 : 80;
   const int testFrames = quick ? 10 : 40;
   auto makeSweep = [&](int protocol, int frames, double offset) {
     auto sweep = vtkSmartPointer<vtkUltrasoundVolumeSweep>::New();
@@ -251,6 +255,74 @@ bool MakeVolumeProtocol(const std::string& root, bool quick, VolumeProtocol& vp,
   return true;
 }
 
+namespace
+{
+/// @p volume resliced trilinearly at each of @p vp's test sweeps' poses and scored, into @p rows (@p seconds: its
+/// preparation).
+void ResliceAtTestPoses(const VolumeProtocol& vp, vtkAlgorithmOutput* volume, vtkImageData* volumeData,
+  const std::string& method, double seconds, Row rows[3])
+{
+  for (int t = 0; t < 3; ++t)
+  {
+    vtkNew<vtkUltrasoundSequenceReslice> reslice;
+    if (volume)
+    {
+      reslice->SetInputConnection(volume);
+    }
+    else
+    {
+      reslice->SetInputData(volumeData);
+    }
+    reslice->SetPoseConnection(vp.Tests[t]->GetOutputPort());
+    reslice->MaskEmptyVoxelsOff();
+    const double t0 = Now();
+    reslice->Update();
+    Row& r = rows[t];
+    r.Method = method;
+    r.Seconds = seconds;
+    r.MsPerFrame = 1e3 * (Now() - t0) / vp.TestList[t].size();
+    r.Quality =
+      Score(static_cast<float*>(reslice->GetOutput()->GetScalarPointer()), 1.0, vp.TestData[t], vp.TestList[t]);
+  }
+}
+}
+
+bool StackSlices(const VolumeProtocol& vp, Row rows[3], std::string* error)
+{
+  const TrainingData& d = vp.TrainData;
+  const int n = d.Count();
+  if (n < 2)
+  {
+    return Failed("volume protocol: fewer than 2 training slices to stack", error);
+  }
+  // Pixel (i, j) of slice k lies at origin + i u + j v + k w: u, v along x and y, w along z, the same for every k.
+  const std::array<double, 16>& first = d.Poses[0];
+  const double step = d.Poses[1][11] - first[11];
+  for (int k = 0; k < n; ++k)
+  {
+    const std::array<double, 16>& p = d.Poses[k];
+    const double expected[12] = { first[0], 0, 0, first[3], 0, first[5], 0, first[7], 0, 0, 0, first[11] + k * step };
+    for (int e = 0; e < 12; ++e)
+    {
+      if (e % 4 != 2 && std::abs(p[e] - expected[e]) > 1e-6 * (1 + std::abs(expected[e])))
+      {
+        return Failed("volume protocol: training slice " + std::to_string(k) +
+            " is not on the axis-aligned, evenly spaced stack the first two define",
+          error);
+      }
+    }
+  }
+  const double t0 = Now();
+  vtkNew<vtkImageData> stack;
+  stack->SetDimensions(d.Width, d.Height, n);
+  stack->SetSpacing(first[0], first[5], step);
+  stack->SetOrigin(first[3], first[7], first[11]);
+  stack->AllocateScalars(VTK_FLOAT, 1);
+  std::copy(d.Frames.begin(), d.Frames.end(), static_cast<float*>(stack->GetScalarPointer()));
+  ResliceAtTestPoses(vp, nullptr, stack, "training slices stacked + trilinear reslice", Now() - t0, rows);
+  return true;
+}
+
 void CompoundVolume(const VolumeProtocol& vp, Row rows[3])
 {
   vtkNew<vtkUltrasoundVolumeCompounder> compound;
@@ -259,21 +331,6 @@ void CompoundVolume(const VolumeProtocol& vp, Row rows[3])
   compound->SetOutputSpacing(0.5, 0.5, 0.5);
   double t0 = Now();
   compound->Update();
-  const double compoundSeconds = Now() - t0;
-  for (int t = 0; t < 3; ++t)
-  {
-    vtkNew<vtkUltrasoundSequenceReslice> reslice;
-    reslice->SetInputConnection(compound->GetOutputPort());
-    reslice->SetPoseConnection(vp.Tests[t]->GetOutputPort());
-    reslice->MaskEmptyVoxelsOff();
-    t0 = Now();
-    reslice->Update();
-    Row& r = rows[t];
-    r.Method = "compounded volume + trilinear reslice";
-    r.Seconds = compoundSeconds;
-    r.MsPerFrame = 1e3 * (Now() - t0) / vp.TestList[t].size();
-    r.Quality =
-      Score(static_cast<float*>(reslice->GetOutput()->GetScalarPointer()), 1.0, vp.TestData[t], vp.TestList[t]);
-  }
+  ResliceAtTestPoses(vp, compound->GetOutputPort(), nullptr, "compounded volume + trilinear reslice", Now() - t0, rows);
 }
 }

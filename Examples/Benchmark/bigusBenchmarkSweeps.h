@@ -66,13 +66,20 @@ struct VolumeProtocol
   double ElevationSigma = 0; ///< hand-tuned: half the slice spacing
 };
 
-/// Reads the volume and makes the volume protocol's training and test sweeps (fewer frames with @p quick);
-/// false with @p error when the volume cannot be read.
-bool MakeVolumeProtocol(const std::string& root, bool quick, VolumeProtocol& vp, std::string* error);
+/// Reads the volume and makes the volume protocol's training and test sweeps (fewer frames with @p quick;
+/// @p trainFrames > 0: that many parallel training slices, and as many in-between ones; the oblique and orthogonal
+/// test slices do not depend on it); false with @p error when the volume cannot be read.
+bool MakeVolumeProtocol(
+  const std::string& root, bool quick, VolumeProtocol& vp, std::string* error, int trainFrames = 0);
 
 /// The baseline of the volume protocol: the training slices compounded (0.5 mm, the volume's own grid
 /// spacing) and resliced trilinearly at each test sweep's poses, into @p rows.
 void CompoundVolume(const VolumeProtocol& vp, Row rows[3]);
+
+/// The other baseline: the training slices stacked as they are into a volume (the slice spacing between them, no
+/// compounding) and resliced trilinearly at each test sweep's poses, into @p rows; false with @p error when the
+/// training slices are not parallel, axis-aligned and evenly spaced (the parallel protocol's are).
+bool StackSlices(const VolumeProtocol& vp, Row rows[3], std::string* error);
 }
 
 #endif

@@ -111,6 +111,80 @@ bool ScoreVolume(Trainer& trainer, const VolumeProtocol& vp, const Row& row, Row
 }
 }
 
+/**
+ * "More data is never worse": the trainer's defaults on 40, 80 and 160 parallel training slices of the volume
+ * (quick: 20 and 40) at one time budget, each scored on its own in-between slices and on the same oblique and
+ * orthogonal slices, beside the two baselines made from the same slices (compounded, and stacked as they are); a
+ * table and a verdict in @p context's report.
+ */
+bool SliceCounts(BenchmarkContext& context, std::string* error)
+{
+  const bool quick = context.Quick;
+  const std::vector<int> counts = quick ? std::vector<int>{ 20, 40 } : std::vector<int>{ 40, 80, 160 };
+  const double budget = quick ? 4 : 60;
+  std::ostringstream& md = context.Report.Markdown;
+  nlohmann::json& j = context.Report.Json["volume_slice_counts"];
+  md << "\n### More slices of the same volume\n\nThe trainer's defaults with a time budget of "
+     << Format("%.0f", budget) << " s on " << counts.size() << " training sweeps of the same volume that differ "
+     << "only in their number of parallel slices; each is scored on its own in-between slices (offset half its "
+     << "spacing) and on the same oblique and orthogonal slices as above, beside the compounded volume and the "
+     << "training slices stacked as they are (the slice spacing between them), each resliced trilinearly.\n\n"
+     << "| slices | spacing (mm) | method | time (s) | in-between PSNR (dB) | oblique PSNR (dB) | orthogonal PSNR "
+     << "(dB) | Gaussians | note |\n|---|---|---|---|---|---|---|---|---|\n";
+  std::vector<Row> bigus; // [count][test] flattened: the defaults' rows
+  for (int count : counts)
+  {
+    VolumeProtocol vp;
+    Row methods[3][3];
+    if (!MakeVolumeProtocol(context.Root, quick, vp, error, count) || !StackSlices(vp, methods[1], error))
+    {
+      return false;
+    }
+    CompoundVolume(vp, methods[0]);
+    TrainerSettings defaults;
+    defaults.Iterations = 0;
+    defaults.TimeBudget = budget;
+    Row row;
+    if (!TrainToBudget(
+          vp.TrainData, defaults, "BIGUS defaults", row,
+          [&](Trainer& trainer, Row& r) { return ScoreVolume(trainer, vp, r, methods[2], error); }, error))
+    {
+      return Failed(Format("volume protocol, %.0f slices: ", count) + *error, error);
+    }
+    for (const auto& rows : methods)
+    {
+      md << "| " << count << " | " << Format("%.3f", vp.SliceSpacing) << " | " << rows[0].Method << " | "
+         << Format("%.1f", rows[0].Seconds) << " | " << Format("%.2f", rows[0].Quality.PSNR) << " | "
+         << Format("%.2f", rows[1].Quality.PSNR) << " | " << Format("%.2f", rows[2].Quality.PSNR) << " | "
+         << (rows[0].Gaussians >= 0 ? std::to_string(rows[0].Gaussians) : "-") << " | " << rows[0].Note << " |\n";
+      nlohmann::json entry = { { "slices", count }, { "spacing_mm", vp.SliceSpacing } };
+      for (int t = 0; t < 3; ++t)
+      {
+        entry[t == 0 ? "in_between" : t == 1 ? "oblique" : "orthogonal"] = ToJson(rows[t]);
+      }
+      j.push_back(entry);
+    }
+    bigus.insert(bigus.end(), methods[2], methods[2] + 3);
+  }
+  // The verdict: on the shared oblique and orthogonal slices, no sweep with more slices scores lower.
+  std::string lower;
+  for (std::size_t k = 1; k < counts.size(); ++k)
+  {
+    for (int t = 1; t < 3; ++t)
+    {
+      const double drop = bigus[3 * (k - 1) + t].Quality.PSNR - bigus[3 * k + t].Quality.PSNR;
+      if (drop > 0)
+      {
+        lower += Format("; %.0f slices", counts[k]) + Format(" score %.2f dB below ", drop) +
+          Format("%.0f on the ", counts[k - 1]) + (t == 1 ? "oblique" : "orthogonal") + " slices";
+      }
+    }
+  }
+  md << "\nMore slices never scored lower on the shared oblique and orthogonal slices: "
+     << (lower.empty() ? std::string("yes.") : "no" + lower + ".") << "\n";
+  return true;
+}
+
 bool VolumeProtocolSection(BenchmarkContext& context, std::string* error)
 {
   const std::string& root = context.Root;
@@ -210,6 +284,10 @@ bool VolumeProtocolSection(BenchmarkContext& context, std::string* error)
          << " dB and the recorded blend " << Format("%.2f", v.RecordedBlendWhereBothHoldData.PSNR) << " dB.\n";
     }
     report.Json["volume_protocol"][testNames[t]] = j;
+  }
+  if (!SliceCounts(context, error))
+  {
+    return false;
   }
   PlotSpec spec =
     TimePlot("volume protocol: PSNR of the in-between slices against time", baselineRows[0], bigusRows[0]);
