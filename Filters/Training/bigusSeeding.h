@@ -40,7 +40,9 @@ struct SeedingSettings
   bool DenseInitialisation = false;
   /// The fit when the data are few: when the dense start's planes (SelectGridPlanes) hold at most
   /// PixelGridFanPixelsPerGaussian x MaximumGaussians fan pixels, the field is a pixel grid (SeedGrid: every fan
-  /// pixel, or MaximumGaussians of them at a stride of up to 1.41) with its reflectivities solved, and no geometry
+  /// pixel where this machine's memory holds them, TrainingBytesPerGaussian each and the solve's
+  /// ReflectivitySolveBytes; else MaximumGaussians of them at a stride of up to 1.41) with its reflectivities
+  /// solved, and no geometry
   /// step follows, whatever Iterations and TimeBudget: 11 parameters per Gaussian would outnumber the pixels, and
   /// Adam overfits them. Applies with the default start only (Harris seeding, InitialGaussians 0, no
   /// DenseInitialisation, signed reflectivities).
@@ -51,9 +53,9 @@ struct SeedingSettings
 
 /**
  * The pixel-grid fit (SeedingSettings::PixelGridFit) applies while the dense start's planes hold at most this many
- * fan pixels per Gaussian of MaximumGaussians: every fan pixel when they fit, otherwise a grid of MaximumGaussians
- * points (a stride of up to sqrt(2) pixels; the grid loses to Adam from a stride of about 1.45: docs/FINDINGS.md,
- * "Several sweeps into one field").
+ * fan pixels per Gaussian of MaximumGaussians: every fan pixel where memory holds them (the count is set by memory),
+ * otherwise a grid of MaximumGaussians points (a stride of up to sqrt(2) pixels; the grid loses to Adam from a
+ * stride of about 1.45: docs/FINDINGS.md, "Several sweeps into one field"). The route itself is this rule, untested.
  */
 constexpr double PixelGridFanPixelsPerGaussian = 2.0;
 

@@ -126,7 +126,7 @@ bool Trainer::PrepareInitialField(std::string* error)
   // A field that could not grow to MaximumGaussians in this machine's memory is refused before any seed is
   // made (the training frames are already held).
   const std::int64_t trainingPixels = std::int64_t(data.Width) * data.Height * std::int64_t(data.TrainFrames.size());
-  const std::int64_t maximum = this->Settings.MaximumGaussians;
+  const std::int64_t maximum = std::max(this->Settings.MaximumGaussians, plan.PixelGrid ? plan.Count : 0);
   if (!CheckTrainingMemory(
         maximum, this->SolvesReflectivities() ? ReflectivitySolveBytes(maximum, trainingPixels) : 0.0, error))
   {

@@ -51,8 +51,8 @@ SeedShape ParallelShape()
 }
 
 // PlanSeeding with the default settings on 12 frames of 48 x 64 fan pixels each, 36,864 in all: up to twice
-// MaximumGaussians of them the plan is the pixel grid, of every fan pixel when they fit under the maximum and of
-// MaximumGaussians points otherwise; one Gaussian fewer allowed and the plan is Harris seeds (half the maximum here).
+// MaximumGaussians of them the plan is the pixel grid of every fan pixel (its count is set by memory, which holds
+// these easily, not by the maximum); one Gaussian fewer allowed and the plan is Harris seeds (half the maximum here).
 TEST(Seeding, FanPixelsUpToTwiceMaximumGaussiansGiveThePixelGrid)
 {
   const TrainingData data = ParallelFrames(12, W, H, 48);
@@ -60,7 +60,7 @@ TEST(Seeding, FanPixelsUpToTwiceMaximumGaussiansGiveThePixelGrid)
   ASSERT_EQ(fanPixels, 36864);
   const SeedingSettings settings;
   // MaximumGaussians, then the grid's count.
-  const std::int64_t cases[4][2] = { { 1000000, 36864 }, { 36864, 36864 }, { 20000, 20000 }, { 18432, 18432 } };
+  const std::int64_t cases[4][2] = { { 1000000, 36864 }, { 36864, 36864 }, { 20000, 36864 }, { 18432, 36864 } };
   for (const auto& c : cases)
   {
     SeedingPlan plan;
@@ -235,13 +235,11 @@ TEST(Trainer, WhenOneGaussianPerFanPixelFitsTheDefaultsFitThePixelGridAndTakeNoS
   const double grid = HeldOutPsnr(trainer, heldOut);
   EXPECT_GT(grid, 43.0) << "held-out frames between the planes";
 
-  // Up to twice as many fan pixels as MaximumGaussians: a coarser grid of at most that many, no step either.
+  // Up to twice as many fan pixels as MaximumGaussians: still every fan pixel (memory holds them), no step either.
   s.MaximumGaussians = planes.FanPixels / 2 + 1;
   Trainer coarse(data, s);
   ASSERT_TRUE(coarse.Initialize(&error)) << error;
-  EXPECT_LE(coarse.GetReport().InitialGaussians, s.MaximumGaussians);
-  EXPECT_GT(coarse.GetReport().InitialGaussians, s.MaximumGaussians * 9 / 10)
-    << "short of it by less than a row and a column";
+  EXPECT_EQ(coarse.GetReport().InitialGaussians, planes.FanPixels) << "the grid's count is set by memory";
   ASSERT_TRUE(coarse.Run(nullptr, nullptr, &error)) << error;
   EXPECT_EQ(coarse.GetIteration(), 0);
   // One Gaussian fewer allowed than half the fan pixels: Harris seeds and Adam.
