@@ -456,10 +456,19 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
   {
     for (vtkIdType i = 0; i < lines->GetNumberOfValues(); ++i)
     {
-      // What the run decided after its settings were printed: the pose-refinement trial, the anchor.
+      // What the run decided after its settings were printed: the pose-refinement trial, the anchor, the route
+      // trial (and, where it took the grid, the grid's own choices).
       const std::string& line = lines->GetValue(i);
+      const bool grid = trainer->GetStopReason() &&
+        std::string(trainer->GetStopReason())
+            .find("the pixel grid, "
+                  "measured") == 0;
       if (line.rfind("PoseAnchor = ", 0) == 0 ||
-        (line.rfind("RefinePoses = ", 0) == 0 && line.find("measured: ") != std::string::npos))
+        (line.rfind("RefinePoses = ", 0) == 0 && line.find("measured: ") != std::string::npos) ||
+        (line.rfind("Route = ", 0) == 0 && line.find("(measured on ") != std::string::npos) ||
+        (grid &&
+          (line.rfind("ElevationSigma = ", 0) == 0 || line.rfind("Ridge = ", 0) == 0 ||
+            line.rfind("FinalPrune = ", 0) == 0 || line.rfind("Merge = ", 0) == 0)))
       {
         std::printf("               %s\n", line.c_str());
       }
@@ -633,7 +642,9 @@ Command AddTrainCommand(CLI::App& app)
     "without every second training frame and scored on those: ElevationSigma by rule times 1/8, 1/4, 1/2, 1 and 2 "
     "(the narrowest within 0.05 dB of the best held-out PSNR is taken), then the solve's ridge times 1, 10 and 100 "
     "(the default's unless another is more than 0.05 dB better); the final prune and the merge are then kept only "
-    "where they cost at most 0.05 dB on those frames)");
+    "where they cost at most 0.05 dB on those frames; and where the rule takes Harris seeds and Adam but the grid of "
+    "every fan pixel fits memory and half the budget, the grid is measured against Adam on held-out frames and the "
+    "better takes the run: the Route line)");
   trainCommand->add_flag("--held-out-validation", settings.HeldOut.HoldOutValidationFrames,
     "Validate on frames held out of the fit until the densification window closes (one in 8 training frames of a "
     "sweep, 4 to 8 of them), then joined to it: growth stops and early stopping keeps a field on frames the fit has "

@@ -127,9 +127,11 @@ void HeldOutChoice::RewriteSettingLine(std::vector<std::string>& lines, const ch
       continue;
     }
     const double rule = std::atof(ruleLine.c_str() + prefix.size());
-    ruleLine = vtkfmt::sprintf("%s = %.4g%s%s (%s; the rule's value %.4g%s%s, %s)", name,
-      this->Candidates[this->Chosen].Value, *unit ? " " : "", unit, this->Describe(unit).c_str(), rule,
-      *unit ? " " : "", unit, ruleLine.substr(open + 1, close - open - 1).c_str());
+    const std::string scaled =
+      this->Scale == 1 ? std::string() : vtkfmt::sprintf("; taken x %.3g: %s", this->Scale, this->ScaleReason.c_str());
+    ruleLine = vtkfmt::sprintf("%s = %.4g%s%s (%s%s; the rule's value %.4g%s%s, %s)", name, this->Taken(),
+      *unit ? " " : "", unit, this->Describe(unit).c_str(), scaled.c_str(), rule, *unit ? " " : "", unit,
+      ruleLine.substr(open + 1, close - open - 1).c_str());
   }
 }
 
@@ -348,6 +350,9 @@ bool ChooseOnHeldOutFrames(const TrainingData& data, const TrainerSettings& sett
   {
     return false;
   }
+  sigma.Scale = h.ElevationSigmaScale;
+  sigma.ScaleReason = "the fit on every frame has its views half as far from its frames as the held-out frames lie "
+                      "from the candidates' fits";
   TrainerSettings chosen = settings;
   chosen.ElevationSigma = sigma.Candidates[sigma.Chosen].Value;
   // The ridge's first candidate, the rule's ridge at the chosen sigma, is that sigma's fit, already scored (and kept).
@@ -380,6 +385,117 @@ bool ChooseOnHeldOutFrames(const TrainingData& data, const TrainerSettings& sett
   return choices.Reduction.Untested.empty()
     ? fits.MeasureReduction(chosen, ridge.Candidates[ridge.Chosen].PSNR, choices.Reduction, error)
     : true;
+}
+
+bool ApplyHeldOutChoices(
+  const HeldOutChoices& choices, bool sigmaByRule, bool pixelGrid, TrainerSettings& s, std::vector<std::string>& lines)
+{
+  if (pixelGrid)
+  {
+    lines.push_back(
+      vtkfmt::sprintf("Ridge = %.4g (the solve's: lambda as a share of the mean diag(A^T G A))", s.Solve.Ridge));
+    choices.Ridge.RewriteSettingLine(lines, "Ridge", "");
+  }
+  choices.Reduction.RewriteSettingLines(lines);
+  if (choices.Ridge.Chosen >= 0)
+  {
+    s.Solve.Ridge = choices.Ridge.Candidates[choices.Ridge.Chosen].Value;
+  }
+  s.FinalPruneTolerance = choices.Reduction.KeepPrune ? s.FinalPruneTolerance : 0.0;
+  s.Merge.Tolerance = choices.Reduction.KeepMerge ? s.Merge.Tolerance : 0.0;
+  if (!sigmaByRule)
+  {
+    return false;
+  }
+  const HeldOutChoice& sigma = choices.ElevationSigma;
+  choices.ElevationSigma.RewriteSettingLine(lines, "ElevationSigma", "mm");
+  const double chosen = sigma.Chosen < 0 ? s.ElevationSigma : sigma.Taken();
+  const bool changed = chosen != s.ElevationSigma;
+  s.ElevationSigma = chosen;
+  return changed;
+}
+
+std::string RouteTrialUntested(
+  const TrainingData& data, const TrainerSettings& settings, const SeedingPlan& plan, bool dataParallel)
+{
+  const HeldOutChoiceSettings& h = settings.HeldOut;
+  const std::int64_t all = plan.Planes.FanPixels;
+  const std::int64_t trainingPixels =
+    std::int64_t(data.Width) * data.Height * static_cast<std::int64_t>(data.TrainFrames.size());
+  const double seconds = 6.5 * h.GridFitSecondsPerGaussian * static_cast<double>(all);
+  return !h.Enabled            ? "the held-out choices are off"
+    : !h.MeasureRoute          ? "its measurement is off (MeasureRoute)"
+    : all <= 0                 ? "the pixel-grid fit does not apply to these settings"
+    : dataParallel             ? "a data-parallel run does not measure it"
+    : settings.TimeBudget <= 0 ? "no time budget to plan the measurement in"
+    : !CheckTrainingMemory(all, ReflectivitySolveBytes(all, trainingPixels), nullptr)
+    ? vtkfmt::sprintf(
+        "a grid of every one of the %lld fan pixels does not fit this machine's memory", static_cast<long long>(all))
+    : seconds > 0.5 * settings.TimeBudget
+    ? vtkfmt::sprintf("the pixel grid's fits (about %.0f s for %lld Gaussians) would take more than half the budget",
+        seconds, static_cast<long long>(all))
+    : std::string();
+}
+
+bool MeasurePixelGridRoute(
+  const TrainingData& data, const TrainerSettings& settings, bool sigmaByRule, RouteTrial& trial, std::string* error)
+{
+  const double start = SteadySeconds();
+  TrainerSettings grid = settings;
+  grid.Seeding.PixelGridFanPixelsPerGaussian = std::numeric_limits<double>::infinity();
+  if (!ChooseOnHeldOutFrames(data, grid, true, sigmaByRule, trial.Grid, error))
+  {
+    return false;
+  }
+  trial.Frames = trial.Grid.Ridge.Frames;
+  if (trial.Frames.size() < 2)
+  {
+    trial.Untested = trial.Grid.Ridge.Untested;
+    return true;
+  }
+  std::vector<std::string> lines;
+  ApplyHeldOutChoices(trial.Grid, sigmaByRule, true, grid, lines);
+  const std::unique_ptr<Trainer> fit = FitCandidate(data, trial.Frames, grid, error);
+  ImageMetrics metrics;
+  if (!fit || !fit->EvaluateOn(data, trial.Frames, metrics, error))
+  {
+    if (error)
+    {
+      *error = "the pixel grid's fit for the route: " + *error;
+    }
+    return false;
+  }
+  trial.GridPSNR = metrics.PSNR;
+  trial.GridGaussians = fit->GetField().Count();
+  trial.GridSeconds = SteadySeconds() - start;
+  trial.Pending = true;
+  return true;
+}
+
+std::string RouteTrial::Line() const
+{
+  const std::string rule = vtkfmt::sprintf("the rule: the %lld fan pixels of the grid's planes are more than twice "
+                                           "MaximumGaussians",
+    static_cast<long long>(this->FanPixels));
+  if (!this->Untested.empty() || (!this->Pending && this->DecidedAt < 0))
+  {
+    return "Route = Harris seeds and Adam (" + rule +
+      "; untested against the pixel grid: " + (this->Untested.empty() ? std::string("not measured") : this->Untested) +
+      ")";
+  }
+  const std::string grid = vtkfmt::sprintf("the pixel grid of %lld Gaussians %.2f dB (its fits %.1f s)",
+    static_cast<long long>(this->GridGaussians), this->GridPSNR, this->GridSeconds);
+  if (this->DecidedAt < 0)
+  {
+    return vtkfmt::sprintf("Route = Harris seeds and Adam, measured against the pixel grid on %zu held-out frames "
+                           "when they join the fit (",
+             this->Frames.size()) +
+      grid + "; " + rule + ")";
+  }
+  return vtkfmt::sprintf("Route = %s (measured on %zu held-out frames at their tracked poses, out of both fits: ",
+           this->GridChosen ? "the pixel grid" : "Harris seeds and Adam", this->Frames.size()) +
+    grid + vtkfmt::sprintf(", Harris seeds and Adam at step %d %.2f dB; ", this->DecidedAt, this->AdamPSNR) + rule +
+    ")";
 }
 
 } // namespace bigus

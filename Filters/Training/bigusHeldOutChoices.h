@@ -16,6 +16,7 @@
 #ifndef bigusHeldOutChoices_h
 #define bigusHeldOutChoices_h
 
+#include "bigusSeeding.h"
 #include "bigusTrainingEngine.h"
 #include "bigusTrainingModule.h" // For export macro
 
@@ -44,12 +45,24 @@ struct HeldOutChoiceSettings
   double Tolerance = 0.05;
   /// ElevationSigma's candidates: the rule's value times these (small ones included: a volume has no beam).
   std::vector<double> ElevationSigmaFactors = { 0.125, 0.25, 0.5, 1.0, 2.0 };
+  /// The chosen candidate times this is the ElevationSigma of the fit on every frame: a held-out frame lies a whole
+  /// spacing from the candidates' fits (every second frame out), the final field's in-between views half a spacing
+  /// from its frames, and a beam that bridges the wider gap blurs every view across its elevation. 1/sqrt(2) scored
+  /// higher than 1 on in-between, oblique and orthogonal slices of three volume sweeps (and 1/2 did not, on two of
+  /// them): docs/FINDINGS.md, "ElevationSigma taken narrower than the held-out choice".
+  double ElevationSigmaScale = 0.70710678118654752;
   /// The reflectivity solve's ridge candidates: ReflectivitySolveSettings::Ridge times these (the first, the
   /// default's own, is kept unless another scores more than Tolerance higher).
   std::vector<double> RidgeFactors = { 1.0, 10.0, 100.0 };
   /// Measure the final prune and the merge on held-out frames (HeldOutReduction) and keep each only where it costs
   /// at most Tolerance.
   bool MeasureReduction = true;
+  /// Where the route's rule (SeedingSettings::PixelGridFanPixelsPerGaussian) gives Harris seeds and Adam, measure
+  /// the pixel grid against it on held-out frames when the budget affords it (RouteTrial).
+  bool MeasureRoute = true;
+  /// s per Gaussian of one pixel-grid fit (assembly, solve, scoring), to plan the route trial: 3.5e-6 measured on
+  /// 2 cores (volume protocol, 160 slices), taken larger.
+  double GridFitSecondsPerGaussian = 5e-6;
   /// The Adam route's validation frames held out of the fit (true), or training frames (false; ValidationFrames);
   /// a switch of its own, whatever Enabled says.
   /// Off by default: on the liver's main job the frames out of the fit cost more than the honest decisions gave
@@ -95,11 +108,16 @@ struct HeldOutChoice
   std::vector<HeldOutCandidate> Candidates; ///< in the order tried
   int Chosen = -1;                          ///< index into Candidates; -1: untested
   std::string Untested;                     ///< why no candidate was measured (Chosen -1)
+  double Scale = 1;                         ///< the value taken is the chosen candidate's times this (Taken)
+  std::string ScaleReason;                  ///< why, where Scale is not 1
+  /// The value the run takes: the chosen candidate's times Scale (Chosen >= 0).
+  double Taken() const { return this->Candidates[this->Chosen].Value * this->Scale; }
   /// The setting line's parenthesis: "chosen on 9 held-out frames: 0.12 mm 40.6 dB, 0.25 mm 41.0, ... (s)".
   std::string Describe(const char* unit) const;
   /**
    * Rewrites the setting line of @p name in @p lines, the rule's ("NAME = V UNIT (the rule's reason)"): untested,
-   * the rule's line with why appended; measured, the value chosen, the candidates, then the rule's value and reason.
+   * the rule's line with why appended; measured, the value taken (Taken), the candidates, then the rule's value and
+   * reason.
    */
   void RewriteSettingLine(std::vector<std::string>& lines, const char* name, const char* unit) const;
 };
@@ -142,6 +160,56 @@ struct HeldOutChoices
   HeldOutChoice Ridge;          ///< ReflectivitySolveSettings::Ridge, a share of the mean basis norm
   HeldOutReduction Reduction;   ///< the final prune and the merge
 };
+
+/**
+ * The route measured: where the rule gives Harris seeds and Adam but the pixel grid of every fan pixel fits this
+ * machine's memory and its fits half the time budget, the grid (with its own held-out choices, ChooseOnHeldOutFrames)
+ * is fitted on every training frame but Frames and scored on them; the Adam run then holds Frames out as its
+ * validation frames, and when they would join its fit (the densification window's close) it is scored on them too:
+ * the higher score takes the rest of the run (Trainer). The Route setting line says what each scored, or why the
+ * rule's route was taken untested.
+ */
+struct RouteTrial
+{
+  bool Pending = false;           ///< measured on the grid's side; the Adam run decides when its frames join
+  HeldOutChoices Grid;            ///< the grid's own choices, on its own held-out frames (a superset of Frames)
+  std::vector<int> Frames;        ///< scored for both routes, held out of both fits
+  double GridPSNR = 0;            ///< dB, the grid with its choices fitted on every training frame but Frames
+  std::int64_t GridGaussians = 0; ///< of that fit
+  double GridSeconds = 0;         ///< the grid's side: its choices and that fit
+  double AdamPSNR = 0;            ///< dB, the Adam run's field at the decision
+  int DecidedAt = -1;             ///< the Adam run's iteration at the decision; -1 before
+  bool GridChosen = false;
+  std::int64_t FanPixels = 0; ///< of the grid's planes
+  std::string Untested;       ///< why the rule's route was taken without the measurement
+  /// The "Route = ..." setting line.
+  std::string Line() const;
+};
+
+/**
+ * Why the route trial cannot run for @p settings with the seeding @p plan (Harris seeds) on @p data, alone or
+ * @p dataParallel; empty where it can: the held-out choices and MeasureRoute on, the grid allowed
+ * (SeedingPlan::Planes measured), a time budget, one process, every fan pixel of the planes within this machine's
+ * memory (CheckTrainingMemory), and about 6.5 grid fits (GridFitSecondsPerGaussian) within half the budget.
+ */
+BIGUSTRAINING_EXPORT std::string RouteTrialUntested(
+  const TrainingData& data, const TrainerSettings& settings, const SeedingPlan& plan, bool dataParallel);
+
+/**
+ * The grid's side of the route trial (RouteTrial): the grid's choices (ChooseOnHeldOutFrames with the grid forced),
+ * then the grid with them fitted on every training frame but the frames they scored, and scored on those. False
+ * with @p error when a fit fails.
+ */
+BIGUSTRAINING_EXPORT bool MeasurePixelGridRoute(
+  const TrainingData& data, const TrainerSettings& settings, bool sigmaByRule, RouteTrial& trial, std::string* error);
+
+/**
+ * @p choices taken into @p settings: the chosen ElevationSigma (where @p sigmaByRule and measured), ridge, and the
+ * final prune and merge tolerances (0 where dropped); the setting lines of @p lines rewritten (a `Ridge = ` line
+ * added where @p pixelGrid). Returns whether ElevationSigma changed.
+ */
+BIGUSTRAINING_EXPORT bool ApplyHeldOutChoices(const HeldOutChoices& choices, bool sigmaByRule, bool pixelGrid,
+  TrainerSettings& settings, std::vector<std::string>& lines);
 
 /**
  * The choices a pixel-grid run (@p pixelGrid) makes on held-out frames (HeldOutFrames(settings.HeldOut.Stride)):

@@ -137,9 +137,9 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
 
 bool Trainer::EndPoseTrial(const std::string& how, std::string* error)
 {
-  if (this->Settings.HeldOut.HoldOutValidationFrames || this->HeldOutValidation.empty())
+  if (this->Settings.HeldOut.HoldOutValidationFrames || this->HeldOutValidation.empty() || this->Report.Route.Pending)
   {
-    return true;
+    return true; // held out for their own sake, or for the route trial, which decides when they join
   }
   // Held out for the trial alone: they join the fit, and validation goes on with them as training frames.
   JoinTrainingFrames(*this->Data, this->HeldOutValidation);

@@ -353,7 +353,7 @@ bool PlanSeeding(const TrainingData& data, const SeedingSettings& s, std::int64_
   if (gridMayApply)
   {
     plan.Planes = SelectGridPlanes(data, shape);
-    plan.PixelGrid = plan.Planes.FanPixels <= PixelGridFanPixelsPerGaussian * maximumGaussians;
+    plan.PixelGrid = plan.Planes.FanPixels <= s.PixelGridFanPixelsPerGaussian * maximumGaussians;
   }
   if (plan.PixelGrid)
   {

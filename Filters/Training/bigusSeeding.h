@@ -47,17 +47,15 @@ struct SeedingSettings
   /// Adam overfits them. Applies with the default start only (Harris seeding, InitialGaussians 0, no
   /// DenseInitialisation, signed reflectivities).
   bool PixelGridFit = true;
+  /// The pixel-grid fit applies while the dense start's planes hold at most this many fan pixels per Gaussian of
+  /// MaximumGaussians (the route's rule): every fan pixel where memory holds them (the count is set by memory),
+  /// otherwise a grid of MaximumGaussians points (a stride of up to sqrt(2) pixels; the grid loses to Adam from a
+  /// stride of about 1.45: docs/FINDINGS.md, "Several sweeps into one field"). Above it the route is Harris seeds and
+  /// Adam unless the held-out route trial measures the grid better (bigusHeldOutChoices.h, RouteTrial).
+  double PixelGridFanPixelsPerGaussian = 2.0;
   double UniformShare = 0.1;       ///< share of Harris seeds drawn uniformly inside the mask
   double InitialScalePixels = 1.5; ///< pixels: in-plane standard deviation of a Harris or uniform seed
 };
-
-/**
- * The pixel-grid fit (SeedingSettings::PixelGridFit) applies while the dense start's planes hold at most this many
- * fan pixels per Gaussian of MaximumGaussians: every fan pixel where memory holds them (the count is set by memory),
- * otherwise a grid of MaximumGaussians points (a stride of up to sqrt(2) pixels; the grid loses to Adam from a
- * stride of about 1.45: docs/FINDINGS.md, "Several sweeps into one field"). The route itself is this rule, untested.
- */
-constexpr double PixelGridFanPixelsPerGaussian = 2.0;
 
 /**
  * The intensity map's exponent for @p data (GammaFromMeanIntensity of the training frames' mean intensity inside
@@ -139,7 +137,7 @@ struct SeedingPlan
 
 /**
  * The seeding stage's choices for @p data: the pixel-grid fit where it applies (the default start, signed
- * reflectivities: @p nonNegative false) and the planes hold at most PixelGridFanPixelsPerGaussian x
+ * reflectivities: @p nonNegative false) and the planes hold at most @p s.PixelGridFanPixelsPerGaussian x
  * @p maximumGaussians fan pixels, else the count of seeds (InitialGaussians, or one per 200 of the training frames'
  * @p fanPixels, 20,000 to half of @p maximumGaussians). False with @p error when InitialGaussians exceeds
  * @p maximumGaussians.

@@ -118,7 +118,9 @@ bool Trainer::PrepareInitialField(std::string* error)
   {
     return false;
   }
-  if (!this->MeasureOnHeldOutFrames(count, plan, error))
+  // The route measured where the rule takes Adam; the choices measured on the grid (or said untested on Adam).
+  if ((!plan.PixelGrid && !this->PlanRouteTrial(plan, error)) ||
+    (!this->Report.Route.Pending && !this->MeasureOnHeldOutFrames(count, plan, error)))
   {
     return false;
   }
@@ -273,38 +275,14 @@ bool Trainer::MeasureOnHeldOutFrames(std::int64_t fanPixels, SeedingPlan& plan, 
   {
     return false;
   }
-  TrainerSettings& s = this->Settings;
-  std::vector<std::string>& lines = this->Report.Settings;
-  if (plan.PixelGrid)
-  {
-    lines.push_back(
-      vtkfmt::sprintf("Ridge = %.4g (the solve's: lambda as a share of the mean diag(A^T G A))", s.Solve.Ridge));
-    choices.Ridge.RewriteSettingLine(lines, "Ridge", "");
-  }
-  choices.Reduction.RewriteSettingLines(lines);
-  if (choices.Ridge.Chosen >= 0)
-  {
-    s.Solve.Ridge = choices.Ridge.Candidates[choices.Ridge.Chosen].Value;
-  }
-  s.FinalPruneTolerance = choices.Reduction.KeepPrune ? s.FinalPruneTolerance : 0.0;
-  s.Merge.Tolerance = choices.Reduction.KeepMerge ? s.Merge.Tolerance : 0.0;
-  if (!this->SigmaByRule)
-  {
-    return true;
-  }
-  const double rule = s.ElevationSigma;
-  const double sigma =
-    choices.ElevationSigma.Chosen < 0 ? rule : choices.ElevationSigma.Candidates[choices.ElevationSigma.Chosen].Value;
-  choices.ElevationSigma.RewriteSettingLine(lines, "ElevationSigma", "mm");
-  if (sigma == rule)
+  if (!ApplyHeldOutChoices(choices, this->SigmaByRule, plan.PixelGrid, this->Settings, this->Report.Settings))
   {
     return true;
   }
   // The seeding plan of the chosen sigma (the grid's elevation scale follows it).
-  s.ElevationSigma = sigma;
-  this->Report.ElevationSigma = sigma;
-  return PlanSeeding(
-    *this->Data, s.Seeding, s.MaximumGaussians, s.NonNegativeReflectivity, this->SeedShapeOf(), fanPixels, plan, error);
+  this->Report.ElevationSigma = this->Settings.ElevationSigma;
+  return PlanSeeding(*this->Data, this->Settings.Seeding, this->Settings.MaximumGaussians,
+    this->Settings.NonNegativeReflectivity, this->SeedShapeOf(), fanPixels, plan, error);
 }
 
 double Trainer::TrainingSeconds() const
@@ -422,7 +400,9 @@ void Trainer::HoldOutValidationFrames()
   // The pose-refinement trial scores on held-out frames too (TryPoseRefinement).
   HeldOutChoiceSettings held = this->Settings.HeldOut;
   held.HoldOutValidationFrames = held.HoldOutValidationFrames || this->Poses.IsTrialPending();
-  r.ValidationFrames = ChooseValidationFrames(*this->Data, held, r.ValidationHeldOut, line);
+  // The route trial's frames, where it is pending: the pixel grid's fits never saw them.
+  r.ValidationFrames = ChooseValidationFrames(*this->Data, held,
+    this->Report.Route.Pending ? this->Report.Route.Frames : std::vector<int>(), r.ValidationHeldOut, line);
   r.Settings.push_back(line);
   if (r.ValidationHeldOut)
   {
@@ -436,6 +416,10 @@ bool Trainer::JoinValidationFrames(const double* last, std::string* error)
   if (this->HeldOutValidation.empty())
   {
     return true;
+  }
+  if (this->Report.Route.Pending)
+  {
+    return this->DecideRoute(last, true, error);
   }
   if (last && RestoreBestField(this->State, *last))
   {
@@ -592,11 +576,20 @@ bool Trainer::Iterate(double start, const std::function<void(double, int, double
   }
   const bool window = this->InDensificationWindow();
   const bool densify = d.Enabled && it >= d.Start && it % d.Interval == 0 && window;
+  if (window && this->Report.Route.Pending && !this->InPoseTrial && !this->Poses.IsTrialPending() &&
+    it % d.Interval == 0 && !this->DecideRoute(&validation, false, error))
+  {
+    return false;
+  }
   // The choices made on the held-out frames end here: the fit goes on from the best field they scored, with them.
   if (!window && !this->InPoseTrial && !this->Poses.IsTrialPending() && it % d.Interval == 0 &&
     !this->JoinValidationFrames(&validation, error))
   {
     return false;
+  }
+  if (this->PixelGrid)
+  {
+    return true; // the route trial chose the pixel grid: its solve was the fit
   }
   if ((densify && !this->DensifyAndPrune(validation, error)) ||
     (this->SolvesReflectivities() && (densify || (s.SolveInterval > 0 && it % s.SolveInterval == 0)) &&
@@ -768,6 +761,7 @@ bool Trainer::ReadCheckpoint(const std::string& file, std::string* error)
   }
   this->Gamma = gamma;
   this->PixelGrid = false; // a checkpoint comes from a run that takes steps: it goes on with them
+  this->CancelRouteTrial("the run resumed from the checkpoint " + file + ", which goes on with its steps");
   return this->PushState(error) && (this->InDensificationWindow() || this->JoinValidationFrames(nullptr, error));
 }
 

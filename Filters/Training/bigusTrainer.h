@@ -56,6 +56,7 @@ struct TrainerReport
   double LastLoss = 0;       ///< mean loss of the last 50 steps
   double ElevationSigma = 0; ///< mm, the sigma trained with (given or chosen)
   HeldOutChoices HeldOut;    ///< the choices measured on held-out frames (ChooseOnHeldOutFrames)
+  RouteTrial Route;          ///< the route measured where the rule gives Harris seeds and Adam (RouteTrial)
   /// Early stopping: the iteration whose field Finish kept (the best on the validation frames; a field
   /// measured just before a densification carries that densification's iteration), the validation
   /// loss there and that of the last field (equal when the last was kept).
@@ -238,6 +239,24 @@ private:
   /// The Adam route: the validation frames (HeldOutChoiceSettings::ValidationStride) taken out of the fit, and their
   /// setting line; too few, the training frames ValidationFrames chooses.
   void HoldOutValidationFrames();
+  /**
+   * The Adam route's seeding @p plan made: the route trial's grid side where RouteTrialUntested allows it
+   * (MeasurePixelGridRoute, its seconds counted as training), else the Route line says why not.
+   */
+  bool PlanRouteTrial(const SeedingPlan& plan, std::string* error);
+  /**
+   * The route trial's decision: the Adam run's field scored on the trial's frames at their tracked poses against the
+   * grid's score. Adam above it decides at once (more steps and frames only help it); the grid only when the frames
+   * would join the fit (@p closing): it then becomes the pixel-grid fit on every training frame with the grid's
+   * choices (SwitchToPixelGrid). Adam decided, the frames join (JoinValidationFrames with @p last). The Route line
+   * says what each scored.
+   */
+  bool DecideRoute(const double* last, bool closing, std::string* error);
+  /// A pending route trial ends untested (@p why; its frames join when the window closes, as validation frames).
+  void CancelRouteTrial(const std::string& why);
+  /// The run from here the pixel grid's: the grid's choices in the settings, every frame in the fit at its tracked
+  /// pose, the grid seeded and its reflectivities solved; Train takes no further step.
+  bool SwitchToPixelGrid(std::string* error);
   /// The held-out validation frames join the fit (with RefinePoses, from their tracked poses, as they were scored),
   /// from the best field they scored when the @p last validation loss (if given) is worse (RestoreBestField); after
   /// this, a validation loss is recorded but no longer decides.

@@ -23,14 +23,15 @@ std::vector<int> ValidationFrames(const TrainingData& data)
   return frames;
 }
 
-std::vector<int> ChooseValidationFrames(
-  TrainingData& data, const HeldOutChoiceSettings& settings, bool& heldOut, std::string& line)
+std::vector<int> ChooseValidationFrames(TrainingData& data, const HeldOutChoiceSettings& settings,
+  const std::vector<int>& given, bool& heldOut, std::string& line)
 {
   const HeldOutChoiceSettings& h = settings;
-  const bool holdOut = h.HoldOutValidationFrames;
-  const int minimum = std::max(2, h.MinimumValidationFrames);
-  std::vector<int> frames =
-    holdOut ? HeldOutFrames(data, h.ValidationStride, h.MaximumValidationFrames) : std::vector<int>();
+  const bool holdOut = h.HoldOutValidationFrames || !given.empty();
+  const int minimum = given.empty() ? std::max(2, h.MinimumValidationFrames) : 1;
+  std::vector<int> frames = !given.empty() ? given
+    : holdOut                              ? HeldOutFrames(data, h.ValidationStride, h.MaximumValidationFrames)
+                                           : std::vector<int>();
   heldOut = static_cast<int>(frames.size()) >= minimum;
   if (!heldOut)
   {
@@ -44,10 +45,13 @@ std::vector<int> ChooseValidationFrames(
   train.erase(std::remove_if(
                 train.begin(), train.end(), [&](int f) { return std::binary_search(frames.begin(), frames.end(), f); }),
     train.end());
-  line = vtkfmt::sprintf("Validation = %d held-out frames (one in %d training frames of a sweep, at most %d): out of "
-                         "the fit until the densification window closes, then in it; growth stops and early stopping "
-                         "keeps a field on them",
-    int(frames.size()), h.ValidationStride, h.MaximumValidationFrames);
+  line = vtkfmt::sprintf("Validation = %d held-out frames (%s): out of the fit until the densification window "
+                         "closes, then in it; growth stops and early stopping keeps a field on them",
+    int(frames.size()),
+    given.empty() ? vtkfmt::sprintf(
+                      "one in %d training frames of a sweep, at most %d", h.ValidationStride, h.MaximumValidationFrames)
+                      .c_str()
+                  : "the route trial's, which no fit of the pixel grid saw");
   return frames;
 }
 

@@ -27,14 +27,14 @@ namespace bigus
 BIGUSTRAINING_EXPORT std::vector<int> ValidationFrames(const TrainingData& data);
 
 /**
- * The validation frames of a run that takes steps, by @p settings (TrainerSettings::HeldOut): with
- * HoldOutValidationFrames, HeldOutFrames(@p data, ValidationStride, MaximumValidationFrames), taken out of @p data's
- * TrainFrames when there are at least MinimumValidationFrames (and 2) of them (@p heldOut true); otherwise
- * ValidationFrames(@p data), training frames (@p heldOut false). @p line receives the stage's setting line
- * ("Validation = ...").
+ * The validation frames of a run that takes steps, by @p settings (TrainerSettings::HeldOut): @p given frames (the
+ * route trial's, RouteTrial::Frames) where there are any, else with HoldOutValidationFrames, HeldOutFrames(@p data,
+ * ValidationStride, MaximumValidationFrames) when there are at least MinimumValidationFrames (and 2) of them; either
+ * taken out of @p data's TrainFrames (@p heldOut true); otherwise ValidationFrames(@p data), training frames
+ * (@p heldOut false). @p line receives the stage's setting line ("Validation = ...").
  */
-BIGUSTRAINING_EXPORT std::vector<int> ChooseValidationFrames(
-  TrainingData& data, const HeldOutChoiceSettings& settings, bool& heldOut, std::string& line);
+BIGUSTRAINING_EXPORT std::vector<int> ChooseValidationFrames(TrainingData& data, const HeldOutChoiceSettings& settings,
+  const std::vector<int>& given, bool& heldOut, std::string& line);
 
 /// @p frames (held out by ChooseValidationFrames) back into @p data's TrainFrames, in order.
 BIGUSTRAINING_EXPORT void JoinTrainingFrames(TrainingData& data, const std::vector<int>& frames);

@@ -299,7 +299,7 @@ TEST(PoseRefinementChoice, AutoRefinementIsMeasuredOnHeldOutFramesAtTheirTracked
   held.HoldOutValidationFrames = true;
   bool heldOutOk = false;
   std::string line;
-  const std::vector<int> trial = ChooseValidationFrames(copy, held, heldOutOk, line);
+  const std::vector<int> trial = ChooseValidationFrames(copy, held, {}, heldOutOk, line);
   ASSERT_TRUE(heldOutOk) << line;
   std::vector<int> fitted;
   for (int f : exact.TrainFrames)

@@ -1,0 +1,144 @@
+// The route trial (bigusHeldOutChoices.h, RouteTrial): methods of Trainer, as the trial's decision is taken inside
+// the training loop (see bigusTrainer.h).
+#include "bigusTrainer.h"
+
+#include <vtk_fmt.h>
+// clang-format off
+#include VTK_FMT(fmt/printf.h)
+// clang-format on
+
+#include <algorithm>
+#include <limits>
+
+namespace bigus
+{
+
+namespace
+{
+/// The index of the setting line that starts with @p prefix in @p lines, or lines.size().
+std::size_t LineOf(const std::vector<std::string>& lines, const std::string& prefix)
+{
+  return static_cast<std::size_t>(
+    std::find_if(lines.begin(), lines.end(), [&](const std::string& l) { return l.rfind(prefix, 0) == 0; }) -
+    lines.begin());
+}
+}
+
+bool Trainer::PlanRouteTrial(const SeedingPlan& plan, std::string* error)
+{
+  RouteTrial& trial = this->Report.Route;
+  trial = RouteTrial();
+  trial.FanPixels = plan.Planes.FanPixels;
+  trial.Untested = RouteTrialUntested(*this->Data, this->Settings, plan, this->Reduction != nullptr);
+  if (trial.Untested.empty())
+  {
+    if (!MeasurePixelGridRoute(*this->Data, this->Settings, this->SigmaByRule, trial, error))
+    {
+      return false;
+    }
+    // The grid's side is training time: the budget pays for it.
+    this->State.TrainingSeconds += trial.GridSeconds;
+    this->Report.Seconds += trial.GridSeconds;
+  }
+  if (trial.FanPixels > 0) // a route the rule chose (the grid's planes measured), not one the settings gave
+  {
+    this->Report.Settings.push_back(trial.Line());
+  }
+  return true;
+}
+
+void Trainer::CancelRouteTrial(const std::string& why)
+{
+  RouteTrial& trial = this->Report.Route;
+  if (!trial.Pending)
+  {
+    return;
+  }
+  trial.Pending = false;
+  trial.Untested = why;
+  std::vector<std::string>& lines = this->Report.Settings;
+  const std::size_t at = LineOf(lines, "Route = ");
+  if (at < lines.size())
+  {
+    lines[at] = trial.Line();
+  }
+}
+
+bool Trainer::DecideRoute(const double* last, bool closing, std::string* error)
+{
+  RouteTrial& trial = this->Report.Route;
+  ImageMetrics metrics;
+  // Scored as the grid was: the frames at their tracked poses (held out, they have no correction).
+  if (!this->PullState(error) || !this->EvaluateOn(*this->Data, trial.Frames, metrics, error))
+  {
+    return false;
+  }
+  trial.AdamPSNR = metrics.PSNR;
+  // Adam only gains from more steps and more frames: once it scores above the grid the route is decided; the grid
+  // only when the frames would join anyway.
+  if (!closing && trial.AdamPSNR <= trial.GridPSNR)
+  {
+    return true;
+  }
+  trial.Pending = false;
+  trial.DecidedAt = this->State.Iteration;
+  trial.GridChosen = trial.GridPSNR > trial.AdamPSNR;
+  std::vector<std::string>& lines = this->Report.Settings;
+  const std::size_t at = LineOf(lines, "Route = ");
+  if (at < lines.size())
+  {
+    lines[at] = trial.Line();
+  }
+  if (trial.GridChosen)
+  {
+    return this->SwitchToPixelGrid(error);
+  }
+  SeedingPlan adam; // the Adam route's choices: said untested (no pixel-grid candidate is fitted)
+  return this->MeasureOnHeldOutFrames(0, adam, error) && this->JoinValidationFrames(last, error);
+}
+
+bool Trainer::SwitchToPixelGrid(std::string* error)
+{
+  const RouteTrial& trial = this->Report.Route;
+  TrainerSettings& s = this->Settings;
+  std::vector<std::string>& lines = this->Report.Settings;
+  // Every frame in the fit, at its tracked pose: the grid takes no step to refine one with.
+  JoinTrainingFrames(*this->Data, this->HeldOutValidation);
+  this->HeldOutValidation.clear();
+  this->Poses.TurnOffCorrections(this->State, lines, "the route measured is the pixel grid, which takes no step");
+  this->Data->Poses = this->Poses.GetTrackedPoses();
+  s.Poses = this->Poses.GetSettings();
+  s.Seeding.PixelGridFanPixelsPerGaussian = std::numeric_limits<double>::infinity();
+  if (ApplyHeldOutChoices(trial.Grid, this->SigmaByRule, true, s, lines))
+  {
+    this->Report.ElevationSigma = s.ElevationSigma;
+  }
+  this->Report.HeldOut = trial.Grid;
+  std::int64_t fanPixels = 0;
+  std::string gammaLine;
+  SeedingPlan plan;
+  if (!this->Engine->SetData(this->Data.get(), error) ||
+    !GammaOfTrainingFrames(*this->Data, this->Gamma, fanPixels, gammaLine, error) ||
+    !PlanSeeding(*this->Data, s.Seeding, s.MaximumGaussians, s.NonNegativeReflectivity, this->SeedShapeOf(), fanPixels,
+      plan, error))
+  {
+    return false;
+  }
+  lines.push_back(gammaLine + " (again, for the pixel grid)");
+  TrainingState& state = this->State;
+  state.Gaussians = OptimizerState();
+  // Adam's best field is no candidate: Finish's validation keeps the grid (early stopping has nothing earlier).
+  state.BestField = GaussianField();
+  state.BestFieldLoss = std::numeric_limits<double>::infinity();
+  lines.push_back(
+    SeedField(*this->Data, plan, s.Seeding, this->SeedShapeOf(), s.Seed, s.Solve.L1, state.Gaussians.Field));
+  state.Gaussians.ResizeToField();
+  this->Report.InitialGaussians = state.Gaussians.Field.Count();
+  this->PixelGrid = true;
+  this->Report.StopReason = vtkfmt::sprintf(
+    "the pixel grid, measured better than Adam on held-out frames at step %d (no geometry steps)", trial.DecidedAt);
+  this->Report.GrowthStopReason = "none (the pixel grid)";
+  return this->PushState(error) && this->SolveFieldReflectivities(error);
+}
+
+} // namespace bigus
