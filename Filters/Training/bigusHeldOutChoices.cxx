@@ -455,6 +455,10 @@ bool MeasurePixelGridRoute(
   }
   std::vector<std::string> lines;
   ApplyHeldOutChoices(trial.Grid, sigmaByRule, true, grid, lines);
+  // Its frames lie a whole spacing from the fitted ones, as the choices' held-out frames do: the beam chosen for that
+  // gap, not the narrower one taken for the fit on every frame (ElevationSigmaScale), which the switch takes.
+  const HeldOutChoice& sigma = trial.Grid.ElevationSigma;
+  grid.ElevationSigma = sigma.Chosen >= 0 ? sigma.Candidates[sigma.Chosen].Value : grid.ElevationSigma;
   const std::unique_ptr<Trainer> fit = FitCandidate(data, trial.Frames, grid, error);
   ImageMetrics metrics;
   if (!fit || !fit->EvaluateOn(data, trial.Frames, metrics, error))

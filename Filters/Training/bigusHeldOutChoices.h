@@ -197,7 +197,8 @@ BIGUSTRAINING_EXPORT std::string RouteTrialUntested(
 
 /**
  * The grid's side of the route trial (RouteTrial): the grid's choices (ChooseOnHeldOutFrames with the grid forced),
- * then the grid with them fitted on every training frame but the frames they scored, and scored on those. False
+ * then the grid with them fitted on every training frame but the frames they scored, and scored on those (at the
+ * ElevationSigma candidate chosen, not scaled: those frames lie a whole spacing from the fitted ones). False
  * with @p error when a fit fails.
  */
 BIGUSTRAINING_EXPORT bool MeasurePixelGridRoute(
