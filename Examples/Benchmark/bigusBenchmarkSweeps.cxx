@@ -298,6 +298,10 @@ bool StackSlices(const VolumeProtocol& vp, Row rows[3], std::string* error)
   // Pixel (i, j) of slice k lies at origin + i u + j v + k w: u, v along x and y, w along z, the same for every k.
   const std::array<double, 16>& first = d.Poses[0];
   const double step = d.Poses[1][11] - first[11];
+  if (!(first[0] > 0 && first[5] > 0 && step > 0)) // vtkImageData's spacing: positive
+  {
+    return Failed("volume protocol: the training slices do not step along +x, +y and +z", error);
+  }
   for (int k = 0; k < n; ++k)
   {
     const std::array<double, 16>& p = d.Poses[k];

@@ -603,8 +603,9 @@ Command AddTrainCommand(CLI::App& app)
       ->capture_default_str()
       ->check(FiniteNonNegative());
   trainCommand
-    ->add_option(
-      "--max-gaussians", settings.MaximumGaussians, "Hard maximum of Gaussians (gap filling's copies included)")
+    ->add_option("--max-gaussians", settings.MaximumGaussians,
+      "Maximum of Gaussians of Harris seeds and Adam (gap filling's copies included); the pixel grid "
+      "takes every fan pixel where memory holds them, whatever this says (the InitialGaussians line)")
     ->capture_default_str()
     ->check(FinitePositive());
   trainCommand
@@ -673,7 +674,8 @@ Command AddTrainCommand(CLI::App& app)
   trainCommand->add_flag_callback(
     "--no-pixel-grid-fit", [&settings] { settings.Seeding.PixelGridFit = false; },
     "Train from Harris seeds even when the training frames hold at most twice --max-gaussians fan pixels (default: "
-    "there, a pixel grid of at most --max-gaussians, its reflectivities solved, and no geometry steps)");
+    "there, a pixel grid of every fan pixel where memory holds them, its reflectivities solved, and no geometry "
+    "steps)");
   CLI::Option* refine = trainCommand->add_flag_callback(
     "--refine-poses", [&settings] { settings.Poses.RefinePoses = PoseRefinement::On; },
     "Refine the tracked pose of every sweep's training frames with the field (a rigid correction about its centre "

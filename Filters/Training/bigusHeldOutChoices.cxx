@@ -218,6 +218,19 @@ struct CandidateFits
         this->Kept.reset(); // an earlier candidate, whose fit was not kept, is chosen now
       }
     }
+    if (choice.Candidates.empty())
+    {
+      choice.Untested = "no candidates";
+      return true;
+    }
+    if (choice.Chosen < 0)
+    {
+      if (error)
+      {
+        *error = std::string(name) + ": no candidate scored a finite PSNR on the held-out frames";
+      }
+      return false;
+    }
     if (!this->Kept)
     {
       TrainerSettings s = settings;
@@ -248,13 +261,19 @@ struct CandidateFits
     OptimizerState G;
     G.Field = whole;
     G.ResizeToField();
-    FinalPrune(G, fit.GetData(), fit.Options(), fit.GetGamma(), settings.FinalPruneTolerance);
-    r.Pruned = G.Field.Count();
-    if (!score(G.Field, r.PrunedPSNR))
+    r.PruneMeasured = settings.FinalPruneTolerance > 0;
+    r.Pruned = r.Whole;
+    r.PrunedPSNR = r.WholePSNR;
+    if (r.PruneMeasured)
     {
-      return false;
+      FinalPrune(G, fit.GetData(), fit.Options(), fit.GetGamma(), settings.FinalPruneTolerance);
+      r.Pruned = G.Field.Count();
+      if (!score(G.Field, r.PrunedPSNR))
+      {
+        return false;
+      }
+      r.KeepPrune = r.PrunedPSNR >= r.WholePSNR - this->Tolerance;
     }
-    r.KeepPrune = r.PrunedPSNR >= r.WholePSNR - this->Tolerance;
     if (!r.KeepPrune)
     {
       G.Field = whole;
@@ -281,7 +300,7 @@ void HeldOutReduction::RewriteSettingLines(std::vector<std::string>& lines) cons
 {
   for (std::string& line : lines)
   {
-    const bool prune = line.rfind("FinalPrune = ", 0) == 0;
+    const bool prune = line.rfind("FinalPrune = ", 0) == 0 && (!this->Untested.empty() || this->PruneMeasured);
     const bool merge = line.rfind("Merge = ", 0) == 0 && (!this->Untested.empty() || this->MergeMeasured);
     if (!prune && !merge)
     {
@@ -336,7 +355,7 @@ bool ChooseOnHeldOutFrames(const TrainingData& data, const TrainerSettings& sett
     return true;
   }
   std::vector<double> sigmas{ settings.ElevationSigma };
-  if (sigmaByRule)
+  if (sigmaByRule && !h.ElevationSigmaFactors.empty())
   {
     sigmas.clear();
     for (double factor : h.ElevationSigmaFactors)
@@ -381,10 +400,9 @@ bool ChooseOnHeldOutFrames(const TrainingData& data, const TrainerSettings& sett
   {
     return false;
   }
-  chosen.Solve.Ridge = ridge.Candidates[ridge.Chosen].Value;
-  return choices.Reduction.Untested.empty()
-    ? fits.MeasureReduction(chosen, ridge.Candidates[ridge.Chosen].PSNR, choices.Reduction, error)
-    : true;
+  const HeldOutCandidate& fit = ridge.Chosen >= 0 ? ridge.Candidates[ridge.Chosen] : fitted;
+  chosen.Solve.Ridge = ridge.Chosen >= 0 ? fit.Value : settings.Solve.Ridge;
+  return !choices.Reduction.Untested.empty() || fits.MeasureReduction(chosen, fit.PSNR, choices.Reduction, error);
 }
 
 bool ApplyHeldOutChoices(
@@ -423,12 +441,14 @@ std::string RouteTrialUntested(
   const std::int64_t trainingPixels =
     std::int64_t(data.Width) * data.Height * static_cast<std::int64_t>(data.TrainFrames.size());
   const double seconds = 6.5 * h.GridFitSecondsPerGaussian * static_cast<double>(all);
-  return !h.Enabled            ? "the held-out choices are off"
-    : !h.MeasureRoute          ? "its measurement is off (MeasureRoute)"
-    : all <= 0                 ? "the pixel-grid fit does not apply to these settings"
-    : dataParallel             ? "a data-parallel run does not measure it"
+  return !h.Enabled   ? "the held-out choices are off"
+    : !h.MeasureRoute ? "its measurement is off (MeasureRoute)"
+    : all <= 0        ? "the pixel-grid fit does not apply to these settings"
+    : dataParallel    ? "a data-parallel run does not measure it"
+    : settings.Poses.RefineTimeOffset || settings.Poses.RefineImageToProbe
+    ? "a shared pose correction (time offset, ImageToProbe) is refined, which the grid's fit would not"
     : settings.TimeBudget <= 0 ? "no time budget to plan the measurement in"
-    : !CheckTrainingMemory(all, ReflectivitySolveBytes(all, trainingPixels), nullptr)
+    : !CheckTrainingMemory(all, ReflectivitySolveBytes(all, trainingPixels, settings.Solve.L1 > 0), nullptr)
     ? vtkfmt::sprintf(
         "a grid of every one of the %lld fan pixels does not fit this machine's memory", static_cast<long long>(all))
     : seconds > 0.5 * settings.TimeBudget
@@ -478,9 +498,9 @@ bool MeasurePixelGridRoute(
 
 std::string RouteTrial::Line() const
 {
-  const std::string rule = vtkfmt::sprintf("the rule: the %lld fan pixels of the grid's planes are more than twice "
-                                           "MaximumGaussians",
-    static_cast<long long>(this->FanPixels));
+  const std::string rule =
+    vtkfmt::sprintf("the rule: the %lld fan pixels of the grid's planes are more than %g x MaximumGaussians",
+      static_cast<long long>(this->FanPixels), this->RulePixelsPerGaussian);
   if (!this->Untested.empty() || (!this->Pending && this->DecidedAt < 0))
   {
     return "Route = Harris seeds and Adam (" + rule +

@@ -144,6 +144,7 @@ struct HeldOutReduction
   bool KeepPrune = true;      ///< the prune cost at most HeldOutChoiceSettings::Tolerance
   bool KeepMerge = true;      ///< the merge cost at most that on top of what was kept
   bool MergeMeasured = false; ///< the merge is on (Merge.Tolerance > 0) and was measured
+  bool PruneMeasured = false; ///< the prune is on (FinalPruneTolerance > 0) and was measured
   double Seconds = 0;         ///< the prune, the merge and their scoring
   int Frames = 0;             ///< held-out frames scored
   /**
@@ -180,8 +181,9 @@ struct RouteTrial
   double AdamPSNR = 0;            ///< dB, the Adam run's field at the decision
   int DecidedAt = -1;             ///< the Adam run's iteration at the decision; -1 before
   bool GridChosen = false;
-  std::int64_t FanPixels = 0; ///< of the grid's planes
-  std::string Untested;       ///< why the rule's route was taken without the measurement
+  std::int64_t FanPixels = 0;       ///< of the grid's planes
+  double RulePixelsPerGaussian = 2; ///< SeedingSettings::PixelGridFanPixelsPerGaussian, for the line
+  std::string Untested;             ///< why the rule's route was taken without the measurement
   /// The "Route = ..." setting line.
   std::string Line() const;
 };

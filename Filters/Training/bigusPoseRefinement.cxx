@@ -432,6 +432,24 @@ std::vector<FramePoseCorrection> PoseRefiner::Corrections(const TrainingState& s
   return corrections;
 }
 
+bool PoseRefiner::Resume(
+  TrainingState& loaded, std::vector<std::string>& lines, const std::string& file, bool& trialDone, std::string* error)
+{
+  trialDone = false;
+  if (this->TrialPending && loaded.PoseCorrections.empty())
+  {
+    this->TurnOffCorrections(loaded, lines, "measured before the checkpoint " + file + " was written");
+    trialDone = true;
+  }
+  else if (this->TrialPending &&
+    std::any_of(loaded.PoseSteps.begin(), loaded.PoseSteps.end(), [](int steps) { return steps > 0; }))
+  {
+    this->EndTrial();
+    trialDone = true;
+  }
+  return this->CheckCheckpoint(loaded, file, error);
+}
+
 bool PoseRefiner::CheckCheckpoint(const TrainingState& loaded, const std::string& file, std::string* error) const
 {
   const PoseRefinementSettings& s = this->Settings;

@@ -188,6 +188,14 @@ public:
   /// Whether a checkpoint's state @p loaded holds the corrections this run refines (same settings, same sweep);
   /// false with @p error naming @p file otherwise.
   bool CheckCheckpoint(const TrainingState& loaded, const std::string& file, std::string* error) const;
+  /**
+   * A checkpoint's state @p loaded (from @p file) taken up. One written after the pose-refinement trial goes on with
+   * its choice, read from its corrections: none, trusted (TurnOffCorrections, the RefinePoses line of @p lines says
+   * so); one that moved, refined; @p trialDone says whether either applied (the checkpoint does not store the
+   * outcome). Then CheckCheckpoint; false with its @p error.
+   */
+  bool Resume(TrainingState& loaded, std::vector<std::string>& lines, const std::string& file, bool& trialDone,
+    std::string* error);
 
 private:
   /// Frame @p frame's pose in the data: its tracked pose at its timestamp plus the time offset, then its own

@@ -26,9 +26,10 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
   const int steps = s.Poses.TrialSteps, from = this->State.Iteration;
   double left = s.Iterations > 0 ? s.Iterations - from : std::numeric_limits<double>::infinity();
   const double seconds = this->TrainingSeconds();
-  if (s.TimeBudget > 0 && seconds > 0 && from > 0) // no step yet: the rate is unknown, the trial goes ahead
+  const double stepping = seconds - this->Report.Route.GridSeconds; // the route trial's grid side took no step
+  if (s.TimeBudget > 0 && stepping > 0 && from > 0) // no step yet: the rate is unknown, the trial goes ahead
   {
-    left = std::min(left, (s.TimeBudget - seconds) * from / seconds);
+    left = std::min(left, (s.TimeBudget - seconds) * from / stepping);
   }
   if (frames.empty() || this->Reduction || left < 4.0 * steps)
   {

@@ -22,6 +22,20 @@ std::size_t LineOf(const std::vector<std::string>& lines, const std::string& pre
     std::find_if(lines.begin(), lines.end(), [&](const std::string& l) { return l.rfind(prefix, 0) == 0; }) -
     lines.begin());
 }
+
+/// The setting line that starts with @p prefix replaced by @p line (appended where there is none).
+void ReplaceLine(std::vector<std::string>& lines, const std::string& prefix, const std::string& line)
+{
+  const std::size_t at = LineOf(lines, prefix);
+  if (at < lines.size())
+  {
+    lines[at] = line;
+  }
+  else
+  {
+    lines.push_back(line);
+  }
+}
 }
 
 bool Trainer::PlanRouteTrial(const SeedingPlan& plan, std::string* error)
@@ -29,6 +43,7 @@ bool Trainer::PlanRouteTrial(const SeedingPlan& plan, std::string* error)
   RouteTrial& trial = this->Report.Route;
   trial = RouteTrial();
   trial.FanPixels = plan.Planes.FanPixels;
+  trial.RulePixelsPerGaussian = this->Settings.Seeding.PixelGridFanPixelsPerGaussian;
   trial.Untested = RouteTrialUntested(*this->Data, this->Settings, plan, this->Reduction != nullptr);
   if (trial.Untested.empty())
   {
@@ -47,21 +62,18 @@ bool Trainer::PlanRouteTrial(const SeedingPlan& plan, std::string* error)
   return true;
 }
 
-void Trainer::CancelRouteTrial(const std::string& why)
+bool Trainer::CancelRouteTrial(const std::string& why, std::string* error)
 {
   RouteTrial& trial = this->Report.Route;
   if (!trial.Pending)
   {
-    return;
+    return true;
   }
   trial.Pending = false;
   trial.Untested = why;
-  std::vector<std::string>& lines = this->Report.Settings;
-  const std::size_t at = LineOf(lines, "Route = ");
-  if (at < lines.size())
-  {
-    lines[at] = trial.Line();
-  }
+  ReplaceLine(this->Report.Settings, "Route = ", trial.Line());
+  SeedingPlan adam; // the Adam route's choices: said untested (no pixel-grid candidate is fitted)
+  return this->MeasureOnHeldOutFrames(0, adam, error);
 }
 
 bool Trainer::DecideRoute(const double* last, bool closing, std::string* error)
@@ -83,12 +95,7 @@ bool Trainer::DecideRoute(const double* last, bool closing, std::string* error)
   trial.Pending = false;
   trial.DecidedAt = this->State.Iteration;
   trial.GridChosen = trial.GridPSNR > trial.AdamPSNR;
-  std::vector<std::string>& lines = this->Report.Settings;
-  const std::size_t at = LineOf(lines, "Route = ");
-  if (at < lines.size())
-  {
-    lines[at] = trial.Line();
-  }
+  ReplaceLine(this->Report.Settings, "Route = ", trial.Line());
   if (trial.GridChosen)
   {
     return this->SwitchToPixelGrid(error);
@@ -106,7 +113,10 @@ bool Trainer::SwitchToPixelGrid(std::string* error)
   JoinTrainingFrames(*this->Data, this->HeldOutValidation);
   this->HeldOutValidation.clear();
   this->Poses.TurnOffCorrections(this->State, lines, "the route measured is the pixel grid, which takes no step");
-  this->Data->Poses = this->Poses.GetTrackedPoses();
+  if (!this->Poses.GetTrackedPoses().empty()) // kept only where a pose was refined
+  {
+    this->Data->Poses = this->Poses.GetTrackedPoses();
+  }
   s.Poses = this->Poses.GetSettings();
   s.Seeding.PixelGridFanPixelsPerGaussian = std::numeric_limits<double>::infinity();
   if (ApplyHeldOutChoices(trial.Grid, this->SigmaByRule, true, s, lines))
@@ -124,13 +134,19 @@ bool Trainer::SwitchToPixelGrid(std::string* error)
   {
     return false;
   }
-  lines.push_back(gammaLine + " (again, for the pixel grid)");
+  ReplaceLine(lines, "Gamma = ", gammaLine + " (of every training frame, for the pixel grid)");
+  const std::size_t validation = LineOf(lines, "Validation = ");
+  if (validation < lines.size())
+  {
+    lines[validation] +=
+      vtkfmt::sprintf("; joined the fit at step %d, where the route trial took the pixel grid", trial.DecidedAt);
+  }
   TrainingState& state = this->State;
   state.Gaussians = OptimizerState();
   // Adam's best field is no candidate: Finish's validation keeps the grid (early stopping has nothing earlier).
   state.BestField = GaussianField();
   state.BestFieldLoss = std::numeric_limits<double>::infinity();
-  lines.push_back(
+  ReplaceLine(lines, "InitialGaussians = ",
     SeedField(*this->Data, plan, s.Seeding, this->SeedShapeOf(), s.Seed, s.Solve.L1, state.Gaussians.Field));
   state.Gaussians.ResizeToField();
   this->Report.InitialGaussians = state.Gaussians.Field.Count();

@@ -362,7 +362,7 @@ bool PlanSeeding(const TrainingData& data, const SeedingSettings& s, std::int64_
     const std::int64_t all = plan.Planes.FanPixels;
     const std::int64_t trainingPixels =
       std::int64_t(data.Width) * data.Height * static_cast<std::int64_t>(data.TrainFrames.size());
-    plan.Count = CheckTrainingMemory(all, ReflectivitySolveBytes(all, trainingPixels), nullptr)
+    plan.Count = s.GridCountByMemory && CheckTrainingMemory(all, ReflectivitySolveBytes(all, trainingPixels), nullptr)
       ? all
       : std::min<std::int64_t>(all, maximumGaussians);
   }
@@ -388,12 +388,12 @@ std::string SeedField(const TrainingData& data, const SeedingPlan& plan, const S
   if (plan.PixelGrid)
   {
     const std::string grid = SeedGrid(data, plan.Planes, plan.Count, shape, field);
-    return vtkfmt::sprintf("InitialGaussians = %lld (the pixel-grid fit: the %lld fan pixels of the dense start's "
-                           "planes %s; ",
-             gaussians(), static_cast<long long>(plan.Planes.FanPixels),
-             plan.Count < plan.Planes.FanPixels
-               ? "are at most twice MaximumGaussians and more than memory holds, a grid of MaximumGaussians"
-               : "are at most twice MaximumGaussians, every one as memory holds them") +
+    return vtkfmt::sprintf("InitialGaussians = %lld (the pixel-grid fit: %s the %lld fan pixels of the dense "
+                           "start's planes; ",
+             gaussians(),
+             plan.Count < plan.Planes.FanPixels ? "MaximumGaussians points, as memory does not hold every one of"
+                                                : "every one, as memory holds them, of",
+             static_cast<long long>(plan.Planes.FanPixels)) +
       grid + "; reflectivities solved" +
       (solveL1 > 0 ? vtkfmt::sprintf(" with an L1 term of %.3g (FISTA)", solveL1) : std::string()) +
       ", no geometry steps)";

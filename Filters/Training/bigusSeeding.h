@@ -53,6 +53,9 @@ struct SeedingSettings
   /// stride of about 1.45: docs/FINDINGS.md, "Several sweeps into one field"). Above it the route is Harris seeds and
   /// Adam unless the held-out route trial measures the grid better (bigusHeldOutChoices.h, RouteTrial).
   double PixelGridFanPixelsPerGaussian = 2.0;
+  /// The grid's count follows this machine's memory (every fan pixel where it holds them); false: at most
+  /// MaximumGaussians (a data-parallel run, whose processes must seed the same grid).
+  bool GridCountByMemory = true;
   double UniformShare = 0.1;       ///< share of Harris seeds drawn uniformly inside the mask
   double InitialScalePixels = 1.5; ///< pixels: in-plane standard deviation of a Harris or uniform seed
 };

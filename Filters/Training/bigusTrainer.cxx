@@ -112,6 +112,8 @@ bool Trainer::PrepareInitialField(std::string* error)
   {
     return false;
   }
+  // Every process of a data-parallel run seeds the same grid: its count cannot follow each machine's memory.
+  this->Settings.Seeding.GridCountByMemory = this->Settings.Seeding.GridCountByMemory && !this->Reduction;
   SeedingPlan plan;
   if (!PlanSeeding(data, this->Settings.Seeding, this->Settings.MaximumGaussians,
         this->Settings.NonNegativeReflectivity, this->SeedShapeOf(), count, plan, error))
@@ -279,10 +281,12 @@ bool Trainer::MeasureOnHeldOutFrames(std::int64_t fanPixels, SeedingPlan& plan, 
   {
     return true;
   }
-  // The seeding plan of the chosen sigma (the grid's elevation scale follows it).
+  // The seeding plan of the chosen sigma (the grid's planes and elevation scale follow it), still the grid's.
   this->Report.ElevationSigma = this->Settings.ElevationSigma;
-  return PlanSeeding(*this->Data, this->Settings.Seeding, this->Settings.MaximumGaussians,
-    this->Settings.NonNegativeReflectivity, this->SeedShapeOf(), fanPixels, plan, error);
+  SeedingSettings seeding = this->Settings.Seeding;
+  seeding.PixelGridFanPixelsPerGaussian = std::numeric_limits<double>::infinity();
+  return PlanSeeding(*this->Data, seeding, this->Settings.MaximumGaussians, this->Settings.NonNegativeReflectivity,
+    this->SeedShapeOf(), fanPixels, plan, error);
 }
 
 double Trainer::TrainingSeconds() const
@@ -417,9 +421,14 @@ bool Trainer::JoinValidationFrames(const double* last, std::string* error)
   {
     return true;
   }
-  if (this->Report.Route.Pending)
+  if (this->Report.Route.Pending && last)
   {
     return this->DecideRoute(last, true, error);
+  }
+  // A run that ends before the window's close (a stop, a budget spent) stays Adam's.
+  if (!this->CancelRouteTrial("the run ended before its frames would join the fit", error))
+  {
+    return false;
   }
   if (last && RestoreBestField(this->State, *last))
   {
@@ -694,75 +703,6 @@ bool Trainer::Run(const std::function<void(double, int, double, std::int64_t)>& 
   const std::function<bool()>& abort, std::string* error)
 {
   return this->Train(progress, abort, error) && this->Finish(error);
-}
-
-bool Trainer::SaveCheckpoint(const std::string& file, std::string* error)
-{
-  this->State.TrainingSeconds = this->TrainingSeconds();
-  this->State.DataDigest = this->Digest;
-  this->State.RunSettings = this->RunSettings;
-  return this->PullState(error) && this->State.Save(file, this->Gamma, error);
-}
-
-bool Trainer::LoadCheckpoint(const std::string& file, std::string* error)
-{
-  // Data-parallel: every process reads the file (rank 0 wrote it); one that cannot fails them all here.
-  const bool loaded = this->ReadCheckpoint(file, error);
-  return this->Agree(loaded, error);
-}
-
-bool Trainer::ReadCheckpoint(const std::string& file, std::string* error)
-{
-  TrainingState loaded;
-  double gamma = this->Gamma;
-  if (!loaded.Load(file, gamma, error))
-  {
-    return false;
-  }
-  // Written for this run's data and settings (a file without them, from before "BIGUSCK6", cannot be checked).
-  const std::string changed = ResumeSettingsDifference(loaded.RunSettings, this->RunSettings);
-  if ((loaded.DataDigest != 0 && loaded.DataDigest != this->Digest) || !changed.empty())
-  {
-    if (error)
-    {
-      *error = file + ": the checkpoint was written by a run " +
-        (changed.empty() ? std::string("on other training data (the frames, poses, masks, calibration or held-out "
-                                       "frames differ); resume with the sweeps and options it was written with")
-                         : "with other settings (" + changed + "); resume with the options it was written with");
-    }
-    return false;
-  }
-  // A checkpoint written after the pose-refinement trial goes on with its choice: no corrections, trusted; a
-  // correction that moved, refined.
-  bool trialDone = false;
-  if (this->Poses.IsTrialPending() && loaded.PoseCorrections.empty())
-  {
-    this->Poses.TurnOffCorrections(
-      this->State, this->Report.Settings, "measured before the checkpoint " + file + " was written");
-    this->Settings.Poses = this->Poses.GetSettings();
-    trialDone = true;
-  }
-  else if (this->Poses.IsTrialPending() &&
-    std::any_of(loaded.PoseSteps.begin(), loaded.PoseSteps.end(), [](int steps) { return steps > 0; }))
-  {
-    this->Poses.EndTrial();
-    trialDone = true;
-  }
-  if (!this->Poses.CheckCheckpoint(loaded, file, error))
-  {
-    return false;
-  }
-  this->State = std::move(loaded);
-  this->Poses.ComposePoses(
-    this->State); // frames never corrected (held out, or before the corrections moved) stay as tracked
-  if (trialDone && !this->EndPoseTrial("before the checkpoint", error))
-  {
-    return false;
-  }
-  this->Gamma = gamma;
-  this->PixelGrid = false; // a checkpoint comes from a run that takes steps: it goes on with them
-  this->CancelRouteTrial("the run resumed from the checkpoint " + file + ", which goes on with its steps");
-  return this->PushState(error) && (this->InDensificationWindow() || this->JoinValidationFrames(nullptr, error));
 }
 
 } // namespace bigus

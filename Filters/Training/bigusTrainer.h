@@ -252,8 +252,9 @@ private:
    * says what each scored.
    */
   bool DecideRoute(const double* last, bool closing, std::string* error);
-  /// A pending route trial ends untested (@p why; its frames join when the window closes, as validation frames).
-  void CancelRouteTrial(const std::string& why);
+  /// A pending route trial ends untested (@p why): the run stays Adam's, its frames stay validation frames and the
+  /// choices' lines say untested. False with @p error as MeasureOnHeldOutFrames.
+  bool CancelRouteTrial(const std::string& why, std::string* error);
   /// The run from here the pixel grid's: the grid's choices in the settings, every frame in the fit at its tracked
   /// pose, the grid seeded and its reflectivities solved; Train takes no further step.
   bool SwitchToPixelGrid(std::string* error);
