@@ -149,6 +149,29 @@ bool FitWithoutHeldOutFrames(const TrainingData& data, const std::vector<int>& h
 
 namespace
 {
+/// A candidate of @p settings fitted without @p heldOut (FitCandidate) and scored on @p scored: its PSNR into @p c
+/// (and its Gaussians and seconds); the fit, or null with @p error prefixed by @p what.
+std::unique_ptr<Trainer> FitAndScore(const TrainingData& data, const std::vector<int>& heldOut,
+  const std::vector<int>& scored, const TrainerSettings& settings, const std::string& what, HeldOutCandidate& c,
+  std::string* error)
+{
+  const double start = SteadySeconds();
+  std::unique_ptr<Trainer> fit = FitCandidate(data, heldOut, settings, error);
+  ImageMetrics metrics;
+  if (!fit || !fit->EvaluateOn(data, scored, metrics, error))
+  {
+    if (error)
+    {
+      *error = what + ": " + *error;
+    }
+    return nullptr;
+  }
+  c.PSNR = metrics.PSNR;
+  c.Count = fit->GetField().Count();
+  c.Seconds = SteadySeconds() - start;
+  return fit;
+}
+
 /// The index of the first candidate of @p candidates within @p tolerance dB of the best; -1 when there is none.
 int FirstWithinTolerance(const std::vector<HeldOutCandidate>& candidates, double tolerance)
 {
@@ -188,24 +211,16 @@ struct CandidateFits
   {
     for (double value : values)
     {
-      const double start = SteadySeconds();
       TrainerSettings s = settings;
       apply(s, value);
-      std::unique_ptr<Trainer> fit = FitCandidate(this->Data, this->HeldOut, s, error);
       HeldOutCandidate c;
       c.Value = value;
-      ImageMetrics metrics;
-      if (!fit || !fit->EvaluateOn(this->Data, this->Scored, metrics, error))
+      std::unique_ptr<Trainer> fit = FitAndScore(
+        this->Data, this->HeldOut, this->Scored, s, vtkfmt::sprintf("%s candidate %.4g", name, value), c, error);
+      if (!fit)
       {
-        if (error)
-        {
-          *error = vtkfmt::sprintf("%s candidate %.4g: ", name, value) + *error;
-        }
         return false;
       }
-      c.PSNR = metrics.PSNR;
-      c.Count = fit->GetField().Count();
-      c.Seconds = SteadySeconds() - start;
       const int before = choice.Chosen;
       choice.Candidates.push_back(c);
       choice.Chosen = FirstWithinTolerance(choice.Candidates, this->Tolerance);
@@ -438,8 +453,6 @@ std::string RouteTrialUntested(
 {
   const HeldOutChoiceSettings& h = settings.HeldOut;
   const std::int64_t all = plan.Planes.FanPixels;
-  const std::int64_t trainingPixels =
-    std::int64_t(data.Width) * data.Height * static_cast<std::int64_t>(data.TrainFrames.size());
   const double seconds = 6.5 * h.GridFitSecondsPerGaussian * static_cast<double>(all);
   return !h.Enabled   ? "the held-out choices are off"
     : !h.MeasureRoute ? "its measurement is off (MeasureRoute)"
@@ -448,7 +461,7 @@ std::string RouteTrialUntested(
     : settings.Poses.RefineTimeOffset || settings.Poses.RefineImageToProbe
     ? "a shared pose correction (time offset, ImageToProbe) is refined, which the grid's fit would not"
     : settings.TimeBudget <= 0 ? "no time budget to plan the measurement in"
-    : !CheckTrainingMemory(all, ReflectivitySolveBytes(all, trainingPixels, settings.Solve.L1 > 0), nullptr)
+    : !PixelGridFitsInMemory(data, all, settings.Solve.L1 > 0)
     ? vtkfmt::sprintf(
         "a grid of every one of the %lld fan pixels does not fit this machine's memory", static_cast<long long>(all))
     : seconds > 0.5 * settings.TimeBudget
@@ -479,18 +492,13 @@ bool MeasurePixelGridRoute(
   // gap, not the narrower one taken for the fit on every frame (ElevationSigmaScale), which the switch takes.
   const HeldOutChoice& sigma = trial.Grid.ElevationSigma;
   grid.ElevationSigma = sigma.Chosen >= 0 ? sigma.Candidates[sigma.Chosen].Value : grid.ElevationSigma;
-  const std::unique_ptr<Trainer> fit = FitCandidate(data, trial.Frames, grid, error);
-  ImageMetrics metrics;
-  if (!fit || !fit->EvaluateOn(data, trial.Frames, metrics, error))
+  HeldOutCandidate c;
+  if (!FitAndScore(data, trial.Frames, trial.Frames, grid, "the pixel grid's fit for the route", c, error))
   {
-    if (error)
-    {
-      *error = "the pixel grid's fit for the route: " + *error;
-    }
     return false;
   }
-  trial.GridPSNR = metrics.PSNR;
-  trial.GridGaussians = fit->GetField().Count();
+  trial.GridPSNR = c.PSNR;
+  trial.GridGaussians = c.Count;
   trial.GridSeconds = SteadySeconds() - start;
   trial.Pending = true;
   return true;

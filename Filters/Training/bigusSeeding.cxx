@@ -333,6 +333,13 @@ double UniformDouble(std::mt19937_64& rng)
   return (rng() >> 11) * (1.0 / 9007199254740992.0);
 }
 
+bool PixelGridFitsInMemory(const TrainingData& data, std::int64_t gaussians, bool l1)
+{
+  const std::int64_t trainingPixels =
+    std::int64_t(data.Width) * data.Height * static_cast<std::int64_t>(data.TrainFrames.size());
+  return CheckTrainingMemory(gaussians, ReflectivitySolveBytes(gaussians, trainingPixels, l1), nullptr);
+}
+
 bool PlanSeeding(const TrainingData& data, const SeedingSettings& s, std::int64_t maximumGaussians, bool nonNegative,
   const SeedShape& shape, std::int64_t fanPixels, SeedingPlan& plan, std::string* error)
 {
@@ -360,9 +367,7 @@ bool PlanSeeding(const TrainingData& data, const SeedingSettings& s, std::int64_
     // The grid's count is set by memory, not by MaximumGaussians (a grid is never densified): every fan pixel of the
     // planes where this machine holds their training state and solve, else MaximumGaussians of them.
     const std::int64_t all = plan.Planes.FanPixels;
-    const std::int64_t trainingPixels =
-      std::int64_t(data.Width) * data.Height * static_cast<std::int64_t>(data.TrainFrames.size());
-    plan.Count = s.GridCountByMemory && CheckTrainingMemory(all, ReflectivitySolveBytes(all, trainingPixels), nullptr)
+    plan.Count = s.GridCountByMemory && PixelGridFitsInMemory(data, all, false)
       ? all
       : std::min<std::int64_t>(all, maximumGaussians);
   }

@@ -61,6 +61,13 @@ struct SeedingSettings
 };
 
 /**
+ * Whether this machine's memory holds a pixel grid of @p gaussians with the reflectivity solve over @p data's
+ * training frames (CheckTrainingMemory of TrainingBytesPerGaussian each and ReflectivitySolveBytes, with the L1
+ * term's vectors where @p l1).
+ */
+BIGUSTRAINING_EXPORT bool PixelGridFitsInMemory(const TrainingData& data, std::int64_t gaussians, bool l1);
+
+/**
  * The intensity map's exponent for @p data (GammaFromMeanIntensity of the training frames' mean intensity inside
  * their masks) and its `setting` line; @p fanPixels receives how many training pixels are inside the masks. False
  * with @p error when none is.
