@@ -1,4 +1,5 @@
 #include "bigusPlot.h"
+#include "bigusReplaceFile.h"
 
 #include "vtkImageData.h"
 #include "vtkNew.h"
@@ -9,28 +10,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <unistd.h>
 
 namespace bigus
 {
-
-std::string TemporaryName(const std::string& path)
-{
-  const std::size_t slash = path.find_last_of('/');
-  const std::size_t dot = path.find('.', slash == std::string::npos ? 0 : slash + 1);
-  const std::string tag = ".tmp" + std::to_string(::getpid());
-  return dot == std::string::npos ? path + tag : path.substr(0, dot) + tag + path.substr(dot);
-}
-
-bool Publish(const std::string& temporary, const std::string& path)
-{
-  if (std::rename(temporary.c_str(), path.c_str()) != 0)
-  {
-    std::remove(temporary.c_str());
-    return false;
-  }
-  return true;
-}
 
 bool WritePng(const cv::Mat& image, const std::string& path)
 {

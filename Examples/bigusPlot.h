@@ -32,11 +32,6 @@ struct PlotSpec
 /// @p path through a temporary file. Returns false when it cannot write.
 bool WritePlot(const PlotSpec& spec, const std::string& path);
 
-/// "name.tmp<pid>.ext": same folder and extension, so that writers that look at the extension work.
-std::string TemporaryName(const std::string& path);
-/// Renames @p temporary to @p path; removes the temporary and returns false on failure.
-bool Publish(const std::string& temporary, const std::string& path);
-
 /**
  * Writes @p image (8-bit, 1 channel gray or 3 channels in OpenCV's B, G, R order; [rows, columns], row 0
  * at the top of the picture) as PNG to @p path through a temporary file (vtkPNGWriter). False when

@@ -1,6 +1,7 @@
 #include "vtkUltrasoundSequenceWriter.h"
 
 #include "bigusMetaImageHeader.h"
+#include "bigusReplaceFile.h"
 
 #include "vtkDataArray.h"
 #include "vtkFieldData.h"
@@ -15,7 +16,6 @@
 #include <cstdio>
 #include <fstream>
 #include <sstream>
-#include <unistd.h>
 #include <vector>
 
 vtkStandardNewMacro(vtkUltrasoundSequenceWriter);
@@ -183,31 +183,23 @@ void vtkUltrasoundSequenceWriter::WriteData()
   h << "ElementDataFile = " << dataFile << "\n";
 
   // Write under temporary names, then rename: an existing file is never left half-written.
-  const std::string suffix = ".tmp" + std::to_string(::getpid());
+  const std::string temporary = bigus::TemporaryName(file), dataTemporary = bigus::TemporaryName(dataPath);
   bool ok = true;
   if (detached)
   {
-    ok =
-      WriteFile(dataPath + suffix, std::string(), pixels, bodyBytes) && WriteFile(file + suffix, h.str(), nullptr, 0);
+    ok = WriteFile(dataTemporary, std::string(), pixels, bodyBytes) && WriteFile(temporary, h.str(), nullptr, 0);
   }
   else
   {
-    ok = WriteFile(file + suffix, h.str(), pixels, bodyBytes);
+    ok = WriteFile(temporary, h.str(), pixels, bodyBytes);
   }
-  if (ok && detached)
-  {
-    ok = std::rename((dataPath + suffix).c_str(), dataPath.c_str()) == 0;
-  }
-  if (ok)
-  {
-    ok = std::rename((file + suffix).c_str(), file.c_str()) == 0;
-  }
+  ok = ok && (!detached || bigus::Publish(dataTemporary, dataPath)) && bigus::Publish(temporary, file);
   if (!ok)
   {
-    std::remove((file + suffix).c_str());
+    std::remove(temporary.c_str());
     if (detached)
     {
-      std::remove((dataPath + suffix).c_str());
+      std::remove(dataTemporary.c_str());
     }
     return this->Fail(file + ": cannot write the file (folder missing or not writable, or disk full)");
   }

@@ -1,5 +1,6 @@
 // `bigus benchmark`: the report and the probes of the machine and of this process (bigusBenchmarkReport.h).
 #include "bigusBenchmarkReport.h"
+#include "bigusReplaceFile.h"
 
 #include "vtkSMPTools.h"
 

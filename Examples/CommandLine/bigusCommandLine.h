@@ -10,6 +10,8 @@
 #ifndef bigusCommandLine_h
 #define bigusCommandLine_h
 
+#include "bigusReplaceFile.h"
+
 #include "vtkCallbackCommand.h"
 #include "vtkImageData.h"
 #include "vtkNew.h"

@@ -66,12 +66,13 @@ void PoseRefiner::Configure(TrainingData* data, const PoseRefinementSettings& se
   }
   if (s.RefinePoses == PoseRefinement::On)
   {
-    lines.push_back(
-      vtkfmt::sprintf("RefinePoses = on (from %.0f %% of the schedule, %sAdam %.3g rad and %.3g mm per "
-                      "step; prior %.3g at %.3g degrees and %.3g mm, smoothness %.3g; ",
+    this->RuleText =
+      vtkfmt::sprintf("from %.0f %% of the schedule, %sAdam %.3g rad and %.3g mm per step; prior "
+                      "%.3g at %.3g degrees and %.3g mm, smoothness %.3g; ",
         100 * s.Start, startBy.empty() ? "" : startBy + "; ", s.RotationLearningRate, s.TranslationLearningRate,
         s.Prior, s.RotationSigma * 180 / M_PI, s.TranslationSigma, s.Smoothness) +
-      refinedBy + ")");
+      refinedBy;
+    lines.push_back("RefinePoses = on (" + this->RuleText + ")");
     const std::size_t n = data->Poses.size();
     state.PoseCorrections.assign(n, {});
     state.PoseFirstMoment.assign(n, {});
@@ -151,7 +152,18 @@ void PoseRefiner::TurnOffCorrections(TrainingState& state, std::vector<std::stri
   }
 }
 
-void PoseRefiner::AnnotateChoice(std::vector<std::string>& lines, const std::string& how)
+void PoseRefiner::EndTrialWithoutRoom(int iterations, double timeBudget, std::vector<std::string>& lines)
+{
+  const double left = (1 - this->Settings.Start) * iterations;
+  if (this->TrialPending && timeBudget <= 0 && iterations > 0 && left < 4.0 * this->Settings.TrialSteps)
+  {
+    this->TrialPending = false;
+    this->AnnotateChoice(lines,
+      vtkfmt::sprintf("untested: the schedule leaves %.0f steps, fewer than 4 x %d", left, this->Settings.TrialSteps));
+  }
+}
+
+void PoseRefiner::AnnotateChoice(std::vector<std::string>& lines, const std::string& how) const
 {
   const std::string on = "RefinePoses = on (";
   for (std::string& line : lines)

@@ -148,7 +148,14 @@ public:
   bool IsTrialPending() const { return this->TrialPending; }
   void EndTrial() { this->TrialPending = false; }
   /// Adds what the trial found (@p how) to the `RefinePoses = on (...)` line of @p lines.
-  static void AnnotateChoice(std::vector<std::string>& lines, const std::string& how);
+  void AnnotateChoice(std::vector<std::string>& lines, const std::string& how) const;
+  /// Where a pending trial cannot run within a schedule of @p iterations steps and no time budget (@p timeBudget
+  /// <= 0, s): fewer than 4 x TrialSteps steps left after Start. The trial ends untested (the rule's choice stands)
+  /// and the `RefinePoses` line of @p lines says so.
+  void EndTrialWithoutRoom(int iterations, double timeBudget, std::vector<std::string>& lines);
+  /// What the `RefinePoses = on (...)` line said when Configure wrote it, without the brackets (empty where it
+  /// wrote no such line): why the rule refines, kept for a line that later replaces it.
+  const std::string& GetRuleText() const { return this->RuleText; }
   /// Whether the training frames of sweep @p sweep (TrainingData::Sweeps) have their poses refined.
   bool IsSweepRefined(int sweep) const
   {
@@ -212,6 +219,7 @@ private:
   std::vector<char> RefinedSweeps; // RefinePoses: 1 for each sweep whose training frames are refined
   bool Suspended = false;
   bool TrialPending = false;
+  std::string RuleText; // the `RefinePoses = on (...)` line's text as Configure wrote it
 };
 
 /**

@@ -20,7 +20,7 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
 {
   this->Poses.EndTrial(); // one trial, whatever it finds
   const std::vector<int> frames = this->HeldOutValidation;
-  auto rewrite = [&](const std::string& how) { PoseRefiner::AnnotateChoice(this->Report.Settings, how); };
+  auto rewrite = [&](const std::string& how) { this->Poses.AnnotateChoice(this->Report.Settings, how); };
   // The steps the schedule has left: at most Iterations', and at the rate so far what the budget's seconds allow.
   const TrainerSettings& s = this->Settings;
   const int steps = s.Poses.TrialSteps, from = this->State.Iteration;
@@ -125,13 +125,8 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
     return false;
   }
   this->Engine->Snapshot();
-  std::string rule;
-  const std::string on = "RefinePoses = on (";
-  for (const std::string& line : this->Report.Settings)
-  {
-    rule = line.rfind(on, 0) == 0 ? line.substr(on.size(), line.size() - on.size() - 1) : rule;
-  }
-  this->Poses.TurnOffCorrections(this->State, this->Report.Settings, how + "; the rule alone: on, " + rule);
+  this->Poses.TurnOffCorrections(
+    this->State, this->Report.Settings, how + "; the rule alone: on, " + this->Poses.GetRuleText());
   this->Settings.Poses = this->Poses.GetSettings();
   return this->EndPoseTrial(how, error);
 }

@@ -138,16 +138,8 @@ bool Trainer::PrepareInitialField(std::string* error)
   }
   if (!plan.PixelGrid)
   {
-    // A schedule of Iterations alone too short for the pose-refinement trial keeps the rule's choice (no frame is
-    // held out for it).
-    const TrainerSettings& s = this->Settings;
-    const double left = (1 - this->Poses.GetSettings().Start) * s.Iterations;
-    if (this->Poses.IsTrialPending() && s.TimeBudget <= 0 && s.Iterations > 0 && left < 4.0 * s.Poses.TrialSteps)
-    {
-      this->Poses.EndTrial();
-      PoseRefiner::AnnotateChoice(this->Report.Settings,
-        vtkfmt::sprintf("untested: the schedule leaves %.0f steps, fewer than 4 x %d", left, s.Poses.TrialSteps));
-    }
+    // A schedule too short for the pose-refinement trial keeps the rule's choice (no frame is held out for it).
+    this->Poses.EndTrialWithoutRoom(this->Settings.Iterations, this->Settings.TimeBudget, this->Report.Settings);
     // Before gamma and the seeds, which read only the fitted frames (the rules measured at construction, the seed
     // count and the pixel spacing read every training frame).
     this->HoldOutValidationFrames();
@@ -270,25 +262,6 @@ SeedShape Trainer::SeedShapeOf() const
   return bigus::SeedShapeOf(this->Settings, this->PixelSpacing, this->Gamma);
 }
 
-bool Trainer::MeasureOnHeldOutFrames(std::int64_t fanPixels, SeedingPlan& plan, std::string* error)
-{
-  HeldOutChoices& choices = this->Report.HeldOut;
-  if (!ChooseOnHeldOutFrames(*this->Data, this->Settings, plan.PixelGrid, this->SigmaByRule, choices, error))
-  {
-    return false;
-  }
-  if (!ApplyHeldOutChoices(choices, this->SigmaByRule, plan.PixelGrid, this->Settings, this->Report.Settings))
-  {
-    return true;
-  }
-  // The seeding plan of the chosen sigma (the grid's planes and elevation scale follow it), still the grid's.
-  this->Report.ElevationSigma = this->Settings.ElevationSigma;
-  SeedingSettings seeding = this->Settings.Seeding;
-  seeding.PixelGridFanPixelsPerGaussian = std::numeric_limits<double>::infinity();
-  return PlanSeeding(*this->Data, seeding, this->Settings.MaximumGaussians, this->Settings.NonNegativeReflectivity,
-    this->SeedShapeOf(), fanPixels, plan, error);
-}
-
 double Trainer::TrainingSeconds() const
 {
   return this->TrainStart > 0
@@ -368,26 +341,6 @@ StepStatus Trainer::Step(double* loss, std::string* error)
   return status;
 }
 
-bool Trainer::CheckValidation(double& loss, std::string* error)
-{
-  TrainerReport& r = this->Report;
-  if (r.ValidationFrames.empty())
-  {
-    r.ValidationFrames = ValidationFrames(*this->Data); // a field given (SetField): its training frames
-  }
-  if (!bigus::ValidationLoss(*this->Engine, *this->Data, r.ValidationFrames, this->Options(), this->Settings.Loss,
-        this->Reduction, loss, error))
-  {
-    return false;
-  }
-  r.ValidationHistory.push_back({ this->State.Iteration, loss, this->State.Gaussians.Count() });
-  if (r.ValidationJoinedAt < 0)
-  {
-    KeepIfBest(this->State, loss, this->GetField());
-  }
-  return true;
-}
-
 bool Trainer::DensifyAndPrune(double validation, std::string* error)
 {
   return this->PullState(error) &&
@@ -395,94 +348,6 @@ bool Trainer::DensifyAndPrune(double validation, std::string* error)
       this->Settings.Densification, this->Settings.MaximumGaussians, validation, this->State,
       this->Report.GrowthStopReason, error) &&
     this->PushState(error);
-}
-
-void Trainer::HoldOutValidationFrames()
-{
-  TrainerReport& r = this->Report;
-  std::string line;
-  // The pose-refinement trial scores on held-out frames too (TryPoseRefinement).
-  HeldOutChoiceSettings held = this->Settings.HeldOut;
-  held.HoldOutValidationFrames = held.HoldOutValidationFrames || this->Poses.IsTrialPending();
-  // The route trial's frames, where it is pending: the pixel grid's fits never saw them.
-  r.ValidationFrames = ChooseValidationFrames(*this->Data, held,
-    this->Report.Route.Pending ? this->Report.Route.Frames : std::vector<int>(), r.ValidationHeldOut, line);
-  r.Settings.push_back(line);
-  if (r.ValidationHeldOut)
-  {
-    this->HeldOutValidation = r.ValidationFrames;
-    this->Engine->SetData(this->Data.get(), nullptr);
-  }
-}
-
-bool Trainer::JoinValidationFrames(const double* last, std::string* error)
-{
-  if (this->HeldOutValidation.empty())
-  {
-    return true;
-  }
-  if (this->Report.Route.Pending && last)
-  {
-    return this->DecideRoute(last, true, error);
-  }
-  // A run that ends before the window's close (a stop, a budget spent) stays Adam's.
-  if (!this->CancelRouteTrial("the run ended before its frames would join the fit", error))
-  {
-    return false;
-  }
-  if (last && RestoreBestField(this->State, *last))
-  {
-    this->Poses.ComposePoses(this->State); // the best field's poses
-    if (!this->PushState(error))
-    {
-      return false;
-    }
-  }
-  JoinTrainingFrames(*this->Data, this->HeldOutValidation);
-  this->HeldOutValidation.clear();
-  this->Recent = LossWindow(); // the joined frames' first losses are no sign of convergence
-  this->Report.ValidationJoinedAt = this->State.Iteration;
-  return this->Engine->SetData(this->Data.get(), error);
-}
-
-void Trainer::PlaceUntrainedFrames()
-{
-  this->Report.UntrainedCorrections = this->Poses.PlaceUntrainedFrames(this->State); // none unless RefinePoses On
-  // Held-out validation frames stay at their tracked poses while they decide, as every validation scores them.
-  if (!this->HeldOutValidation.empty() && !this->State.PoseCorrections.empty())
-  {
-    for (int f : this->HeldOutValidation)
-    {
-      this->State.PoseCorrections[f] = {};
-    }
-    this->Poses.ComposePoses(this->State);
-  }
-}
-
-bool Trainer::Evaluate(
-  const std::vector<int>& frames, ImageMetrics& metrics, std::string* error, double* secondsPerFrame)
-{
-  // Mid-run too, the frames not trained on are scored where Finish will put them, among their refined neighbours.
-  this->PlaceUntrainedFrames();
-  return this->EvaluateOn(*this->Data, frames, metrics, error, secondsPerFrame);
-}
-
-bool Trainer::EvaluateOn(const TrainingData& data, const std::vector<int>& frames, ImageMetrics& metrics,
-  std::string* error, double* secondsPerFrame)
-{
-  return EvaluateFrames(*this->Engine, data, frames, this->FilterRenderOptions(), metrics, error, secondsPerFrame);
-}
-
-bool Trainer::RenderFrame(const TrainingData& data, int frame, float* image, std::string* error)
-{
-  return bigus::RenderFrame(*this->Engine, data, frame, this->FilterRenderOptions(), this->S, image, error);
-}
-
-RenderOptions Trainer::FilterRenderOptions() const
-{
-  RenderOptions o = this->Options();
-  o.Cutoff = RenderOptions().Cutoff;
-  return o;
 }
 
 bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>& progress,

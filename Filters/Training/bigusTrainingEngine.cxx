@@ -1,6 +1,8 @@
 // The training state, its checkpoint file, and the engine factory (see bigusTrainingEngine.h).
 #include "bigusTrainingEngine.h"
 
+#include "bigusReplaceFile.h"
+
 #include "bigusBackend.h"
 #include "bigusSliceFrame.h"
 
@@ -470,7 +472,7 @@ std::uint64_t TrainingDataDigest(const TrainingData& data)
 
 bool TrainingState::Save(const std::string& file, double gamma, std::string* error) const
 {
-  const std::string temporary = file + ".tmp";
+  const std::string temporary = TemporaryName(file);
   {
     std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
     out.write("BIGUSCK6", 8);
@@ -534,9 +536,8 @@ bool TrainingState::Save(const std::string& file, double gamma, std::string* err
       return false;
     }
   }
-  if (std::rename(temporary.c_str(), file.c_str()) != 0)
+  if (!Publish(temporary, file))
   {
-    std::remove(temporary.c_str());
     if (error)
     {
       *error = file + ": cannot replace the checkpoint";

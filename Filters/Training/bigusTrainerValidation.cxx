@@ -1,0 +1,139 @@
+// The frames a fit does not see (see bigusTrainer.h and DESIGN section 4.1): the held-out choices before the seeds,
+// the validation frames held out of the Adam run and joined when the choices made on them end, the frames not trained
+// placed among their refined neighbours, and the renders that score them. Methods of Trainer, as holding frames out
+// and joining them changes the data the loop trains on.
+#include "bigusTrainer.h"
+
+#include <limits>
+
+namespace bigus
+{
+
+bool Trainer::MeasureOnHeldOutFrames(std::int64_t fanPixels, SeedingPlan& plan, std::string* error)
+{
+  HeldOutChoices& choices = this->Report.HeldOut;
+  if (!ChooseOnHeldOutFrames(*this->Data, this->Settings, plan.PixelGrid, this->SigmaByRule, choices, error))
+  {
+    return false;
+  }
+  if (!ApplyHeldOutChoices(choices, this->SigmaByRule, plan.PixelGrid, this->Settings, this->Report.Settings))
+  {
+    return true;
+  }
+  // The seeding plan of the chosen sigma (the grid's planes and elevation scale follow it), still the grid's.
+  this->Report.ElevationSigma = this->Settings.ElevationSigma;
+  SeedingSettings seeding = this->Settings.Seeding;
+  seeding.PixelGridFanPixelsPerGaussian = std::numeric_limits<double>::infinity();
+  return PlanSeeding(*this->Data, seeding, this->Settings.MaximumGaussians, this->Settings.NonNegativeReflectivity,
+    this->SeedShapeOf(), fanPixels, plan, error);
+}
+
+bool Trainer::CheckValidation(double& loss, std::string* error)
+{
+  TrainerReport& r = this->Report;
+  if (r.ValidationFrames.empty())
+  {
+    r.ValidationFrames = ValidationFrames(*this->Data); // a field given (SetField): its training frames
+  }
+  if (!bigus::ValidationLoss(*this->Engine, *this->Data, r.ValidationFrames, this->Options(), this->Settings.Loss,
+        this->Reduction, loss, error))
+  {
+    return false;
+  }
+  r.ValidationHistory.push_back({ this->State.Iteration, loss, this->State.Gaussians.Count() });
+  if (r.ValidationJoinedAt < 0)
+  {
+    KeepIfBest(this->State, loss, this->GetField());
+  }
+  return true;
+}
+
+void Trainer::HoldOutValidationFrames()
+{
+  TrainerReport& r = this->Report;
+  std::string line;
+  // The pose-refinement trial scores on held-out frames too (TryPoseRefinement).
+  HeldOutChoiceSettings held = this->Settings.HeldOut;
+  held.HoldOutValidationFrames = held.HoldOutValidationFrames || this->Poses.IsTrialPending();
+  // The route trial's frames, where it is pending: the pixel grid's fits never saw them.
+  r.ValidationFrames = ChooseValidationFrames(*this->Data, held,
+    this->Report.Route.Pending ? this->Report.Route.Frames : std::vector<int>(), r.ValidationHeldOut, line);
+  r.Settings.push_back(line);
+  if (r.ValidationHeldOut)
+  {
+    this->HeldOutValidation = r.ValidationFrames;
+    this->Engine->SetData(this->Data.get(), nullptr);
+  }
+}
+
+bool Trainer::JoinValidationFrames(const double* last, std::string* error)
+{
+  if (this->HeldOutValidation.empty())
+  {
+    return true;
+  }
+  if (this->Report.Route.Pending && last)
+  {
+    return this->DecideRoute(last, true, error);
+  }
+  // A run that ends before the window's close (a stop, a budget spent) stays Adam's.
+  if (!this->CancelRouteTrial("the run ended before its frames would join the fit", error))
+  {
+    return false;
+  }
+  if (last && RestoreBestField(this->State, *last))
+  {
+    this->Poses.ComposePoses(this->State); // the best field's poses
+    if (!this->PushState(error))
+    {
+      return false;
+    }
+  }
+  JoinTrainingFrames(*this->Data, this->HeldOutValidation);
+  this->HeldOutValidation.clear();
+  this->Recent = LossWindow(); // the joined frames' first losses are no sign of convergence
+  this->Report.ValidationJoinedAt = this->State.Iteration;
+  return this->Engine->SetData(this->Data.get(), error);
+}
+
+void Trainer::PlaceUntrainedFrames()
+{
+  this->Report.UntrainedCorrections = this->Poses.PlaceUntrainedFrames(this->State); // none unless RefinePoses On
+  // Held-out validation frames stay at their tracked poses while they decide, as every validation scores them.
+  if (!this->HeldOutValidation.empty() && !this->State.PoseCorrections.empty())
+  {
+    for (int f : this->HeldOutValidation)
+    {
+      this->State.PoseCorrections[f] = {};
+    }
+    this->Poses.ComposePoses(this->State);
+  }
+}
+
+bool Trainer::Evaluate(
+  const std::vector<int>& frames, ImageMetrics& metrics, std::string* error, double* secondsPerFrame)
+{
+  // Mid-run too, the frames not trained on are scored where Finish will put them, among their refined neighbours.
+  this->PlaceUntrainedFrames();
+  return this->EvaluateOn(*this->Data, frames, metrics, error, secondsPerFrame);
+}
+
+bool Trainer::EvaluateOn(const TrainingData& data, const std::vector<int>& frames, ImageMetrics& metrics,
+  std::string* error, double* secondsPerFrame)
+{
+  return EvaluateFrames(*this->Engine, data, frames, this->FilterRenderOptions(), metrics, error, secondsPerFrame);
+}
+
+bool Trainer::RenderFrame(const TrainingData& data, int frame, float* image, std::string* error)
+{
+  return bigus::RenderFrame(*this->Engine, data, frame, this->FilterRenderOptions(), this->S, image, error);
+}
+
+RenderOptions Trainer::FilterRenderOptions() const
+{
+  RenderOptions o = this->Options();
+  o.Cutoff = RenderOptions().Cutoff;
+  return o;
+}
+
+} // namespace bigus
