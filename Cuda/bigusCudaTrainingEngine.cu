@@ -668,46 +668,19 @@ bool CudaTrainingEngine::BasisNorms(
 bool CudaTrainingEngine::UseAssembled(
   const int* frames, int count, const RenderOptions& options, bool& ok, std::string* error)
 {
-  ok = true;
-  if (this->BasisMemoryLimit <= 0)
-  {
-    this->BasisProducts = "matrix free (no memory allowed for the assembled basis)";
-    return false;
-  }
-  const BasisKey key(frames, count, options);
-  if (this->Assembled && this->AssembledKey == key)
-  {
-    return true;
-  }
-  this->Assembled.reset();
-  const double start = SteadySeconds();
-  const RenderOptions linear = LinearBasisOptions(options);
-  std::vector<PreparedSlice> prepared;
-  if (!PrepareFrames(*this->Data, frames, count, linear, prepared, error))
-  {
-    ok = false;
-    return false;
-  }
-  std::unique_ptr<DeviceBasis> basis(new DeviceBasis);
-  std::string why;
-  bool tooLarge = false;
-  if (!basis->Assemble(this->Field(), prepared, EffectiveElevationSigma(linear), linear.Cutoff, this->BasisMemoryLimit,
-        this->Device, &why, &tooLarge))
-  {
+  auto assemble = [&](DeviceBasis& basis, std::string& why, bool& tooLarge) {
+    const RenderOptions linear = LinearBasisOptions(options);
+    std::vector<PreparedSlice> prepared;
     // Refused before allocating its weights when it does not fit (matrix free then); a CUDA error fails the product.
-    this->BasisProducts = "matrix free (" + why + ")";
-    ok = tooLarge;
-    if (!ok && error)
-    {
-      *error = why;
-    }
-    return false;
-  }
-  this->Assembled = std::move(basis);
-  this->AssembledKey = key;
-  this->BasisProducts = AssembledBasisText(
-    this->Assembled->GetEntries(), this->Assembled->PersistentBytes(), SteadySeconds() - start, "on the device");
-  return true;
+    return PrepareFrames(*this->Data, frames, count, linear, prepared, &why) &&
+      basis.Assemble(this->Field(), prepared, EffectiveElevationSigma(linear), linear.Cutoff, this->BasisMemoryLimit,
+        this->Device, &why, &tooLarge);
+  };
+  auto describe = [](const DeviceBasis& basis, double seconds) {
+    return AssembledBasisText(basis.GetEntries(), basis.PersistentBytes(), seconds, "on the device");
+  };
+  return UseAssembledBasis(this->Assembled, this->AssembledKey, BasisKey(frames, count, options),
+    this->BasisMemoryLimit, this->BasisProducts, ok, error, assemble, describe);
 }
 
 bool CudaTrainingEngine::AssembledColumnProduct(

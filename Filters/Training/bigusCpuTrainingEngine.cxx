@@ -243,44 +243,21 @@ private:
 bool CpuTrainingEngine::UseAssembled(
   const int* frames, int count, const RenderOptions& options, bool& ok, std::string* error)
 {
-  ok = true;
-  if (this->BasisMemoryLimit <= 0)
-  {
-    this->BasisProducts = "matrix free (no memory allowed for the assembled basis)";
-    return false;
-  }
-  const BasisKey key(frames, count, options);
-  if (this->Assembled && this->AssembledKey == key)
-  {
-    return true;
-  }
-  this->Assembled.reset();
-  const double start = SteadySeconds();
-  std::vector<SliceGeometry> slices(count);
-  for (int k = 0; k < count; ++k)
-  {
-    slices[k] = this->Data->Slice(frames[k]);
-  }
-  std::unique_ptr<AssembledBasis> basis(new AssembledBasis);
-  std::string why;
-  bool tooLarge = false;
-  if (!basis->Assemble(this->State.Field.View(), slices.data(), count, LinearBasisOptions(options),
-        this->BasisMemoryLimit, &why, &tooLarge))
-  {
-    // Refused before allocating when it does not fit (matrix free then); a refused pose fails the product.
-    this->BasisProducts = "matrix free (" + why + ")";
-    ok = tooLarge;
-    if (!ok && error)
+  auto assemble = [&](AssembledBasis& basis, std::string& why, bool& tooLarge) {
+    std::vector<SliceGeometry> slices(count);
+    for (int k = 0; k < count; ++k)
     {
-      *error = why;
+      slices[k] = this->Data->Slice(frames[k]);
     }
-    return false;
-  }
-  this->Assembled = std::move(basis);
-  this->AssembledKey = key;
-  const AssembledBasis::Size& size = this->Assembled->GetSize();
-  this->BasisProducts = AssembledBasisText(size.Weights, size.Bytes(), SteadySeconds() - start);
-  return true;
+    // Refused before allocating when it does not fit (matrix free then); a refused pose fails the product.
+    return basis.Assemble(this->State.Field.View(), slices.data(), count, LinearBasisOptions(options),
+      this->BasisMemoryLimit, &why, &tooLarge);
+  };
+  auto describe = [](const AssembledBasis& basis, double seconds) {
+    return AssembledBasisText(basis.GetSize().Weights, basis.GetSize().Bytes(), seconds);
+  };
+  return UseAssembledBasis(this->Assembled, this->AssembledKey, BasisKey(frames, count, options),
+    this->BasisMemoryLimit, this->BasisProducts, ok, error, assemble, describe);
 }
 
 StepStatus CpuTrainingEngine::Step(const StepRequest& request, double* loss, std::string* error)

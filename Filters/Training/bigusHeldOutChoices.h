@@ -65,9 +65,8 @@ struct HeldOutChoiceSettings
   double GridFitSecondsPerGaussian = 5e-6;
   /// The Adam route's validation frames held out of the fit (true), or training frames (false; ValidationFrames);
   /// a switch of its own, whatever Enabled says.
-  /// Off by default: on the liver's main job the frames out of the fit cost more than the honest decisions gave
-  /// (300 s: 36.99 dB at the test frames' tracked poses against 37.20; 90 s: 35.75 against 35.99), while on
-  /// synthetic truth (16,000 steps) they gave 1.9 dB (docs/FINDINGS.md, "Validation frames held out of the fit").
+  /// Off by default: on the liver's main job the frames out of the fit cost more than the honest decisions gave,
+  /// on synthetic truth they gained (docs/FINDINGS.md, "Validation frames held out of the fit").
   bool HoldOutValidationFrames = false;
   /// The held-out validation frames, on which growth stops and early stopping keeps its field: every
   /// ValidationStride-th training frame of a sweep, at most MaximumValidationFrames spread over them (HeldOutFrames),

@@ -452,6 +452,50 @@ inline double SteadySeconds()
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
+/**
+ * For engines with an assembled basis (the CPU engine's AssembledBasis, the CUDA engine's device twin): whether the
+ * products for @p key run on it. The cached @p assembled where @p assembledKey is @p key; otherwise one built by
+ * @p assemble(Basis&, std::string& why, bool& tooLarge), which returns false with why when it cannot build: refused
+ * before allocating (tooLarge, or @p memoryLimit <= 0), the products run matrix free and @p ok stays true; any other
+ * failure sets @p ok false and @p error to why. @p products becomes DescribeBasisProducts's text: "matrix free (why)",
+ * or @p describe(const Basis&, double seconds) of the new basis.
+ */
+template <class Basis, class Assemble, class Describe>
+bool UseAssembledBasis(std::unique_ptr<Basis>& assembled, BasisKey& assembledKey, const BasisKey& key,
+  std::int64_t memoryLimit, std::string& products, bool& ok, std::string* error, Assemble&& assemble,
+  Describe&& describe)
+{
+  ok = true;
+  if (memoryLimit <= 0)
+  {
+    products = "matrix free (no memory allowed for the assembled basis)";
+    return false;
+  }
+  if (assembled && assembledKey == key)
+  {
+    return true;
+  }
+  assembled.reset();
+  const double start = SteadySeconds();
+  std::unique_ptr<Basis> basis(new Basis);
+  std::string why;
+  bool tooLarge = false;
+  if (!assemble(*basis, why, tooLarge))
+  {
+    products = "matrix free (" + why + ")";
+    ok = tooLarge;
+    if (!ok && error)
+    {
+      *error = why;
+    }
+    return false;
+  }
+  assembled = std::move(basis);
+  assembledKey = key;
+  products = describe(*assembled, SteadySeconds() - start);
+  return true;
+}
+
 /// The CPU engine over @p renderer (normally bigus::CreateRenderer("cpu", ...)).
 BIGUSTRAINING_EXPORT std::unique_ptr<TrainingEngine> CreateCpuTrainingEngine(std::unique_ptr<Renderer> renderer);
 
