@@ -4,6 +4,7 @@
 #include "bigusReplaceFile.h"
 
 #include "vtkDataArray.h"
+#include "vtkErrorCode.h"
 #include "vtkFieldData.h"
 #include "vtkImageData.h"
 #include "vtkInformation.h"
@@ -77,12 +78,14 @@ int vtkUltrasoundSequenceWriter::FillInputPortInformation(int, vtkInformation* i
 void vtkUltrasoundSequenceWriter::Fail(const std::string& message)
 {
   this->LastErrorText = message;
+  this->SetErrorCode(vtkErrorCode::UserError); // Write() returns 0
   vtkErrorMacro(<< message);
 }
 
 void vtkUltrasoundSequenceWriter::WriteData()
 {
   this->LastErrorText.clear();
+  this->SetErrorCode(vtkErrorCode::NoError);
   vtkImageData* image = this->GetInput();
   const std::string file = this->FileName ? this->FileName : "";
   if (file.empty())

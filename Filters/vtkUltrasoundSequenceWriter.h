@@ -52,7 +52,8 @@ public:
   vtkSetStringMacro(TransformName);
   vtkGetStringMacro(TransformName);
 
-  /// Message of the last error; empty after a successful write.
+  /// Message of the last error; empty after a successful write. A failed write also sets the error code
+  /// (vtkErrorCode::UserError), so Write() returns 0.
   const char* GetLastErrorText() const { return this->LastErrorText.c_str(); }
 
   vtkImageData* GetInput();

@@ -395,6 +395,38 @@ bool WriteXml(vtkXMLWriterBase* writer, const std::string& path)
   writer->WriteToOutputStringOn();
   return writer->Write() && WriteText(path, writer->GetOutputString());
 }
+
+/// Whether the compressed MetaImage @p header (as vtkMetaImageWriter writes it) holds every byte of its data: the
+/// CompressedDataSize its header states, after the header (ElementDataFile LOCAL) or in its data file, whose name
+/// (relative to the header's folder) goes to @p dataFile. VTK's writer does not report a write that failed.
+bool MetaImageComplete(const std::string& header, std::string& dataFile)
+{
+  std::ifstream in(header, std::ios::binary);
+  std::string line;
+  double compressedBytes = -1;
+  dataFile.clear();
+  while (dataFile.empty() && std::getline(in, line))
+  {
+    const std::size_t equals = line.find('=');
+    auto trim = [](const std::string& text) {
+      const std::size_t first = text.find_first_not_of(" \t\r"), last = text.find_last_not_of(" \t\r");
+      return first == std::string::npos ? std::string() : text.substr(first, last - first + 1);
+    };
+    const std::string key = trim(line.substr(0, equals));
+    const std::string value = equals == std::string::npos ? std::string() : trim(line.substr(equals + 1));
+    compressedBytes = key == "CompressedDataSize" ? std::atof(value.c_str()) : compressedBytes;
+    dataFile = key == "ElementDataFile" ? value : dataFile;
+  }
+  if (!in || compressedBytes < 0 || dataFile.empty())
+  {
+    return false;
+  }
+  const std::string data = dataFile == "LOCAL" ? header : vtksys::SystemTools::GetFilenamePath(header) + "/" + dataFile;
+  const double offset = dataFile == "LOCAL" ? double(in.tellg()) : 0.0;
+  std::error_code status;
+  const double bytes = double(std::filesystem::file_size(data, status));
+  return !status && bytes - offset == compressedBytes;
+}
 }
 
 int WriteField(vtkPolyData* field, const std::string& path)
@@ -434,17 +466,28 @@ int WriteImage(vtkImageData* image, const std::string& path)
   {
     return Fail(path + ": unknown image format (use .png, .mha or .vti)");
   }
-  const std::string temporary = TemporaryName(path);
-  vtkNew<vtkMetaImageWriter> writer;
-  writer->SetInputData(image);
-  writer->SetFileName(temporary.c_str());
-  writer->SetCompression(true);
-  writer->Write();
-  if (writer->GetErrorCode() != 0 || !Publish(temporary, path))
+  // Written in a staging folder beside the output under the output's own names (a .mhd's header names its data file
+  // as it will be called), checked complete, then each file renamed into place.
+  using vtksys::SystemTools;
+  const std::string staging = TemporaryName(path);
+  const std::string name = SystemTools::GetFilenameName(path);
+  std::string folder = SystemTools::GetFilenamePath(path);
+  folder = folder.empty() ? "." : folder;
+  std::string dataFile;
+  std::error_code status;
+  bool ok = std::filesystem::create_directory(staging, status) && !status;
+  if (ok)
   {
-    std::remove(temporary.c_str());
-    return Fail(path + ": cannot write the image");
+    vtkNew<vtkMetaImageWriter> writer;
+    writer->SetInputData(image);
+    writer->SetFileName((staging + "/" + name).c_str());
+    writer->SetCompression(true);
+    writer->Write();
+    ok = writer->GetErrorCode() == 0 && MetaImageComplete(staging + "/" + name, dataFile) &&
+      (dataFile == "LOCAL" || Publish(staging + "/" + dataFile, folder + "/" + dataFile)) &&
+      Publish(staging + "/" + name, path);
   }
-  return 0;
+  std::filesystem::remove_all(staging, status);
+  return ok ? 0 : Fail(path + ": cannot write the image (folder not writable, or disk full)");
 }
 } // namespace bigus::cli

@@ -5,7 +5,6 @@
 #include "vtkDataArray.h"
 #include "vtkImageData.h"
 #include "vtkMetaImageReader.h"
-#include "vtkMetaImageWriter.h"
 #include "vtkNIFTIImageReader.h"
 #include "vtkNew.h"
 #include "vtkPointData.h"
@@ -107,28 +106,17 @@ int RunSweepFromVolume(const SweepFromVolumeOptions& o)
   {
     return Fail("sweep: " + error.Or("no frames"));
   }
-  const std::string temporary = TemporaryName(o.Output);
+  // The writer writes under temporary names and renames (a detached .mhd's data file too).
   vtkNew<vtkUltrasoundSequenceWriter> writer;
   writer->SetInputConnection(sweep->GetOutputPort());
-  writer->SetFileName(temporary.c_str());
-  if (!writer->Write() || !Publish(temporary, o.Output))
+  writer->SetFileName(o.Output.c_str());
+  if (!writer->Write())
   {
-    std::remove(temporary.c_str());
     return Fail(o.Output + ": cannot write the sweep");
   }
-  if (!o.MaskOutput.empty())
+  if (!o.MaskOutput.empty() && WriteImage(sweep->GetMaskOutput(), o.MaskOutput) != 0)
   {
-    const std::string maskTemporary = TemporaryName(o.MaskOutput);
-    vtkNew<vtkMetaImageWriter> maskWriter;
-    maskWriter->SetInputData(sweep->GetMaskOutput());
-    maskWriter->SetFileName(maskTemporary.c_str());
-    maskWriter->SetCompression(true);
-    maskWriter->Write();
-    if (maskWriter->GetErrorCode() != 0 || !Publish(maskTemporary, o.MaskOutput))
-    {
-      std::remove(maskTemporary.c_str());
-      return Fail(o.MaskOutput + ": cannot write the mask");
-    }
+    return 1;
   }
   const int* size = sweep->GetFrameSize();
   std::printf("sweep          %s: %d %s frames of %d x %d pixels, %.4f mm apart (build %.2f s)%s%s\n", o.Output.c_str(),

@@ -530,13 +530,11 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
         poses->SetTuple(f, all->GetTuple(first + f));
       }
       first += frames;
-      const std::string temporaryPoses = TemporaryName(o.RefinedPoses[k]);
-      vtkNew<vtkUltrasoundSequenceWriter> sequenceWriter;
+      vtkNew<vtkUltrasoundSequenceWriter> sequenceWriter; // under temporary names, then renamed
       sequenceWriter->SetInputData(refined);
-      sequenceWriter->SetFileName(temporaryPoses.c_str());
-      if (!sequenceWriter->Write() || !Publish(temporaryPoses, o.RefinedPoses[k]))
+      sequenceWriter->SetFileName(o.RefinedPoses[k].c_str());
+      if (!sequenceWriter->Write())
       {
-        std::remove(temporaryPoses.c_str());
         return Fail(o.RefinedPoses[k] + ": cannot write the refined sequence");
       }
       std::printf("refined poses  %s: %s with its frames' ImageToReference as refined\n", o.RefinedPoses[k].c_str(),

@@ -137,6 +137,37 @@ def check_metrics_write_failure(field, sweep, xml, report):
     assert not [f for f in os.listdir(report) if ".tmp" in f], os.listdir(report)
 
 
+def check_metaimage_outputs(field, out):
+    """A volume rendered to .mhd names its data file as it is called (V.zraw, not a temporary) and reads back with
+    VTK's reader; one whose write fails (the staged header a link to /dev/full: a full disk, which VTK's MetaImage
+    writer does not report) exits 1 naming the file, with the .mha already there untouched and nothing staged left."""
+    folder = os.path.join(out, "metaimage")
+    shutil.rmtree(folder, ignore_errors=True)
+    os.makedirs(folder)
+    code, out_text, err = run("render", field, "--volume", "--spacing", "1", "-o", os.path.join(folder, "V.mhd"))
+    assert code == 0, err
+    assert sorted(os.listdir(folder)) == ["V.mhd", "V.zraw"], os.listdir(folder)
+    assert "ElementDataFile = V.zraw" in open(os.path.join(folder, "V.mhd")).read()
+    reader = vtk.vtkMetaImageReader()
+    reader.SetFileName(os.path.join(folder, "V.mhd"))
+    reader.Update()
+    dims = reader.GetOutput().GetDimensions()
+    assert "rendered %d x %d x %d" % dims in out_text, (dims, out_text)
+    volume = os.path.join(folder, "V.mha")
+    with open(volume, "w") as kept:
+        kept.write("the user's file\n")
+
+    def full_disk_staging():
+        staging = os.path.join(folder, "V.tmp%d.mha" % os.getpid())
+        os.makedirs(staging)
+        os.symlink("/dev/full", os.path.join(staging, "V.mha"))
+
+    code, _, err = run("render", field, "--volume", "--spacing", "1", "-o", volume, preexec_fn=full_disk_staging)
+    assert code == 1 and err.count("\n") == 1 and "V.mha: cannot write the image" in err, (code, err)
+    assert open(volume).read() == "the user's file\n"
+    assert not [f for f in os.listdir(folder) if ".tmp" in f], os.listdir(folder)
+
+
 def check_outputs_before_any_work(field, sweep, xml, out):
     """An output that is one of the run's inputs (also through a link) is refused before any work and the input
     is untouched; so are an output whose folder does not exist (refused before training, not after it) and one file
@@ -603,6 +634,7 @@ def main():
     code, _, err = run("render", field, "--plane", "0", "0", "0", "0", "0", "0", "-o", os.path.join(out, "p.png"))
     assert code == 1 and "normal" in err, err
     check_png_matches_the_image(field, out)
+    check_metaimage_outputs(field, out)
 
     # The backend is chosen in one place (the registry): every command takes --backend, says which it
     # used, refuses an unknown one by name, and writes nothing then.
