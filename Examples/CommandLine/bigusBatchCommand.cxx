@@ -18,7 +18,9 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cerrno>
 #include <fcntl.h>
+#include <sys/file.h>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -165,7 +167,36 @@ int AddHeldOutFrames(const std::vector<int>& training, std::vector<std::string>&
   return 0;
 }
 
-/// Trains and evaluates one job into its folder; returns its record (also written as job.json, last).
+/// An exclusive lock on a job's folder while this process trains it: flock(2) on OUTPUT/.bigus-batch.lock, released
+/// by the kernel when the process ends however it ends, so two batch runs of one manifest (on one machine, or on a
+/// shared file system whose locks reach every client) never train one job at once.
+class JobLock
+{
+public:
+  explicit JobLock(const std::string& folder)
+    : File(::open((fs::path(folder) / ".bigus-batch.lock").c_str(), O_CREAT | O_RDWR | O_CLOEXEC, 0644))
+  {
+    // A folder where no lock can be made is left to the job, which fails there with its own message.
+    this->Busy = this->File >= 0 && ::flock(this->File, LOCK_EX | LOCK_NB) != 0 && errno == EWOULDBLOCK;
+  }
+  ~JobLock()
+  {
+    if (this->File >= 0)
+    {
+      ::close(this->File);
+    }
+  }
+  JobLock(const JobLock&) = delete;
+  JobLock& operator=(const JobLock&) = delete;
+  bool Busy = false; ///< another process holds the lock: it trains this job now
+
+private:
+  int File = -1;
+};
+
+/// Trains and evaluates one job into its folder; returns its record (also written as job.json, last). A job another
+/// batch run is training (JobLock) is left to it, untouched ("busy"); one completed since this run's queue was made
+/// is kept.
 json RunJob(const BatchJob& job, int rank, int threads)
 {
   const auto start = std::chrono::steady_clock::now();
@@ -173,6 +204,19 @@ json RunJob(const BatchJob& job, int rank, int threads)
     { "evaluate", job.EvaluateArguments }, { "rank", rank } };
   std::error_code made;
   fs::create_directories(job.Output, made);
+  const JobLock lock(job.Output);
+  if (lock.Busy)
+  {
+    record["status"] = "busy";
+    record["error"] = "another batch run is training this job now (" + job.Output + "/.bigus-batch.lock is held)";
+    return record;
+  }
+  json completed = CompletedJob(job);
+  if (!completed.is_null())
+  {
+    completed["status"] = "kept";
+    return completed;
+  }
   fs::remove(fs::path(job.Output) / "job.json", made); // a rerun's outputs are not complete until it ends
   const std::string log = (fs::path(job.Output) / "log.txt").string();
   int code = 1;
@@ -280,12 +324,12 @@ bool WriteSummary(
 {
   const char* metrics[] = { "psnr", "ssim", "ncc", "speckle" };
   std::map<std::string, std::vector<double>> values;
-  int counts[3] = { 0, 0, 0 }; // done now, kept (complete before this run), failed
+  int counts[4] = { 0, 0, 0, 0 }; // done now, kept (complete before this run), failed, busy (another run's)
   for (const json& r : records)
   {
     const std::string status = r.value("status", "");
-    counts[status == "done" ? 0 : status == "kept" ? 1 : 2]++;
-    if (status == "failed")
+    counts[status == "done" ? 0 : status == "kept" ? 1 : status == "busy" ? 3 : 2]++;
+    if (status == "failed" || status == "busy")
     {
       continue;
     }
@@ -297,7 +341,7 @@ bool WriteSummary(
     values["seconds"].push_back(r.value("seconds", 0.0));
   }
   json summary = { { "manifest", manifest }, { "ranks", ranks }, { "wall_seconds", seconds }, { "done", counts[0] },
-    { "kept", counts[1] }, { "failed", counts[2] }, { "jobs", records } };
+    { "kept", counts[1] }, { "failed", counts[2] }, { "busy", counts[3] }, { "jobs", records } };
   for (const auto& [name, list] : values)
   {
     summary["statistics"][name] = Spread(list);
@@ -306,13 +350,13 @@ bool WriteSummary(
   char cell[256];
   md << "# bigus batch " << manifest << "\n\n"
      << records.size() << " jobs: " << counts[0] << " done, " << counts[1] << " kept (complete before this run), "
-     << counts[2] << " failed; " << ranks << (ranks == 1 ? " process" : " MPI ranks") << ", " << std::lround(seconds)
-     << " s wall-clock.\n\n"
+     << counts[2] << " failed, " << counts[3] << " left to another batch run training them; " << ranks
+     << (ranks == 1 ? " process" : " MPI ranks") << ", " << std::lround(seconds) << " s wall-clock.\n\n"
      << "| job | status | rank | seconds | Gaussians | PSNR (dB) | SSIM | NCC | speckle | error |\n"
      << "|---|---|---|---|---|---|---|---|---|---|\n";
   for (const json& r : records)
   {
-    const bool scored = r.value("status", "") != "failed";
+    const bool scored = r.value("status", "") != "failed" && r.value("status", "") != "busy";
     std::snprintf(cell, sizeof(cell), "| %s | %s | %d | %.1f | ", r.value("name", "").c_str(),
       r.value("status", "").c_str(), r.value("rank", 0), r.value("seconds", 0.0));
     md << cell;
@@ -422,10 +466,11 @@ int RunBatch(const BatchOptions& o)
   std::mutex printing;
   auto report = [&](const json& r, std::size_t index) {
     std::lock_guard<std::mutex> lock(printing);
-    if (r.value("status", "") == "failed")
+    if (r.value("status", "") == "failed" || r.value("status", "") == "busy")
     {
-      std::fprintf(console, "job %zu/%zu %s: failed on rank %d after %.1f s: %s\n", index + 1, jobs.size(),
-        r.value("name", "").c_str(), r.value("rank", 0), r.value("seconds", 0.0), r.value("error", "").c_str());
+      std::fprintf(console, "job %zu/%zu %s: %s on rank %d after %.1f s: %s\n", index + 1, jobs.size(),
+        r.value("name", "").c_str(), r.value("status", "") == "busy" ? "left to the run that holds it" : "failed",
+        r.value("rank", 0), r.value("seconds", 0.0), r.value("error", "").c_str());
     }
     else
     {

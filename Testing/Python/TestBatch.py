@@ -2,10 +2,12 @@
 refused before any job starts with the line that is wrong; the same fields and metrics from 2 ranks as from one
 process; a job with a malformed sweep reported while the others complete; a rank killed half-way ends the run
 (no hang) and a rerun trains only the jobs without complete outputs (missing, or a field cut short); a job
-whose arguments changed is trained again; an interrupted job with a checkpoint resumes from it.
+whose arguments changed is trained again; an interrupted job with a checkpoint resumes from it; a job another
+batch run holds is left to it.
 
 Usage: TestBatch.py TESTING_DATA_DIR BIGUS_EXECUTABLE MPIEXEC OUTPUT_DIR
 """
+import fcntl
 import json
 import os
 import shutil
@@ -211,6 +213,27 @@ def interrupted_job_resumes_from_its_checkpoint():
           "could not be resumed" in log, f"a checkpoint of other options: exit {result.returncode}, log {log[-600:]}")
 
 
+def a_job_another_run_holds_is_left_to_it():
+    """Two batch runs of one manifest never train one job at once: a job whose folder lock another process holds
+    (flock on OUTPUT/.bigus-batch.lock, as a second `bigus batch` takes it) is reported busy, its folder untouched,
+    the run's exit 0; once the lock is released, a rerun trains it."""
+    folder = os.path.join(OUT, "lock")
+    shutil.rmtree(folder, ignore_errors=True)
+    job = {"sweep": SWEEP, "output": "runs/job", "holdout-every": 4, "holdout-offset": 2}
+    manifest = write_manifest(folder, [job], DEFAULTS)
+    run = os.path.join(folder, "runs", "job")
+    os.makedirs(run)
+    with open(os.path.join(run, ".bigus-batch.lock"), "w") as held:
+        fcntl.flock(held, fcntl.LOCK_EX)
+        result = batch(manifest)
+        summary = read_summary(folder)
+        check(result.returncode == 0 and summary["busy"] == 1 and summary["done"] == 0 and
+              "left to the run that holds it" in result.stdout, f"held: exit {result.returncode}, {result.stdout}")
+        check(os.listdir(run) == [".bigus-batch.lock"], f"the held job's folder was touched: {os.listdir(run)}")
+    result = batch(manifest)
+    check(result.returncode == 0 and read_summary(folder)["done"] == 1, f"released: exit {result.returncode}")
+
+
 def read_summary(folder):
     with open(os.path.join(folder, "summary.json")) as f:
         return json.load(f)
@@ -220,4 +243,5 @@ bad_manifests()
 same_jobs_on_one_process_and_two_ranks()
 rank_killed_then_rerun()
 interrupted_job_resumes_from_its_checkpoint()
+a_job_another_run_holds_is_left_to_it()
 finish()
