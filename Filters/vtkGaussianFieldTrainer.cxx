@@ -25,6 +25,7 @@
 #include "vtkStringArray.h"
 
 #include <algorithm>
+#include <type_traits>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -213,9 +214,20 @@ vtkGaussianFieldTrainer::~vtkGaussianFieldTrainer()
 }
 
 // The settings' setters and getters: each reads and writes its field of the one bigus::TrainerSettings, whose
-// defaults are the filter's (a clamped one keeps a value in [lo, hi], as vtkSetClampMacro does).
+// defaults are the filter's (a clamped one keeps a value in [lo, hi], as vtkSetClampMacro does; NaN, which no clamp
+// moves, is refused with an error and the setting kept).
 namespace
 {
+template <typename Value>
+bool IsNaN(Value value)
+{
+  if constexpr (std::is_floating_point<Value>::value)
+  {
+    return std::isnan(value);
+  }
+  return false;
+}
+
 /// @p member = @p value; whether it changed (the setter then calls Modified).
 template <typename Member, typename Value>
 bool Assign(Member& member, const Value& value)
@@ -231,6 +243,11 @@ bool Assign(Member& member, const Value& value)
 #define bigusTrainerSettingMacro(name, type, member, lo, hi)                                                           \
   void vtkGaussianFieldTrainer::Set##name(type value)                                                                  \
   {                                                                                                                    \
+    if (IsNaN(value))                                                                                                  \
+    {                                                                                                                  \
+      vtkErrorMacro("Set" #name ": NaN is not a value; the setting stays " << this->Get##name());                      \
+      return;                                                                                                          \
+    }                                                                                                                  \
     if (Assign(this->Settings->member, std::min<type>(std::max<type>(value, lo), hi)))                                 \
     {                                                                                                                  \
       this->Modified();                                                                                                \
@@ -267,8 +284,8 @@ bigusTrainerSetting(TimeBudget, double, TimeBudget, 0.0, 1e9)
 bigusTrainerSetting(ConvergenceTolerance, double, ConvergenceTolerance, 0.0, 1.0)
 bigusTrainerSetting(InitialGaussians, vtkIdType, Seeding.InitialGaussians, 0, VTK_ID_MAX)
 bigusTrainerSetting(MaximumGaussians, vtkIdType, MaximumGaussians, 1, VTK_ID_MAX)
-bigusTrainerSetting(DensifyStart, int, Densification.Start, bigusAnyValue(int))
-bigusTrainerSetting(DensifyEnd, int, Densification.End, bigusAnyValue(int))
+bigusTrainerSetting(DensifyStart, int, Densification.Start, 0, VTK_INT_MAX)
+bigusTrainerSetting(DensifyEnd, int, Densification.End, -1, VTK_INT_MAX)
 bigusTrainerSetting(DensifyInterval, int, Densification.Interval, 1, VTK_INT_MAX)
 bigusTrainerSetting(DensifyPercentile, double, Densification.Percentile, 0.0, 100.0)
 bigusTrainerSetting(ResidualSeedShare, double, Densification.ResidualSeedShare, 0.0, 100.0)
@@ -301,7 +318,13 @@ int vtkGaussianFieldTrainer::GetRefinePoses() const
 void vtkGaussianFieldTrainer::SetLossWeights(double l1, double dssim, double ffl)
 {
   bigus::ImageLossWeights& w = this->Settings->Loss;
-  if (Assign(w.L1, l1) | Assign(w.DSSIM, dssim) | Assign(w.FFL, ffl))
+  if (IsNaN(l1) || IsNaN(dssim) || IsNaN(ffl))
+  {
+    vtkErrorMacro("SetLossWeights: NaN is not a weight; the weights stay " << w.L1 << " " << w.DSSIM << " " << w.FFL);
+    return;
+  }
+  // Clamped at 0, as the other settings are to their ranges: a negative weight would reward the error.
+  if (Assign(w.L1, std::max(0.0, l1)) | Assign(w.DSSIM, std::max(0.0, dssim)) | Assign(w.FFL, std::max(0.0, ffl)))
   {
     this->Modified();
   }

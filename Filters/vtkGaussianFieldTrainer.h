@@ -59,6 +59,9 @@
  * scheduled by TimeBudget depends on the machine's speed). Errors (no valid frames, empty mask, a training pose the
  * renderer rejects, an unavailable Backend, an unreadable checkpoint) fail the request with
  * vtkErrorMacro and an empty output.
+ *
+ * Setters: a value outside a setting's range is clamped to it (as vtkSetClampMacro does; the ParaView XML's range
+ * domains are the same ranges); NaN, which no clamp moves, is refused with vtkErrorMacro and the setting kept.
  */
 #ifndef vtkGaussianFieldTrainer_h
 #define vtkGaussianFieldTrainer_h

@@ -373,15 +373,17 @@ bool PlanSeeding(const TrainingData& data, const SeedingSettings& s, std::int64_
   }
   else if (s.DenseInitialisation)
   {
-    plan.Count = s.InitialGaussians > 0 ? s.InitialGaussians : maximumGaussians / 2;
+    plan.Count = s.InitialGaussians > 0 ? s.InitialGaussians : std::max<std::int64_t>(1, maximumGaussians / 2);
   }
   else
   {
     // Capacity follows the data: more fan pixels to explain, more seeds (docs/FINDINGS.md, "The trainer's defaults,
     // measured").
-    plan.Count = s.InitialGaussians > 0 ? s.InitialGaussians
-                                        : std::max<std::int64_t>(std::min<std::int64_t>(20000, maximumGaussians / 2),
-                                            std::min<std::int64_t>(fanPixels / 200, maximumGaussians / 2));
+    // (At least one seed: half of a MaximumGaussians of 1 is none.)
+    const std::int64_t half = std::max<std::int64_t>(1, maximumGaussians / 2);
+    plan.Count = s.InitialGaussians > 0
+      ? s.InitialGaussians
+      : std::max<std::int64_t>(std::min<std::int64_t>(20000, half), std::min<std::int64_t>(fanPixels / 200, half));
   }
   return true;
 }
