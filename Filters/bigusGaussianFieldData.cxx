@@ -16,11 +16,11 @@
 #include "vtkPoints.h"
 #include "vtkPolyData.h"
 #include "vtkStreamingDemandDrivenPipeline.h"
-#include "vtkUnsignedCharArray.h"
 
 #include <algorithm>
 
 #include <cmath>
+#include <type_traits>
 #include <limits>
 
 namespace bigus
@@ -263,25 +263,42 @@ RenderOptions RenderOptionsFor(const FieldModel& model, double elevationSigma, d
   return options;
 }
 
+double IntensityUnit(int scalarType)
+{
+  return scalarType == VTK_FLOAT || scalarType == VTK_DOUBLE ? 1.0 : 255.0;
+}
+
+namespace
+{
+template <typename T>
+void FillIntensities(const std::vector<float>& I, double unit, T* out)
+{
+  const double lowest = static_cast<double>(std::numeric_limits<T>::lowest());
+  const double highest = static_cast<double>(std::numeric_limits<T>::max());
+  for (std::size_t p = 0; p < I.size(); ++p)
+  {
+    const double v = unit * I[p];
+    if constexpr (std::is_integral<T>::value)
+    {
+      // NaN (no sample) becomes the lowest value, as a clamp of nothing would; others round half up, then clamp.
+      out[p] = static_cast<T>(std::isnan(v) ? lowest : std::min(highest, std::max(lowest, std::floor(v + 0.5))));
+    }
+    else
+    {
+      out[p] = static_cast<T>(v);
+    }
+  }
+}
+}
+
 vtkSmartPointer<vtkDataArray> IntensityArray(const std::vector<float>& I, int scalarType)
 {
-  vtkSmartPointer<vtkDataArray> scalars;
-  if (scalarType == VTK_UNSIGNED_CHAR)
+  vtkSmartPointer<vtkDataArray> scalars = vtk::TakeSmartPointer(vtkDataArray::CreateDataArray(scalarType));
+  scalars->SetNumberOfTuples(static_cast<vtkIdType>(I.size()));
+  const double unit = IntensityUnit(scalarType);
+  switch (scalarType)
   {
-    auto bytes = vtkSmartPointer<vtkUnsignedCharArray>::New();
-    bytes->SetNumberOfTuples(static_cast<vtkIdType>(I.size()));
-    for (std::size_t p = 0; p < I.size(); ++p)
-    {
-      bytes->SetValue(p, static_cast<unsigned char>(std::lround(255.0f * std::min(1.0f, std::max(0.0f, I[p])))));
-    }
-    scalars = bytes;
-  }
-  else
-  {
-    auto values = vtkSmartPointer<vtkFloatArray>::New();
-    values->SetNumberOfTuples(static_cast<vtkIdType>(I.size()));
-    std::copy(I.begin(), I.end(), values->GetPointer(0));
-    scalars = values;
+    vtkTemplateMacro(FillIntensities(I, unit, static_cast<VTK_TT*>(scalars->GetVoidPointer(0))));
   }
   scalars->SetName("Intensity");
   return scalars;
@@ -298,14 +315,26 @@ vtkSmartPointer<vtkDataArray> CoverageArray(const std::vector<float>& coverage)
 
 bool IsIntensityScalarType(int scalarType, std::string* error)
 {
-  if (scalarType == VTK_FLOAT || scalarType == VTK_UNSIGNED_CHAR)
+  switch (scalarType)
   {
-    return true;
+    case VTK_FLOAT:
+    case VTK_DOUBLE:
+    case VTK_CHAR:
+    case VTK_SIGNED_CHAR:
+    case VTK_UNSIGNED_CHAR:
+    case VTK_SHORT:
+    case VTK_UNSIGNED_SHORT:
+    case VTK_INT:
+    case VTK_UNSIGNED_INT:
+      return true;
+    default:
+      break;
   }
   if (error)
   {
     *error = std::string("scalar type ") + vtkImageScalarTypeNameMacro(scalarType) + " (" + std::to_string(scalarType) +
-      ") is not supported: use VTK_FLOAT or VTK_UNSIGNED_CHAR";
+      ") is not supported: use VTK_FLOAT, VTK_DOUBLE, VTK_CHAR, VTK_SIGNED_CHAR, VTK_UNSIGNED_CHAR, VTK_SHORT, "
+      "VTK_UNSIGNED_SHORT, VTK_INT or VTK_UNSIGNED_INT";
   }
   return false;
 }

@@ -212,15 +212,21 @@ struct RenderSetup
   RenderOptions Options;                      ///< RenderOptionsFor the field, ElevationSigma and Cutoff
 };
 
-/// The rendered image I ([0, 1] floats) as point-data scalars "Intensity": VTK_FLOAT as is, or
-/// VTK_UNSIGNED_CHAR as round(255 I).
+/// The output unit of an intensity of @p scalarType: 1 for VTK_FLOAT and VTK_DOUBLE (I in [0, 1]), 255 for the
+/// integer types (the gray levels of 8-bit ultrasound frames).
+BIGUSFILTERS_EXPORT double IntensityUnit(int scalarType);
+
+/// The rendered image I ([0, 1] floats) as point-data scalars "Intensity" of @p scalarType (IsIntensityScalarType):
+/// I x IntensityUnit, for an integer type rounded to the nearest integer and clamped to the type's range (as
+/// vtkImageReslice converts to its OutputScalarType).
 BIGUSFILTERS_EXPORT vtkSmartPointer<vtkDataArray> IntensityArray(const std::vector<float>& I, int scalarType);
 
 /// A coverage image (TrainingCoverage::Compute, slices one after the other) as point data "Coverage" (float).
 BIGUSFILTERS_EXPORT vtkSmartPointer<vtkDataArray> CoverageArray(const std::vector<float>& coverage);
 
-/// Whether IntensityArray produces @p scalarType (VTK_FLOAT or VTK_UNSIGNED_CHAR); false with @p error
-/// naming the type and the two accepted otherwise. The filters' OutputScalarType setters check it.
+/// Whether IntensityArray produces @p scalarType: VTK_FLOAT, VTK_DOUBLE, VTK_CHAR, VTK_SIGNED_CHAR,
+/// VTK_UNSIGNED_CHAR, VTK_SHORT, VTK_UNSIGNED_SHORT, VTK_INT or VTK_UNSIGNED_INT (vtkImageReslice's output types);
+/// false with @p error naming the type and those accepted otherwise. The filters' OutputScalarType setters check it.
 BIGUSFILTERS_EXPORT bool IsIntensityScalarType(int scalarType, std::string* error);
 
 /// Write a field (points, vertices, Scale, Rotation normalised, Reflectivity, ElevationSigma, Gamma,

@@ -4,6 +4,7 @@
 #include "bigusRenderer.h"
 #include "bigusTrainingEngine.h"
 
+#include "vtkAbstractImageInterpolator.h"
 #include "vtkAbstractTransform.h"
 #include "vtkFloatArray.h"
 #include "vtkHomogeneousTransform.h"
@@ -26,6 +27,7 @@ vtkStandardNewMacro(vtkGaussianFieldReslice);
 vtkCxxSetObjectMacro(vtkGaussianFieldReslice, ResliceAxes, vtkMatrix4x4);
 vtkCxxSetObjectMacro(vtkGaussianFieldReslice, InformationInput, vtkImageData);
 vtkCxxSetObjectMacro(vtkGaussianFieldReslice, ResliceTransform, vtkAbstractTransform);
+vtkCxxSetObjectMacro(vtkGaussianFieldReslice, Interpolator, vtkAbstractImageInterpolator);
 
 namespace
 {
@@ -343,6 +345,7 @@ vtkGaussianFieldReslice::~vtkGaussianFieldReslice()
   this->SetResliceAxes(nullptr);
   this->SetResliceTransform(nullptr);
   this->SetInformationInput(nullptr);
+  this->SetInterpolator(nullptr);
 }
 
 void vtkGaussianFieldReslice::SetOutputSpacing(double x, double y, double z)
@@ -675,9 +678,18 @@ int vtkGaussianFieldReslice::RequestData(
         }
       }
     }
+    if (this->ScalarShift != 0 || this->ScalarScale != 1)
+    {
+      // In the output's units, then back to I's: IntensityArray converts with the unit, rounds and clamps.
+      const double unit = bigus::IntensityUnit(this->OutputScalarType);
+      for (std::size_t p = 0; p < slicePixels; ++p)
+      {
+        i[p] = static_cast<float>((unit * i[p] + this->ScalarShift) * this->ScalarScale / unit);
+      }
+    }
     if (this->BackgroundColor[0] != 0)
     {
-      const double level = this->BackgroundColor[0] / (this->OutputScalarType == VTK_UNSIGNED_CHAR ? 255.0 : 1.0);
+      const double level = this->BackgroundColor[0] / bigus::IntensityUnit(this->OutputScalarType);
       FillBackground(*render.Field, SliceAt(frame, grid.Spacing, grid.Origin, extent, k, 0, 0), level, i);
     }
     this->UpdateProgress(double(k + 1) / depth);
@@ -756,4 +768,7 @@ void vtkGaussianFieldReslice::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "InformationInput: " << (this->InformationInput ? "set" : "(none)") << "\n";
   os << indent << "PixelLowPass: " << this->PixelLowPass << "\n";
   os << indent << "OutputScatteringField: " << this->OutputScatteringField << "\n";
+  os << indent << "ScalarShift: " << this->ScalarShift << "\n";
+  os << indent << "ScalarScale: " << this->ScalarScale << "\n";
+  os << indent << "Interpolator: " << this->Interpolator << "\n";
 }

@@ -25,15 +25,17 @@
  * with SetOutputSpacing, SetOutputOrigin and SetOutputExtent override either; the getters return them, or
  * vtkImageReslice's (1, 1, 1), (0, 0, 0) and (0, 0, 0, 0, 0, 0) while the default applies.
  *
- * BackgroundColor (its first component, BackgroundLevel, in the output's scalar units: [0, 1] for float, 0 to
- * 255 for unsigned char) fills the samples outside the field's padded bounds, where vtkImageReslice fills the
+ * OutputScalarType: any of vtkImageReslice's (bigus::IsIntensityScalarType), the intensity I in [0, 1] for float
+ * and double, round(255 I) clamped to the type's range for the integer types; ScalarShift and ScalarScale as there.
+ * BackgroundColor (its first component, BackgroundLevel, in the output's scalar units: [0, 1] for float and double,
+ * 0 to 255 for the integer types) fills the samples outside the field's padded bounds, where vtkImageReslice fills the
  * samples outside its input volume; inside, a field renders 0 where it has no Gaussian. SlabMode (min, max,
  * mean, sum) combines SlabNumberOfSlices slices SlabSliceSpacingFraction x the output's z spacing apart,
  * centred on each output slice (SlabTrapezoidIntegration halves the two end slices' weights for mean and sum),
  * the intensity, the scattering field and the coverage alike.
  *
  * Accepted and stored, without effect on a field (it has no voxels to interpolate, wrap or mirror):
- * InterpolationMode (and Interpolate), Wrap, Mirror, Border, BorderThickness, Optimization.
+ * InterpolationMode (and Interpolate), Interpolator, Wrap, Mirror, Border, BorderThickness, Optimization.
  *
  * Pipeline: with spacing, origin and extent all set (or an InformationInput) the output grid is pure
  * metadata. A default grid needs the field's bounds, which are data, not pipeline information:
@@ -60,6 +62,7 @@
 #include "bigusFiltersModule.h" // For export macro
 #include "vtkGaussianFieldRenderer.h"
 
+class vtkAbstractImageInterpolator;
 class vtkAbstractTransform;
 class vtkMatrix4x4;
 class vtkPolyData;
@@ -177,6 +180,19 @@ public:
 
   ///@{
   /**
+   * As vtkImageReslice's: each rendered sample v (the intensity in the output's scalar units, IntensityUnit: I for
+   * float and double, 255 I for the integer types) becomes (v + ScalarShift) x ScalarScale before it is converted
+   * to OutputScalarType (an integer type rounded and clamped to its range). The background (BackgroundColor) is not
+   * shifted or scaled. Defaults 0 and 1.
+   */
+  vtkSetMacro(ScalarShift, double);
+  vtkGetMacro(ScalarShift, double);
+  vtkSetMacro(ScalarScale, double);
+  vtkGetMacro(ScalarScale, double);
+  ///@}
+
+  ///@{
+  /**
    * Slab rendering, as vtkImageReslice's (see the class description): SlabMode VTK_IMAGE_SLAB_MIN, _MAX, _MEAN
    * (default) or _SUM; SlabNumberOfSlices (default 1: no slab); SlabSliceSpacingFraction of the output's z
    * spacing between the slab's slices (default 1); SlabTrapezoidIntegration (default off).
@@ -224,6 +240,10 @@ public:
   vtkSetMacro(Optimization, vtkTypeBool);
   vtkGetMacro(Optimization, vtkTypeBool);
   vtkBooleanMacro(Optimization, vtkTypeBool);
+  /// An interpolator (vtkImageInterpolator, vtkImageSincInterpolator, ...) as vtkImageReslice takes one: held and
+  /// returned, no effect on a field.
+  virtual void SetInterpolator(vtkAbstractImageInterpolator*);
+  vtkGetObjectMacro(Interpolator, vtkAbstractImageInterpolator);
   ///@}
 
   ///@{
@@ -310,6 +330,9 @@ protected:
   vtkTypeBool Border = 1;
   double BorderThickness = 0.5;
   vtkTypeBool Optimization = 1;
+  vtkAbstractImageInterpolator* Interpolator = nullptr;
+  double ScalarShift = 0.0;
+  double ScalarScale = 1.0;
   double PixelLowPass = 0.0;
   bool OutputScatteringField = false;
 

@@ -303,6 +303,53 @@ def test_background_and_accepted_calls():
     check(plain.GetPointData().GetScalars().GetRange()[1] > 0.05, "the plane misses the field")
 
 
+def test_output_types_shift_and_scale():
+    # vtkImageReslice's OutputScalarType, ScalarShift and ScalarScale on the field's own volume (in 8-bit gray
+    # levels, 255 V, for the integer types, as the field's integer outputs are round(255 I)): the same values, rounded
+    # and clamped alike (within one gray level where 255 V and 255 I round differently), and the same type; the
+    # Interpolator is accepted.
+    levels = vtk.vtkImageShiftScale()
+    levels.SetInputData(V)
+    levels.SetScale(255.0)
+    levels.SetOutputScalarTypeToFloat()
+    levels.Update()
+    cases = [(vtk.VTK_FLOAT, 0.0, 1.0, 1e-6), (vtk.VTK_DOUBLE, 0.1, 2.0, 1e-6), (vtk.VTK_UNSIGNED_CHAR, 0.0, 3.0, 1.0),
+             (vtk.VTK_SHORT, -100.0, 2.0, 1.0), (vtk.VTK_UNSIGNED_SHORT, -20.0, 1.0, 1.0), (vtk.VTK_INT, 0.0, 1.0, 1.0)]
+    for scalar_type, shift, scale, tolerance in cases:
+        integer = scalar_type not in (vtk.VTK_FLOAT, vtk.VTK_DOUBLE)
+
+        def setup(r):
+            r.SetOutputScalarType(scalar_type)
+            r.SetScalarShift(shift)
+            r.SetScalarScale(scale)
+            r.SetResliceAxesOrigin(0.0, 0.0, 4.5)
+
+        a = vtk.vtkImageReslice()
+        a.SetInputData(levels.GetOutput() if integer else V)
+        a.SetInterpolationModeToNearestNeighbor()
+        b = field_reslice()
+        b.SetInformationInput(V)
+        b.SetInterpolator(vtk.vtkImageInterpolator())
+        for r in (a, b):
+            r.SetOutputDimensionality(2)
+            setup(r)
+            r.Update()
+        name = vtk.vtkImageScalarTypeNameMacro(scalar_type) if hasattr(vtk, "vtkImageScalarTypeNameMacro") else scalar_type
+        same_geometry(a.GetOutput(), b.GetOutput(), f"type {name}")
+        types = a.GetOutput().GetScalarType(), b.GetOutput().GetScalarType()
+        check(types[0] == types[1] == scalar_type, f"type {name}: vtkImageReslice {types[0]}, field {types[1]}")
+        difference = largest_difference(a.GetOutput(), b.GetOutput())
+        check(difference <= tolerance, f"type {name}, shift {shift}, scale {scale}: values differ by {difference}")
+        low, high = b.GetOutput().GetPointData().GetScalars().GetRange()
+        if scalar_type == vtk.VTK_UNSIGNED_CHAR:
+            check(high == 255.0, f"unsigned char x 3: the largest value {high} is not clamped to 255")
+        if scalar_type == vtk.VTK_SHORT:
+            check(low < 0, f"short shifted by -100: no negative value ({low})")
+        if scalar_type == vtk.VTK_UNSIGNED_SHORT:
+            check(low == 0.0, f"unsigned short shifted by -20: the smallest value {low} is not clamped to 0")
+    check(isinstance(b.GetInterpolator(), vtk.vtkImageInterpolator), "the Interpolator is not held")
+
+
 def test_slicer_style_view():
     # A 3D Slicer-style slice view, unchanged from a volume's: the plane given by SetResliceAxes and moved by a
     # SetResliceTransform, the slice into vtkImageMapToColors and an image actor, rendered off screen. The same
@@ -398,6 +445,7 @@ def main():
     test_reslice_transform()
     test_slabs()
     test_background_and_accepted_calls()
+    test_output_types_shift_and_scale()
     test_slicer_style_view()
     test_volume_read_back_in_pieces()
     if FAILURES:
