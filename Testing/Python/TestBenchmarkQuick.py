@@ -150,14 +150,15 @@ def check_ablations(ablations, report):
 def check_pareto(pareto, report):
     """Held-out PSNR against Gaussians and time (--quick: one budget of 3 s): per sweep the two adaptive runs
     (Adam alone, variable projection), then one regular grid per adaptive count (counts within 10 % share
-    one), untrained and seeded below the count it was asked for; the fronts and the comparison with the
-    grid recomputed here from the runs."""
+    one), untrained and seeded below the count it was asked for, then the high end's grid; the fronts, the
+    comparison with the grid and the best of each route recomputed here from the runs."""
     assert sorted(pareto) == sorted(["liver, frames 40 to 59", "spine phantom",
                                      "volume protocol (in-between slices)"]), sorted(pareto)
     for name, sweep in pareto.items():
         runs = sweep["runs"]
         adaptive = [r for r in runs if r["budget"] is not None]
-        grids = [r for r in runs if r["budget"] is None]
+        grids = [r for r in runs if r["budget"] is None and not r["high_end"]]
+        high = [r for r in runs if r["high_end"]]
         assert [r["method"] for r in adaptive] == ["Adam alone (defaults)", "variable projection"], name
         # A loaded machine may spend a 3 s budget on seeding and the first solve (CI did: 0 steps), so only
         # the grids' count is fixed: they are never trained.
@@ -169,6 +170,16 @@ def check_pareto(pareto, report):
         assert [g["requested"] for g in grids] == expected, (name, grids, expected)
         for g in grids:
             assert g["method"] == "regular grid + solve" and g["seeds"] <= g["requested"], (name, g)
+        # The high end (--quick: one grid of 50,000, or of every fan pixel where there are fewer), never trained.
+        assert len(high) == 1 and high[0]["steps"] == 0 and high[0]["requested"] <= 50000, (name, high)
+        assert high[0]["method"] == ("regular grid + solve" if high[0]["requested"] == 50000
+                                     else "grid of every fan pixel + solve"), (name, high)
+        # Where each route wins: the best of each, recomputed.
+        best_grid = max((r for r in runs if r["budget"] is None), key=lambda r: r["psnr"])
+        best_adaptive = max(adaptive, key=lambda r: r["psnr"])
+        assert sweep["best"]["grid_psnr"] == best_grid["psnr"] and sweep["best"]["adaptive_psnr"] == best_adaptive["psnr"]
+        assert sweep["best"]["grid_wins"] == (best_grid["psnr"] > best_adaptive["psnr"]), (name, sweep["best"])
+        assert "- Where each route wins: the best grid (%.0f Gaussians" % best_grid["gaussians"] in report, name
         for r in runs:
             assert math.isfinite(r["psnr"]) and math.isfinite(r["fit_psnr"]) and r["gaussians"] > 0, (name, r)
             for cost, front in (("gaussians", "count_front"), ("seconds", "time_front")):
