@@ -28,7 +28,8 @@ Command AddBenchmarkCommand(CLI::App& app, const std::string& sourceDirectory)
       "defaults (defaults against hand-tuned), "
       "volume (the volume protocol), blocks (block hold-outs on the liver) or ablations (every switch at equal "
       "iterations and equal time, 3 seeds; about 2 hours) or pareto (held-out PSNR against Gaussians and time: "
-      "Adam alone, variable projection and the regular grid; about 30 minutes) or sweeps (two sweeps of the volume "
+      "Adam alone, variable projection and the regular grid, up to 4 million Gaussians; about 45 minutes) or sweeps "
+      "(two sweeps of the volume "
       "protocol into one field against compounding both; about 15 minutes)")
     ->capture_default_str()
     ->check(CLI::IsMember({ "all", "main", "defaults", "volume", "blocks", "ablations", "pareto", "sweeps" }));
