@@ -25,7 +25,6 @@
 #include "vtkStringArray.h"
 
 #include <algorithm>
-#include <type_traits>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -218,16 +217,6 @@ vtkGaussianFieldTrainer::~vtkGaussianFieldTrainer()
 // moves, is refused with an error and the setting kept).
 namespace
 {
-template <typename Value>
-bool IsNaN(Value value)
-{
-  if constexpr (std::is_floating_point<Value>::value)
-  {
-    return std::isnan(value);
-  }
-  return false;
-}
-
 /// @p member = @p value; whether it changed (the setter then calls Modified).
 template <typename Member, typename Value>
 bool Assign(Member& member, const Value& value)
@@ -243,7 +232,7 @@ bool Assign(Member& member, const Value& value)
 #define bigusTrainerSettingMacro(name, type, member, lo, hi)                                                           \
   void vtkGaussianFieldTrainer::Set##name(type value)                                                                  \
   {                                                                                                                    \
-    if (IsNaN(value))                                                                                                  \
+    if (std::isnan(static_cast<double>(value)))                                                                        \
     {                                                                                                                  \
       vtkErrorMacro("Set" #name ": NaN is not a value; the setting stays " << this->Get##name());                      \
       return;                                                                                                          \
@@ -318,7 +307,7 @@ int vtkGaussianFieldTrainer::GetRefinePoses() const
 void vtkGaussianFieldTrainer::SetLossWeights(double l1, double dssim, double ffl)
 {
   bigus::ImageLossWeights& w = this->Settings->Loss;
-  if (IsNaN(l1) || IsNaN(dssim) || IsNaN(ffl))
+  if (std::isnan(l1) || std::isnan(dssim) || std::isnan(ffl))
   {
     vtkErrorMacro("SetLossWeights: NaN is not a weight; the weights stay " << w.L1 << " " << w.DSSIM << " " << w.FFL);
     return;

@@ -17,10 +17,9 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
-#include <cstdio>
 #include <cerrno>
+#include <cstdio>
 #include <fcntl.h>
-#include <sys/file.h>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -29,6 +28,7 @@
 #include <new>
 #include <sstream>
 #include <string>
+#include <sys/file.h>
 #include <thread>
 #include <unistd.h>
 #include <vector>
@@ -194,6 +194,14 @@ private:
   int File = -1;
 };
 
+/// Whether a job's record holds its metrics: trained by this run ("done") or complete before it ("kept"), not
+/// "failed" nor left to another run ("busy").
+bool Scored(const json& r)
+{
+  const std::string status = r.value("status", "");
+  return status == "done" || status == "kept";
+}
+
 /// Trains and evaluates one job into its folder; returns its record (also written as job.json, last). A job another
 /// batch run is training (JobLock) is left to it, untouched ("busy"); one completed since this run's queue was made
 /// is kept.
@@ -329,7 +337,7 @@ bool WriteSummary(
   {
     const std::string status = r.value("status", "");
     counts[status == "done" ? 0 : status == "kept" ? 1 : status == "busy" ? 3 : 2]++;
-    if (status == "failed" || status == "busy")
+    if (!Scored(r))
     {
       continue;
     }
@@ -356,7 +364,7 @@ bool WriteSummary(
      << "|---|---|---|---|---|---|---|---|---|---|\n";
   for (const json& r : records)
   {
-    const bool scored = r.value("status", "") != "failed" && r.value("status", "") != "busy";
+    const bool scored = Scored(r);
     std::snprintf(cell, sizeof(cell), "| %s | %s | %d | %.1f | ", r.value("name", "").c_str(),
       r.value("status", "").c_str(), r.value("rank", 0), r.value("seconds", 0.0));
     md << cell;
@@ -466,7 +474,7 @@ int RunBatch(const BatchOptions& o)
   std::mutex printing;
   auto report = [&](const json& r, std::size_t index) {
     std::lock_guard<std::mutex> lock(printing);
-    if (r.value("status", "") == "failed" || r.value("status", "") == "busy")
+    if (!Scored(r))
     {
       std::fprintf(console, "job %zu/%zu %s: %s on rank %d after %.1f s: %s\n", index + 1, jobs.size(),
         r.value("name", "").c_str(), r.value("status", "") == "busy" ? "left to the run that holds it" : "failed",

@@ -362,6 +362,7 @@ bool PlanSeeding(const TrainingData& data, const SeedingSettings& s, std::int64_
     plan.Planes = SelectGridPlanes(data, shape);
     plan.PixelGrid = plan.Planes.FanPixels <= s.PixelGridFanPixelsPerGaussian * maximumGaussians;
   }
+  const std::int64_t half = std::max<std::int64_t>(1, maximumGaussians / 2); // at least one seed where the maximum is 1
   if (plan.PixelGrid)
   {
     // The grid's count is set by memory, not by MaximumGaussians (a grid is never densified): every fan pixel of the
@@ -373,14 +374,12 @@ bool PlanSeeding(const TrainingData& data, const SeedingSettings& s, std::int64_
   }
   else if (s.DenseInitialisation)
   {
-    plan.Count = s.InitialGaussians > 0 ? s.InitialGaussians : std::max<std::int64_t>(1, maximumGaussians / 2);
+    plan.Count = s.InitialGaussians > 0 ? s.InitialGaussians : half;
   }
   else
   {
     // Capacity follows the data: more fan pixels to explain, more seeds (docs/FINDINGS.md, "The trainer's defaults,
     // measured").
-    // (At least one seed: half of a MaximumGaussians of 1 is none.)
-    const std::int64_t half = std::max<std::int64_t>(1, maximumGaussians / 2);
     plan.Count = s.InitialGaussians > 0
       ? s.InitialGaussians
       : std::max<std::int64_t>(std::min<std::int64_t>(20000, half), std::min<std::int64_t>(fanPixels / 200, half));
