@@ -21,6 +21,7 @@
 #include "vtkWeakPointer.h"
 
 #include <array>
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -122,6 +123,10 @@ public:
    * sums its frames in their order, so the result does not depend on the thread count.
    */
   void Compute(const SliceGeometry& slice, double elevationSigma, float* coverage) const;
+
+  /// Coverage at @p count scattered points ([count, 3] mm, reference frame) into @p coverage ([count]), as Compute
+  /// at each (the samples of a reslice whose grid a non-linear transform bends). Points in parallel (vtkSMPTools).
+  void ComputePoints(const double* points, std::int64_t count, double elevationSigma, float* coverage) const;
 
 private:
   /// Frame t's pixel coordinates a, b and signed distance d (mm) of a point x: row r gives

@@ -301,4 +301,36 @@ void TrainingCoverage::Compute(const SliceGeometry& slice, double elevationSigma
   });
 }
 
+void TrainingCoverage::ComputePoints(
+  const double* points, std::int64_t count, double elevationSigma, float* coverage) const
+{
+  const double sigma = std::max(0.0, elevationSigma);
+  const double reach = sigma > 0 ? CullSigmas * sigma : 1e-6;
+  const double exponent = sigma > 0 ? -0.5 / (sigma * sigma) : 0.0;
+  const int frameWidth = this->Geometry.Width, frameHeight = this->Geometry.Height;
+  const unsigned char* mask = this->Geometry.Mask.data();
+  vtkSMPTools::For(0, count, 1024, [&](std::int64_t begin, std::int64_t end) {
+    for (std::int64_t p = begin; p < end; ++p)
+    {
+      const double* x = points + 3 * p;
+      double sum = 0;
+      for (const Frame& frame : this->Frames)
+      {
+        double c[3];
+        for (int r = 0; r < 3; ++r)
+        {
+          c[r] = vtkMath::Dot(frame.Rows[r], x) + frame.Rows[r][3];
+        }
+        const double a = std::floor(c[0] + 0.5), b = std::floor(c[1] + 0.5);
+        if (std::abs(c[2]) <= reach && a >= 0 && a < frameWidth && b >= 0 && b < frameHeight &&
+          mask[std::size_t(b) * frameWidth + std::size_t(a)])
+        {
+          sum += std::exp(exponent * c[2] * c[2]);
+        }
+      }
+      coverage[p] = static_cast<float>(sum);
+    }
+  });
+}
+
 } // namespace bigus

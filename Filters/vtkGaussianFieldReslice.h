@@ -37,6 +37,24 @@
  * Accepted and stored, without effect on a field (it has no voxels to interpolate, wrap or mirror):
  * InterpolationMode (and Interpolate), Interpolator, Wrap, Mirror, Border, BorderThickness, Optimization.
  *
+ * Sampling grids: sheared axes (the x and y direction cosines not perpendicular, short of parallel) are rendered
+ * exactly, each slice a sheared pixel grid on its plane with the elevation beam along the plane's normal x cross y.
+ * A ResliceTransform that is not linear (any vtkAbstractTransform other than a vtkHomogeneousTransform: thin-plate
+ * spline, grid, general, spherical...) or a perspective bottom row (in ResliceAxes or a vtkHomogeneousTransform)
+ * bends the grid: each output sample is then rendered at its own point, with the elevation beam along the local
+ * normal (the cross product of the sample's derivatives along the output's i and j, from the transform's
+ * TransformDerivative) and PixelLowPass on those local pixel axes (bigus::RenderPoints). Cost: about 100 flops per
+ * Gaussian near each sample, against a plane's per-pixel cost of the Gaussians that overlap it: a bent 256 x 256
+ * slice of a field of a few hundred thousand Gaussians takes about a second on 2 cores (docs/DESIGN.md section 5).
+ * Always on the CPU (Backend applies to planar grids).
+ *
+ * Stencils, as vtkImageReslice's: SetStencilData (input port 1, a vtkImageStencilData on the output's grid) sets the
+ * output's scalars outside the stencil to BackgroundLevel. GenerateStencilOutput makes output port 1 a
+ * vtkImageStencilData on the output's grid (GetStencilOutput) marking the samples the field stands for: where the
+ * training coverage (vtkGaussianFieldRenderer's Coverage, at each sample's own point) is at least
+ * StencilCoverageThreshold; for a field without training geometry, the samples inside the field's padded bounds (the
+ * samples BackgroundColor does not fill), as vtkImageReslice marks the samples inside its input volume.
+ *
  * Pipeline: with spacing, origin and extent all set (or an InformationInput) the output grid is pure
  * metadata. A default grid needs the field's bounds, which are data, not pipeline information:
  * RequestInformation takes them from the field the input holds at that moment (exact for SetInputData and
@@ -53,7 +71,7 @@
  * field again. A stack (OutputDimensionality 3) reports progress after every slice and stops at the
  * next slice when AbortExecute is set, leaving an empty output (the next Update renders again).
  *
- * Errors (those of vtkGaussianFieldRenderer, a singular or sheared ResliceAxes, an empty extent) fail
+ * Errors (those of vtkGaussianFieldRenderer, a singular ResliceAxes or one a transform folds, an empty extent) fail
  * the request with vtkErrorMacro and leave the output empty.
  */
 #ifndef vtkGaussianFieldReslice_h
@@ -64,6 +82,8 @@
 
 class vtkAbstractImageInterpolator;
 class vtkAbstractTransform;
+class vtkAlgorithmOutput;
+class vtkImageStencilData;
 class vtkMatrix4x4;
 class vtkPolyData;
 
@@ -124,8 +144,9 @@ public:
   /**
    * A transform applied to the sampling grid after ResliceAxes, as vtkImageReslice's: a linear one
    * (vtkLinearTransform, or a vtkHomogeneousTransform without perspective) is composed with the axes, so that
-   * each slice is rendered in its transformed plane. A non-linear transform fails the update with an error
-   * naming it (a field's slice is rendered as a plane). Held: its changes re-execute the filter.
+   * each slice is rendered in its transformed plane; any other (non-linear, perspective) renders each sample at its
+   * transformed point with the beam along the local normal (the class description). Held: its changes re-execute
+   * the filter.
    */
   virtual void SetResliceTransform(vtkAbstractTransform*);
   vtkGetObjectMacro(ResliceTransform, vtkAbstractTransform);
@@ -277,6 +298,37 @@ public:
   vtkBooleanMacro(OutputScatteringField, bool);
   ///@}
 
+  ///@{
+  /**
+   * A stencil on the output's grid, as vtkImageReslice's (input port 1): the output's scalars outside it are
+   * BackgroundLevel (not shifted or scaled). Null (default): none.
+   */
+  void SetStencilData(vtkImageStencilData* stencil);
+  vtkImageStencilData* GetStencil();
+  ///@}
+
+  ///@{
+  /**
+   * Output port 1 as a vtkImageStencilData of the samples the field stands for (the class description), as
+   * vtkImageReslice's GenerateStencilOutput. Default off (the port's stencil is then empty).
+   */
+  vtkSetMacro(GenerateStencilOutput, vtkTypeBool);
+  vtkGetMacro(GenerateStencilOutput, vtkTypeBool);
+  vtkBooleanMacro(GenerateStencilOutput, vtkTypeBool);
+  vtkAlgorithmOutput* GetStencilOutputPort() { return this->GetOutputPort(1); }
+  vtkImageStencilData* GetStencilOutput();
+  ///@}
+
+  ///@{
+  /**
+   * The training coverage (dimensionless: the elevation weights of the training frames at a sample, each at most 1;
+   * bigus::TrainingCoverage) from which a sample is inside the stencil output. Default 0.5: within 1.18 sigma_E of a
+   * training frame inside its fan (where one frame's beam is at half its peak), or between two frames' half weights.
+   */
+  vtkSetClampMacro(StencilCoverageThreshold, double, 0.0, 1e6);
+  vtkGetMacro(StencilCoverageThreshold, double);
+  ///@}
+
   /**
    * Includes the ResliceAxes matrix, the ResliceTransform and the information input.
    */
@@ -288,6 +340,12 @@ protected:
 
   int RequestInformation(vtkInformation*, vtkInformationVector**, vtkInformationVector*) override;
   int RequestData(vtkInformation*, vtkInformationVector**, vtkInformationVector*) override;
+  /// Makes the stencil output (port 1) on REQUEST_DATA_OBJECT.
+  vtkTypeBool ProcessRequest(vtkInformation*, vtkInformationVector**, vtkInformationVector*) override;
+  /// Port 1: the optional stencil (vtkImageStencilData).
+  int FillInputPortInformation(int port, vtkInformation* info) override;
+  /// Port 1: the stencil output (vtkImageStencilData).
+  int FillOutputPortInformation(int port, vtkInformation* info) override;
 
   /**
    * The output grid (spacing and origin in mm, extent): the settings where set; for the computed parts an
@@ -335,6 +393,8 @@ protected:
   double ScalarScale = 1.0;
   double PixelLowPass = 0.0;
   bool OutputScatteringField = false;
+  vtkTypeBool GenerateStencilOutput = 0;
+  double StencilCoverageThreshold = 0.5;
 
 private:
   vtkGaussianFieldReslice(const vtkGaussianFieldReslice&) = delete;

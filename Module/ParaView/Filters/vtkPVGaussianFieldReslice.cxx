@@ -17,6 +17,9 @@ vtkStandardNewMacro(vtkPVGaussianFieldReslice);
 
 vtkPVGaussianFieldReslice::vtkPVGaussianFieldReslice()
 {
+  // One port each in ParaView: the slice of a field (the stencil input and output are for VTK pipelines).
+  this->SetNumberOfInputPorts(1);
+  this->SetNumberOfOutputPorts(1);
   this->UpdateAxesAndGrid();
 }
 
