@@ -30,6 +30,10 @@
  * rebuilt only when Backend or the field input (object or MTime) changes, so that a new pose
  * re-renders without converting the field again.
  *
+ * A vtkThreadedImageAlgorithm, as vtkImageReslice is, so that a script's threading calls (NumberOfThreads,
+ * EnableSMP, SplitMode, DesiredBytesPerPiece, MinimumPieceSize) are accepted; they are stored without effect: the
+ * renderers run on vtkSMPTools' threads (VTK_SMP_MAX_THREADS / vtkSMPTools::Initialize), every output whole.
+ *
  * Errors shared by the subclasses (no field or a malformed field, malformed training geometry with
  * OutputCoverage on, an unavailable backend) fail the request with vtkErrorMacro and leave the output
  * empty.
@@ -38,7 +42,7 @@
 #define vtkGaussianFieldRenderer_h
 
 #include "bigusFiltersModule.h" // For export macro
-#include "vtkImageAlgorithm.h"
+#include "vtkThreadedImageAlgorithm.h"
 
 namespace bigus
 {
@@ -46,10 +50,10 @@ class FieldCache;
 struct RenderSetup;
 }
 
-class BIGUSFILTERS_EXPORT vtkGaussianFieldRenderer : public vtkImageAlgorithm
+class BIGUSFILTERS_EXPORT vtkGaussianFieldRenderer : public vtkThreadedImageAlgorithm
 {
 public:
-  vtkAbstractTypeMacro(vtkGaussianFieldRenderer, vtkImageAlgorithm);
+  vtkAbstractTypeMacro(vtkGaussianFieldRenderer, vtkThreadedImageAlgorithm);
   void PrintSelf(ostream& os, vtkIndent indent) override;
 
   ///@{

@@ -7,6 +7,7 @@
 
 #include "vtkAbstractImageInterpolator.h"
 #include "vtkAbstractTransform.h"
+#include "vtkExecutive.h"
 #include "vtkFloatArray.h"
 #include "vtkGeneralTransform.h"
 #include "vtkHomogeneousTransform.h"
@@ -917,6 +918,24 @@ vtkImageStencilData* vtkGaussianFieldReslice::GetStencil()
   return this->GetNumberOfInputConnections(1) < 1
     ? nullptr
     : vtkImageStencilData::SafeDownCast(this->GetExecutive()->GetInputData(1, 0));
+}
+
+void vtkGaussianFieldReslice::SetStencilOutput(vtkImageStencilData* stencil)
+{
+  this->GetExecutive()->SetOutputData(1, stencil);
+}
+
+const char* vtkGaussianFieldReslice::GetInterpolationModeAsString()
+{
+  switch (this->InterpolationMode)
+  {
+    case VTK_NEAREST_INTERPOLATION:
+      return "NearestNeighbor";
+    case VTK_CUBIC_INTERPOLATION:
+      return "Cubic";
+    default:
+      return "Linear";
+  }
 }
 
 vtkImageStencilData* vtkGaussianFieldReslice::GetStencilOutput()

@@ -242,6 +242,7 @@ public:
   void SetInterpolationModeToNearestNeighbor() { this->SetInterpolationMode(VTK_NEAREST_INTERPOLATION); }
   void SetInterpolationModeToLinear() { this->SetInterpolationMode(VTK_LINEAR_INTERPOLATION); }
   void SetInterpolationModeToCubic() { this->SetInterpolationMode(VTK_CUBIC_INTERPOLATION); }
+  const char* GetInterpolationModeAsString();
   void SetInterpolate(int t) { this->SetInterpolationMode(t ? VTK_LINEAR_INTERPOLATION : VTK_NEAREST_INTERPOLATION); }
   void InterpolateOn() { this->SetInterpolate(1); }
   void InterpolateOff() { this->SetInterpolate(0); }
@@ -316,6 +317,8 @@ public:
   vtkBooleanMacro(GenerateStencilOutput, vtkTypeBool);
   vtkAlgorithmOutput* GetStencilOutputPort() { return this->GetOutputPort(1); }
   vtkImageStencilData* GetStencilOutput();
+  /// The data object of output port 1 (as vtkImageReslice's): the next update fills it when GenerateStencilOutput.
+  void SetStencilOutput(vtkImageStencilData* stencil);
   ///@}
 
   ///@{

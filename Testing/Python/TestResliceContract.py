@@ -840,12 +840,27 @@ def test_background_and_accepted_calls():
     r.MirrorOn()
     r.SetBorder(0)
     r.OptimizationOff()
+    check(r.GetInterpolationModeAsString() == "Cubic", f"interpolation mode {r.GetInterpolationModeAsString()}")
+    # vtkThreadedImageAlgorithm's calls, as vtkImageReslice has them.
+    r.SetNumberOfThreads(1)
+    r.SetEnableSMP(False)
+    r.SetSplitModeToBeam()
+    r.SetDesiredBytesPerPiece(1000)
+    r.SetMinimumPieceSize(4, 4, 4)
     r.Update()
     first, far = plain.ComputePointId([0, 0, 0]), plain.ComputePointId([35, 35, 0])
     got = r.GetOutput().GetPointData().GetScalars()
     check(abs(got.GetTuple1(first) - 0.25) < 1e-7, f"background level outside the field: {got.GetTuple1(first)}")
     check(got.GetTuple1(far) == plain.GetPointData().GetScalars().GetTuple1(far), "inside the field: changed")
     check(plain.GetPointData().GetScalars().GetRange()[1] > 0.05, "the plane misses the field")
+
+
+def test_every_method_of_vtkImageReslice():
+    # Every public method vtkImageReslice has (its own and those of vtkThreadedImageAlgorithm and above) exists on the
+    # field's reslice, bar the garbage collector's ReportReferences (internal to VTK).
+    missing = sorted(set(dir(vtk.vtkImageReslice)) - set(dir(bigus.vtkGaussianFieldReslice)) - {"ReportReferences"})
+    check(not missing, f"vtkImageReslice's methods missing on vtkGaussianFieldReslice: {missing}")
+    print(f"vtkImageReslice's {len(dir(vtk.vtkImageReslice))} attributes: all on vtkGaussianFieldReslice but ReportReferences")
 
 
 def test_output_types_shift_and_scale():
@@ -997,6 +1012,7 @@ def main():
     test_stencil_output_from_coverage()
     test_slabs()
     test_background_and_accepted_calls()
+    test_every_method_of_vtkImageReslice()
     test_output_types_shift_and_scale()
     test_slicer_style_view()
     test_volume_read_back_in_pieces()
