@@ -422,6 +422,7 @@ int vtkGaussianFieldTrainer::RequestData(
   }
   this->BackendInUse = engine->GetName();
   bigus::Trainer trainer(std::move(data), s, std::move(engine));
+  trainer.SetResuming(this->ResumeFile && *this->ResumeFile);
   if ((this->Controller && !trainer.SetProcessReduction(&reduction, &error)) || !trainer.Initialize(&error) ||
     (this->ResumeFile && *this->ResumeFile && !trainer.LoadCheckpoint(this->ResumeFile, &error)))
   {

@@ -45,7 +45,16 @@ bool Trainer::PlanRouteTrial(const SeedingPlan& plan, std::string* error)
   trial.FanPixels = plan.Planes.FanPixels;
   trial.RulePixelsPerGaussian = this->Settings.Seeding.PixelGridFanPixelsPerGaussian;
   trial.Untested = RouteTrialUntested(*this->Data, this->Settings, plan, this->Reduction != nullptr);
-  if (trial.Untested.empty())
+  if (trial.Untested.empty() && this->Resuming)
+  {
+    // The frames the grid's side would score (its choices' held-out frames), held out of the fit as in the
+    // checkpoint's run; the grid is not fitted (LoadCheckpoint cancels the trial).
+    const HeldOutChoiceSettings& h = this->Settings.HeldOut;
+    trial.Frames = HeldOutFrames(*this->Data, h.Stride, h.MaximumFrames);
+    trial.Pending = trial.Frames.size() >= 2;
+    trial.Untested = trial.Pending ? std::string() : "fewer than 2 training frames to hold out between them";
+  }
+  else if (trial.Untested.empty())
   {
     if (!MeasurePixelGridRoute(*this->Data, this->Settings, this->SigmaByRule, trial, error))
     {
@@ -129,8 +138,8 @@ bool Trainer::SwitchToPixelGrid(std::string* error)
   SeedingPlan plan;
   if (!this->Engine->SetData(this->Data.get(), error) ||
     !GammaOfTrainingFrames(*this->Data, this->Gamma, fanPixels, gammaLine, error) ||
-    !PlanSeeding(*this->Data, s.Seeding, s.MaximumGaussians, s.NonNegativeReflectivity, this->SeedShapeOf(), fanPixels,
-      plan, error))
+    !PlanSeeding(*this->Data, s.Seeding, s.MaximumGaussians, s.NonNegativeReflectivity, s.Solve.L1 > 0,
+      this->SeedShapeOf(), fanPixels, plan, error))
   {
     return false;
   }

@@ -341,7 +341,7 @@ bool PixelGridFitsInMemory(const TrainingData& data, std::int64_t gaussians, boo
 }
 
 bool PlanSeeding(const TrainingData& data, const SeedingSettings& s, std::int64_t maximumGaussians, bool nonNegative,
-  const SeedShape& shape, std::int64_t fanPixels, SeedingPlan& plan, std::string* error)
+  bool solveL1, const SeedShape& shape, std::int64_t fanPixels, SeedingPlan& plan, std::string* error)
 {
   plan = SeedingPlan();
   plan.FanPixels = fanPixels;
@@ -368,7 +368,7 @@ bool PlanSeeding(const TrainingData& data, const SeedingSettings& s, std::int64_
     // The grid's count is set by memory, not by MaximumGaussians (a grid is never densified): every fan pixel of the
     // planes where this machine holds their training state and solve, else MaximumGaussians of them.
     const std::int64_t all = plan.Planes.FanPixels;
-    plan.Count = s.GridCountByMemory && PixelGridFitsInMemory(data, all, false)
+    plan.Count = s.GridCountByMemory && PixelGridFitsInMemory(data, all, solveL1)
       ? all
       : std::min<std::int64_t>(all, maximumGaussians);
   }

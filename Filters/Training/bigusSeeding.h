@@ -149,12 +149,14 @@ struct SeedingPlan
  * The seeding stage's choices for @p data: the pixel-grid fit where it applies (the default start, signed
  * reflectivities: @p nonNegative false) and the planes hold at most @p s.PixelGridFanPixelsPerGaussian x
  * @p maximumGaussians fan pixels, else the count of seeds (InitialGaussians, or one per 200 of the training frames'
- * @p fanPixels, 20,000 to half of @p maximumGaussians). False with @p error when InitialGaussians exceeds
- * @p maximumGaussians.
+ * @p fanPixels, 20,000 to half of @p maximumGaussians). The grid's count is every fan pixel of its planes where this
+ * machine holds their training state and the reflectivity solve's vectors (PixelGridFitsInMemory; with the solve's
+ * L1 term, @p solveL1, its larger vectors), else @p maximumGaussians of them. False with @p error when
+ * InitialGaussians exceeds @p maximumGaussians.
  */
 BIGUSTRAINING_EXPORT bool PlanSeeding(const TrainingData& data, const SeedingSettings& settings,
-  std::int64_t maximumGaussians, bool nonNegative, const SeedShape& shape, std::int64_t fanPixels, SeedingPlan& plan,
-  std::string* error);
+  std::int64_t maximumGaussians, bool nonNegative, bool solveL1, const SeedShape& shape, std::int64_t fanPixels,
+  SeedingPlan& plan, std::string* error);
 
 /**
  * Seeds @p field (replaced) as @p plan says, drawing with a generator seeded from @p seed; returns the stage's

@@ -116,7 +116,7 @@ bool Trainer::PrepareInitialField(std::string* error)
   this->Settings.Seeding.GridCountByMemory = this->Settings.Seeding.GridCountByMemory && !this->Reduction;
   SeedingPlan plan;
   if (!PlanSeeding(data, this->Settings.Seeding, this->Settings.MaximumGaussians,
-        this->Settings.NonNegativeReflectivity, this->SeedShapeOf(), count, plan, error))
+        this->Settings.NonNegativeReflectivity, this->Settings.Solve.L1 > 0, this->SeedShapeOf(), count, plan, error))
   {
     return false;
   }
@@ -131,8 +131,10 @@ bool Trainer::PrepareInitialField(std::string* error)
   // made (the training frames are already held).
   const std::int64_t trainingPixels = std::int64_t(data.Width) * data.Height * std::int64_t(data.TrainFrames.size());
   const std::int64_t maximum = std::max(this->Settings.MaximumGaussians, plan.PixelGrid ? plan.Count : 0);
-  if (!CheckTrainingMemory(
-        maximum, this->SolvesReflectivities() ? ReflectivitySolveBytes(maximum, trainingPixels) : 0.0, error))
+  if (!CheckTrainingMemory(maximum,
+        this->SolvesReflectivities() ? ReflectivitySolveBytes(maximum, trainingPixels, this->Settings.Solve.L1 > 0)
+                                     : 0.0,
+        error))
   {
     return false;
   }

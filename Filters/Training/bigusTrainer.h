@@ -123,6 +123,12 @@ public:
    */
   bool Initialize(std::string* error);
   /**
+   * Call before Initialize when LoadCheckpoint follows: the route trial (RouteTrial) then holds out its frames as
+   * the checkpoint's run did, without fitting the pixel grid again (LoadCheckpoint ends the trial: the checkpoint's
+   * run goes on with its steps).
+   */
+  void SetResuming(bool resuming) { this->Resuming = resuming; }
+  /**
    * Data-parallel training over the processes of @p reduction (null: this process alone); call before
    * Initialize, on every process with the same data and settings. Every process draws the same FramesPerStep x
    * Size() frames per step and renders its share, the engine sums gradients, EA-D accumulators and the loss
@@ -317,6 +323,7 @@ private:
   bool DensificationEnded = false;    // the last Train call ended past the densification window
   bool PixelGrid = false;             // the field is the pixel-grid fit (PixelGridFit): Train takes no step
   std::vector<int> HeldOutValidation; // validation frames out of the fit until JoinValidationFrames; empty after
+  bool Resuming = false;              // SetResuming
   bool SigmaByRule = false;           // ElevationSigma came from the rule (MeasureOnHeldOutFrames may measure it)
   PoseRefiner Poses;
   bool InPoseTrial = false; // TryPoseRefinement is running its branches: no checkpoint, no join

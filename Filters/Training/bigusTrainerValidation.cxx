@@ -25,7 +25,7 @@ bool Trainer::MeasureOnHeldOutFrames(std::int64_t fanPixels, SeedingPlan& plan, 
   SeedingSettings seeding = this->Settings.Seeding;
   seeding.PixelGridFanPixelsPerGaussian = std::numeric_limits<double>::infinity();
   return PlanSeeding(*this->Data, seeding, this->Settings.MaximumGaussians, this->Settings.NonNegativeReflectivity,
-    this->SeedShapeOf(), fanPixels, plan, error);
+    this->Settings.Solve.L1 > 0, this->SeedShapeOf(), fanPixels, plan, error);
 }
 
 bool Trainer::CheckValidation(double& loss, std::string* error)

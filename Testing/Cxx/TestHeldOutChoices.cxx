@@ -311,6 +311,51 @@ TEST(HeldOutChoices, TheRouteIsMeasuredWhereTheRuleTakesAdamAndTheBetterRouteTak
     l.end());
 }
 
+TEST(HeldOutChoices, AResumedRunHoldsOutTheRouteTrialsFramesWithoutFittingTheGridAgain)
+{
+  // The route test's sweep and settings: the trial is planned. A run stopped after its checkpoint at step 100, then
+  // resumed (SetResuming before Initialize): the resumed run holds out the same frames as the checkpoint's run, does
+  // not fit the grid again (no grid seconds), and LoadCheckpoint ends the trial with the reason in its line.
+  std::vector<int> unseen;
+  const TrainingData data = synthetic::SyntheticSweep(synthetic::KnownField(300, 5), 0.3, unseen);
+  TrainerSettings settings;
+  settings.ElevationSigma = 0.3;
+  settings.MaximumGaussians = 20000;
+  settings.Poses.RefinePoses = PoseRefinement::Off;
+  settings.Iterations = 300;
+  settings.TimeBudget = 600;
+  settings.CheckpointFile = std::string(BIGUS_TEST_OUTPUT) + "/route-trial.ckpt";
+  settings.CheckpointInterval = 100;
+  std::string error;
+  Trainer first(data, settings);
+  ASSERT_TRUE(first.Initialize(&error)) << error;
+  ASSERT_TRUE(first.GetReport().Route.Pending) << first.GetReport().Route.Untested;
+  EXPECT_GT(first.GetReport().Route.GridSeconds, 0) << "the grid's side was fitted";
+  ASSERT_TRUE(first.Run(
+    nullptr, [&]() { return first.GetIteration() >= 100; }, &error))
+    << error;
+
+  Trainer resumed(data, settings);
+  resumed.SetResuming(true);
+  ASSERT_TRUE(resumed.Initialize(&error)) << error;
+  const RouteTrial& route = resumed.GetReport().Route;
+  EXPECT_TRUE(route.Pending);
+  EXPECT_EQ(route.GridSeconds, 0) << "the grid is not fitted again";
+  EXPECT_EQ(route.Frames, first.GetReport().Route.Frames);
+  EXPECT_EQ(resumed.GetReport().ValidationFrames, first.GetReport().ValidationFrames);
+  for (int f : route.Frames)
+  {
+    EXPECT_EQ(std::count(resumed.GetData().TrainFrames.begin(), resumed.GetData().TrainFrames.end(), f), 0)
+      << "frame " << f << " is held out of the resumed fit as of the checkpoint's";
+  }
+  ASSERT_TRUE(resumed.LoadCheckpoint(settings.CheckpointFile, &error)) << error;
+  EXPECT_EQ(resumed.GetIteration(), 100);
+  EXPECT_FALSE(route.Pending);
+  EXPECT_NE(route.Line().find("the run resumed from the checkpoint"), std::string::npos) << route.Line();
+  ASSERT_TRUE(resumed.Run(nullptr, nullptr, &error)) << error;
+  EXPECT_EQ(resumed.GetIteration(), 300);
+}
+
 TEST(HeldOutChoices, TheRouteTrialSwitchesToThePixelGridWhereItScoresHigher)
 {
   // The same sweep with an Adam route that cannot win: MaximumGaussians 100 (50 seeds), no densification. The grid

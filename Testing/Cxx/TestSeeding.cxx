@@ -65,7 +65,7 @@ TEST(Seeding, FanPixelsUpToTwiceMaximumGaussiansGiveThePixelGrid)
   {
     SeedingPlan plan;
     std::string error;
-    ASSERT_TRUE(PlanSeeding(data, settings, c[0], false, ParallelShape(), fanPixels, plan, &error)) << error;
+    ASSERT_TRUE(PlanSeeding(data, settings, c[0], false, false, ParallelShape(), fanPixels, plan, &error)) << error;
     EXPECT_TRUE(plan.PixelGrid) << "MaximumGaussians " << c[0];
     EXPECT_EQ(plan.Count, c[1]) << "MaximumGaussians " << c[0];
     EXPECT_EQ(plan.Planes.Frames, data.TrainFrames) << "frames 1 mm apart, sigma_E 0.5 mm: every one a plane";
@@ -74,11 +74,11 @@ TEST(Seeding, FanPixelsUpToTwiceMaximumGaussiansGiveThePixelGrid)
   }
   SeedingPlan plan;
   std::string error;
-  ASSERT_TRUE(PlanSeeding(data, settings, 18431, false, ParallelShape(), fanPixels, plan, &error)) << error;
+  ASSERT_TRUE(PlanSeeding(data, settings, 18431, false, false, ParallelShape(), fanPixels, plan, &error)) << error;
   EXPECT_FALSE(plan.PixelGrid);
   EXPECT_EQ(plan.Count, 18431 / 2) << "at most half the maximum (one per 200 fan pixels would be 184)";
   // Non-negative reflectivities: never the pixel grid.
-  ASSERT_TRUE(PlanSeeding(data, settings, 1000000, true, ParallelShape(), fanPixels, plan, &error)) << error;
+  ASSERT_TRUE(PlanSeeding(data, settings, 1000000, true, false, ParallelShape(), fanPixels, plan, &error)) << error;
   EXPECT_FALSE(plan.PixelGrid);
   EXPECT_EQ(plan.Count, 20000);
 }
@@ -108,7 +108,8 @@ TEST(Seeding, HarrisSeedsAreOnePer200FanPixelsBetweenTheirBounds)
     ASSERT_EQ(c.FanPixels, std::int64_t(c.Data->Count()) * 512 * 512);
     SeedingPlan plan;
     std::string error;
-    ASSERT_TRUE(PlanSeeding(*c.Data, settings, c.Maximum, false, ParallelShape(), c.FanPixels, plan, &error)) << error;
+    ASSERT_TRUE(PlanSeeding(*c.Data, settings, c.Maximum, false, false, ParallelShape(), c.FanPixels, plan, &error))
+      << error;
     EXPECT_FALSE(plan.PixelGrid) << c.Why;
     EXPECT_EQ(plan.Count, c.Count) << c.Why;
     EXPECT_EQ(plan.FanPixels, c.FanPixels);
@@ -118,7 +119,7 @@ TEST(Seeding, HarrisSeedsAreOnePer200FanPixelsBetweenTheirBounds)
   given.InitialGaussians = 1234;
   SeedingPlan plan;
   std::string error;
-  ASSERT_TRUE(PlanSeeding(two, given, 100000000, false, ParallelShape(), 524288, plan, &error)) << error;
+  ASSERT_TRUE(PlanSeeding(two, given, 100000000, false, false, ParallelShape(), 524288, plan, &error)) << error;
   EXPECT_FALSE(plan.PixelGrid);
   EXPECT_EQ(plan.Count, 1234);
 }
@@ -130,13 +131,13 @@ TEST(Seeding, MoreInitialGaussiansThanTheMaximumAreRefusedNamingBoth)
   settings.InitialGaussians = 30001;
   SeedingPlan plan;
   std::string error;
-  EXPECT_FALSE(PlanSeeding(data, settings, 30000, false, ParallelShape(), 36864, plan, &error));
+  EXPECT_FALSE(PlanSeeding(data, settings, 30000, false, false, ParallelShape(), 36864, plan, &error));
   EXPECT_NE(error.find("InitialGaussians (30001)"), std::string::npos) << error;
   EXPECT_NE(error.find("MaximumGaussians (30000)"), std::string::npos) << error;
   // As many as the maximum: accepted, and that many seeds.
   settings.InitialGaussians = 30000;
   error.clear();
-  ASSERT_TRUE(PlanSeeding(data, settings, 30000, false, ParallelShape(), 36864, plan, &error)) << error;
+  ASSERT_TRUE(PlanSeeding(data, settings, 30000, false, false, ParallelShape(), 36864, plan, &error)) << error;
   EXPECT_EQ(plan.Count, 30000);
 }
 // Data this few (the synthetic sweep's 45 training frames of 64 x 64 pixels): one Gaussian per fan pixel of
