@@ -102,11 +102,36 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
     this->InPoseTrial = false;
     return false;
   }
+  this->InPoseTrial = false;
+  // The trusted branch goes on: its state, report and poses (every correction 0: the tracked poses).
+  auto keepTrusted = [&](const std::string& how) {
+    const int refinedSteps = this->State.Iteration - from;
+    const std::string stopReason = this->Report.StopReason; // the run's, where it stopped in the refined branch
+    this->State = std::move(trustedState);
+    this->Report = std::move(trustedReport);
+    this->Report.StopReason = stop ? stopReason : this->Report.StopReason;
+    this->Recent = trustedRecent;
+    this->Poses.ComposePoses(this->State);
+    if (!this->PushState(error))
+    {
+      return false;
+    }
+    this->Engine->Snapshot();
+    const std::string said = !stop ? how
+                                   : vtkfmt::sprintf("untested: the run stopped during the trial, %d of its %d steps "
+                                                     "with refinement; the %d on the tracked poses kept",
+                                       refinedSteps, steps, steps);
+    this->Poses.TurnOffCorrections(
+      this->State, this->Report.Settings, said + "; the rule alone: on, " + this->Poses.GetRuleText());
+    this->Settings.Poses = this->Poses.GetSettings();
+    return this->EndPoseTrial(stop ? "" : how, error);
+  };
   if (stop)
   {
-    return stopped();
+    // The run ends in the refined branch, fewer steps along than the trusted one, which it would otherwise discard
+    // (on a short budget the rate of the steps before the trial underestimates the steps to come).
+    return keepTrusted("");
   }
-  this->InPoseTrial = false;
   const std::string how = vtkfmt::sprintf("measured: %d steps each way from step %d on %zu held-out frames at "
                                           "their tracked poses, refined %.2f dB, trusted %.2f dB",
     steps, from, frames.size(), refined, trusted);
@@ -115,20 +140,7 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
     rewrite(how);
     return this->EndPoseTrial(how, error);
   }
-  // The trusted branch goes on: its state, report and poses (every correction 0: the tracked poses).
-  this->State = std::move(trustedState);
-  this->Report = std::move(trustedReport);
-  this->Recent = trustedRecent;
-  this->Poses.ComposePoses(this->State);
-  if (!this->PushState(error))
-  {
-    return false;
-  }
-  this->Engine->Snapshot();
-  this->Poses.TurnOffCorrections(
-    this->State, this->Report.Settings, how + "; the rule alone: on, " + this->Poses.GetRuleText());
-  this->Settings.Poses = this->Poses.GetSettings();
-  return this->EndPoseTrial(how, error);
+  return keepTrusted(how);
 }
 
 bool Trainer::EndPoseTrial(const std::string& how, std::string* error)

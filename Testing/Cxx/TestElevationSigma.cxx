@@ -277,6 +277,44 @@ TEST(PoseRefinementChoice, TheTrainerRefinesTheSweepsTheRuleChooses)
   }
 }
 
+// A run that stops in the trial's refined branch (here an abort 40 steps into it; on a short time budget, the budget)
+// keeps the trusted branch, whose TrialSteps steps it would otherwise discard, and says so; the poses stay tracked.
+TEST(PoseRefinementChoice, ARunStoppedInTheRefinedBranchKeepsTheTrustedBranchsSteps)
+{
+  const GaussianField truth = SpeckleField(12000, 20.0, 7);
+  std::vector<int> heldOut;
+  const TrainingData data = Sweep(truth, 0.6, 0.2, 80, heldOut);
+  TrainerSettings s;
+  s.ElevationSigma = 0.6;
+  s.Seeding.PixelGridFit = false;
+  s.Seeding.InitialGaussians = 3000;
+  s.Iterations = 1000;
+  s.Poses.Start = 0.1; // the trial from step 100
+  s.Poses.TrialSteps = 100;
+  Trainer trainer(data, s);
+  ASSERT_EQ(trainer.GetSettings().Poses.RefinePoses, PoseRefinement::On) << "the rule refines this sweep";
+  std::string error;
+  ASSERT_TRUE(trainer.Initialize(&error)) << error;
+  // One abort check per step: 100 before the trial, the one that starts it, 100 in the trusted branch, 40 refined.
+  int checks = 0;
+  ASSERT_TRUE(trainer.Run(
+    nullptr, [&]() { return ++checks > 100 + 1 + 100 + 40; }, &error))
+    << error;
+  EXPECT_EQ(trainer.GetReport().StopReason, "aborted");
+  EXPECT_EQ(trainer.GetIteration(), 200) << "the trusted branch's steps, not the refined branch's 140";
+  EXPECT_EQ(trainer.GetSettings().Poses.RefinePoses, PoseRefinement::Off);
+  std::string said;
+  for (const std::string& l : trainer.GetReport().Settings)
+  {
+    said += l.rfind("RefinePoses = ", 0) == 0 ? l : "";
+  }
+  EXPECT_NE(said.find("RefinePoses = off (untested: the run stopped during the trial, 40 of its 100 steps with "
+                      "refinement; the 100 on the tracked poses kept"),
+    std::string::npos)
+    << said;
+  EXPECT_TRUE(trainer.GetReport().PoseCorrections.empty());
+}
+
 // Auto where the rule would refine (speckle correlates): the choice is measured, TrialSteps steps each way from the
 // refinement's start, on held-out frames at their tracked poses (issue 54's tests). Exact poses: refinement ends off
 // (or moves no pose by more than 0.02 mm). Training poses moved by 0.5 degrees and 0.5 mm each at random (the
