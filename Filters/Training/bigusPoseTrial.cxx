@@ -27,7 +27,7 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
   double left = s.Iterations > 0 ? s.Iterations - from : std::numeric_limits<double>::infinity();
   const double seconds = this->TrainingSeconds();
   const double stepping = seconds - this->Report.Route.GridSeconds; // the route trial's grid side took no step
-  if (s.TimeBudget > 0 && stepping > 0 && from > 0) // no step yet: the rate is unknown, the trial goes ahead
+  if (s.TimeBudget > 0 && stepping > 0 && from > 0)                 // Iterate waits for 10 steps under a time budget
   {
     left = std::min(left, (s.TimeBudget - seconds) * from / stepping);
   }

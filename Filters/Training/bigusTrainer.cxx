@@ -423,7 +423,11 @@ bool Trainer::Iterate(double start, const std::function<void(double, int, double
     this->Report.StopReason = aborted ? "aborted" : "time budget";
     return true;
   }
-  if (this->Poses.IsTrialPending() && !this->InPoseTrial && this->Poses.RefinesAt(this->ScheduleFraction()))
+  // With a time budget the pose trial waits for the run's first steps: their rate (seeding and solves included) says
+  // whether the budget leaves room for both branches (TryPoseRefinement).
+  const bool rateKnown = s.TimeBudget <= 0 || state.Iteration >= 10;
+  if (this->Poses.IsTrialPending() && !this->InPoseTrial && rateKnown &&
+    this->Poses.RefinesAt(this->ScheduleFraction()))
   {
     return this->TryPoseRefinement(start, progress, abort, stop, error);
   }
