@@ -213,7 +213,7 @@ void ImageDefaults(
 /**
  * The matrix of the sampling grid's frame into @p frame: ResliceTransform's matrix times ResliceAxes. Returns whether
  * the grid stays planar: false for a transform that is not homogeneous, or a perspective bottom row (the samples are
- * then rendered point by point; @p frame holds the axes alone).
+ * then rendered point by point, and @p frame is not used).
  */
 bool FrameMatrix(vtkMatrix4x4* axes, vtkAbstractTransform* transform, vtkMatrix4x4* frame)
 {
@@ -291,6 +291,16 @@ void BentSlice(vtkGeneralTransform* indexToReference, const int extent[6], int k
       }
     }
   });
+}
+
+/// The positions of @p samples into @p points ([n, 3] mm).
+void PositionsOf(const std::vector<bigus::PointSample>& samples, std::vector<double>& points)
+{
+  points.resize(3 * samples.size());
+  for (std::size_t p = 0; p < samples.size(); ++p)
+  {
+    std::copy(samples[p].Position, samples[p].Position + 3, &points[3 * p]);
+  }
 }
 
 /// The points (mm) of the pixels of a planar @p slice into @p points ([H W, 3]).
@@ -795,11 +805,7 @@ int vtkGaussianFieldReslice::RequestData(
           this->PixelLowPass, options, ts, ti, &error);
         if (rendered && coverage)
         {
-          points.resize(3 * bentSamples.size());
-          for (std::size_t p = 0; p < bentSamples.size(); ++p)
-          {
-            std::copy(bentSamples[p].Position, bentSamples[p].Position + 3, &points[3 * p]);
-          }
+          PositionsOf(bentSamples, points);
           coverage->ComputePoints(
             points.data(), static_cast<std::int64_t>(bentSamples.size()), options.ElevationSigma, tc);
         }
@@ -847,12 +853,11 @@ int vtkGaussianFieldReslice::RequestData(
     }
     else
     {
-      BentSlice(bent, extent, k, 0, bentSamples);
-      points.resize(3 * bentSamples.size());
-      for (std::size_t p = 0; p < bentSamples.size(); ++p)
+      if (slab > 1) // else the samples rendered are the slice's own
       {
-        std::copy(bentSamples[p].Position, bentSamples[p].Position + 3, &points[3 * p]);
+        BentSlice(bent, extent, k, 0, bentSamples);
       }
+      PositionsOf(bentSamples, points);
     }
     InsideFieldBox(*render.Field, points, inside);
     const float background = static_cast<float>(this->BackgroundColor[0] / unit);
