@@ -277,21 +277,35 @@ TEST(PoseRefinementChoice, TheTrainerRefinesTheSweepsTheRuleChooses)
   }
 }
 
-// A run that stops in the trial's refined branch (here an abort 40 steps into it; on a short time budget, the budget)
-// keeps the trusted branch, whose TrialSteps steps it would otherwise discard, and says so; the poses stay tracked.
-TEST(PoseRefinementChoice, ARunStoppedInTheRefinedBranchKeepsTheTrustedBranchsSteps)
+namespace
 {
-  const GaussianField truth = SpeckleField(12000, 20.0, 7);
-  std::vector<int> heldOut;
-  const TrainingData data = Sweep(truth, 0.6, 0.2, 80, heldOut);
+/// The pose trials' sweep (80 frames of a speckle field 0.2 mm apart, sigma_E 0.6 mm: the rule refines it) and
+/// settings (3000 Harris seeds, no pixel grid; the refinement from 10 % of @p iterations, @p trialSteps each way).
+TrainerSettings TrialSettings(int iterations, int trialSteps)
+{
   TrainerSettings s;
   s.ElevationSigma = 0.6;
   s.Seeding.PixelGridFit = false;
   s.Seeding.InitialGaussians = 3000;
-  s.Iterations = 1000;
-  s.Poses.Start = 0.1; // the trial from step 100
-  s.Poses.TrialSteps = 100;
-  Trainer trainer(data, s);
+  s.Iterations = iterations;
+  s.Poses.Start = 0.1; // the trial needs 4 x TrialSteps steps after the start
+  s.Poses.TrialSteps = trialSteps;
+  return s;
+}
+
+TrainingData TrialSweep()
+{
+  std::vector<int> heldOut;
+  return Sweep(SpeckleField(12000, 20.0, 7), 0.6, 0.2, 80, heldOut);
+}
+}
+
+// A run that stops in the trial's refined branch (here an abort 40 steps into it; on a short time budget, the budget)
+// keeps the trusted branch, whose TrialSteps steps it would otherwise discard, and says so; the poses stay tracked.
+TEST(PoseRefinementChoice, ARunStoppedInTheRefinedBranchKeepsTheTrustedBranchsSteps)
+{
+  const TrainerSettings s = TrialSettings(1000, 100); // the trial from step 100
+  Trainer trainer(TrialSweep(), s);
   ASSERT_EQ(trainer.GetSettings().Poses.RefinePoses, PoseRefinement::On) << "the rule refines this sweep";
   std::string error;
   ASSERT_TRUE(trainer.Initialize(&error)) << error;
@@ -321,16 +335,8 @@ TEST(PoseRefinementChoice, ARunStoppedInTheRefinedBranchKeepsTheTrustedBranchsSt
 // held-out frames' tracked poses exact): refinement stays on.
 TEST(PoseRefinementChoice, AutoRefinementIsMeasuredOnHeldOutFramesAtTheirTrackedPoses)
 {
-  const GaussianField truth = SpeckleField(12000, 20.0, 7);
-  std::vector<int> heldOut;
-  const TrainingData exact = Sweep(truth, 0.6, 0.2, 80, heldOut);
-  TrainerSettings s;
-  s.ElevationSigma = 0.6;
-  s.Seeding.PixelGridFit = false;
-  s.Seeding.InitialGaussians = 3000;
-  s.Iterations = 1500;
-  s.Poses.Start = 0.1; // the trial needs 4 x TrialSteps steps after the start
-  s.Poses.TrialSteps = 300;
+  const TrainingData exact = TrialSweep();
+  const TrainerSettings s = TrialSettings(1500, 300);
   // The frames the trainer will hold out for the trial (every 8th training frame), so that only the others err.
   TrainingData copy = exact;
   HeldOutChoiceSettings held = s.HeldOut;

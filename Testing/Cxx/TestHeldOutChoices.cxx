@@ -17,6 +17,19 @@ using namespace bigus;
 namespace
 {
 /// The synthetic sweep's first 24 frames, all of them training frames (a pixel grid of 24 x 64 x 64 fan pixels).
+/// The route trial's settings on the synthetic sweep: MaximumGaussians 20,000 (the rule takes Adam), exact poses,
+/// @p iterations steps; the time budget (600 s, never reached) lets the trial plan its fits.
+TrainerSettings RouteTrialSettings(int iterations)
+{
+  TrainerSettings settings;
+  settings.ElevationSigma = 0.3;
+  settings.MaximumGaussians = 20000;
+  settings.Poses.RefinePoses = PoseRefinement::Off;
+  settings.Iterations = iterations;
+  settings.TimeBudget = 600;
+  return settings;
+}
+
 TrainingData GridSweep()
 {
   std::vector<int> unused;
@@ -223,12 +236,7 @@ TEST(HeldOutChoices, TheRouteIsMeasuredWhereTheRuleTakesAdamAndTheBetterRouteTak
   // about as well as the better of the two routes run alone.
   std::vector<int> unseen;
   const TrainingData data = synthetic::SyntheticSweep(synthetic::KnownField(300, 5), 0.3, unseen);
-  TrainerSettings settings;
-  settings.ElevationSigma = 0.3;
-  settings.MaximumGaussians = 20000;
-  settings.Poses.RefinePoses = PoseRefinement::Off;
-  settings.Iterations = 1000;
-  settings.TimeBudget = 600; // the schedule is the 1000 iterations; the budget lets the trial plan its fits
+  TrainerSettings settings = RouteTrialSettings(1000);
   std::string error;
   Trainer trainer(data, settings);
   ASSERT_TRUE(trainer.Initialize(&error)) << error;
@@ -318,12 +326,7 @@ TEST(HeldOutChoices, AResumedRunHoldsOutTheRouteTrialsFramesWithoutFittingTheGri
   // not fit the grid again (no grid seconds), and LoadCheckpoint ends the trial with the reason in its line.
   std::vector<int> unseen;
   const TrainingData data = synthetic::SyntheticSweep(synthetic::KnownField(300, 5), 0.3, unseen);
-  TrainerSettings settings;
-  settings.ElevationSigma = 0.3;
-  settings.MaximumGaussians = 20000;
-  settings.Poses.RefinePoses = PoseRefinement::Off;
-  settings.Iterations = 300;
-  settings.TimeBudget = 600;
+  TrainerSettings settings = RouteTrialSettings(300);
   settings.CheckpointFile = std::string(BIGUS_TEST_OUTPUT) + "/route-trial.ckpt";
   settings.CheckpointInterval = 100;
   std::string error;

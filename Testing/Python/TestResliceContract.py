@@ -111,6 +111,19 @@ def largest_difference(a, b):
     return max((abs(x - y) for x, y in zip(va, vb)), default=0.0)
 
 
+def agree(a, b, name, printed=None, nonempty=False):
+    """vtkImageReslice's output `a` and the field's `b`: the same geometry and values within 1e-5 (intensity in
+    [0, 1]); with `nonempty`, the field's image not empty. Prints the largest difference after `printed`."""
+    same_geometry(a, b, name)
+    worst = largest_difference(a, b)
+    if printed is not None:
+        print(f"{printed}: largest difference {worst:.3g}")
+    check(worst < 1e-5, f"{name}: values differ by {worst}")
+    if nonempty:
+        check(b.GetPointData().GetScalars().GetRange()[1] > 0.05, f"{name}: an empty image")
+    return worst
+
+
 def both(setup, dimensionality=3, information=None):
     """vtkImageReslice on V and vtkGaussianFieldReslice on the field (V as InformationInput), each set up by
     `setup`; `information` is a second image given to both as InformationInput."""
@@ -223,10 +236,7 @@ def test_information_input():
                         ("information input, permuted", lambda r: r.SetResliceAxesDirectionCosines(0, 1, 0, 1, 0, 0,
                                                                                                    0, 0, -1)),
                         ("information input, spacing set (it wins)", lambda r: r.SetOutputSpacing(0.5, 0.5, 0.5))):
-        a, b = both(setup, 3, information=other)
-        same_geometry(a, b, name)
-        worst = largest_difference(a, b)
-        check(worst < 1e-5, f"{name}: values differ by {worst}")
+        agree(*both(setup, 3, information=other), name)
 
 
 def test_reslice_transform():
@@ -243,10 +253,7 @@ def test_reslice_transform():
         r.SetOutputOrigin(-0.5, 0.0, 0.5)
         r.SetOutputExtent(3, 18, 1, 16, 2, 14)  # every sample inside V
     a, b = both(setup, 3)
-    same_geometry(a, b, "ResliceTransform")
-    worst = largest_difference(a, b)
-    print(f"linear ResliceTransform: largest difference {worst:.3g}")
-    check(worst < 1e-5, f"ResliceTransform: values differ by {worst}")
+    agree(a, b, "ResliceTransform", "linear ResliceTransform")
     # The same as the axes composed by hand.
     composed = vtk.vtkMatrix4x4()
     vtk.vtkMatrix4x4.Multiply4x4(transform.GetMatrix(), vtk.vtkMatrix4x4(), composed)
@@ -299,12 +306,7 @@ def test_sheared_axes():
             r.SetOutputSpacing(*spacing)
             r.SetOutputOrigin(0.0, 0.0, 0.0)
             r.SetOutputExtent(*extent)
-        a, b = both(setup, dimensionality)
-        same_geometry(a, b, name)
-        worst = largest_difference(a, b)
-        print(f"sheared axes, {name}: largest difference {worst:.3g}")
-        check(worst < 1e-5, f"sheared axes, {name}: values differ by {worst}")
-        check(b.GetPointData().GetScalars().GetRange()[1] > 0.05, f"sheared axes, {name}: an empty image")
+        agree(*both(setup, dimensionality), f"sheared axes, {name}", f"sheared axes, {name}", nonempty=True)
     # Parallel x and y have no plane: still an error, with an empty output.
     r = field_reslice()
     r.SetResliceAxesDirectionCosines(1, 0, 0, 1, 0, 0, 0, 0, 1)
@@ -490,13 +492,8 @@ def test_general_transform_on_voxels():
             r.SetOutputSpacing(0.5, 0.5, 0.5)
             r.SetOutputOrigin(-0.5, 0.0, -5.0)
             r.SetOutputExtent(*extent)  # every sample inside V
-        a, b = both(setup, dimensionality)
         name = f"vtkGeneralTransform, dimensionality {dimensionality}"
-        same_geometry(a, b, name)
-        worst = largest_difference(a, b)
-        print(f"{name}: largest difference {worst:.3g}")
-        check(worst < 1e-5, f"{name}: values differ by {worst}")
-        check(b.GetPointData().GetScalars().GetRange()[1] > 0.05, f"{name}: an empty image")
+        agree(*both(setup, dimensionality), name, name, nonempty=True)
 
 
 def test_bent_grids_point_by_point():
@@ -589,10 +586,7 @@ def test_stencil_input():
             r.SetStencilData(stencil)
         a, b = both(setup, dimensionality)
         name = f"stencil input, {name}"
-        same_geometry(a, b, name)
-        worst = largest_difference(a, b)
-        print(f"{name}: largest difference {worst:.3g} from vtkImageReslice with the same stencil")
-        check(worst < 1e-5, f"{name}: values differ by {worst}")
+        agree(a, b, name, f"{name} (vtkImageReslice with the same stencil)")
         field_values = values(b)
         outside = sum(1 for v in field_values if abs(v - 0.3) < 1e-7)
         check(0 < outside < len(field_values),
@@ -815,11 +809,7 @@ def test_slabs():
             r.SetSlabNumberOfSlices(3)
             getattr(r, "SetSlabModeTo" + mode)()
             r.SetOutputSpacing(0.5, 0.5, 0.5)
-        a, b = both(setup, 2)
-        same_geometry(a, b, f"slab {mode}")
-        worst = largest_difference(a, b)
-        check(worst < 1e-5, f"slab {mode}: values differ by {worst}")
-        check(b.GetPointData().GetScalars().GetRange()[1] > 0.05, f"slab {mode}: an empty image")
+        agree(*both(setup, 2), f"slab {mode}", nonempty=True)
     print("slabs of 3 slices: min, max, mean and sum as vtkImageReslice's")
 
 
