@@ -59,6 +59,7 @@ struct Section
   std::string Name;
   const char* Alone;
   std::function<bool(benchmark::BenchmarkContext&, std::string*)> Run;
+  bool InAll = true; ///< run by "all" too
 };
 
 /// Every section in the order they run: first the hold-out section of each of @p sweeps, whose results the
@@ -81,6 +82,7 @@ std::vector<Section> Sections(const std::vector<benchmark::Sweep>& sweeps)
   sections.push_back({ "defaults against hand-tuned", "defaults", benchmark::DefaultsSection });
   sections.push_back({ "block hold-outs", "blocks", benchmark::BlockHoldOutSection });
   sections.push_back({ "several sweeps", "sweeps", benchmark::SeveralSweepsSection });
+  sections.push_back({ "backends", "gpu", benchmark::GpuSection, false });
   return sections;
 }
 }
@@ -104,10 +106,16 @@ int RunBenchmark(const BenchmarkOptions& options)
   if (!all &&
     std::none_of(sections.begin(), sections.end(), [&](const Section& s) { return s.Alone && section == s.Alone; }))
   {
-    return Fail("--section " + section + ": expected all, main, defaults, volume, blocks, ablations, pareto or sweeps");
+    return Fail(
+      "--section " + section + ": expected all, main, defaults, volume, blocks, ablations, pareto, sweeps or gpu");
   }
-  benchmark::Introduction(root, quick, report);
   std::string error;
+  if (!bigus::CreateTrainingEngine(options.Backend, &error))
+  {
+    return Fail("--backend " + options.Backend + ": " + error);
+  }
+  benchmark::SetTrainingBackend(options.Backend);
+  benchmark::Introduction(root, quick, options.Backend, report);
   // Each section's wall time, listed at the end of the report.
   std::vector<std::pair<std::string, double>> times;
   auto run = [&](const std::string& name, bool wanted, const std::function<bool()>& measure) {
@@ -133,7 +141,7 @@ int RunBenchmark(const BenchmarkOptions& options)
   }
   for (const Section& s : sections)
   {
-    ok = ok && run(s.Name, all || (s.Alone && section == s.Alone), [&] { return s.Run(context, &error); });
+    ok = ok && run(s.Name, (all && s.InAll) || (s.Alone && section == s.Alone), [&] { return s.Run(context, &error); });
   }
   if (!ok)
   {

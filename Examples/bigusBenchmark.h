@@ -20,6 +20,10 @@ struct BenchmarkOptions
   /// into one field). With "all", the defaults section also reads the hold-out sections' runs (its
   /// fixed-schedule column).
   std::string Section = "all";
+  /// The training backend of every run (bigus::CreateTrainingEngine): "cpu" (default: the reports' numbers are the
+  /// CPU's), "cuda" or "auto". The "gpu" section runs the main job on it and on the CPU. An unavailable backend fails
+  /// the command before any section runs.
+  std::string Backend = "cpu";
 };
 
 /// Runs every measurement and writes the report. Returns the process exit code (0, or 1 with a

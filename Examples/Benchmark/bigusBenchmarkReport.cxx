@@ -153,7 +153,7 @@ bool Failed(const std::string& what, std::string* error)
   return false;
 }
 
-void Introduction(const std::string& root, bool quick, Report& report)
+void Introduction(const std::string& root, bool quick, const std::string& backend, Report& report)
 {
   const std::string commit = CommandOutput("git -C '" + root + "' rev-parse --short HEAD 2>/dev/null");
   const bool dirty =
@@ -168,9 +168,10 @@ void Introduction(const std::string& root, bool quick, Report& report)
 
   std::ostringstream& md = report.Markdown;
   md << "# Benchmarks: speed against error\n\n"
-     << "Produced by `bigus benchmark" << (quick ? " --quick" : "") << "` on " << date << " at commit `" << commit
-     << (dirty ? " (with uncommitted changes)" : "") << "`.\n"
-     << "Machine: " << machine << "; no GPU was used (CPU backend).\n"
+     << "Produced by `bigus benchmark" << (quick ? " --quick" : "") << (backend != "cpu" ? " --backend " + backend : "")
+     << "` on " << date << " at commit `" << commit << (dirty ? " (with uncommitted changes)" : "") << "`.\n"
+     << "Machine: " << machine << "; training backend `" << backend
+     << (backend == "cpu" ? "` (no GPU was used)" : "` (the render cutoffs section measures the CPU renderer)") << ".\n"
      << "Every number below is the one this command printed; rerun it to reproduce them (timings vary "
      << "between runs on a shared machine: compare within one report). The hand-run measurements behind "
      << "the trainer's defaults are in docs/FINDINGS.md; the MPI measurements (bigus batch on 1 and 2 ranks, "
@@ -195,6 +196,7 @@ void Introduction(const std::string& root, bool quick, Report& report)
   report.Json["commit"] = commit + (dirty ? "+dirty" : "");
   report.Json["machine"] = machine;
   report.Json["quick"] = quick;
+  report.Json["backend"] = backend;
 }
 
 bool WriteReport(

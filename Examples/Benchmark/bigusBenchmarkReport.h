@@ -74,8 +74,9 @@ struct Report
 /// Sets @p error to @p what and returns false: how a section fails (RunBenchmark reports it).
 bool Failed(const std::string& what, std::string* error);
 
-/// The report's title, the machine and commit, and the conventions of every table (also in @p report.Json).
-void Introduction(const std::string& root, bool quick, Report& report);
+/// The report's title, the machine and commit, the training @p backend, and the conventions of every table (also in
+/// @p report.Json).
+void Introduction(const std::string& root, bool quick, const std::string& backend, Report& report);
 
 /// Adds the total run time (@p seconds) and writes the report to @p output: BENCHMARKS.md for every
 /// section, BENCHMARKS_<section>.md for one alone (so that it does not replace the full report), and

@@ -5,6 +5,8 @@ namespace bigus::benchmark
 {
 namespace
 {
+std::string Backend = "cpu";
+
 /// Every 4th training frame of @p e, scored for the fit.
 void SetFitFrames(AblationExperiment& e)
 {
@@ -15,12 +17,38 @@ void SetFitFrames(AblationExperiment& e)
 }
 }
 
+void SetTrainingBackend(const std::string& name)
+{
+  Backend = name;
+}
+
+const std::string& TrainingBackend()
+{
+  return Backend;
+}
+
+std::unique_ptr<Trainer> MakeTrainer(
+  const TrainingData& data, const TrainerSettings& settings, std::string* error, const std::string& backend)
+{
+  std::unique_ptr<TrainingEngine> engine = CreateTrainingEngine(backend, error);
+  if (!engine)
+  {
+    return nullptr;
+  }
+  return std::unique_ptr<Trainer>(new Trainer(data, settings, std::move(engine)));
+}
+
 bool TrainWithMarks(const TrainingData& data, const TrainerSettings& settings, const std::vector<double>& marks,
   const std::vector<int>& heldOut, const std::string& method,
-  const std::function<bool(double, const Row&, Trainer&)>& onMark, std::string* error)
+  const std::function<bool(double, const Row&, Trainer&)>& onMark, std::string* error, const std::string& backend)
 {
   ResetPeakMemory();
-  Trainer trainer(data, settings);
+  std::unique_ptr<Trainer> made = MakeTrainer(data, settings, error, backend);
+  if (!made)
+  {
+    return false;
+  }
+  Trainer& trainer = *made;
   double trained = 0;
   double t0 = Now();
   // Iterations 0: no step limit (TimeBudget is the schedule), the marks decide.
@@ -70,7 +98,12 @@ bool TrainToBudget(const TrainingData& data, const TrainerSettings& settings, co
 {
   ResetPeakMemory();
   const double start = Now();
-  Trainer trainer(data, settings);
+  std::unique_ptr<Trainer> made = MakeTrainer(data, settings, error);
+  if (!made)
+  {
+    return false;
+  }
+  Trainer& trainer = *made;
   if (!trainer.Initialize(error) || !trainer.Train(nullptr, nullptr, error) || !trainer.Finish(error))
   {
     return false;
@@ -127,7 +160,12 @@ bool RunAblation(
   const AblationExperiment& e, const TrainerSettings& settings, AblationRun& run, std::string* error, bool train)
 {
   const double start = Now();
-  Trainer trainer(*e.Train, settings);
+  std::unique_ptr<Trainer> made = MakeTrainer(*e.Train, settings, error);
+  if (!made)
+  {
+    return false;
+  }
+  Trainer& trainer = *made;
   if (!trainer.Initialize(error) || (train && !trainer.Train(nullptr, nullptr, error)) || !trainer.Finish(error))
   {
     return false;

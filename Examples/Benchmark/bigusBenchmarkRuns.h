@@ -7,18 +7,29 @@
 #include "bigusTrainer.h"
 
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
 namespace bigus::benchmark
 {
+/// The training backend of every run of this process (BenchmarkOptions::Backend; "cpu" until set).
+void SetTrainingBackend(const std::string& name);
+const std::string& TrainingBackend();
+
+/// A trainer of @p data with @p settings on the engine of @p backend (CreateTrainingEngine); null with @p error where
+/// that backend cannot run here.
+std::unique_ptr<Trainer> MakeTrainer(const TrainingData& data, const TrainerSettings& settings, std::string* error,
+  const std::string& backend = TrainingBackend());
+
 /// Trains with @p settings, evaluating @p heldOut at each of @p marks (cumulative training seconds);
 /// @p onMark is called with the mark, its row (measured time) and the trainer, and returns false (with
 /// @p error) when its own measurement fails. The field is not pruned at the marks (Trainer::Train).
-/// Returns false on a training error.
+/// Returns false on a training error. On the engine of @p backend.
 bool TrainWithMarks(const TrainingData& data, const TrainerSettings& settings, const std::vector<double>& marks,
   const std::vector<int>& heldOut, const std::string& method,
-  const std::function<bool(double, const Row&, Trainer&)>& onMark, std::string* error);
+  const std::function<bool(double, const Row&, Trainer&)>& onMark, std::string* error,
+  const std::string& backend = TrainingBackend());
 
 /// Trains @p data with @p settings through Finish (early stopping, final prune, gap filling) and fills
 /// @p row (method, time, Gaussians, peak memory, a note with the steps and the sigma used); then

@@ -144,6 +144,14 @@ bool BlockHoldOutSection(BenchmarkContext& context, std::string* error);
  * 120 s budget, and Harris seeds with Adam at 60, 300 and 600 s (4 s with --quick).
  */
 bool SeveralSweepsSection(BenchmarkContext& context, std::string* error);
+
+/**
+ * Issue 58: the main job (the liver's hold-out protocol, the trainer's defaults with a time budget) scored at 10, 30,
+ * 60 and 100 s (1 and 2 s with --quick) on the training backend of --backend (TrainingBackend) and, where that is not
+ * the CPU, on the CPU engine of the same machine in the same run; each backend's self-check is printed with the
+ * table. Run alone (`--section gpu`), not with "all".
+ */
+bool GpuSection(BenchmarkContext& context, std::string* error);
 }
 
 #endif

@@ -30,9 +30,16 @@ Command AddBenchmarkCommand(CLI::App& app, const std::string& sourceDirectory)
       "iterations and equal time, 3 seeds; about 2 hours) or pareto (held-out PSNR against Gaussians and time: "
       "Adam alone, variable projection and the regular grid, up to 4 million Gaussians; about 45 minutes) or sweeps "
       "(two sweeps of the volume "
-      "protocol into one field against compounding both; about 15 minutes)")
+      "protocol into one field against compounding both; about 15 minutes) or gpu (the main job at 10, 30, 60 and 100 "
+      "s "
+      "on --backend and on the CPU; about 4 minutes per backend; not part of all)")
     ->capture_default_str()
-    ->check(CLI::IsMember({ "all", "main", "defaults", "volume", "blocks", "ablations", "pareto", "sweeps" }));
+    ->check(CLI::IsMember({ "all", "main", "defaults", "volume", "blocks", "ablations", "pareto", "sweeps", "gpu" }));
+  benchmarkCommand
+    ->add_option("--backend", benchmark.Backend,
+      "Training backend of every run: cpu (the reports' numbers), cuda or auto (as registered; `bigus info "
+      "--backends`)")
+    ->capture_default_str();
   return { benchmarkCommand, [options] {
             bigus::BenchmarkOptions& benchmark = *options;
             return bigus::RunBenchmark(benchmark);

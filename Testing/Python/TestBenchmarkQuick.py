@@ -314,6 +314,9 @@ def main():
         assert math.isfinite(row["psnr"]) and "| %.2f | %.4f |" % (row["psnr"], row["ssim"]) in report, row
 
     check_main_section(executable, os.path.join(out, "main"), results)
+    check_gpu_section(executable, os.path.join(out, "gpu"))
+    assert "## The main job on" not in report, "the gpu section ran with all"
+    assert results["backend"] == "cpu", results["backend"]
 
 
 def check_main_section(executable, out, full):
@@ -338,6 +341,33 @@ def check_main_section(executable, out, full):
     for name, sweep in results["sweeps"].items():
         for row, other in zip(sweep["baselines"][:2], full["sweeps"][name]["baselines"][:2]):
             assert row["method"] == other["method"] and abs(row["psnr"] - other["psnr"]) < 1e-9, (name, row, other)
+
+
+def check_gpu_section(executable, out):
+    """`--section gpu`: the main job at its marks on --backend and, where that is not the CPU, on the CPU too, every
+    row in the report as printed; a backend that cannot run here fails the command before any section, naming it."""
+    listed = subprocess.run([executable, "info", "--backends"], capture_output=True, text=True).stdout
+    cuda = any(line.startswith("backend cuda") and "cannot run here" not in line for line in listed.splitlines())
+    backend = "cuda" if cuda else "cpu"
+    result = subprocess.run([executable, "benchmark", "--quick", "--section", "gpu", "--backend", backend,
+                             "--output", out], capture_output=True, text=True)
+    assert result.returncode == 0, (result.stdout[-3000:], result.stderr)
+    report = open(os.path.join(out, "BENCHMARKS_gpu.md")).read()
+    results = json.load(open(os.path.join(out, "benchmarks", "results_gpu.json")))
+    assert results["backend"] == backend and sorted(results["gpu"]) == sorted({backend, "cpu"}), results["gpu"].keys()
+    for name, rows in results["gpu"].items():
+        assert len(rows) == 2 and all(row["seconds"] >= mark - 0.05 for row, mark in zip(rows, (1, 2))), rows
+        for row in rows:
+            assert row["method"] == "BIGUS on " + name and math.isfinite(row["psnr"]), row
+            assert "| %s | %.1f |" % (row["method"], row["seconds"]) in report, row
+        assert "- `%s`: passed its self-check" % name in report, name
+    print("gpu section (%s): %s" % (backend, ", ".join("%s %.2f dB at 2 s" % (n, r[-1]["psnr"])
+                                                      for n, r in results["gpu"].items())))
+    if not cuda:
+        refused = subprocess.run([executable, "benchmark", "--quick", "--section", "gpu", "--backend", "cuda",
+                                  "--output", out + "-cuda"], capture_output=True, text=True)
+        assert refused.returncode == 1 and "--backend cuda: backend 'cuda'" in refused.stderr, refused.stderr
+        assert not os.path.exists(os.path.join(out + "-cuda", "BENCHMARKS_gpu.md"))
 
 
 if __name__ == "__main__":
