@@ -32,6 +32,8 @@ bool Check(cudaError_t status, const char* what, std::string& why)
 bool QueryDevice(DeviceInfo& info, std::string& why)
 {
   info = DeviceInfo();
+  cudaDriverGetVersion(&info.DriverVersion);
+  cudaRuntimeGetVersion(&info.RuntimeVersion);
   if (!Check(cudaGetDeviceCount(&info.Count), "cudaGetDeviceCount", why))
   {
     info.Count = 0;

@@ -25,6 +25,8 @@ struct DeviceInfo
   std::string Name;          ///< name of device 0
   int ComputeCapability = 0; ///< e.g. 90 for sm_90
   double MemoryGiB = 0;      ///< global memory of device 0
+  int DriverVersion = 0;     ///< the CUDA version the driver supports, e.g. 13000 for 13.0 (cudaDriverGetVersion)
+  int RuntimeVersion = 0;    ///< of the CUDA runtime this build links (cudaRuntimeGetVersion)
 };
 
 /**

@@ -4,6 +4,7 @@
 #include "bigusCudaRenderer.h"
 
 #include "bigusBackend.h"
+#include "bigusCudaDevice.h"
 #include "bigusCudaDeviceRenderer.h"
 #include "bigusCudaKernels.h"
 #include "bigusCudaTrainingEngine.h"
@@ -14,6 +15,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cstdint>
 #include <vector>
 
@@ -271,6 +273,17 @@ extern "C" BIGUSCUDA_EXPORT void bigusCudaRegisterBackend()
   {
     bigus::RegisterBackend("cuda", &bigus::cuda::MakeCudaRenderer, 10);
     bigus::RegisterTrainingEngine("cuda", &bigus::cuda::CreateCudaTrainingEngine);
+    bigus::cuda::DeviceInfo info;
+    if (bigus::cuda::QueryDevice(info, why))
+    {
+      auto version = [](int v) { return std::to_string(v / 1000) + "." + std::to_string(v % 1000 / 10); };
+      char memory[32];
+      std::snprintf(memory, sizeof(memory), "%.1f", info.MemoryGiB);
+      bigus::SetBackendDescription("cuda",
+        info.Name + " (sm_" + std::to_string(info.ComputeCapability) + ", " + memory + " GiB; " +
+          std::to_string(info.Count) + " device(s) visible, device 0 used), driver supports CUDA " +
+          version(info.DriverVersion) + ", CUDA runtime " + version(info.RuntimeVersion));
+    }
   }
   else
   {

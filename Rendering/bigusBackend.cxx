@@ -49,6 +49,13 @@ std::map<std::string, BackendCheck>& Checks(std::unique_lock<std::mutex>& lock)
   return checks;
 }
 
+/// What each backend runs on (SetBackendDescription; guarded by the registry's lock).
+std::map<std::string, std::string>& Descriptions()
+{
+  static std::map<std::string, std::string> descriptions;
+  return descriptions;
+}
+
 /// Backends built but not usable here, and why (guarded by the registry's lock).
 std::map<std::string, std::string>& Unavailable()
 {
@@ -125,6 +132,22 @@ void RegisterUnavailableBackend(const std::string& name, const std::string& why)
   std::unique_lock<std::mutex> lock;
   Registry(lock);
   Unavailable()[name] = why;
+}
+
+void SetBackendDescription(const std::string& name, const std::string& description)
+{
+  std::unique_lock<std::mutex> lock;
+  Registry(lock);
+  Descriptions()[name] = description;
+}
+
+std::string BackendDescription(const std::string& name)
+{
+  LoadBackendModules();
+  std::unique_lock<std::mutex> lock;
+  Registry(lock);
+  const auto found = Descriptions().find(name);
+  return found == Descriptions().end() ? std::string() : found->second;
 }
 
 std::vector<std::string> AvailableBackends()

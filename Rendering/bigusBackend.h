@@ -39,6 +39,17 @@ BIGUSRENDERING_EXPORT void RegisterBackend(const std::string& name, RendererFact
  */
 BIGUSRENDERING_EXPORT void RegisterUnavailableBackend(const std::string& name, const std::string& why);
 
+/**
+ * Records what backend @p name runs on, for reports (`bigus info --backends`, `bigus benchmark`): for "cuda" the
+ * device, its compute capability and memory, the driver and the CUDA runtime. Called by a backend module when it
+ * registers.
+ */
+BIGUSRENDERING_EXPORT void SetBackendDescription(const std::string& name, const std::string& description);
+
+/// What backend @p name runs on (SetBackendDescription); empty where nothing was recorded (the CPU backend: the
+/// processor is the machine's).
+BIGUSRENDERING_EXPORT std::string BackendDescription(const std::string& name);
+
 /// The registered backend names, highest priority first ("cpu" is always among them).
 BIGUSRENDERING_EXPORT std::vector<std::string> AvailableBackends();
 

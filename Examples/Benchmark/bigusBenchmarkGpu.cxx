@@ -2,6 +2,7 @@
 // training backend of --backend and on the CPU engine of the same machine, in one run (issue 58 item 4).
 #include "bigusBenchmarkSections.h"
 
+#include "bigusBackend.h"
 #include "bigusBackendCheck.h"
 
 #include <string>
@@ -38,8 +39,9 @@ bool GpuSection(BenchmarkContext& context, std::string* error)
   for (const std::string& name : backends)
   {
     const BackendCheck check = CheckBackend(name);
-    md << "- `" << name << "`: " << (check.Passed ? "passed its self-check" : "FAILED its self-check") << ": "
-       << check.Detail << "\n";
+    const std::string runsOn = BackendDescription(name);
+    md << "- `" << name << "` (" << (runsOn.empty() ? "the machine's processor, above" : runsOn)
+       << "): " << (check.Passed ? "passed its self-check" : "FAILED its self-check") << ": " << check.Detail << "\n";
   }
   md << "\n" << TableHeader();
   std::vector<std::vector<Row>> rows(backends.size());

@@ -36,8 +36,10 @@ int PrintBackends()
   for (const std::string& name : bigus::AvailableBackends())
   {
     const bigus::BackendCheck check = bigus::CheckBackend(name);
-    std::printf("backend %-6s %s: %s\n", name.c_str(), check.Passed ? "passed its self-check" : "FAILED its self-check",
-      check.Detail.c_str());
+    const std::string runsOn = bigus::BackendDescription(name);
+    std::printf("backend %-6s %s: %s%s\n", name.c_str(),
+      check.Passed ? "passed its self-check" : "FAILED its self-check", check.Detail.c_str(),
+      runsOn.empty() ? "" : ("; runs on " + runsOn).c_str());
   }
   for (const auto& [name, why] : bigus::UnavailableBackends())
   {
