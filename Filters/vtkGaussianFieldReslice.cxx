@@ -768,7 +768,7 @@ int vtkGaussianFieldReslice::RequestData(
   std::vector<bigus::PointSample> bentSamples;
   std::vector<double> points;          // the output slice's sample points (mm)
   std::vector<char> inside, outInside; // of the padded bounds; of the stencil output, [depth, H, W]
-  std::vector<float> stencilScratch(stencilCoverage ? slicePixels : 0);
+  std::vector<float> stencilScratch(stencilCoverage && !(coverage && slab == 1) ? slicePixels : 0);
   outInside.resize(this->GenerateStencilOutput ? pixels : 0);
   for (int k = 0; k < depth; ++k)
   {
@@ -845,30 +845,37 @@ int vtkGaussianFieldReslice::RequestData(
         i[p] = static_cast<float>((unit * i[p] + this->ScalarShift) * this->ScalarScale / unit);
       }
     }
-    // The output slice's own points (no slab offset): the background outside the field's padded bounds, the stencil
-    // output.
-    if (planar)
-    {
-      SlicePoints(SliceAt(frame, grid.Spacing, grid.Origin, extent, k, 0, 0), points);
-    }
-    else
-    {
-      if (slab > 1) // else the samples rendered are the slice's own
-      {
-        BentSlice(bent, extent, k, 0, bentSamples);
-      }
-      PositionsOf(bentSamples, points);
-    }
-    InsideFieldBox(*render.Field, points, inside);
+    // The output slice's own points (no slab offset), where the background outside the field's padded bounds or the
+    // stencil output needs them. A background of 0 leaves the field's own samples beyond its padded bounds (below
+    // exp(-4.5) of a Gaussian).
     const float background = static_cast<float>(this->BackgroundColor[0] / unit);
-    for (std::size_t p = 0; p < slicePixels; ++p)
+    if (background != 0 || this->GenerateStencilOutput)
     {
-      const int x = extent[0] + static_cast<int>(p % (extent[1] - extent[0] + 1));
-      const int y = extent[2] + static_cast<int>(p / (extent[1] - extent[0] + 1));
-      // A background of 0 leaves the field's own samples beyond its padded bounds (below exp(-4.5) of a Gaussian).
-      if ((!inside[p] && background != 0) || (stencil && !stencil->IsInside(x, y, extent[4] + k)))
+      if (planar)
       {
-        i[p] = background;
+        SlicePoints(SliceAt(frame, grid.Spacing, grid.Origin, extent, k, 0, 0), points);
+      }
+      else
+      {
+        if (slab > 1) // else the samples rendered are the slice's own
+        {
+          BentSlice(bent, extent, k, 0, bentSamples);
+        }
+        PositionsOf(bentSamples, points);
+      }
+      InsideFieldBox(*render.Field, points, inside);
+    }
+    for (std::size_t p = 0; background != 0 && p < slicePixels; ++p)
+    {
+      i[p] = inside[p] ? i[p] : background;
+    }
+    if (stencil)
+    {
+      const int W = extent[1] - extent[0] + 1;
+      for (std::size_t p = 0; p < slicePixels; ++p)
+      {
+        const int x = extent[0] + static_cast<int>(p % W), y = extent[2] + static_cast<int>(p / W);
+        i[p] = stencil->IsInside(x, y, extent[4] + k) ? i[p] : background;
       }
     }
     if (this->GenerateStencilOutput)
@@ -876,11 +883,16 @@ int vtkGaussianFieldReslice::RequestData(
       char* out = outInside.data() + k * slicePixels;
       if (stencilCoverage)
       {
-        stencilCoverage->ComputePoints(
-          points.data(), static_cast<std::int64_t>(slicePixels), options.ElevationSigma, stencilScratch.data());
+        // The coverage output's values where this slice has them (no slab: rendered at the same points).
+        const float* at = c && slab == 1 ? c : stencilScratch.data();
+        if (at != c)
+        {
+          stencilCoverage->ComputePoints(
+            points.data(), static_cast<std::int64_t>(slicePixels), options.ElevationSigma, stencilScratch.data());
+        }
         for (std::size_t p = 0; p < slicePixels; ++p)
         {
-          out[p] = stencilScratch[p] >= this->StencilCoverageThreshold;
+          out[p] = at[p] >= this->StencilCoverageThreshold;
         }
       }
       else
