@@ -121,6 +121,10 @@ bool DeviceRenderer::Initialize(std::string* error)
 
 bool DeviceRenderer::Fits(std::int64_t bytes, std::int64_t held, const std::string& what, std::string* error) const
 {
+  if (bytes <= held)
+  {
+    return true; // what is held already covers it: no query of the device (a training step asks several times)
+  }
   std::size_t freeBytes = 0, totalBytes = 0;
   if (!Check(cudaMemGetInfo(&freeBytes, &totalBytes), "cudaMemGetInfo", error))
   {
@@ -186,13 +190,19 @@ bool DeviceRenderer::Forward(const DeviceField& field, const PreparedSlice& s, c
   LaunchRaster(s.TilesX * s.TilesY, this->Splats.As<Splat>(), this->SortedValues.As<std::uint32_t>(),
     this->TileStart.As<int>(), this->TileEnd.As<int>(), s, static_cast<float>(options.Gamma), S, I,
     this->Count.As<Counters>(), this->Stream);
-  Counters counters;
-  if (!Check(cudaGetLastError(), "raster kernel", error) || !this->ReadCounters(counters, "raster", error))
+  if (!Check(cudaGetLastError(), "raster kernel", error))
   {
     return false;
   }
+  // The counters are read (a wait for the stream) only for statistics: a training step's or a solve's next work
+  // follows on the same stream, and their copies to the host wait for it there.
   if (stats)
   {
+    Counters counters;
+    if (!this->ReadCounters(counters, "raster", error))
+    {
+      return false;
+    }
     stats->GaussiansVisible += static_cast<std::int64_t>(counters.Visible);
     stats->TileEntries += entries;
     stats->PixelEvaluations += static_cast<std::int64_t>(counters.Evaluations);

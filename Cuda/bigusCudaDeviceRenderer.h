@@ -106,8 +106,10 @@ public:
     std::int64_t ownHeld, const std::string& what, std::string* error);
 
   /**
-   * S ([H, W], device) of slice @p s, and I when @p I (device) is not null; waits for the result. Adds to
-   * @p stats (may be null). The field is device memory ([N] per array, DeviceField).
+   * S ([H, W], device) of slice @p s, and I when @p I (device) is not null. With @p stats (may be null) it
+   * waits for the result and adds to them; without, the raster is only queued after the binning (which waits for
+   * its entry count): work that follows on the stream sees S and I. The field is device memory ([N] per array,
+   * DeviceField).
    */
   bool Forward(const DeviceField& field, const PreparedSlice& s, const RenderOptions& options, float* S, float* I,
     RenderStats* stats, std::string* error);

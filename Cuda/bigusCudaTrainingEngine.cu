@@ -42,10 +42,10 @@ struct AdamStep
 /**
  * Adam on Gaussian i (one thread each), as CpuTrainingEngine::Adam (AdamUpdate: the moments in double, stored as
  * float), the arrays in the field's packed layout (bigusFieldLayout.h),
- * the parameters kept in range (unit quaternion, clamped log-scales); @p finite becomes 0 when a gradient or an
+ * the parameters kept in range (unit quaternion, clamped log-scales); @p nonFinite becomes 1 when a gradient or an
  * updated parameter is not finite.
  */
-__global__ void AdamKernel(float* field, float* m, float* v, const float* g, std::int64_t n, AdamStep a, int* finite)
+__global__ void AdamKernel(float* field, float* m, float* v, const float* g, std::int64_t n, AdamStep a, int* nonFinite)
 {
   const std::int64_t i = std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i >= n)
@@ -87,7 +87,7 @@ __global__ void AdamKernel(float* field, float* m, float* v, const float* g, std
     isfinite(field[FieldEntry(n, i, ReflectivityGroup, 0)]);
   if (!ok)
   {
-    *finite = 0;
+    *nonFinite = 1;
   }
 }
 
@@ -128,6 +128,7 @@ public:
   {
     this->Data = data;
     this->Assembled.reset();
+    this->Resident.clear();
     return true;
   }
 
@@ -182,9 +183,12 @@ private:
   /// A^T y (@p transpose true) or diag(A^T W A) over the assembled A, @p pixelValues the [count, H, W] y or W on the
   /// host: added to @p out [N].
   bool AssembledColumnProduct(const float* pixelValues, bool transpose, double* out, std::string* error);
-  /// Copies the recorded frames and masks of the step's frames to the device (LossTargets, LossMasks) and reserves
-  /// the image loss's scratch, checked before allocating.
-  bool StageLossTargets(const TrainingData& data, const StepRequest& request, std::string* error);
+  /// Puts the recorded frames and masks of the step's frames on the device (LossTargets, LossMasks; @p slots[b] is
+  /// the place of the step's frame b there) and reserves the image loss's scratch, checked before allocating. The
+  /// frames of the engine's own data (SetData) stay there once copied, where all of them take at most a quarter of
+  /// the device's free memory; others (a coarse step's decimated frames) are copied for each step.
+  bool StageLossTargets(
+    const TrainingData& data, const StepRequest& request, std::vector<std::int64_t>& slots, std::string* error);
   /// Copies @p bytes from the device to the host and waits.
   bool Download(void* host, const void* device, std::size_t bytes, const char* what, std::string* error)
   {
@@ -202,11 +206,12 @@ private:
   Buffer Seen;        // [N] int: the visible counts since the last Push
   Buffer Images;      // [3, H, W] floats: S, I (then dL/dI), dL/dS
   Buffer PoseTotals;  // [count, 6] doubles: a step's pose gradients
-  Buffer Finite;      // int: 0 when Adam met a non-finite value
+  Buffer NonFinite;   // int: 1 when Adam met a non-finite value
   Buffer SolveValues; // [N] float: the reflectivities of ApplyBasis, one frame's dL/dr in ApplyBasisTranspose
   Buffer SolveSum;    // [N] double: ApplyBasisTranspose's sum over frames
-  Buffer LossTargets; // [count, H, W] floats: the step's recorded frames
+  Buffer LossTargets; // [count, H, W] floats: the step's recorded frames, or every frame of Data (Resident)
   Buffer LossMasks;   // [count, H, W] bytes: their masks
+  std::vector<unsigned char> Resident; // per frame of Data: 1 when LossTargets holds it; empty: none is kept
   Buffer LossScratch; // the image loss's work maps (ImageLossScratchBytes), then [count, 4] doubles: its terms
   // Host scratch, kept between steps (the host loss: steps with an FFL term)
   std::vector<float> I, LossGradient;
@@ -244,7 +249,7 @@ bool CudaTrainingEngine::Push(const OptimizerState& input, std::string* error)
     !this->Gradients.Reserve(slots * FieldParameters * sizeof(float), "allocating gradients", error) ||
     !this->Attribution.Reserve(slots * sizeof(float), "allocating the attribution", error) ||
     !this->Seen.Reserve(slots * sizeof(int), "allocating visible counts", error) ||
-    !this->Finite.Reserve(sizeof(int), "allocating a flag", error))
+    !this->NonFinite.Reserve(sizeof(int), "allocating a flag", error))
   {
     return false;
   }
@@ -350,14 +355,34 @@ bool CudaTrainingEngine::PrepareSolve(std::string* error)
     this->SolveSum.Reserve(slots * sizeof(double), "allocating the solve's vectors", error);
 }
 
-bool CudaTrainingEngine::StageLossTargets(const TrainingData& data, const StepRequest& request, std::string* error)
+bool CudaTrainingEngine::StageLossTargets(
+  const TrainingData& data, const StepRequest& request, std::vector<std::int64_t>& slots, std::string* error)
 {
   const std::int64_t pixels = std::int64_t(data.Width) * data.Height;
-  const std::int64_t count = request.Count;
   const std::int64_t scratch =
-    ImageLossScratchBytes(data.Width, data.Height) + 4 * count * std::int64_t(sizeof(double));
-  const std::int64_t bytes = count * pixels * std::int64_t(sizeof(float) + 1) + scratch;
+    ImageLossScratchBytes(data.Width, data.Height) + 4 * std::int64_t(request.Count) * std::int64_t(sizeof(double));
   const std::int64_t held = this->LossTargets.Bytes + this->LossMasks.Bytes + this->LossScratch.Bytes;
+  // The engine's own frames stay on the device when they take at most a quarter of its free memory (asked once
+  // after SetData).
+  const std::int64_t frames = pixels > 0 ? std::int64_t(data.Frames.size()) / pixels : 0;
+  const bool own = &data == this->Data && frames > 0;
+  if (own && this->Resident.empty())
+  {
+    std::size_t freeBytes = 0, totalBytes = 0;
+    const std::int64_t all = frames * pixels * std::int64_t(sizeof(float) + 1);
+    if (Check(cudaMemGetInfo(&freeBytes, &totalBytes), "cudaMemGetInfo", nullptr) &&
+      all <= (held + std::int64_t(freeBytes)) / 4)
+    {
+      this->Resident.assign(std::size_t(frames), 0);
+    }
+  }
+  const bool resident = own && !this->Resident.empty();
+  if (!own)
+  {
+    std::fill(this->Resident.begin(), this->Resident.end(), 0); // this step's frames go where they were
+  }
+  const std::int64_t count = resident ? frames : request.Count;
+  const std::int64_t bytes = count * pixels * std::int64_t(sizeof(float) + 1) + scratch;
   if (!this->Device.Fits(bytes, held,
         "the image loss of " + std::to_string(count) + " frames of " + std::to_string(pixels) + " pixels", error) ||
     !this->LossTargets.Reserve(
@@ -368,17 +393,27 @@ bool CudaTrainingEngine::StageLossTargets(const TrainingData& data, const StepRe
     return false;
   }
   const cudaStream_t stream = this->Device.GetStream();
+  slots.resize(std::size_t(request.Count));
   for (int b = 0; b < request.Count; ++b)
   {
     const int f = request.Frames[b];
-    if (!Check(cudaMemcpyAsync(this->LossTargets.As<float>() + pixels * b, &data.Frames[pixels * f],
+    slots[b] = resident ? f : b;
+    if (resident && this->Resident[f])
+    {
+      continue;
+    }
+    if (!Check(cudaMemcpyAsync(this->LossTargets.As<float>() + pixels * slots[b], &data.Frames[pixels * f],
                  sizeof(float) * pixels, cudaMemcpyHostToDevice, stream),
           "copying a recorded frame to the device", error) ||
-      !Check(cudaMemcpyAsync(this->LossMasks.As<unsigned char>() + pixels * b, data.MaskOf(f), std::size_t(pixels),
-               cudaMemcpyHostToDevice, stream),
+      !Check(cudaMemcpyAsync(this->LossMasks.As<unsigned char>() + pixels * slots[b], data.MaskOf(f),
+               std::size_t(pixels), cudaMemcpyHostToDevice, stream),
         "copying a mask to the device", error))
     {
       return TrainingFrameError(f, error);
+    }
+    if (resident)
+    {
+      this->Resident[f] = 1;
     }
   }
   return true;
@@ -411,10 +446,11 @@ StepStatus CudaTrainingEngine::Step(const StepRequest& request, double* loss, st
   }
   // The loss on the device unless it has an FFL term (an FFT, on the host): then I goes to the host and dL/dI back.
   const bool deviceLoss = request.Loss.FFL == 0;
-  double* lossTerms = nullptr; // [count, 4] on the device: each frame's terms (LaunchImageLoss)
+  double* lossTerms = nullptr;     // [count, 4] on the device: each frame's terms (LaunchImageLoss)
+  std::vector<std::int64_t> slots; // the place of each of the step's frames in LossTargets
   if (deviceLoss)
   {
-    if (!this->StageLossTargets(data, request, error))
+    if (!this->StageLossTargets(data, request, slots, error))
     {
       return StepStatus::Failed;
     }
@@ -441,9 +477,9 @@ StepStatus CudaTrainingEngine::Step(const StepRequest& request, double* loss, st
     bool ok = true;
     if (deviceLoss)
     {
-      LaunchImageLoss(dI, this->LossTargets.As<float>() + pixels * b, this->LossMasks.As<unsigned char>() + pixels * b,
-        data.Width, data.Height, request.Loss.L1, request.Loss.DSSIM, 1.0 / request.Count, dI, lossTerms + 4 * b,
-        this->LossScratch.Data, stream);
+      LaunchImageLoss(dI, this->LossTargets.As<float>() + pixels * slots[b],
+        this->LossMasks.As<unsigned char>() + pixels * slots[b], data.Width, data.Height, request.Loss.L1,
+        request.Loss.DSSIM, 1.0 / request.Count, dI, lossTerms + 4 * b, this->LossScratch.Data, stream);
       ok = Check(cudaGetLastError(), "image loss kernels", error);
     }
     else
@@ -499,24 +535,22 @@ StepStatus CudaTrainingEngine::Step(const StepRequest& request, double* loss, st
   a.MinimumLogScale = static_cast<float>(request.MinimumLogScale);
   a.MaximumLogScale = static_cast<float>(request.MaximumLogScale);
   a.Sparse = request.SparseAdam;
-  const int one = 1;
-  int finite = 1;
-  if (!Check(
-        cudaMemcpyAsync(this->Finite.Data, &one, sizeof(int), cudaMemcpyHostToDevice, stream), "setting a flag", error))
+  int nonFinite = 0;
+  if (!Check(cudaMemsetAsync(this->NonFinite.Data, 0, sizeof(int), stream), "clearing a flag", error))
   {
     return StepStatus::Failed;
   }
   if (n > 0)
   {
     AdamKernel<<<Blocks(n, SetupBlock), SetupBlock, 0, stream>>>(
-      this->Moment(0), this->Moment(1), this->Moment(2), gradients, n, a, this->Finite.As<int>());
+      this->Moment(0), this->Moment(1), this->Moment(2), gradients, n, a, this->NonFinite.As<int>());
   }
   if (!Check(cudaGetLastError(), "Adam kernel", error) ||
-    !this->Download(&finite, this->Finite.Data, sizeof(int), "Adam", error))
+    !this->Download(&nonFinite, this->NonFinite.Data, sizeof(int), "Adam", error))
   {
     return StepStatus::Failed;
   }
-  return finite ? StepStatus::Done : StepStatus::NonFinite;
+  return nonFinite ? StepStatus::NonFinite : StepStatus::Done;
 }
 
 bool CudaTrainingEngine::Render(

@@ -8,6 +8,13 @@
 #            one (the same volume at 0.18 mm pixels), --backend cuda against cpu on all cores (solve.log)
 #   tracked  the main job at 60 s on the GPU scored at the held-out frames' tracked poses and fair (tracked.log)
 #   routes   the same with variable projection and with the pixel-grid fit of every fan pixel (routes.log)
+#   profile  the kernels' device time over 400 launches in a 800-step run (Nsight Compute's ncu; profile.log)
+#   growth   the main job at 60 s as in tracked, with the growth stop relaxed and with a larger MaximumGaussians
+#            (growth.log)
+#   bench    bigus benchmark --backend cuda: the gpu section (the main job at 10 to 100 s on the GPU and on the CPU
+#            cores beside it), then the volume section (bench/BENCHMARKS_gpu.md, bench/BENCHMARKS_volume.md, bench.log)
+# GPU_CHECKS_SECONDS (default 540): every command is stopped when the script has run that long, so that what ran
+# comes back within the device call's limit.
 #
 # Here (a build with CUDA in build/):
 #   ../shared/tools/device-bundle.sh build .bundle/bt bigus TestCudaRenderer TestCudaDevice TestGaussianMathCuda \
@@ -26,16 +33,18 @@ mkdir -p /work/main/Testing/Output
 L=$root/Examples/Data/liver/liver_sweep.igs.mha
 H="--holdout-every 4 --holdout-offset 2"
 sections=${*:-tests ab series solve tracked routes}
-{ nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv; lscpu | grep -E "Model name|^CPU\(s\)"; } \
+deadline=$((SECONDS + ${GPU_CHECKS_SECONDS:-540}))
+left() { local t=$((deadline - SECONDS)); echo $((t > 1 ? t : 1)); } # seconds to the deadline
+{ nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv; lscpu | grep -E "Model name|^CPU\(s\)"; ls /usr/local/cuda*/bin | grep -E "^(nsys|ncu)$"; } \
   >"$out/machine.txt" 2>&1
 TIMEFORMAT="wall %R s" # bash's time keyword: the wall time of a command (the device has no bc)
 
 if [[ " $sections " == *" tests "* ]]; then
   {
     for t in TestCudaDevice TestGaussianMathCuda TestCudaBackendRegistry TestBackendCheck; do
-      echo "== $t"; timeout 120 $t 2>&1 | tail -4; echo "rc=${PIPESTATUS[0]}"
+      echo "== $t"; { time timeout $(left) $t; } 2>&1 | tail -5; echo "rc=${PIPESTATUS[0]}"
     done
-    echo "== TestCudaRenderer"; timeout 300 TestCudaRenderer 2>&1 | grep -vE "^\[ +(RUN|OK) "
+    echo "== TestCudaRenderer"; { time timeout $(left) TestCudaRenderer; } 2>&1 | grep -vE "^\[ +(RUN|OK) "
     echo "rc=${PIPESTATUS[0]}"
   } >"$out/tests.log" 2>&1
 fi
@@ -45,7 +54,8 @@ if [[ " $sections " == *" ab "* ]] && [ -f .bundle/old-libbigusCuda.so.0.1.0 ]; 
   for k in new old; do
     lib=/tmp/bt/lib; [ $k = old ] && lib=/tmp/oldlib
     echo "== $k"
-    LD_LIBRARY_PATH=$lib bigus train "$L" -o /tmp/w/ab-$k.vtp $H --iterations 2500 --backend cuda 2>&1 | grep -v "^training "
+    { time LD_LIBRARY_PATH=$lib timeout $(left) bigus train "$L" -o /tmp/w/ab-$k.vtp $H --iterations 2500 \
+      --backend cuda; } 2>&1 | grep -v "^training "
   done >"$out/ab.log" 2>&1
 fi
 
@@ -94,9 +104,9 @@ fi
 main60() { # name, options...
   local name=$1; shift
   echo "== $name: $*"
-  { time timeout 200 bigus train "$L" -o /tmp/w/$name.vtp $H --time-budget 60 --backend cuda "$@"; } 2>&1 |
+  { time timeout $(left) bigus train "$L" -o /tmp/w/$name.vtp $H --time-budget 60 --backend cuda "$@"; } 2>&1 |
     grep -E "^field|^early|RefinePoses|InitialGaussians|ElevationSigma|^merge|^solves|pose|wall|rror"
-  bigus evaluate /tmp/w/$name.vtp "$L" $H --backend cuda --refine-poses --tracked-poses --report /tmp/w/r-$name 2>&1 |
+  timeout $(left) bigus evaluate /tmp/w/$name.vtp "$L" $H --backend cuda --refine-poses --tracked-poses --report /tmp/w/r-$name 2>&1 |
     grep -vE "^ +[0-9]+ "
 }
 [[ " $sections " == *" tracked "* ]] && main60 t60 >"$out/tracked.log" 2>&1
@@ -105,5 +115,25 @@ if [[ " $sections " == *" routes "* ]]; then
     main60 vp60 --reflectivity-solve
     main60 grid --max-gaussians 15000000 --solve-memory 0.75
   } >"$out/routes.log" 2>&1
+fi
+if [[ " $sections " == *" profile "* ]]; then
+  ncu=$(ls /usr/local/cuda*/bin/ncu 2>/dev/null | head -1)
+  { time timeout $(left) "$ncu" --metrics gpu__time_duration.sum --launch-skip 4000 --launch-count 400 \
+    --print-summary per-kernel bigus train "$L" -o /tmp/w/p.vtp $H --iterations 800 --backend cuda; } \
+    >"$out/profile.log" 2>&1
+fi
+if [[ " $sections " == *" growth "* ]]; then
+  {
+    main60 patience --growth-patience 1000
+    main60 max1m --growth-patience 1000 --max-gaussians 1000000
+    main60 batch4 --frames-per-step 4
+  } >"$out/growth.log" 2>&1
+fi
+if [[ " $sections " == *" bench "* ]]; then
+  for section in gpu volume; do
+    echo "== bigus benchmark --section $section --backend cuda"
+    { time timeout $(left) bigus benchmark --section $section --backend cuda --output "$out/bench" --data "$root"; } 2>&1 |
+      grep -vE "^training "
+  done >"$out/bench.log" 2>&1
 fi
 echo done
