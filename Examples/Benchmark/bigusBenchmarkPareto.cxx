@@ -147,7 +147,7 @@ bool ParetoSection(BenchmarkContext& context, std::string* error)
       for (std::int64_t count : counts)
       {
         const std::int64_t n = std::min(count, fanPixels);
-        if (!PixelGridFitsInMemory(*e.Train, n, false))
+        if (!TrainingFitsInMemory(*e.Train, n, true, false))
         {
           notRun.push_back(
             "a grid of " + std::to_string(n) + " Gaussians (with its solve, more than this machine's memory holds)");

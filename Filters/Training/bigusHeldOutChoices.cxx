@@ -461,7 +461,7 @@ std::string RouteTrialUntested(
     : settings.Poses.RefineTimeOffset || settings.Poses.RefineImageToProbe
     ? "a shared pose correction (time offset, ImageToProbe) is refined, which the grid's fit would not"
     : settings.TimeBudget <= 0 ? "no time budget to plan the measurement in"
-    : !PixelGridFitsInMemory(data, all, settings.Solve.L1 > 0)
+    : !TrainingFitsInMemory(data, all, true, settings.Solve.L1 > 0)
     ? vtkfmt::sprintf(
         "a grid of every one of the %lld fan pixels does not fit this machine's memory", static_cast<long long>(all))
     : seconds > 0.5 * settings.TimeBudget

@@ -333,11 +333,11 @@ double UniformDouble(std::mt19937_64& rng)
   return (rng() >> 11) * (1.0 / 9007199254740992.0);
 }
 
-bool PixelGridFitsInMemory(const TrainingData& data, std::int64_t gaussians, bool l1)
+bool TrainingFitsInMemory(const TrainingData& data, std::int64_t gaussians, bool solve, bool l1, std::string* error)
 {
   const std::int64_t trainingPixels =
     std::int64_t(data.Width) * data.Height * static_cast<std::int64_t>(data.TrainFrames.size());
-  return CheckTrainingMemory(gaussians, ReflectivitySolveBytes(gaussians, trainingPixels, l1), nullptr);
+  return CheckTrainingMemory(gaussians, solve ? ReflectivitySolveBytes(gaussians, trainingPixels, l1) : 0.0, error);
 }
 
 bool PlanSeeding(const TrainingData& data, const SeedingSettings& s, std::int64_t maximumGaussians, bool nonNegative,
@@ -368,7 +368,7 @@ bool PlanSeeding(const TrainingData& data, const SeedingSettings& s, std::int64_
     // The grid's count is set by memory, not by MaximumGaussians (a grid is never densified): every fan pixel of the
     // planes where this machine holds their training state and solve, else MaximumGaussians of them.
     const std::int64_t all = plan.Planes.FanPixels;
-    plan.Count = s.GridCountByMemory && PixelGridFitsInMemory(data, all, solveL1)
+    plan.Count = s.GridCountByMemory && TrainingFitsInMemory(data, all, true, solveL1)
       ? all
       : std::min<std::int64_t>(all, maximumGaussians);
   }

@@ -61,11 +61,13 @@ struct SeedingSettings
 };
 
 /**
- * Whether this machine's memory holds a pixel grid of @p gaussians with the reflectivity solve over @p data's
- * training frames (CheckTrainingMemory of TrainingBytesPerGaussian each and ReflectivitySolveBytes, with the L1
- * term's vectors where @p l1).
+ * Whether this machine's memory holds the training state of @p gaussians (CheckTrainingMemory:
+ * TrainingBytesPerGaussian each) and, where @p solve, the reflectivity solve over @p data's training frames
+ * (ReflectivitySolveBytes, with the L1 term's vectors where @p l1). Where not, @p error (may be null) says what
+ * does not fit.
  */
-BIGUSTRAINING_EXPORT bool PixelGridFitsInMemory(const TrainingData& data, std::int64_t gaussians, bool l1);
+BIGUSTRAINING_EXPORT bool TrainingFitsInMemory(
+  const TrainingData& data, std::int64_t gaussians, bool solve, bool l1, std::string* error = nullptr);
 
 /**
  * The intensity map's exponent for @p data (GammaFromMeanIntensity of the training frames' mean intensity inside
@@ -150,7 +152,7 @@ struct SeedingPlan
  * reflectivities: @p nonNegative false) and the planes hold at most @p s.PixelGridFanPixelsPerGaussian x
  * @p maximumGaussians fan pixels, else the count of seeds (InitialGaussians, or one per 200 of the training frames'
  * @p fanPixels, 20,000 to half of @p maximumGaussians). The grid's count is every fan pixel of its planes where this
- * machine holds their training state and the reflectivity solve's vectors (PixelGridFitsInMemory; with the solve's
+ * machine holds their training state and the reflectivity solve's vectors (TrainingFitsInMemory; with the solve's
  * L1 term, @p solveL1, its larger vectors), else @p maximumGaussians of them. False with @p error when
  * InitialGaussians exceeds @p maximumGaussians.
  */

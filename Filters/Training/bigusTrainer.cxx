@@ -129,12 +129,8 @@ bool Trainer::PrepareInitialField(std::string* error)
   this->PixelGrid = plan.PixelGrid;
   // A field that could not grow to MaximumGaussians in this machine's memory is refused before any seed is
   // made (the training frames are already held).
-  const std::int64_t trainingPixels = std::int64_t(data.Width) * data.Height * std::int64_t(data.TrainFrames.size());
   const std::int64_t maximum = std::max(this->Settings.MaximumGaussians, plan.PixelGrid ? plan.Count : 0);
-  if (!CheckTrainingMemory(maximum,
-        this->SolvesReflectivities() ? ReflectivitySolveBytes(maximum, trainingPixels, this->Settings.Solve.L1 > 0)
-                                     : 0.0,
-        error))
+  if (!TrainingFitsInMemory(data, maximum, this->SolvesReflectivities(), this->Settings.Solve.L1 > 0, error))
   {
     return false;
   }
