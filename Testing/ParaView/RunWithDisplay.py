@@ -1,4 +1,5 @@
-"""Runs an X client (pvbatch) for a test, again when the X server refused its connection.
+"""Runs an X client (pvbatch, or a VTK Python test that renders) for a test, again when the X server refused its
+connection.
 
 Usage: RunWithDisplay.py COMMAND [ARGS...]
 
