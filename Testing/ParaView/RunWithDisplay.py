@@ -7,7 +7,7 @@ Exits 125 (skipped) without a DISPLAY. Under xvfb-run on this project's machines
 aborts at its first window with "bad X server connection" (7 of about 25 pvbatch runs while this
 was written, also as the first client of a fresh Xvfb with nothing else rendering; the cause is not
 known). Only that
-abort is retried, at most twice, each retry announced; any other failure is returned as it is.
+abort is retried, up to 3 times (4 attempts in all), each retry announced; any other failure is returned as it is.
 """
 import os
 import subprocess
