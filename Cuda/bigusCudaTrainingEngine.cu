@@ -129,6 +129,7 @@ public:
     this->Data = data;
     this->Assembled.reset();
     this->Resident.clear();
+    this->ResidencyDecided = false;
     return true;
   }
 
@@ -212,6 +213,7 @@ private:
   Buffer LossTargets; // [count, H, W] floats: the step's recorded frames, or every frame of Data (Resident)
   Buffer LossMasks;   // [count, H, W] bytes: their masks
   std::vector<unsigned char> Resident; // per frame of Data: 1 when LossTargets holds it; empty: none is kept
+  bool ResidencyDecided = false;       // whether the free memory was asked since SetData (once: not every step)
   Buffer LossScratch; // the image loss's work maps (ImageLossScratchBytes), then [count, 4] doubles: its terms
   // Host scratch, kept between steps (the host loss: steps with an FFL term)
   std::vector<float> I, LossGradient;
@@ -366,8 +368,9 @@ bool CudaTrainingEngine::StageLossTargets(
   // after SetData).
   const std::int64_t frames = pixels > 0 ? std::int64_t(data.Frames.size()) / pixels : 0;
   const bool own = &data == this->Data && frames > 0;
-  if (own && this->Resident.empty())
+  if (own && !this->ResidencyDecided)
   {
+    this->ResidencyDecided = true;
     std::size_t freeBytes = 0, totalBytes = 0;
     const std::int64_t all = frames * pixels * std::int64_t(sizeof(float) + 1);
     if (Check(cudaMemGetInfo(&freeBytes, &totalBytes), "cudaMemGetInfo", nullptr) &&
