@@ -506,6 +506,18 @@ bool MeasurePixelGridRoute(
 
 std::string RouteTrial::Line() const
 {
+  // The routes no run measures, and the report that measured them (item 5 of issue 54: the Pareto section).
+  const std::string others = "; variable projection and grids at a coarser stride untested: on the liver, the spine "
+                             "phantom and the volume protocol each scored below Adam alone or the grid of every fan "
+                             "pixel (docs/BENCHMARKS_pareto.md)";
+  if (this->GridByRule)
+  {
+    return vtkfmt::sprintf("Route = the pixel grid (the rule: the %lld fan pixels of the grid's planes are at most "
+                           "%g x MaximumGaussians; untested against Harris seeds and Adam: the grid's fit takes no "
+                           "step, and a stepping route is measured only by spending the budget on its steps",
+             static_cast<long long>(this->FanPixels), this->RulePixelsPerGaussian) +
+      others + ")";
+  }
   const std::string rule =
     vtkfmt::sprintf("the rule: the %lld fan pixels of the grid's planes are more than %g x MaximumGaussians",
       static_cast<long long>(this->FanPixels), this->RulePixelsPerGaussian);
@@ -513,7 +525,7 @@ std::string RouteTrial::Line() const
   {
     return "Route = Harris seeds and Adam (" + rule +
       "; untested against the pixel grid: " + (this->Untested.empty() ? std::string("not measured") : this->Untested) +
-      ")";
+      others + ")";
   }
   const std::string grid = vtkfmt::sprintf("the pixel grid of %lld Gaussians %.2f dB (its fits %.1f s)",
     static_cast<long long>(this->GridGaussians), this->GridPSNR, this->GridSeconds);
@@ -522,12 +534,12 @@ std::string RouteTrial::Line() const
     return vtkfmt::sprintf("Route = Harris seeds and Adam, measured against the pixel grid on %zu held-out frames "
                            "when they join the fit (",
              this->Frames.size()) +
-      grid + "; " + rule + ")";
+      grid + "; " + rule + others + ")";
   }
   return vtkfmt::sprintf("Route = %s (measured on %zu held-out frames at their tracked poses, out of both fits: ",
            this->GridChosen ? "the pixel grid" : "Harris seeds and Adam", this->Frames.size()) +
     grid + vtkfmt::sprintf(", Harris seeds and Adam at step %d %.2f dB; ", this->DecidedAt, this->AdamPSNR) + rule +
-    ")";
+    others + ")";
 }
 
 } // namespace bigus

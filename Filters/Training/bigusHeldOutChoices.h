@@ -183,6 +183,7 @@ struct RouteTrial
   std::int64_t FanPixels = 0;       ///< of the grid's planes
   double RulePixelsPerGaussian = 2; ///< SeedingSettings::PixelGridFanPixelsPerGaussian, for the line
   std::string Untested;             ///< why the rule's route was taken without the measurement
+  bool GridByRule = false;          ///< the rule took the pixel grid (FanPixels within the rule): nothing measured
   /// The "Route = ..." setting line.
   std::string Line() const;
 };

@@ -127,6 +127,15 @@ bool Trainer::PrepareInitialField(std::string* error)
     return false;
   }
   this->PixelGrid = plan.PixelGrid;
+  if (plan.PixelGrid)
+  {
+    RouteTrial& route = this->Report.Route;
+    route = RouteTrial();
+    route.GridByRule = true;
+    route.FanPixels = plan.Planes.FanPixels;
+    route.RulePixelsPerGaussian = this->Settings.Seeding.PixelGridFanPixelsPerGaussian;
+    this->Report.Settings.push_back(route.Line());
+  }
   // A field that could not grow to MaximumGaussians in this machine's memory is refused before any seed is
   // made (the training frames are already held).
   const std::int64_t maximum = std::max(this->Settings.MaximumGaussians, plan.PixelGrid ? plan.Count : 0);
