@@ -44,6 +44,12 @@ bool Trainer::PlanRouteTrial(const SeedingPlan& plan, std::string* error)
   trial = RouteTrial();
   trial.FanPixels = plan.Planes.FanPixels;
   trial.RulePixelsPerGaussian = this->Settings.Seeding.PixelGridFanPixelsPerGaussian;
+  if (plan.PixelGrid)
+  {
+    trial.GridByRule = true; // nothing to measure: the line says which routes went untested
+    this->Report.Settings.push_back(trial.Line());
+    return true;
+  }
   trial.Untested = RouteTrialUntested(*this->Data, this->Settings, plan, this->Reduction != nullptr);
   if (trial.Untested.empty() && this->Resuming)
   {

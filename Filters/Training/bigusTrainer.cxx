@@ -121,21 +121,12 @@ bool Trainer::PrepareInitialField(std::string* error)
     return false;
   }
   // The route measured where the rule takes Adam; the choices measured on the grid (or said untested on Adam).
-  if ((!plan.PixelGrid && !this->PlanRouteTrial(plan, error)) ||
+  if (!this->PlanRouteTrial(plan, error) ||
     (!this->Report.Route.Pending && !this->MeasureOnHeldOutFrames(count, plan, error)))
   {
     return false;
   }
   this->PixelGrid = plan.PixelGrid;
-  if (plan.PixelGrid)
-  {
-    RouteTrial& route = this->Report.Route;
-    route = RouteTrial();
-    route.GridByRule = true;
-    route.FanPixels = plan.Planes.FanPixels;
-    route.RulePixelsPerGaussian = this->Settings.Seeding.PixelGridFanPixelsPerGaussian;
-    this->Report.Settings.push_back(route.Line());
-  }
   // A field that could not grow to MaximumGaussians in this machine's memory is refused before any seed is
   // made (the training frames are already held).
   const std::int64_t maximum = std::max(this->Settings.MaximumGaussians, plan.PixelGrid ? plan.Count : 0);

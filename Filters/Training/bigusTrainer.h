@@ -246,8 +246,9 @@ private:
   /// setting line; too few, the training frames ValidationFrames chooses.
   void HoldOutValidationFrames();
   /**
-   * The Adam route's seeding @p plan made: the route trial's grid side where RouteTrialUntested allows it
-   * (MeasurePixelGridRoute, its seconds counted as training), else the Route line says why not.
+   * The seeding @p plan made: where the rule took the pixel grid, only its Route line (Adam untested); on the Adam
+   * route, the route trial's grid side where RouteTrialUntested allows it (MeasurePixelGridRoute, its seconds counted
+   * as training), else the Route line says why not.
    */
   bool PlanRouteTrial(const SeedingPlan& plan, std::string* error);
   /**
