@@ -258,9 +258,9 @@ bool MakeVolumeProtocol(const std::string& root, bool quick, VolumeProtocol& vp,
 namespace
 {
 /// @p volume resliced trilinearly at each of @p vp's test sweeps' poses and scored, into @p rows (@p seconds: its
-/// preparation).
+/// preparation); with @p resliced, [t] also receives test sweep t's resliced frames ([M, H, W]).
 void ResliceAtTestPoses(const VolumeProtocol& vp, vtkAlgorithmOutput* volume, vtkImageData* volumeData,
-  const std::string& method, double seconds, Row rows[3])
+  const std::string& method, double seconds, Row rows[3], std::vector<float>* resliced = nullptr)
 {
   for (int t = 0; t < 3; ++t)
   {
@@ -281,13 +281,17 @@ void ResliceAtTestPoses(const VolumeProtocol& vp, vtkAlgorithmOutput* volume, vt
     r.Method = method;
     r.Seconds = seconds;
     r.MsPerFrame = 1e3 * (Now() - t0) / vp.TestList[t].size();
-    r.Quality =
-      Score(static_cast<float*>(reslice->GetOutput()->GetScalarPointer()), 1.0, vp.TestData[t], vp.TestList[t]);
+    const float* frames = static_cast<float*>(reslice->GetOutput()->GetScalarPointer());
+    r.Quality = Score(frames, 1.0, vp.TestData[t], vp.TestList[t]);
+    if (resliced)
+    {
+      resliced[t].assign(frames, frames + reslice->GetOutput()->GetNumberOfPoints());
+    }
   }
 }
 }
 
-bool StackSlices(const VolumeProtocol& vp, Row rows[3], std::string* error)
+bool StackSlices(const VolumeProtocol& vp, StackedSlices& out, std::string* error)
 {
   const TrainingData& d = vp.TrainData;
   const int n = d.Count();
@@ -316,14 +320,62 @@ bool StackSlices(const VolumeProtocol& vp, Row rows[3], std::string* error)
       }
     }
   }
-  const double t0 = Now();
-  vtkNew<vtkImageData> stack;
-  stack->SetDimensions(d.Width, d.Height, n);
-  stack->SetSpacing(first[0], first[5], step);
-  stack->SetOrigin(first[3], first[7], first[11]);
-  stack->AllocateScalars(VTK_FLOAT, 1);
-  std::copy(d.Frames.begin(), d.Frames.end(), static_cast<float*>(stack->GetScalarPointer()));
-  ResliceAtTestPoses(vp, nullptr, stack, "training slices stacked + trilinear reslice", Now() - t0, rows);
+  const std::size_t pixels = std::size_t(d.Width) * d.Height;
+  // values(k, p): the value slice k's pixel p is stacked with.
+  auto resliceStack = [&](const std::string& method, auto values, Row rows[3], std::vector<float>* resliced) {
+    const double t0 = Now();
+    vtkNew<vtkImageData> stack;
+    stack->SetDimensions(d.Width, d.Height, n);
+    stack->SetSpacing(first[0], first[5], step);
+    stack->SetOrigin(first[3], first[7], first[11]);
+    stack->AllocateScalars(VTK_FLOAT, 1);
+    float* voxels = static_cast<float*>(stack->GetScalarPointer());
+    for (int k = 0; k < n; ++k)
+    {
+      for (std::size_t p = 0; p < pixels; ++p)
+      {
+        voxels[pixels * k + p] = values(k, p);
+      }
+    }
+    ResliceAtTestPoses(vp, nullptr, stack, method, Now() - t0, rows, resliced);
+  };
+  const float* frames = d.Frames.data();
+  std::vector<float> recorded[3], coverage[3];
+  resliceStack(
+    "training slices stacked + trilinear reslice", [&](int k, std::size_t p) { return frames[pixels * k + p]; },
+    out.AsRecorded, recorded);
+  resliceStack(
+    "training slices stacked within their masks + trilinear reslice",
+    [&](int k, std::size_t p) { return d.MaskOf(k)[p] ? frames[pixels * k + p] : 0.f; }, out.WithinMasks, nullptr);
+  // The masks stacked (1 where a slice holds data) and resliced: 1 where every sample the trilinear reslice
+  // weighs lies within the training masks, below 1 where one reads a pixel the trainer is not given.
+  Row unused[3];
+  resliceStack(
+    "training masks stacked", [&](int k, std::size_t p) { return d.MaskOf(k)[p] ? 1.f : 0.f; }, unused, coverage);
+  for (int t = 0; t < 3; ++t)
+  {
+    const TrainingData& test = vp.TestData[t];
+    TrainingData& covered = out.Covered[t];
+    covered = test;
+    covered.Mask.resize(pixels * test.Count());
+    std::int64_t scored = 0, kept = 0;
+    for (int k = 0; k < test.Count(); ++k)
+    {
+      const unsigned char* mask = test.MaskOf(k);
+      unsigned char* narrowed = covered.Mask.data() + pixels * k;
+      for (std::size_t p = 0; p < pixels; ++p)
+      {
+        narrowed[p] = mask[p] && coverage[t][pixels * k + p] >= 1.f - 1e-4f;
+      }
+    }
+    for (int k : vp.TestList[t])
+    {
+      scored += std::count_if(test.MaskOf(k), test.MaskOf(k) + pixels, [](unsigned char m) { return m != 0; });
+      kept += std::count_if(covered.MaskOf(k), covered.MaskOf(k) + pixels, [](unsigned char m) { return m != 0; });
+    }
+    out.CoveredShare[t] = scored > 0 ? double(kept) / double(scored) : 0.0;
+    out.AsRecordedWhereCovered[t] = Score(recorded[t].data(), 1.0, covered, vp.TestList[t]);
+  }
   return true;
 }
 

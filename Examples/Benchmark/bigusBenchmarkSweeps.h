@@ -76,10 +76,24 @@ bool MakeVolumeProtocol(
 /// spacing) and resliced trilinearly at each test sweep's poses, into @p rows.
 void CompoundVolume(const VolumeProtocol& vp, Row rows[3]);
 
-/// The other baseline: the training slices stacked as they are into a volume (the slice spacing between them, no
-/// compounding) and resliced trilinearly at each test sweep's poses, into @p rows; false with @p error when the
-/// training slices are not parallel, axis-aligned and evenly spaced (the parallel protocol's are).
-bool StackSlices(const VolumeProtocol& vp, Row rows[3], std::string* error);
+/// The training slices stacked into a volume (the slice spacing between them, no compounding), resliced
+/// trilinearly at each test sweep's poses (StackSlices).
+struct StackedSlices
+{
+  Row AsRecorded[3];  ///< the slices as they are: also their pixels outside their masks (unreconstructed voxels)
+  Row WithinMasks[3]; ///< each slice 0 outside its mask: only what the trainer is given
+  /// Each test sweep with its masks narrowed to the pixels where every sample the trilinear reslice weighs lies
+  /// within the training masks (where the two stacks above agree), the share of the scored pixels kept, and the
+  /// stack's score there.
+  TrainingData Covered[3];
+  double CoveredShare[3] = {};
+  ImageMetrics AsRecordedWhereCovered[3];
+};
+
+/// The other baselines: the training slices stacked (StackedSlices) and resliced at each test sweep's poses, into
+/// @p out; false with @p error when the training slices are not parallel, axis-aligned and evenly spaced (the
+/// parallel protocol's are).
+bool StackSlices(const VolumeProtocol& vp, StackedSlices& out, std::string* error);
 }
 
 #endif

@@ -67,10 +67,11 @@ def liver_baselines(example_data, block=None):
     return float(np.mean(nearest)), float(np.mean(blend)), blurred
 
 
-def check_volume_error_sources(example_data, inbetween, report):
+def check_volume_error_sources(example_data, inbetween, report, results):
     """The volume protocol's account of the in-between error (--quick: 40 training slices): one row, of the
     defaults budget run, and the recorded blend recomputed here from the sweeps (in-between slice k midway
-    between training slices k and k + 1: their mean, masked PSNR per slice, averaged over slices 0 to 38)."""
+    between training slices k and k + 1: their mean, masked PSNR per slice, averaged over slices 0 to 38), and the
+    slice counts' pixels where the stacked training slices read only what their masks hold."""
     reader = vtk.vtkMetaImageReader()
     reader.SetFileName(os.path.join(example_data, "..", "..", "Testing", "Data", "spine-phantom",
                                     "SpinePhantomFreehandReconstructed.mha"))
@@ -108,6 +109,17 @@ def check_volume_error_sources(example_data, inbetween, report):
     assert abs(where["share"] - both_hold / scored) < 1e-9 and 0 < where["share"] < 1, (where, both_hold, scored)
     assert abs(where["recorded_blend_psnr"] - float(np.mean(blend_where_both))) < 1e-3, where
     assert math.isfinite(where["defaults_psnr"]) and where["defaults_psnr"] > 5, where
+    # The slice counts' 40-slice run: its in-between slices lie midway between training slices on their pixel
+    # grid, so the stacked masks resliced weigh exactly the two bracketing pixels, and the pixels where the stack
+    # reads only masked data are those where both slices hold data (the last in-between slice, beyond the last
+    # training slice, has none); the stack's score there is the recorded blend's.
+    counts = {e["slices"]: e for e in results["volume_slice_counts_where_the_stack_reads_masked_data"]}
+    covered = counts[40]["in_between"]
+    all_scored = scored + int(masks[len(between) - 1].sum())
+    assert abs(covered["share"] - both_hold / all_scored) < 1e-9, (covered, both_hold, all_scored)
+    assert abs(covered["stacked_psnr"] - where["recorded_blend_psnr"]) < 1e-3, (covered, where)
+    for t in ("in_between", "oblique", "orthogonal"):
+        assert 0 < counts[40][t]["share"] < 1 and math.isfinite(counts[40][t]["bigus_psnr"]), (t, counts[40])
     (source,) = inbetween["error_sources"]
     assert source["seconds"] == inbetween["budget_runs"][0]["seconds"], (source, inbetween["budget_runs"][0])
     for key in ("training_psnr", "held_out_psnr", "blended_renders_psnr"):
@@ -249,7 +261,8 @@ def main():
         for k, r in enumerate(rows["budget_runs"]):
             first = results["volume_protocol"]["in-between parallel slices"]["budget_runs"][k]
             assert (r["note"], r["gaussians"]) == (first["note"], first["gaussians"]), (test, r, first)
-    check_volume_error_sources(example_data, results["volume_protocol"]["in-between parallel slices"], report)
+    check_volume_error_sources(example_data, results["volume_protocol"]["in-between parallel slices"], report,
+                               results)
     check_ablations(results["ablations"], report)
     check_pareto(results["pareto"], report)
     # Defaults against hand-tuned: every hold-out sweep, the hand-tuned run trained with its sweep's sigma,
