@@ -62,12 +62,16 @@ bool InsideImage(const Plane& p, const Eigen::Vector3d& x, int width, int height
   const double i = (x[0] - j * p.PixelToPlane[1]) / p.PixelToPlane[0];
   return i >= -0.5 && i <= width - 0.5 && j >= -0.5 && j <= height - 0.5;
 }
-}
 
-GapFillingReport FillElevationGaps(
-  GaussianField& field, const TrainingData& data, double elevationSigma, const GapFillingSettings& settings)
+/**
+ * FillElevationGaps on @p field, into @p out when not null (then @p out is @p field), or, with @p out null, only the
+ * count of the copies every gap would take with no maximum, into @p needed (nothing is changed).
+ */
+GapFillingReport BridgeGaps(const GaussianField& field, GaussianField* out, const TrainingData& data,
+  double elevationSigma, const GapFillingSettings& settings, std::int64_t& needed)
 {
   GapFillingReport report;
+  needed = 0;
   std::vector<int> frames = data.TrainFrames;
   std::sort(frames.begin(), frames.end());
   std::vector<Plane> planes(frames.size());
@@ -141,6 +145,18 @@ GapFillingReport FillElevationGaps(
       const Plane& from = side == 0 ? a : b;
       const Eigen::Vector3d mu(field.Means[3 * i], field.Means[3 * i + 1], field.Means[3 * i + 2]);
       Eigen::Vector3d local = from.R.transpose() * (mu - from.Centre);
+      // Out of reach whatever its rotation (a cheap test first): v below is at most sigma_E^2 plus its largest
+      // variance.
+      double largest = -std::numeric_limits<double>::infinity();
+      for (int c = 0; c < 3; ++c)
+      {
+        const double l = field.LogScales[3 * i + c];
+        largest = std::max(largest, std::isfinite(l) ? std::clamp(l, MinimumLogScale, MaximumLogScale) : 0.0);
+      }
+      if (local[2] * local[2] > settings.ReachSigmas * settings.ReachSigmas * (sigma2 + std::exp(2 * largest)))
+      {
+        return 0;
+      }
       const Eigen::Quaterniond q0 = Eigen::Quaterniond(field.Quaternions[4 * i], field.Quaternions[4 * i + 1],
         field.Quaternions[4 * i + 2], field.Quaternions[4 * i + 3])
                                       .normalized();
@@ -200,19 +216,19 @@ GapFillingReport FillElevationGaps(
         const Eigen::Quaterniond qt = qa.slerp(t, qb);
         const Eigen::Vector3d copy = (1 - t) * a.Centre + t * b.Centre + qt.toRotationMatrix() * local;
         const Eigen::Quaterniond q = qt * (side == 0 ? qa : qb).conjugate() * q0;
-        const std::int64_t c = field.Count();
-        field.Resize(c + 1);
-        field.CopyGaussian(i, c);
+        const std::int64_t c = out->Count();
+        out->Resize(c + 1);
+        out->CopyGaussian(i, c);
         for (int e = 0; e < 3; ++e)
         {
-          field.Means[3 * c + e] = static_cast<float>(copy[e]);
+          out->Means[3 * c + e] = static_cast<float>(copy[e]);
         }
-        field.Quaternions[4 * c] = static_cast<float>(q.w());
-        field.Quaternions[4 * c + 1] = static_cast<float>(q.x());
-        field.Quaternions[4 * c + 2] = static_cast<float>(q.y());
-        field.Quaternions[4 * c + 3] = static_cast<float>(q.z());
+        out->Quaternions[4 * c] = static_cast<float>(q.w());
+        out->Quaternions[4 * c + 1] = static_cast<float>(q.x());
+        out->Quaternions[4 * c + 2] = static_cast<float>(q.y());
+        out->Quaternions[4 * c + 3] = static_cast<float>(q.z());
         const double weight = own * scale;
-        field.Reflectivities[c] = static_cast<float>(weight * atPlane * field.Reflectivities[i]);
+        out->Reflectivities[c] = static_cast<float>(weight * atPlane * out->Reflectivities[i]);
         // At the plane the Gaussian renders r exp(-z_i^2 / 2v) and this copy r weight exp(-z_i^2 / 2v)
         // exp(-z^2 / 2v): relative to the Gaussian, weight exp(-z^2 / 2v), whatever z_i.
         added[i] += weight * std::exp(-z * z / (2 * v));
@@ -242,11 +258,12 @@ GapFillingReport FillElevationGaps(
         }
       }
     }
-    if (candidates.empty())
+    needed += total;
+    if (candidates.empty() || !out)
     {
       continue;
     }
-    const std::int64_t room = settings.MaximumGaussians > 0 ? settings.MaximumGaussians - field.Count() : total;
+    const std::int64_t room = settings.MaximumGaussians > 0 ? settings.MaximumGaussians - out->Count() : total;
     if (total > room)
     {
       std::stable_sort(candidates.begin(), candidates.end(),
@@ -274,7 +291,7 @@ GapFillingReport FillElevationGaps(
       }
       report.Thinned += 1;
     }
-    const std::int64_t before = field.Count();
+    const std::int64_t before = out->Count();
     for (const Candidate& c : candidates)
     {
       double strength = 0;
@@ -282,13 +299,29 @@ GapFillingReport FillElevationGaps(
     }
     report.Gaps += 1;
     report.WidestGap = std::max(report.WidestGap, spacing[k]);
-    report.Added += field.Count() - before;
+    report.Added += out->Count() - before;
   }
-  for (std::int64_t i = 0; i < n; ++i)
+  for (std::int64_t i = 0; out && i < n; ++i)
   {
-    field.Reflectivities[i] = static_cast<float>(field.Reflectivities[i] * std::max(0.0, 1 - added[i]));
+    out->Reflectivities[i] = static_cast<float>(out->Reflectivities[i] * std::max(0.0, 1 - added[i]));
   }
   return report;
+}
+}
+
+GapFillingReport FillElevationGaps(
+  GaussianField& field, const TrainingData& data, double elevationSigma, const GapFillingSettings& settings)
+{
+  std::int64_t needed = 0;
+  return BridgeGaps(field, &field, data, elevationSigma, settings, needed);
+}
+
+std::int64_t CountGapCopies(
+  const GaussianField& field, const TrainingData& data, double elevationSigma, const GapFillingSettings& settings)
+{
+  std::int64_t needed = 0;
+  BridgeGaps(field, nullptr, data, elevationSigma, settings, needed);
+  return needed;
 }
 
 std::string DescribeGapFilling(const GapFillingReport& report, const GapFillingSettings& settings)

@@ -87,6 +87,15 @@ struct GapFillingReport
 BIGUSTRAINING_EXPORT GapFillingReport FillElevationGaps(GaussianField& field, const TrainingData& data,
   double elevationSigma, const GapFillingSettings& settings = GapFillingSettings());
 
+/**
+ * The Gaussians FillElevationGaps(@p field, @p data, @p elevationSigma, @p settings) would add with no maximum:
+ * the room its gaps need (@p field is not changed). Densification keeps this room under the trainer's
+ * MaximumGaussians, which counts gap filling's copies, so that a field grown to the maximum is not bridged by
+ * only its strongest Gaussians.
+ */
+BIGUSTRAINING_EXPORT std::int64_t CountGapCopies(const GaussianField& field, const TrainingData& data,
+  double elevationSigma, const GapFillingSettings& settings = GapFillingSettings());
+
 /// One line: "2 gaps bridged (widest 4.51 mm; typical spacing 0.645 mm), 31210 Gaussians added (...)", and
 /// the gaps thinned or left empty by the maximum of Gaussians, if any.
 BIGUSTRAINING_EXPORT std::string DescribeGapFilling(const GapFillingReport& report, const GapFillingSettings& settings);

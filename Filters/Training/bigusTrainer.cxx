@@ -341,11 +341,36 @@ StepStatus Trainer::Step(double* loss, std::string* error)
 
 bool Trainer::DensifyAndPrune(double validation, std::string* error)
 {
-  return this->PullState(error) &&
-    DensifyField(*this->Engine, *this->Data, this->Options(), this->Gamma, this->SeedShapeOf(),
-      this->Settings.Densification, this->Settings.MaximumGaussians, validation, this->State,
-      this->Report.GrowthStopReason, error) &&
-    this->PushState(error);
+  if (!this->PullState(error))
+  {
+    return false;
+  }
+  // MaximumGaussians counts gap filling's copies: growth leaves them room, so that a field grown to the maximum is
+  // not bridged by its strongest Gaussians alone (docs/FINDINGS.md, "Gap filling's room under the maximum"). The
+  // copies grow with the field (they are copies of the Gaussians near the gaps' frames), so the field may grow to
+  // the share of the maximum that leaves its copies in the same proportion room: m (1 + c / n) <= maximum for c
+  // copies of a field of n Gaussians now.
+  const TrainerSettings& s = this->Settings;
+  const std::int64_t n = this->State.Gaussians.Count();
+  const std::int64_t copies = s.FillGaps && s.BeamIntegration && this->State.Growing && n > 0
+    ? CountGapCopies(this->State.Gaussians.Field, *this->Data, s.ElevationSigma, s.GapFilling)
+    : 0;
+  const std::int64_t maximum = copies > 0
+    ? static_cast<std::int64_t>(std::floor(double(s.MaximumGaussians) * double(n) / double(n + copies)))
+    : s.MaximumGaussians;
+  const bool growing = this->State.Growing;
+  if (!DensifyField(*this->Engine, *this->Data, this->Options(), this->Gamma, this->SeedShapeOf(), s.Densification,
+        maximum, validation, this->State, this->Report.GrowthStopReason, error))
+  {
+    return false;
+  }
+  if (growing && !this->State.Growing && copies > 0 && this->Report.GrowthStopReason.rfind("hard maximum", 0) == 0)
+  {
+    this->Report.GrowthStopReason += vtkfmt::sprintf("; MaximumGaussians %lld less room for the copies gap filling "
+                                                     "will add (%lld for the %lld Gaussians before this densification)",
+      static_cast<long long>(s.MaximumGaussians), static_cast<long long>(copies), static_cast<long long>(n));
+  }
+  return this->PushState(error);
 }
 
 bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>& progress,

@@ -95,8 +95,9 @@ struct TrainerSettings
     0; ///< stop when the mean loss of the last 200 steps improved by less (relative); 0 = off
   // Densification (EA-D; bigusDensification.h)
   DensificationSettings Densification;
-  /// Hard maximum, gap filling's copies included (GapFillingSettings): room for a Gaussian per fan pixel of the
-  /// volume protocol's two sweeps.
+  /// Hard maximum, gap filling's copies included (GapFillingSettings): densification leaves them room in proportion
+  /// to the field (CountGapCopies; DESIGN section 4.6). Room for a Gaussian per fan pixel of the volume protocol's
+  /// two sweeps.
   std::int64_t MaximumGaussians = 500000;
   double FinalPruneTolerance = 1.0 / 512; ///< final prune: max change of any training pixel's I
   /// After the final prune, bridge gaps between training frames wider than the beam (FillElevationGaps).

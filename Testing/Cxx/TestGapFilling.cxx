@@ -273,6 +273,8 @@ TEST(GapFilling, UnderTheMaximumOfGaussiansAGapIsBridgedByItsStrongestGaussians)
   GaussianField unlimited = s.Field;
   const std::int64_t needed = FillElevationGaps(unlimited, s.Data, Sigma).Added;
   ASSERT_GT(needed, 0);
+  // The room the trainer's densification keeps under its maximum is this count, taken without filling.
+  EXPECT_EQ(CountGapCopies(s.Field, s.Data, Sigma), needed);
   std::array<double, 16> middle = s.Data.Poses[4];
   middle[11] = 0.5 * (s.Data.Poses[4][11] + s.Data.Poses[5][11]);
   const std::vector<float> full = RenderS(unlimited, middle);
@@ -316,6 +318,27 @@ TEST(GapFilling, UnderTheMaximumOfGaussiansAGapIsBridgedByItsStrongestGaussians)
   ExpectSameField(room, unlimited);
 }
 
+TEST(GapFilling, TheCopiesAreCountedWithoutFillingOnTurnedFramesAndUnderTightMargins)
+{
+  // CountGapCopies against the copies FillElevationGaps adds with no maximum: frames turned by 0 and 25 degrees
+  // across the gap, Gaussians up to 0.4 mm off their planes (some out of reach), clearance and margins changed.
+  for (double degrees : { 0.0, 25.0 })
+  {
+    const Sweep s = MakeSweep(degrees, 0.4);
+    for (double clearance : { 0.0, 1.5 })
+    {
+      GapFillingSettings settings;
+      settings.ClearanceSigmas = clearance;
+      settings.BlendMarginSigmas = clearance > 0 ? 0.5 : 2.0;
+      GaussianField filled = s.Field;
+      const std::int64_t added = FillElevationGaps(filled, s.Data, Sigma, settings).Added;
+      EXPECT_GT(added, 0) << degrees << " degrees, clearance " << clearance;
+      EXPECT_EQ(CountGapCopies(s.Field, s.Data, Sigma, settings), added)
+        << degrees << " degrees, clearance " << clearance;
+    }
+  }
+}
+
 TEST(GapFilling, NonFiniteGaussiansAndAZeroBeamAddNothingAndNeverCrash)
 {
   Sweep s = MakeSweep(0);
@@ -328,8 +351,10 @@ TEST(GapFilling, NonFiniteGaussiansAndAZeroBeamAddNothingAndNeverCrash)
   GaussianField field = s.Field;
   EXPECT_EQ(FillElevationGaps(field, s.Data, 0.0).Added, 0); // no beam: nothing to extrude
   EXPECT_EQ(field.Count(), before.Count());
+  const std::int64_t counted = CountGapCopies(field, s.Data, Sigma);
   const GapFillingReport report = FillElevationGaps(field, s.Data, Sigma);
   EXPECT_EQ(report.Gaps, 1);
+  EXPECT_EQ(counted, report.Added);
   // The Gaussians of the two frames, less the NaN mean and the NaN rotation (skipped); the NaN scale
   // counts as a scale of 1 mm, as the renderer takes it. Every copy is finite.
   EXPECT_GT(report.Added, 0);

@@ -203,6 +203,54 @@ TEST(Trainer, FillingAGapBetweenTrainingFramesRendersTheFramesInsideItBetter)
   EXPECT_GT(psnr[1], psnr[0] + 0.5); // measured: 20.24 -> 21.76 dB
 }
 
+TEST(Trainer, GrowthLeavesRoomUnderTheMaximumForTheGapsCopies)
+{
+  // The gap of the test above, and a maximum the densification reaches. Growth stops short of it by room for the
+  // copies gap filling will add (CountGapCopies, in proportion to the field), so that the gap is bridged by most of
+  // them; without that room the field would reach the maximum and the gap be left empty. The copies the trained
+  // field needs are counted on the field's first Gaussians (gap filling appends its copies and changes only the
+  // reflectivities of the others, which the count does not read): the room is an estimate (the Gaussians near the
+  // gap's frames densify faster than the field), so most, not all, are added.
+  std::vector<int> unused;
+  TrainingData data = SyntheticSweep(KnownField(400, 3), 0.2, unused);
+  data.TrainFrames.clear();
+  for (int k = 0; k < data.Count(); ++k)
+  {
+    if (k < 23 || k >= 37)
+    {
+      data.TrainFrames.push_back(k);
+    }
+  }
+  TrainerSettings s;
+  s.ElevationSigma = 0.2;
+  s.Seeding.InitialGaussians = 3000;
+  s.MaximumGaussians = 5000;
+  s.Densification.Percentile = 10; // reaches it within the densification window
+  s.Iterations = 1500;
+  s.Merge.Tolerance = 0; // the count before the merge is the one the maximum holds
+  Trainer trainer(data, s);
+  std::string error;
+  ASSERT_TRUE(trainer.Initialize(&error)) << error;
+  ASSERT_TRUE(trainer.Run(nullptr, nullptr, &error)) << error;
+  const TrainerReport& r = trainer.GetReport();
+  GaussianField trained = trainer.GetField();
+  trained.Resize(r.Gaussians - r.GapFilling.Added);
+  const std::int64_t needed = CountGapCopies(trained, data, s.ElevationSigma, s.GapFilling);
+  GapFillingSettings described = s.GapFilling;
+  described.MaximumGaussians = s.MaximumGaussians;
+  std::printf("growth: %s; gap filling: %s; %lld of the %lld copies the trained field needs\n",
+    r.GrowthStopReason.c_str(), DescribeGapFilling(r.GapFilling, described).c_str(),
+    static_cast<long long>(r.GapFilling.Added), static_cast<long long>(needed));
+  EXPECT_EQ(r.GrowthStopReason.rfind("hard maximum", 0), 0u) << r.GrowthStopReason;
+  EXPECT_NE(r.GrowthStopReason.find("room for the copies gap filling will add"), std::string::npos)
+    << r.GrowthStopReason;
+  EXPECT_LT(trained.Count(), s.MaximumGaussians - needed / 2) << "growth stopped short of the maximum";
+  EXPECT_EQ(r.GapFilling.Gaps, 1);
+  EXPECT_EQ(r.GapFilling.Skipped, 0);
+  EXPECT_GE(r.GapFilling.Added, 0.6 * needed); // measured: 1519 of 1575
+  EXPECT_LE(r.Gaussians, s.MaximumGaussians);
+}
+
 TEST(Trainer, TheMergeAtTheEndIsMergeGaussiansOnTheTrainedFieldAndKeepsItsRender)
 {
   // The same deterministic run with the merge off and on: the merged run's field is MergeGaussians on the
