@@ -151,11 +151,13 @@ bool DeviceRenderer::Reserve(bool backward, bool poses, std::int64_t n, std::int
   std::int64_t ownHeld, const std::string& what, std::string* error)
 {
   const std::int64_t slots = std::max<std::int64_t>(1, n);
-  const std::int64_t bytes =
-    backward ? (poses ? n * PoseBytesPerGaussian : 0) : n * BinningBytes + 2 * tiles * std::int64_t(sizeof(int));
+  // Phase 2's partial sums: RasterPieces floats per pixel of the slice's tiles.
+  const std::int64_t partialBytes = tiles * std::int64_t(RasterPieces) * RasterThreads * std::int64_t(sizeof(float));
+  const std::int64_t bytes = backward ? (poses ? n * PoseBytesPerGaussian : 0)
+                                      : n * BinningBytes + 2 * tiles * std::int64_t(sizeof(int)) + partialBytes;
   const std::int64_t held = backward
     ? (poses ? this->PoseShareData.Bytes : 0)
-    : this->Splats.Bytes + this->Touched.Bytes + this->TileStart.Bytes + this->TileEnd.Bytes;
+    : this->Splats.Bytes + this->Touched.Bytes + this->TileStart.Bytes + this->TileEnd.Bytes + this->Partials.Bytes;
   if (!this->Fits(ownBytes + bytes, ownHeld + held, what, error))
   {
     return false;
@@ -167,7 +169,8 @@ bool DeviceRenderer::Reserve(bool backward, bool poses, std::int64_t n, std::int
   return this->Splats.Reserve(slots * std::int64_t(sizeof(Splat)), "allocating footprints", error) &&
     this->Touched.Reserve(2 * slots * std::int64_t(sizeof(unsigned long long)), "allocating tile counts", error) &&
     this->TileStart.Reserve(tiles * std::int64_t(sizeof(int)), "allocating tile ranges", error) &&
-    this->TileEnd.Reserve(tiles * std::int64_t(sizeof(int)), "allocating tile ranges", error);
+    this->TileEnd.Reserve(tiles * std::int64_t(sizeof(int)), "allocating tile ranges", error) &&
+    this->Partials.Reserve(partialBytes, "allocating the raster's partial sums", error);
 }
 
 bool DeviceRenderer::ReadCounters(Counters& counters, const char* what, std::string* error)
@@ -189,7 +192,7 @@ bool DeviceRenderer::Forward(const DeviceField& field, const PreparedSlice& s, c
   const double t1 = Now();
   LaunchRaster(s.TilesX * s.TilesY, this->Splats.As<Splat>(), this->SortedValues.As<std::uint32_t>(),
     this->TileStart.As<int>(), this->TileEnd.As<int>(), s, static_cast<float>(options.Gamma), S, I,
-    this->Count.As<Counters>(), this->Stream);
+    this->Partials.As<float>(), this->Count.As<Counters>(), this->Stream);
   if (!Check(cudaGetLastError(), "raster kernel", error))
   {
     return false;

@@ -138,6 +138,7 @@ private:
   Buffer Touched;       // [2, N] unsigned long long: tiles touched, their inclusive scan
   Buffer TileStart;     // [tiles] int
   Buffer TileEnd;       // [tiles] int
+  Buffer Partials;      // [RasterPieces, H, W] float: phase 2's partial sums of split tiles
   Buffer Keys;          // [E] tile id
   Buffer SortedKeys;    // [E]
   Buffer Values;        // [E] Gaussian index

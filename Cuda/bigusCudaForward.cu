@@ -20,16 +20,38 @@ __device__ unsigned long long WarpSum(unsigned long long v)
   return v;
 }
 
+/// Entries per piece of a tile list of @p entries (RasterPieces): at least RasterMinimumPiece, whole staging
+/// batches, at most RasterPieces pieces.
+__device__ int PieceLength(int entries)
+{
+  const int batches = ((entries + RasterPieces - 1) / RasterPieces + RasterThreads - 1) / RasterThreads;
+  return max(RasterMinimumPiece, batches * RasterThreads);
+}
+
+/// The pieces a tile list of @p entries is split into (1 for an empty list: its block writes the zeros).
+__device__ int PieceCount(int entries)
+{
+  const int length = PieceLength(entries);
+  return max(1, (entries + length - 1) / length);
+}
+
 /**
- * Phase 2: one block per tile, one thread per pixel. The tile's footprints are staged in shared memory
- * RasterThreads at a time and every pixel adds them in Gaussian index order, as the CPU backend does,
- * with offsets relative to the tile's first pixel.
+ * Phase 2: block (tile, piece) sums piece blockIdx.y of the tile's list (PieceCount), one thread per pixel. The
+ * piece's footprints are staged in shared memory RasterThreads at a time and every pixel adds them in Gaussian
+ * index order, as the CPU backend does, with offsets relative to the tile's first pixel. A tile of one piece writes
+ * S and I; the pieces of a split tile write their partial sums, which CombinePiecesKernel adds.
  */
 __global__ void RasterKernel(const Splat* splats, const std::uint32_t* values, const int* start, const int* end,
-  PreparedSlice s, float gamma, float* S, float* I, Counters* counters)
+  PreparedSlice s, float gamma, float* S, float* I, float* partials, Counters* counters)
 {
   __shared__ Splat staged[RasterThreads];
-  const int tile = blockIdx.x;
+  const int tile = blockIdx.x, piece = blockIdx.y;
+  const int entries = end[tile] - start[tile];
+  const int pieces = PieceCount(entries);
+  if (piece >= pieces)
+  {
+    return; // the whole block: no barrier is reached
+  }
   const int q = threadIdx.x, r = threadIdx.y;
   const int I0 = (tile % s.TilesX) * TileSize, J0 = (tile / s.TilesX) * TileSize;
   const int i = I0 + q, j = J0 + r;
@@ -42,7 +64,8 @@ __global__ void RasterKernel(const Splat* splats, const std::uint32_t* values, c
   const float column = q * P0;
   float acc = 0;
   unsigned long long evaluations = 0;
-  const int first = start[tile], last = end[tile];
+  const int length = PieceLength(entries);
+  const int first = start[tile] + piece * length, last = min(end[tile], first + length);
   for (int base = first; base < last; base += RasterThreads)
   {
     const int n = min(RasterThreads, last - base);
@@ -76,10 +99,17 @@ __global__ void RasterKernel(const Splat* splats, const std::uint32_t* values, c
   if (inside)
   {
     const std::int64_t p = std::int64_t(j) * s.Width + i;
-    S[p] = acc;
-    if (I)
+    if (pieces > 1)
     {
-      I[p] = ImageFromScattering(acc, gamma);
+      partials[piece * std::int64_t(s.Width) * s.Height + p] = acc;
+    }
+    else
+    {
+      S[p] = acc;
+      if (I)
+      {
+        I[p] = ImageFromScattering(acc, gamma);
+      }
     }
   }
   evaluations = WarpSum(evaluations);
@@ -89,12 +119,44 @@ __global__ void RasterKernel(const Splat* splats, const std::uint32_t* values, c
   }
 }
 
+/// S and I of the pixels of split tiles: their pieces' partial sums added in piece order.
+__global__ void CombinePiecesKernel(
+  const int* start, const int* end, PreparedSlice s, float gamma, const float* partials, float* S, float* I)
+{
+  const std::int64_t pixels = std::int64_t(s.Width) * s.Height;
+  const std::int64_t p = std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (p >= pixels)
+  {
+    return;
+  }
+  const int i = static_cast<int>(p % s.Width), j = static_cast<int>(p / s.Width);
+  const int tile = (j / TileSize) * s.TilesX + i / TileSize;
+  const int pieces = PieceCount(end[tile] - start[tile]);
+  if (pieces == 1)
+  {
+    return;
+  }
+  float acc = 0;
+  for (int k = 0; k < pieces; ++k)
+  {
+    acc += partials[k * pixels + p];
+  }
+  S[p] = acc;
+  if (I)
+  {
+    I[p] = ImageFromScattering(acc, gamma);
+  }
+}
 }
 
 void LaunchRaster(int tiles, const Splat* splats, const std::uint32_t* values, const int* start, const int* end,
-  const PreparedSlice& s, float gamma, float* S, float* I, Counters* counters, cudaStream_t stream)
+  const PreparedSlice& s, float gamma, float* S, float* I, float* partials, Counters* counters, cudaStream_t stream)
 {
-  RasterKernel<<<tiles, dim3(TileSize, TileSize), 0, stream>>>(splats, values, start, end, s, gamma, S, I, counters);
+  RasterKernel<<<dim3(tiles, RasterPieces), dim3(TileSize, TileSize), 0, stream>>>(
+    splats, values, start, end, s, gamma, S, I, partials, counters);
+  constexpr int block = 256;
+  CombinePiecesKernel<<<static_cast<unsigned>(Blocks(std::int64_t(s.Width) * s.Height, block)), block, 0, stream>>>(
+    start, end, s, gamma, partials, S, I);
 }
 
 } // namespace cuda

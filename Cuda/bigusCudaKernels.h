@@ -30,6 +30,12 @@ constexpr int SetupBlock = 256;
 constexpr int BackwardBlock = 256; // 8 warps: 8 Gaussians per block
 constexpr int WarpSize = 32;
 constexpr int RasterThreads = TileSize * TileSize;
+/// Phase 2 splits a tile's footprint list over at most RasterPieces blocks, each of at least RasterMinimumPiece
+/// entries (a whole number of staging batches), so that the longest lists no longer set a launch's time; the
+/// pieces' partial sums are added in piece order (deterministic), a list of at most RasterMinimumPiece entries is
+/// one piece summed as before.
+constexpr int RasterPieces = 8;
+constexpr int RasterMinimumPiece = 2 * RasterThreads;
 constexpr int PoseSumBlock = 256;
 
 /// The field on the device, structure of arrays as in FieldView.
@@ -70,9 +76,10 @@ void LaunchTileRange(const std::uint32_t* keys, std::int64_t entries, int* start
 // Forward (bigusCudaForward.cu).
 
 /// Phase 2: S (and I = 1 - exp(-gamma max(S, 0)) when @p I is not null) of slice @p s, [H, W], from the
-/// splats listed per tile by @p values, @p start and @p end; @p tiles = s.TilesX s.TilesY.
+/// splats listed per tile by @p values, @p start and @p end; @p tiles = s.TilesX s.TilesY; @p partials
+/// [RasterPieces, H, W] holds the partial sums of the tiles whose lists are split (RasterPieces).
 void LaunchRaster(int tiles, const Splat* splats, const std::uint32_t* values, const int* start, const int* end,
-  const PreparedSlice& s, float gamma, float* S, float* I, Counters* counters, cudaStream_t stream);
+  const PreparedSlice& s, float gamma, float* S, float* I, float* partials, Counters* counters, cudaStream_t stream);
 
 // Backward (bigusCudaBackward.cu).
 

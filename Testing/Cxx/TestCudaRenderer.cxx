@@ -310,30 +310,39 @@ TEST(CudaRenderer, EdgeTilesAndSlicesOfDifferentSizesInOneBatch)
 
 TEST(CudaRenderer, ATileWithMoreFootprintsThanOneStagingPass)
 {
-  // 700 small Gaussians inside one 16 x 16 tile: the raster kernel stages the tile's footprints
-  // RasterThreads (256) at a time, so its loop runs three times.
+  // Small Gaussians inside one 16 x 16 tile of a 48 x 48 slice: the raster kernel stages a block's footprints
+  // RasterThreads (256) at a time, and splits a tile's list over up to RasterPieces (8) blocks of at least
+  // RasterMinimumPiece (512) entries, whose partial sums are added in order. 700 footprints: 2 pieces; 6,000: 8
+  // pieces of 768; the tiles around hold a few spilled footprints each (one piece).
   auto gpu = Cuda();
   ASSERT_TRUE(gpu);
   auto cpu = CreateCpuRenderer();
   const double axis[3] = { 0, 0, 1 }, origin[3] = { 0, 0, 0 };
-  const std::vector<SliceGeometry> slices = { MakeSlice(32, 32, 0.25, 0, axis, origin) };
-  std::mt19937 rng(4);
-  std::uniform_real_distribution<double> in(0.5, 3.5), off(-0.3, 0.3), r(-0.5, 1.0);
-  FieldF field;
-  for (int k = 0; k < 700; ++k)
+  const std::vector<SliceGeometry> slices = { MakeSlice(48, 48, 0.25, 0, axis, origin) };
+  for (int count : { 700, 6000 })
   {
-    field.Means.insert(field.Means.end(), { float(in(rng)), float(in(rng)), float(off(rng)) });
-    field.LogScales.insert(field.LogScales.end(), { std::log(0.2f), std::log(0.15f), std::log(0.3f) });
-    field.Quaternions.insert(field.Quaternions.end(), { 1.f, 0.f, 0.f, 0.f });
-    field.Reflectivities.push_back(float(r(rng)));
+    std::mt19937 rng(4);
+    std::uniform_real_distribution<double> in(0.5, 3.5), off(-0.3, 0.3), r(-0.5, 1.0);
+    FieldF field;
+    for (int k = 0; k < count; ++k)
+    {
+      field.Means.insert(field.Means.end(), { float(in(rng)), float(in(rng)), float(off(rng)) });
+      field.LogScales.insert(field.LogScales.end(), { std::log(0.2f), std::log(0.15f), std::log(0.3f) });
+      field.Quaternions.insert(field.Quaternions.end(), { 1.f, 0.f, 0.f, 0.f });
+      field.Reflectivities.push_back(float(r(rng)));
+    }
+    RenderOptions o;
+    o.ElevationSigma = 0.4;
+    const std::vector<float> dL = RandomGradient(48 * 48, 12);
+    const std::string what = std::to_string(count) + " footprints in one tile";
+    const Rendered g = Render(*gpu, field.View(), slices, o, dL);
+    const Rendered c = Render(*cpu, field.View(), slices, o, dL);
+    EXPECT_GT(g.Forward.TileEntries, count / 2) << what;
+    ExpectSameAsCpu(g, c, what);
+    const Rendered again = Render(*gpu, field.View(), slices, o, dL);
+    EXPECT_EQ(g.S, again.S) << what << ": the split tile's sums repeat bit for bit";
+    EXPECT_EQ(g.I, again.I) << what;
   }
-  RenderOptions o;
-  o.ElevationSigma = 0.4;
-  const std::vector<float> dL = RandomGradient(32 * 32, 12);
-  const Rendered g = Render(*gpu, field.View(), slices, o, dL);
-  const Rendered c = Render(*cpu, field.View(), slices, o, dL);
-  EXPECT_GT(g.Forward.TileEntries, 256 * 1) << "the first tile holds more than one staging pass";
-  ExpectSameAsCpu(g, c, "700 footprints in one tile");
 }
 
 TEST(CudaRenderer, NoImageOutputGradientsWithRespectToSAndNullGradientOutputs)
