@@ -355,23 +355,27 @@ bool StackSlices(const VolumeProtocol& vp, StackedSlices& out, std::string* erro
   for (int t = 0; t < 3; ++t)
   {
     const TrainingData& test = vp.TestData[t];
+    const std::size_t testPixels = std::size_t(test.Width) * test.Height; // the orthogonal frames are smaller
     TrainingData& covered = out.Covered[t];
     covered = test;
-    covered.Mask.resize(pixels * test.Count());
+    covered.Mask.resize(testPixels * test.Count());
     std::int64_t scored = 0, kept = 0;
     for (int k = 0; k < test.Count(); ++k)
     {
       const unsigned char* mask = test.MaskOf(k);
-      unsigned char* narrowed = covered.Mask.data() + pixels * k;
-      for (std::size_t p = 0; p < pixels; ++p)
+      unsigned char* narrowed = covered.Mask.data() + testPixels * k;
+      for (std::size_t p = 0; p < testPixels; ++p)
       {
-        narrowed[p] = mask[p] && coverage[t][pixels * k + p] >= 1.f - 1e-4f;
+        narrowed[p] = mask[p] && coverage[t][testPixels * k + p] >= 1.f - 1e-4f;
       }
     }
+    auto count = [&](const unsigned char* mask) {
+      return std::count_if(mask, mask + testPixels, [](unsigned char m) { return m != 0; });
+    };
     for (int k : vp.TestList[t])
     {
-      scored += std::count_if(test.MaskOf(k), test.MaskOf(k) + pixels, [](unsigned char m) { return m != 0; });
-      kept += std::count_if(covered.MaskOf(k), covered.MaskOf(k) + pixels, [](unsigned char m) { return m != 0; });
+      scored += count(test.MaskOf(k));
+      kept += count(covered.MaskOf(k));
     }
     out.CoveredShare[t] = scored > 0 ? double(kept) / double(scored) : 0.0;
     out.AsRecordedWhereCovered[t] = Score(recorded[t].data(), 1.0, covered, vp.TestList[t]);
