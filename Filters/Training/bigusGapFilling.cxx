@@ -68,11 +68,11 @@ bool InsideImage(const Plane& p, const Eigen::Vector3d& x, int width, int height
  * count of the copies every gap would take with no maximum, into @p needed (nothing is changed).
  */
 GapFillingReport BridgeGaps(const GaussianField& field, GaussianField* out, const TrainingData& data,
-  double elevationSigma, const GapFillingSettings& settings, std::int64_t& needed)
+  const std::vector<int>& trainFrames, double elevationSigma, const GapFillingSettings& settings, std::int64_t& needed)
 {
   GapFillingReport report;
   needed = 0;
-  std::vector<int> frames = data.TrainFrames;
+  std::vector<int> frames = trainFrames;
   std::sort(frames.begin(), frames.end());
   std::vector<Plane> planes(frames.size());
   for (std::size_t k = 0; k < frames.size(); ++k)
@@ -313,14 +313,14 @@ GapFillingReport FillElevationGaps(
   GaussianField& field, const TrainingData& data, double elevationSigma, const GapFillingSettings& settings)
 {
   std::int64_t needed = 0;
-  return BridgeGaps(field, &field, data, elevationSigma, settings, needed);
+  return BridgeGaps(field, &field, data, data.TrainFrames, elevationSigma, settings, needed);
 }
 
-std::int64_t CountGapCopies(
-  const GaussianField& field, const TrainingData& data, double elevationSigma, const GapFillingSettings& settings)
+std::int64_t CountGapCopies(const GaussianField& field, const TrainingData& data, double elevationSigma,
+  const GapFillingSettings& settings, const std::vector<int>* trainFrames)
 {
   std::int64_t needed = 0;
-  BridgeGaps(field, nullptr, data, elevationSigma, settings, needed);
+  BridgeGaps(field, nullptr, data, trainFrames ? *trainFrames : data.TrainFrames, elevationSigma, settings, needed);
   return needed;
 }
 

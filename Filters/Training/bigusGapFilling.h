@@ -37,6 +37,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 namespace bigus
 {
@@ -89,12 +90,15 @@ BIGUSTRAINING_EXPORT GapFillingReport FillElevationGaps(GaussianField& field, co
 
 /**
  * The Gaussians FillElevationGaps(@p field, @p data, @p elevationSigma, @p settings) would add with no maximum:
- * the room its gaps need (@p field is not changed). Densification keeps this room under the trainer's
- * MaximumGaussians, which counts gap filling's copies, so that a field grown to the maximum is not bridged by
- * only its strongest Gaussians.
+ * the room its gaps need (@p field is not changed), with @p trainFrames (indices into @p data) as the training
+ * frames when not null (the frames the fill at the end will see: a run's validation frames held out of the fit
+ * join it before the fill, and would otherwise make gaps that are not there). Densification keeps this room under
+ * the trainer's MaximumGaussians, which counts gap filling's copies, so that a field grown to the maximum is not
+ * bridged by only its strongest Gaussians.
  */
 BIGUSTRAINING_EXPORT std::int64_t CountGapCopies(const GaussianField& field, const TrainingData& data,
-  double elevationSigma, const GapFillingSettings& settings = GapFillingSettings());
+  double elevationSigma, const GapFillingSettings& settings = GapFillingSettings(),
+  const std::vector<int>* trainFrames = nullptr);
 
 /// One line: "2 gaps bridged (widest 4.51 mm; typical spacing 0.645 mm), 31210 Gaussians added (...)", and
 /// the gaps thinned or left empty by the maximum of Gaussians, if any.

@@ -352,9 +352,14 @@ bool Trainer::DensifyAndPrune(double validation, std::string* error)
   // copies of a field of n Gaussians now.
   const TrainerSettings& s = this->Settings;
   const std::int64_t n = this->State.Gaussians.Count();
-  const std::int64_t copies = s.FillGaps && s.BeamIntegration && this->State.Growing && n > 0
-    ? CountGapCopies(this->State.Gaussians.Field, *this->Data, s.ElevationSigma, s.GapFilling)
-    : 0;
+  std::int64_t copies = 0;
+  if (s.FillGaps && s.BeamIntegration && this->State.Growing && n > 0)
+  {
+    // The frames the fill will see: the validation frames held out of the fit join it before then.
+    std::vector<int> frames = this->Data->TrainFrames;
+    frames.insert(frames.end(), this->HeldOutValidation.begin(), this->HeldOutValidation.end());
+    copies = CountGapCopies(this->State.Gaussians.Field, *this->Data, s.ElevationSigma, s.GapFilling, &frames);
+  }
   const std::int64_t maximum = copies > 0
     ? static_cast<std::int64_t>(std::floor(double(s.MaximumGaussians) * double(n) / double(n + copies)))
     : s.MaximumGaussians;
