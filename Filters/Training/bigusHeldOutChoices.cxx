@@ -199,6 +199,24 @@ struct CandidateFits
   double Tolerance = 0;
   /// The fit of the candidate chosen so far, kept for the next choice and the reduction.
   std::unique_ptr<Trainer> Kept;
+  double Start = SteadySeconds();
+  double MaximumSeconds = 0; ///< HeldOutChoiceSettings::MaximumSeconds
+  double LastFitSeconds = 0;
+  std::string OutOfTime; ///< why the fits stopped before their last candidate (empty: they did not)
+
+  /// Whether another fit fits within MaximumSeconds (its time taken as the last one's); OutOfTime says why not.
+  bool HasTimeForAnotherFit()
+  {
+    const double elapsed = SteadySeconds() - this->Start;
+    if (this->MaximumSeconds > 0 && elapsed + this->LastFitSeconds > this->MaximumSeconds)
+    {
+      this->OutOfTime = vtkfmt::sprintf("its fits stopped after %.1f s (the last took %.1f s), as another would "
+                                        "pass the %.3g s allowed (half the budget)",
+        elapsed, this->LastFitSeconds, this->MaximumSeconds);
+      return false;
+    }
+    return true;
+  }
 
   /**
    * Fits and scores a candidate of @p settings for each of @p values (@p apply sets one into the settings), after
@@ -211,6 +229,10 @@ struct CandidateFits
   {
     for (double value : values)
     {
+      if (!this->HasTimeForAnotherFit())
+      {
+        return true;
+      }
       TrainerSettings s = settings;
       apply(s, value);
       HeldOutCandidate c;
@@ -221,6 +243,7 @@ struct CandidateFits
       {
         return false;
       }
+      this->LastFitSeconds = c.Seconds;
       const int before = choice.Chosen;
       choice.Candidates.push_back(c);
       choice.Chosen = FirstWithinTolerance(choice.Candidates, this->Tolerance);
@@ -248,6 +271,10 @@ struct CandidateFits
     }
     if (!this->Kept)
     {
+      if (!this->HasTimeForAnotherFit())
+      {
+        return true;
+      }
       TrainerSettings s = settings;
       apply(s, choice.Candidates[choice.Chosen].Value);
       this->Kept = FitCandidate(this->Data, this->HeldOut, s, error);
@@ -349,6 +376,19 @@ bool ChooseOnHeldOutFrames(const TrainingData& data, const TrainerSettings& sett
   const HeldOutChoiceSettings& h = settings.HeldOut;
   CandidateFits fits{ data, HeldOutFrames(data, h.Stride, 0), HeldOutFrames(data, h.Stride, h.MaximumFrames),
     h.Tolerance, nullptr };
+  fits.MaximumSeconds = h.MaximumSeconds;
+  // Out of time: every choice untested, with why (nothing measured is taken).
+  auto outOfTime = [&]() {
+    choices = HeldOutChoices();
+    for (HeldOutChoice* choice : { &choices.ElevationSigma, &choices.Ridge })
+    {
+      choice->Stride = std::max(2, h.Stride);
+      choice->Frames = fits.Scored;
+      choice->Untested = fits.OutOfTime;
+    }
+    choices.Reduction.Untested = fits.OutOfTime;
+    return true;
+  };
   std::string untested = !h.Enabled ? "the held-out choices are off"
     : !pixelGrid ? "a candidate's fit on this route is an Adam run, which the budget does not repeat per candidate"
     : fits.Scored.size() < 2
@@ -384,6 +424,10 @@ bool ChooseOnHeldOutFrames(const TrainingData& data, const TrainerSettings& sett
   {
     return false;
   }
+  if (!fits.OutOfTime.empty())
+  {
+    return outOfTime();
+  }
   sigma.Scale = h.ElevationSigmaScale;
   sigma.ScaleReason = "the fit on every frame has its views half as far from its frames as the held-out frames lie "
                       "from the candidates' fits";
@@ -414,6 +458,10 @@ bool ChooseOnHeldOutFrames(const TrainingData& data, const TrainerSettings& sett
         chosen, ridges, [](TrainerSettings& s, double v) { s.Solve.Ridge = v; }, "Ridge", ridge, error))
   {
     return false;
+  }
+  if (!fits.OutOfTime.empty())
+  {
+    return outOfTime();
   }
   const HeldOutCandidate& fit = ridge.Chosen >= 0 ? ridge.Candidates[ridge.Chosen] : fitted;
   chosen.Solve.Ridge = ridge.Chosen >= 0 ? fit.Value : settings.Solve.Ridge;
@@ -476,14 +524,31 @@ bool MeasurePixelGridRoute(
   const double start = SteadySeconds();
   TrainerSettings grid = settings;
   grid.Seeding.PixelGridFanPixelsPerGaussian = std::numeric_limits<double>::infinity();
+  grid.HeldOut.MaximumSeconds = 0.5 * settings.TimeBudget;
   if (!ChooseOnHeldOutFrames(data, grid, true, sigmaByRule, trial.Grid, error))
   {
     return false;
   }
   trial.Frames = trial.Grid.Ridge.Frames;
-  if (trial.Frames.size() < 2)
+  const double left = grid.HeldOut.MaximumSeconds - (SteadySeconds() - start);
+  double last = 0; // the longest candidate's fit: the route's takes about as long
+  for (const HeldOutChoice* choice : { &trial.Grid.ElevationSigma, &trial.Grid.Ridge })
   {
-    trial.Untested = trial.Grid.Ridge.Untested;
+    for (const HeldOutCandidate& c : choice->Candidates)
+    {
+      last = std::max(last, c.Seconds);
+    }
+  }
+  trial.Untested = trial.Frames.size() < 2 || !trial.Grid.Ridge.Untested.empty() ? trial.Grid.Ridge.Untested
+    : last > left
+    ? vtkfmt::sprintf("its fits stopped after %.1f s, as the route's fit (about %.1f s) would pass the %.3g s "
+                      "allowed (half the budget)",
+        SteadySeconds() - start, last, grid.HeldOut.MaximumSeconds)
+    : std::string();
+  if (!trial.Untested.empty())
+  {
+    trial.Frames.clear();
+    trial.GridSeconds = SteadySeconds() - start;
     return true;
   }
   std::vector<std::string> lines;

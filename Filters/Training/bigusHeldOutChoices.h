@@ -60,9 +60,13 @@ struct HeldOutChoiceSettings
   /// Where the route's rule (SeedingSettings::PixelGridFanPixelsPerGaussian) gives Harris seeds and Adam, measure
   /// the pixel grid against it on held-out frames when the budget affords it (RouteTrial).
   bool MeasureRoute = true;
-  /// s per Gaussian of one pixel-grid fit (assembly, solve, scoring), to plan the route trial: 3.5e-6 measured on
-  /// 2 cores (volume protocol, 160 slices), taken larger.
-  double GridFitSecondsPerGaussian = 5e-6;
+  /// s per Gaussian of one pixel-grid fit (assembly, solve, scoring), to plan the route trial: 2.5e-6 to 3.5e-6
+  /// measured on 2 cores (volume protocol, 160 to 240 slices). A grid whose Gaussians reach more frames (a real
+  /// sweep's wider beam) takes longer: the trial's fits stop at MaximumSeconds, which it sets to half the budget.
+  double GridFitSecondsPerGaussian = 3.5e-6;
+  /// s: the choices fit no further candidate once the time they took, plus the last fit's, would pass this
+  /// (0: no limit); what was not measured then is untested, and says so. The route trial sets half the budget.
+  double MaximumSeconds = 0;
   /// The Adam route's validation frames held out of the fit (true), or training frames (false; ValidationFrames);
   /// a switch of its own, whatever Enabled says.
   /// Off by default: on the liver's main job the frames out of the fit cost more than the honest decisions gave,

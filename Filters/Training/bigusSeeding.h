@@ -36,7 +36,7 @@ struct SeedingSettings
   /// A dense start instead of Harris seeds: Gaussians on the pixel grid of the training frames (every frame at least
   /// sigma_E from the previous one kept) at the real-valued stride that gives at most InitialGaussians, short of it
   /// by less than a row and a column of the grid (0 = half of MaximumGaussians), in-plane scale 0.6 strides,
-  /// elevation scale 0.45 of the spacing of the planes kept (SeedGrid).
+  /// elevation scale 0.45 of each plane's own spacing (SeedGrid).
   bool DenseInitialisation = false;
   /// The fit when the data are few: when the dense start's planes (SelectGridPlanes) hold at most
   /// PixelGridFanPixelsPerGaussian x MaximumGaussians fan pixels, the field is a pixel grid (SeedGrid: every fan
@@ -124,14 +124,18 @@ struct GridPlanes
   std::vector<double> Spacing; ///< [sweeps] mm, the mean spacing of each sweep's planes along their normals
                                ///< (sigma_E or a pixel for a sweep of one plane)
   std::int64_t FanPixels = 0;  ///< pixels inside the fan masks of the frames kept (the grid's count at stride 1)
+  /// [Frames] mm, each plane's own spacing: the larger of its gaps (along the normal of the plane before) to the
+  /// planes kept beside it in its sweep (the sweep's Spacing for a sweep of one plane)
+  std::vector<double> PlaneSpacing;
 };
 GridPlanes SelectGridPlanes(const TrainingData& data, const SeedShape& shape);
 
 /**
  * The dense start: Gaussians on the pixel grid of the planes SelectGridPlanes keeps, about @p total of
- * them (never more), in-plane scale 0.6 stride, elevation scale 0.45 of the spacing of the plane's sweep's
- * planes (chosen on the volume protocol: docs/FINDINGS.md, "The dense start's elevation scale"). Returns one line
- * that says what was made.
+ * them (never more), in-plane scale 0.6 stride, elevation scale 0.45 of the gap at the point (chosen on the volume
+ * protocol: docs/FINDINGS.md, "The dense start's elevation scale"): the larger of the plane's own spacing
+ * (GridPlanes::PlaneSpacing) and the point's distances to the planes beside it in its sweep (wider on one side of a
+ * tilted neighbour). Returns one line that says what was made.
  */
 std::string SeedGrid(const TrainingData& data, std::int64_t total, const SeedShape& shape, GaussianField& field);
 /// The same on planes already selected (SelectGridPlanes of the same data and shape).

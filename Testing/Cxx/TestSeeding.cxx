@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -86,6 +87,70 @@ TEST(Seeding, FanPixelsUpToTwiceMaximumGaussiansGiveThePixelGrid)
 // The count of Harris seeds when none is given (SeedingSettings::InitialGaussians 0): one per 200 fan pixels of the
 // training frames, at least min(20,000, MaximumGaussians / 2), at most MaximumGaussians / 2. Frames of 512 x 512
 // pixels, every one in the fan, always more than twice MaximumGaussians of them: Harris seeds.
+// The dense start's planes each take their own spacing, the larger of the gaps to the planes beside them: 12
+// parallel frames 1 mm apart with frame 5 left out give the planes beside the gap (4 and 6) a 2 mm spacing, the
+// others 1 mm, and the grid's Gaussians elevation scales of 0.45 times that.
+TEST(Seeding, TheGridsPlanesBesideAWiderGapTakeItsWidthAsTheirSpacing)
+{
+  TrainingData data = ParallelFrames(12, W, H, 48);
+  data.TrainFrames.erase(data.TrainFrames.begin() + 5);
+  const GridPlanes planes = SelectGridPlanes(data, ParallelShape());
+  ASSERT_EQ(planes.Frames, data.TrainFrames);
+  ASSERT_EQ(planes.PlaneSpacing.size(), planes.Frames.size());
+  ASSERT_EQ(planes.Spacing.size(), 1u);
+  EXPECT_NEAR(planes.Spacing[0], 11.0 / 10.0, 1e-9) << "the sweep's mean: 11 mm over 10 gaps";
+  for (std::size_t k = 0; k < planes.Frames.size(); ++k)
+  {
+    const int f = planes.Frames[k];
+    EXPECT_NEAR(planes.PlaneSpacing[k], f == 4 || f == 6 ? 2.0 : 1.0, 1e-9) << "frame " << f;
+  }
+  GaussianField field;
+  SeedGrid(data, planes, planes.FanPixels, ParallelShape(), field);
+  ASSERT_EQ(field.Count(), planes.FanPixels) << "every fan pixel";
+  for (std::int64_t g = 0; g < field.Count(); ++g)
+  {
+    const int f = static_cast<int>(std::lround(field.Means[3 * g + 2])); // plane k lies at z = k mm
+    ASSERT_NEAR(std::exp(field.LogScales[3 * g + 2]), 0.45 * (f == 4 || f == 6 ? 2.0 : 1.0), 1e-5) << "plane " << f;
+  }
+}
+
+// Where the plane beside it is tilted (a rocking probe), the gap at a grid point is its distance to that plane, which
+// runs across the frame: plane 1 of three parallel frames 1 mm apart is turned 10 degrees about the x axis through
+// its centre, so a Gaussian of plane 0 at row height y (mm) lies |sin t (y - c) + cos t| from it (c the centre's
+// height), and takes 0.45 times that where it is wider than the 1 mm between the centres.
+TEST(Seeding, AGridPointsElevationScaleFollowsItsDistanceToATiltedPlaneBesideIt)
+{
+  TrainingData data = ParallelFrames(3, W, H, 48);
+  const double t = 10.0 * M_PI / 180.0, c = Spacing * 0.5 * (H - 1);
+  // Plane 1: v = (0, cos t, sin t), centre pixel at (x, c, 1).
+  std::array<double, 16>& tilted = data.Poses[1];
+  tilted[5] = std::cos(t) * Spacing;
+  tilted[9] = std::sin(t) * Spacing;
+  tilted[7] = c - std::cos(t) * c;
+  tilted[11] = 1.0 - std::sin(t) * c;
+  const GridPlanes planes = SelectGridPlanes(data, ParallelShape());
+  ASSERT_EQ(planes.Frames, data.TrainFrames);
+  ASSERT_NEAR(planes.PlaneSpacing[0], 1.0, 1e-9) << "the centres' gap";
+  GaussianField field;
+  SeedGrid(data, planes, planes.FanPixels, ParallelShape(), field);
+  int onPlane0 = 0, wider = 0;
+  for (std::int64_t g = 0; g < field.Count(); ++g)
+  {
+    if (std::abs(field.Means[3 * g + 2]) > 1e-6)
+    {
+      continue; // not plane 0 (z = 0)
+    }
+    ++onPlane0;
+    const double y = field.Means[3 * g + 1];
+    const double gap = std::abs(std::sin(t) * (y - c) + std::cos(t));
+    wider += gap > 1.0;
+    ASSERT_NEAR(std::exp(field.LogScales[3 * g + 2]), 0.45 * std::max(1.0, gap), 1e-5) << "row at y = " << y << " mm";
+  }
+  EXPECT_EQ(onPlane0, 48 * H);
+  EXPECT_GT(wider, 0);
+  EXPECT_LT(wider, onPlane0);
+}
+
 TEST(Seeding, HarrisSeedsAreOnePer200FanPixelsBetweenTheirBounds)
 {
   const TrainingData two = ParallelFrames(2, 512, 512, 512), twenty = ParallelFrames(20, 512, 512, 512);
