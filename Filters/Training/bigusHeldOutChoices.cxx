@@ -202,17 +202,21 @@ struct CandidateFits
   double Start = SteadySeconds();
   double MaximumSeconds = 0; ///< HeldOutChoiceSettings::MaximumSeconds
   double LastFitSeconds = 0;
+  int Planned = 0;       ///< the candidates' fits planned in all
+  int Done = 0;          ///< of them, fitted
   std::string OutOfTime; ///< why the fits stopped before their last candidate (empty: they did not)
 
-  /// Whether another fit fits within MaximumSeconds (its time taken as the last one's); OutOfTime says why not.
+  /// Whether the fits still planned (at least one), each taken as long as the last, end within MaximumSeconds;
+  /// OutOfTime says why not.
   bool HasTimeForAnotherFit()
   {
     const double elapsed = SteadySeconds() - this->Start;
-    if (this->MaximumSeconds > 0 && elapsed + this->LastFitSeconds > this->MaximumSeconds)
+    const int left = std::max(1, this->Planned - this->Done);
+    if (this->MaximumSeconds > 0 && elapsed + left * this->LastFitSeconds > this->MaximumSeconds)
     {
-      this->OutOfTime = vtkfmt::sprintf("its fits stopped after %.1f s (the last took %.1f s), as another would "
-                                        "pass the %.3g s allowed (half the budget)",
-        elapsed, this->LastFitSeconds, this->MaximumSeconds);
+      this->OutOfTime = vtkfmt::sprintf("its fits stopped after %d in %.1f s, as the %d left (the last took %.1f s) "
+                                        "would pass the %.3g s allowed (half the budget)",
+        this->Done, elapsed, left, this->LastFitSeconds, this->MaximumSeconds);
       return false;
     }
     return true;
@@ -244,6 +248,7 @@ struct CandidateFits
         return false;
       }
       this->LastFitSeconds = c.Seconds;
+      ++this->Done;
       const int before = choice.Chosen;
       choice.Candidates.push_back(c);
       choice.Chosen = FirstWithinTolerance(choice.Candidates, this->Tolerance);
@@ -418,6 +423,8 @@ bool ChooseOnHeldOutFrames(const TrainingData& data, const TrainerSettings& sett
       sigmas.push_back(settings.ElevationSigma * factor);
     }
   }
+  fits.Planned = static_cast<int>(sigmas.size() + h.RidgeFactors.size()) -
+    (!h.RidgeFactors.empty() && h.RidgeFactors.front() == 1.0 ? 1 : 0); // the first ridge's is sigma's fit
   HeldOutChoice& sigma = choices.ElevationSigma;
   if (!fits.Measure(
         settings, sigmas, [](TrainerSettings& s, double v) { s.ElevationSigma = v; }, "ElevationSigma", sigma, error))

@@ -64,8 +64,9 @@ struct HeldOutChoiceSettings
   /// measured on 2 cores (volume protocol, 160 to 240 slices). A grid whose Gaussians reach more frames (a real
   /// sweep's wider beam) takes longer: the trial's fits stop at MaximumSeconds, which it sets to half the budget.
   double GridFitSecondsPerGaussian = 3.5e-6;
-  /// s: the choices fit no further candidate once the time they took, plus the last fit's, would pass this
-  /// (0: no limit); what was not measured then is untested, and says so. The route trial sets half the budget.
+  /// s: the choices fit no further candidate once the time they took, plus the fits still planned each taken as
+  /// long as the last, would pass this (0: no limit); nothing measured is then taken, every choice is untested and
+  /// says why. The route trial sets half the budget.
   double MaximumSeconds = 0;
   /// The Adam route's validation frames held out of the fit (true), or training frames (false; ValidationFrames);
   /// a switch of its own, whatever Enabled says.

@@ -418,7 +418,7 @@ TEST(HeldOutChoices, TheGridsRouteFitOnMoreFramesScoresTheHeldOutFramesAtLeastAs
   EXPECT_GE(trial.GridPSNR, fewer - 0.1);
 }
 
-TEST(HeldOutChoices, TheGridsSideOfTheRouteTrialStopsWhereAnotherFitWouldPassHalfTheBudget)
+TEST(HeldOutChoices, TheGridsSideOfTheRouteTrialStopsWhereItsFitsLeftWouldPassHalfTheBudget)
 {
   // Half a budget of 2 ms: the first candidate's fit is started (nothing was spent), none after it. The route is then
   // untested, says why, holds no frame out of the Adam run, and its time is counted.
