@@ -382,15 +382,19 @@ bool ChooseOnHeldOutFrames(const TrainingData& data, const TrainerSettings& sett
   CandidateFits fits{ data, HeldOutFrames(data, h.Stride, 0), HeldOutFrames(data, h.Stride, h.MaximumFrames),
     h.Tolerance, nullptr };
   fits.MaximumSeconds = h.MaximumSeconds;
-  // Out of time: every choice untested, with why (nothing measured is taken).
-  auto outOfTime = [&]() {
+  // No candidate taken (empty @p why: none yet): every choice with its frames and why it is untested.
+  auto untestedChoices = [&](const std::string& why) {
     choices = HeldOutChoices();
     for (HeldOutChoice* choice : { &choices.ElevationSigma, &choices.Ridge })
     {
       choice->Stride = std::max(2, h.Stride);
       choice->Frames = fits.Scored;
-      choice->Untested = fits.OutOfTime;
+      choice->Untested = why;
     }
+  };
+  // Out of time: nothing measured is taken.
+  auto outOfTime = [&]() {
+    untestedChoices(fits.OutOfTime);
     choices.Reduction.Untested = fits.OutOfTime;
     return true;
   };
@@ -399,12 +403,7 @@ bool ChooseOnHeldOutFrames(const TrainingData& data, const TrainerSettings& sett
     : fits.Scored.size() < 2
     ? vtkfmt::sprintf("%zu training frames leave fewer than 2 to hold out between them", data.TrainFrames.size())
     : std::string();
-  for (HeldOutChoice* choice : { &choices.ElevationSigma, &choices.Ridge })
-  {
-    choice->Stride = std::max(2, h.Stride);
-    choice->Frames = fits.Scored;
-    choice->Untested = untested;
-  }
+  untestedChoices(untested);
   choices.Reduction.Untested = h.Enabled && !pixelGrid
     ? "on this route no frame is held out at the end (the validation frames join the fit)"
     : !untested.empty()  ? untested

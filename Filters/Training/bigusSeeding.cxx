@@ -36,6 +36,17 @@ void Apply(const std::array<double, 16>& m, double i, double j, double out[3])
     out[r] = m[4 * r] * i + m[4 * r + 1] * j + m[4 * r + 3];
   }
 }
+/// mm from @p plane to @p point (mm) along its normal.
+double DistanceFromPlane(const SliceFrame& plane, const double point[3])
+{
+  double d = 0;
+  for (int k = 0; k < 3; ++k)
+  {
+    d += plane.n[k] * (point[k] - plane.origin[k]);
+  }
+  return std::abs(d);
+}
+
 /// Appends one seed Gaussian lying in frame @p pose at pixel (i, j).
 void AddSeed(GaussianField& field, const std::array<double, 16>& pose, double i, double j, double inPlaneScale,
   double elevationScale, double reflectivity)
@@ -220,18 +231,14 @@ GridPlanes SelectGridPlanes(const TrainingData& data, const SeedShape& shape)
     }
     if (sweep == lastSweep) // the first frame of a sweep is kept
     {
-      double d = 0;
-      for (int k = 0; k < 3; ++k)
-      {
-        d += last.n[k] * (centre[k] - last.origin[k]);
-      }
-      if (std::abs(d) < minimumGap)
+      const double d = DistanceFromPlane(last, centre);
+      if (d < minimumGap)
       {
         continue;
       }
-      gaps[sweep] += std::abs(d);
+      gaps[sweep] += d;
       ++gapCount[sweep];
-      gapBefore.push_back(std::abs(d));
+      gapBefore.push_back(d);
     }
     else
     {
@@ -329,12 +336,7 @@ std::string SeedGrid(const TrainingData& data, const GridPlanes& selected, std::
       double gap = selected.PlaneSpacing.at(k);
       for (const SliceFrame& plane : beside)
       {
-        double d = 0;
-        for (int i = 0; i < 3; ++i)
-        {
-          d += plane.n[i] * (point[i] - plane.origin[i]);
-        }
-        gap = std::max(gap, std::abs(d));
+        gap = std::max(gap, DistanceFromPlane(plane, point));
       }
       AddSeed(field, data.Poses[f], x, y, inPlane, 0.45 * gap, ScatteringOfIntensity(frame[p], shape.Gamma));
     });
