@@ -641,9 +641,10 @@ Command AddTrainCommand(CLI::App& app)
     "without every second training frame and scored on those: ElevationSigma by rule times 1/8, 1/4, 1/2, 1 and 2 "
     "(the narrowest within 0.05 dB of the best held-out PSNR is taken), then the solve's ridge times 1, 10 and 100 "
     "(the default's unless another is more than 0.05 dB better); the final prune and the merge are then kept only "
-    "where they cost at most 0.05 dB on those frames; and where the rule takes Harris seeds and Adam but the grid of "
-    "every fan pixel fits memory and half the budget, the grid is measured against Adam on held-out frames and the "
-    "better takes the run: the Route line)");
+    "where they cost at most 0.05 dB on those frames; and with a time budget, where the grid of every fan pixel fits "
+    "memory and half the budget, the route is measured on held-out frames: the grid against Harris seeds and Adam, "
+    "the better takes the run (where the rule takes the grid, Adam must pass it within a quarter of the budget): the "
+    "Route line)");
   trainCommand->add_flag("--held-out-validation", settings.HeldOut.HoldOutValidationFrames,
     "Validate on frames held out of the fit until the densification window closes (one in 8 training frames of a "
     "sweep, 4 to 8 of them), then joined to it: growth stops and early stopping keeps a field on frames the fit has "

@@ -581,27 +581,33 @@ std::string RouteTrial::Line() const
   const std::string others = "; variable projection and grids at a coarser stride untested: on the liver, the spine "
                              "phantom and the volume protocol each scored below Adam alone or the grid of every fan "
                              "pixel (docs/BENCHMARKS_pareto.md)";
-  if (this->GridByRule)
-  {
-    return vtkfmt::sprintf("Route = the pixel grid (the rule: the %lld fan pixels of the grid's planes are at most "
-                           "%g x MaximumGaussians; untested against Harris seeds and Adam: the grid's fit takes no "
-                           "step, and a stepping route is measured only by spending the budget on its steps",
-             static_cast<long long>(this->FanPixels), this->RulePixelsPerGaussian) +
-      others + ")";
-  }
   const std::string rule =
-    vtkfmt::sprintf("the rule: the %lld fan pixels of the grid's planes are more than %g x MaximumGaussians",
-      static_cast<long long>(this->FanPixels), this->RulePixelsPerGaussian);
+    vtkfmt::sprintf("the rule: the %lld fan pixels of the grid's planes are %s %g x MaximumGaussians",
+      static_cast<long long>(this->FanPixels), this->GridByRule ? "at most" : "more than", this->RulePixelsPerGaussian);
+  const bool adamSide = !this->GridByRule || this->DecideBy < 1; // the run started as Adam's
   if (!this->Untested.empty() || (!this->Pending && this->DecidedAt < 0))
   {
+    const std::string why = this->Untested.empty() ? std::string("not measured") : this->Untested;
+    if (!adamSide) // the rule's grid, its fit with no step
+    {
+      return "Route = the pixel grid (" + rule + "; untested against Harris seeds and Adam: " + why + others + ")";
+    }
     return "Route = Harris seeds and Adam (" + rule +
-      "; untested against the pixel grid: " + (this->Untested.empty() ? std::string("not measured") : this->Untested) +
-      others + ")";
+      (this->GridByRule ? "; the trial against the pixel grid ended untested: "
+                        : "; untested against the pixel grid: ") +
+      why + others + ")";
   }
   const std::string grid = vtkfmt::sprintf("the pixel grid of %lld Gaussians %.2f dB (its fits %.1f s)",
     static_cast<long long>(this->GridGaussians), this->GridPSNR, this->GridSeconds);
   if (this->DecidedAt < 0)
   {
+    if (this->GridByRule)
+    {
+      return vtkfmt::sprintf("Route = the pixel grid unless Harris seeds and Adam score higher on %zu held-out frames "
+                             "by %.0f %% of the schedule (",
+               this->Frames.size(), 100 * this->DecideBy) +
+        grid + "; " + rule + others + ")";
+    }
     return vtkfmt::sprintf("Route = Harris seeds and Adam, measured against the pixel grid on %zu held-out frames "
                            "when they join the fit (",
              this->Frames.size()) +

@@ -57,9 +57,17 @@ struct HeldOutChoiceSettings
   /// Measure the final prune and the merge on held-out frames (HeldOutReduction) and keep each only where it costs
   /// at most Tolerance.
   bool MeasureReduction = true;
-  /// Where the route's rule (SeedingSettings::PixelGridFanPixelsPerGaussian) gives Harris seeds and Adam, measure
-  /// the pixel grid against it on held-out frames when the budget affords it (RouteTrial).
+  /// Measure the route's rule (SeedingSettings::PixelGridFanPixelsPerGaussian) on held-out frames when the budget
+  /// affords it (RouteTrial): where it gives Harris seeds and Adam, the pixel grid against it; where it gives the
+  /// grid, Harris seeds and Adam against the grid for RouteProbeFraction of the schedule.
   bool MeasureRoute = true;
+  /// Where the rule takes the pixel grid, Harris seeds and Adam are taken only if they score above it on the
+  /// held-out frames within this share of the schedule from Adam's start (after the grid's side; the decision is
+  /// taken at the first validation from then on, after any pose-refinement trial). Where Adam passed the grid on
+  /// real sweeps it did so within 4 to 9 % of the budget from its start (the N-wire and spine-phantom sweeps at 120
+  /// and 300 s: docs/FINDINGS.md, "The route measured where the rule takes the grid"); a run whose grid wins spends
+  /// this share of its budget on Adam's steps.
+  double RouteProbeFraction = 0.25;
   /// s per Gaussian of one pixel-grid fit (assembly, solve, scoring), to plan the route trial: 2.5e-6 to 3.5e-6
   /// measured on 2 cores (volume protocol, 160 to 240 slices). A grid whose Gaussians reach more frames (a real
   /// sweep's wider beam) takes longer: the trial's fits stop at MaximumSeconds, which it sets to half the budget.
@@ -171,8 +179,9 @@ struct HeldOutChoices
  * machine's memory and its fits half the time budget, the grid (with its own held-out choices, ChooseOnHeldOutFrames)
  * is fitted on every training frame but Frames and scored on them; the Adam run then holds Frames out as its
  * validation frames, and when they would join its fit (the densification window's close) it is scored on them too:
- * the higher score takes the rest of the run (Trainer). The Route setting line says what each scored, or why the
- * rule's route was taken untested.
+ * the higher score takes the rest of the run (Trainer). Where the rule gives the grid, the same under the same
+ * conditions, except that Adam must score above the grid by DecideBy of the schedule (RouteProbeFraction from its
+ * start). The Route setting line says what each scored, or why the rule's route was taken untested.
  */
 struct RouteTrial
 {
@@ -188,13 +197,16 @@ struct RouteTrial
   std::int64_t FanPixels = 0;       ///< of the grid's planes
   double RulePixelsPerGaussian = 2; ///< SeedingSettings::PixelGridFanPixelsPerGaussian, for the line
   std::string Untested;             ///< why the rule's route was taken without the measurement
-  bool GridByRule = false;          ///< the rule took the pixel grid (FanPixels within the rule): nothing measured
+  bool GridByRule = false;          ///< the rule took the pixel grid (FanPixels within the rule)
+  /// Schedule fraction by which the Adam side must score above the grid (GridByRule: the fraction at Adam's start
+  /// plus RouteProbeFraction; else 1, the densification window's close decides)
+  double DecideBy = 1;
   /// The "Route = ..." setting line.
   std::string Line() const;
 };
 
 /**
- * Why the route trial cannot run for @p settings with the seeding @p plan (Harris seeds) on @p data, alone or
+ * Why the route trial cannot run for @p settings with the seeding @p plan (either route) on @p data, alone or
  * @p dataParallel; empty where it can: the held-out choices and MeasureRoute on, the grid allowed
  * (SeedingPlan::Planes measured), a time budget, one process, every fan pixel of the planes within this machine's
  * memory (CheckTrainingMemory), and about 6.5 grid fits (GridFitSecondsPerGaussian) within half the budget.

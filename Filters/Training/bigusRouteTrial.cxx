@@ -38,19 +38,30 @@ void ReplaceLine(std::vector<std::string>& lines, const std::string& prefix, con
 }
 }
 
-bool Trainer::PlanRouteTrial(const SeedingPlan& plan, std::string* error)
+bool Trainer::PlanRouteTrial(SeedingPlan& plan, std::string* error)
 {
   RouteTrial& trial = this->Report.Route;
   trial = RouteTrial();
   trial.FanPixels = plan.Planes.FanPixels;
   trial.RulePixelsPerGaussian = this->Settings.Seeding.PixelGridFanPixelsPerGaussian;
-  if (plan.PixelGrid)
-  {
-    trial.GridByRule = true; // nothing to measure: the line says which routes went untested
-    this->Report.Settings.push_back(trial.Line());
-    return true;
-  }
+  trial.GridByRule = plan.PixelGrid;
   trial.Untested = RouteTrialUntested(*this->Data, this->Settings, plan, this->Reduction != nullptr);
+  const SeedingPlan rule = plan;
+  if (trial.GridByRule && trial.Untested.empty())
+  {
+    // The grid must be measured against the route it displaced: the run starts as Adam's, and Adam has
+    // RouteProbeFraction of the schedule to score above the grid.
+    SeedingSettings adam = this->Settings.Seeding;
+    adam.PixelGridFit = false;
+    const std::int64_t fanPixels = plan.FanPixels;
+    const GridPlanes planes = plan.Planes;
+    if (!PlanSeeding(*this->Data, adam, this->Settings.MaximumGaussians, this->Settings.NonNegativeReflectivity,
+          this->Settings.Solve.L1 > 0, this->SeedShapeOf(), fanPixels, plan, error))
+    {
+      return false;
+    }
+    plan.Planes = planes;
+  }
   if (trial.Untested.empty() && this->Resuming)
   {
     // The frames the grid's side would score (its choices' held-out frames), held out of the fit as in the
@@ -69,6 +80,14 @@ bool Trainer::PlanRouteTrial(const SeedingPlan& plan, std::string* error)
     // The grid's side is training time: the budget pays for it.
     this->State.TrainingSeconds += trial.GridSeconds;
     this->Report.Seconds += trial.GridSeconds;
+  }
+  if (trial.GridByRule && !trial.Pending) // nothing measured: the rule's grid stands
+  {
+    plan = rule;
+  }
+  else if (trial.GridByRule) // Adam's share of the schedule from its start, after the grid's side
+  {
+    trial.DecideBy = this->ScheduleFraction() + this->Settings.HeldOut.RouteProbeFraction;
   }
   if (trial.FanPixels > 0) // a route the rule chose (the grid's planes measured), not one the settings gave
   {

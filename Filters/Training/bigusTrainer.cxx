@@ -483,7 +483,8 @@ bool Trainer::Iterate(double start, const std::function<void(double, int, double
   const bool window = this->InDensificationWindow();
   const bool densify = d.Enabled && it >= d.Start && it % d.Interval == 0 && window;
   if (window && this->Report.Route.Pending && !this->InPoseTrial && !this->Poses.IsTrialPending() &&
-    it % d.Interval == 0 && !this->DecideRoute(&validation, false, error))
+    it % d.Interval == 0 &&
+    !this->DecideRoute(&validation, this->ScheduleFraction() >= this->Report.Route.DecideBy, error))
   {
     return false;
   }

@@ -246,17 +246,18 @@ private:
   /// setting line; too few, the training frames ValidationFrames chooses.
   void HoldOutValidationFrames();
   /**
-   * The seeding @p plan made: where the rule took the pixel grid, only its Route line (Adam untested); on the Adam
-   * route, the route trial's grid side where RouteTrialUntested allows it (MeasurePixelGridRoute, its seconds counted
-   * as training), else the Route line says why not.
+   * The seeding @p plan made: the route trial's grid side where RouteTrialUntested allows it (MeasurePixelGridRoute,
+   * its seconds counted as training), else the Route line says why not. Where the rule took the pixel grid and the
+   * trial runs, @p plan becomes the Adam route's (Harris seeds), which must score above the grid by
+   * RouteProbeFraction of the schedule (RouteTrial::DecideBy).
    */
-  bool PlanRouteTrial(const SeedingPlan& plan, std::string* error);
+  bool PlanRouteTrial(SeedingPlan& plan, std::string* error);
   /**
    * The route trial's decision: the Adam run's field scored on the trial's frames at their tracked poses against the
    * grid's score. Adam above it decides at once (more steps and frames only help it); the grid only when the frames
-   * would join the fit (@p closing): it then becomes the pixel-grid fit on every training frame with the grid's
-   * choices (SwitchToPixelGrid). Adam decided, the frames join (JoinValidationFrames with @p last). The Route line
-   * says what each scored.
+   * would join the fit (@p closing) or at RouteTrial::DecideBy of the schedule: it then becomes the pixel-grid fit on
+   * every training frame with the grid's choices (SwitchToPixelGrid). Adam decided, the frames join
+   * (JoinValidationFrames with @p last). The Route line says what each scored.
    */
   bool DecideRoute(const double* last, bool closing, std::string* error);
   /// A pending route trial ends untested (@p why): the run stays Adam's, its frames stay validation frames and the

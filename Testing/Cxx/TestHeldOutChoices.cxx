@@ -284,6 +284,7 @@ TEST(HeldOutChoices, TheRouteIsMeasuredWhereTheRuleTakesAdamAndTheBetterRouteTak
   ASSERT_TRUE(adamAlone.Initialize(&error) && adamAlone.Run(nullptr, nullptr, &error)) << error;
   TrainerSettings grid = settings;
   grid.Seeding.PixelGridFanPixelsPerGaussian = 1e9;
+  grid.HeldOut.MeasureRoute = false;
   Trainer gridAlone(data, grid);
   ASSERT_TRUE(gridAlone.Initialize(&error) && gridAlone.Run(nullptr, nullptr, &error)) << error;
   const double a = synthetic::HeldOutPsnr(adamAlone, unseen), g = synthetic::HeldOutPsnr(gridAlone, unseen);
@@ -295,7 +296,7 @@ TEST(HeldOutChoices, TheRouteIsMeasuredWhereTheRuleTakesAdamAndTheBetterRouteTak
   // route taken stays within a quarter of that gap of the better route (the worse one is 7 dB lower here).
   EXPECT_GE(chosen, std::max(a, g) - 0.25 * std::abs(a - g));
   EXPECT_EQ(adamAlone.GetReport().Route.Untested, "its measurement is off (MeasureRoute)");
-  // The grid taken by the rule says so, and which routes it leaves untested.
+  // The grid taken by the rule and not measured says so, and which routes it leaves untested.
   const std::vector<std::string>& gridLines = gridAlone.GetReport().Settings;
   const auto routeLine =
     std::find_if(gridLines.begin(), gridLines.end(), [](const std::string& l) { return l.rfind("Route = ", 0) == 0; });
@@ -303,12 +304,36 @@ TEST(HeldOutChoices, TheRouteIsMeasuredWhereTheRuleTakesAdamAndTheBetterRouteTak
   EXPECT_EQ(
     routeLine->rfind("Route = the pixel grid (the rule: the " + std::to_string(gridAlone.GetReport().Route.FanPixels) +
         " fan pixels of the grid's planes are at most 1e+09 x MaximumGaussians; untested against Harris seeds "
-        "and Adam",
+        "and Adam: its measurement is off (MeasureRoute)",
       0),
     0u)
     << *routeLine;
   EXPECT_NE(routeLine->find("variable projection and grids at a coarser stride untested"), std::string::npos)
     << *routeLine;
+
+  // The same grid taken by the rule (every fan pixel within it) is measured against the route it displaced: the run
+  // starts as Adam's, with the trial's frames held out, and Adam, which scores above the grid on them before a quarter
+  // of the schedule, takes the run (issue 54: a route is not switched by a pixel count).
+  grid.HeldOut.MeasureRoute = true;
+  Trainer probe(data, grid);
+  ASSERT_TRUE(probe.Initialize(&error)) << error;
+  const RouteTrial& probed = probe.GetReport().Route;
+  ASSERT_TRUE(probed.Pending) << probed.Untested;
+  EXPECT_TRUE(probed.GridByRule);
+  EXPECT_GE(probed.DecideBy, grid.HeldOut.RouteProbeFraction) << "from Adam's start, after the grid's side";
+  EXPECT_LT(probed.DecideBy, grid.HeldOut.RouteProbeFraction + 0.1);
+  EXPECT_LT(probe.GetReport().InitialGaussians, probed.GridGaussians) << "Harris seeds, not the grid";
+  ASSERT_TRUE(probe.Run(nullptr, nullptr, &error)) << error;
+  ASSERT_GE(probed.DecidedAt, 0);
+  EXPECT_FALSE(probed.GridChosen);
+  EXPECT_LE(probed.DecidedAt, grid.HeldOut.RouteProbeFraction * grid.Iterations + grid.Densification.Interval);
+  EXPECT_EQ(probe.GetIteration(), grid.Iterations) << "Adam's steps go on";
+  EXPECT_EQ(probe.GetData().TrainFrames, data.TrainFrames) << "the trial's frames joined the fit";
+  EXPECT_EQ(probed.Line().rfind("Route = Harris seeds and Adam (measured on", 0), 0u) << probed.Line();
+  EXPECT_NE(probed.Line().find("are at most 1e+09 x MaximumGaussians"), std::string::npos) << probed.Line();
+  const double p = synthetic::HeldOutPsnr(probe, unseen);
+  std::printf("%s\nunseen frames: the rule's grid measured against Adam %.2f dB\n", probed.Line().c_str(), p);
+  EXPECT_GE(p, std::max(a, g) - 0.25 * std::abs(a - g));
 
   // A run that ends before its frames would join (100 steps: no validation after the window's close) stays Adam's,
   // with every training frame back in the data and the line saying why the route is untested.
@@ -438,6 +463,28 @@ TEST(HeldOutChoices, TheGridsSideOfTheRouteTrialStopsWhereItsFitsLeftWouldPassHa
   EXPECT_EQ(trial.Grid.Ridge.Chosen, -1);
   EXPECT_EQ(trial.Grid.Reduction.Untested, trial.Untested);
 
+  // Where the rule takes the grid (the plan's estimate made to pass), the same stop leaves nothing measured against
+  // Adam, so the rule's grid stands: the run seeds every fan pixel and takes no step, and its line says why Adam went
+  // untested.
+  TrainerSettings byRule = settings;
+  byRule.Seeding.PixelGridFanPixelsPerGaussian = 1e9;
+  byRule.HeldOut.GridFitSecondsPerGaussian = 1e-12;
+  Trainer grid(data, byRule);
+  ASSERT_TRUE(grid.Initialize(&error)) << error;
+  const RouteTrial& route = grid.GetReport().Route;
+  EXPECT_FALSE(route.Pending);
+  EXPECT_TRUE(route.GridByRule);
+  EXPECT_EQ(grid.GetReport().InitialGaussians, route.FanPixels) << "the grid of every fan pixel";
+  EXPECT_EQ(route.Line().rfind("Route = the pixel grid (the rule: the " + std::to_string(route.FanPixels) +
+                " fan pixels of the grid's planes are at most 1e+09 x MaximumGaussians; untested against Harris "
+                "seeds and Adam: its fits stopped after",
+              0),
+    0u)
+    << route.Line();
+  ASSERT_TRUE(grid.Run(nullptr, nullptr, &error)) << error;
+  EXPECT_EQ(grid.GetIteration(), 0);
+  EXPECT_EQ(grid.GetData().TrainFrames, data.TrainFrames);
+
   // The choices alone (a pixel-grid run given a limit): one fit, then every choice untested with the same reason.
   settings.HeldOut.MaximumSeconds = 0.002;
   HeldOutChoices choices;
@@ -487,10 +534,30 @@ TEST(HeldOutChoices, TheRouteTrialSwitchesToThePixelGridWhereItScoresHigher)
 
     TrainerSettings grid = settings;
     grid.Seeding.PixelGridFanPixelsPerGaussian = 1e9;
+    grid.HeldOut.MeasureRoute = false;
     Trainer gridAlone(data, grid);
     ASSERT_TRUE(gridAlone.Initialize(&error) && gridAlone.Run(nullptr, nullptr, &error)) << error;
     const double switched = synthetic::HeldOutPsnr(trainer, unseen), alone = synthetic::HeldOutPsnr(gridAlone, unseen);
     std::printf("unseen frames: switched to the grid %.2f dB, the grid alone %.2f dB\n", switched, alone);
     EXPECT_NEAR(switched, alone, 0.1);
+
+    // The rule taking the grid and measuring Adam against it: Adam stays below, so the grid is taken at the first
+    // validation from a quarter of the schedule on (after the pose trial, where Auto holds one), not at the window's
+    // close, and renders as the grid alone does.
+    grid.HeldOut.MeasureRoute = true;
+    Trainer probe(data, grid);
+    ASSERT_TRUE(probe.Initialize(&error) && probe.Run(nullptr, nullptr, &error)) << error;
+    const RouteTrial& probed = probe.GetReport().Route;
+    std::printf("%s\n", probed.Line().c_str());
+    ASSERT_TRUE(probed.GridChosen) << probed.Line();
+    EXPECT_GE(probed.DecidedAt, grid.HeldOut.RouteProbeFraction * grid.Iterations);
+    if (refine == PoseRefinement::Off)
+    {
+      EXPECT_EQ(probed.DecidedAt, 400) << "validations every 200 steps: the first from step 250 on";
+    }
+    EXPECT_LT(probed.DecidedAt, route.DecidedAt) << "before the window's close";
+    EXPECT_EQ(probe.GetIteration(), probed.DecidedAt);
+    EXPECT_EQ(probed.Line().rfind("Route = the pixel grid (measured on", 0), 0u) << probed.Line();
+    EXPECT_NEAR(synthetic::HeldOutPsnr(probe, unseen), alone, 0.1);
   }
 }
