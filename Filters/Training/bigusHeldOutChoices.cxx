@@ -584,7 +584,7 @@ std::string RouteTrial::Line() const
   const std::string rule =
     vtkfmt::sprintf("the rule: the %lld fan pixels of the grid's planes are %s %g x MaximumGaussians",
       static_cast<long long>(this->FanPixels), this->GridByRule ? "at most" : "more than", this->RulePixelsPerGaussian);
-  const bool adamSide = !this->GridByRule || this->DecideBy < 1; // the run started as Adam's
+  const bool adamSide = !this->GridByRule || this->AdamProbe; // the run started as Adam's
   if (!this->Untested.empty() || (!this->Pending && this->DecidedAt < 0))
   {
     const std::string why = this->Untested.empty() ? std::string("not measured") : this->Untested;

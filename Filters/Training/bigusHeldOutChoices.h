@@ -198,8 +198,11 @@ struct RouteTrial
   double RulePixelsPerGaussian = 2; ///< SeedingSettings::PixelGridFanPixelsPerGaussian, for the line
   std::string Untested;             ///< why the rule's route was taken without the measurement
   bool GridByRule = false;          ///< the rule took the pixel grid (FanPixels within the rule)
-  /// Schedule fraction by which the Adam side must score above the grid (GridByRule: the fraction at Adam's start
-  /// plus RouteProbeFraction; else 1, the densification window's close decides)
+  /// The rule took the grid and the run started as Harris seeds and Adam to measure it against the grid (the trial
+  /// planned; it stays set where the trial ends untested, as the run is then Adam's)
+  bool AdamProbe = false;
+  /// AdamProbe: the schedule fraction by which Adam must score above the grid (the fraction at Adam's start plus
+  /// RouteProbeFraction); otherwise unused, the densification window's close decides
   double DecideBy = 1;
   /// The "Route = ..." setting line.
   std::string Line() const;

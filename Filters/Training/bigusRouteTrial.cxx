@@ -87,6 +87,7 @@ bool Trainer::PlanRouteTrial(SeedingPlan& plan, std::string* error)
   }
   else if (trial.GridByRule) // Adam's share of the schedule from its start, after the grid's side
   {
+    trial.AdamProbe = true;
     trial.DecideBy = this->ScheduleFraction() + this->Settings.HeldOut.RouteProbeFraction;
   }
   if (trial.FanPixels > 0) // a route the rule chose (the grid's planes measured), not one the settings gave

@@ -484,7 +484,8 @@ bool Trainer::Iterate(double start, const std::function<void(double, int, double
   const bool densify = d.Enabled && it >= d.Start && it % d.Interval == 0 && window;
   if (window && this->Report.Route.Pending && !this->InPoseTrial && !this->Poses.IsTrialPending() &&
     it % d.Interval == 0 &&
-    !this->DecideRoute(&validation, this->ScheduleFraction() >= this->Report.Route.DecideBy, error))
+    !this->DecideRoute(
+      &validation, this->Report.Route.AdamProbe && this->ScheduleFraction() >= this->Report.Route.DecideBy, error))
   {
     return false;
   }

@@ -320,6 +320,7 @@ TEST(HeldOutChoices, TheRouteIsMeasuredWhereTheRuleTakesAdamAndTheBetterRouteTak
   const RouteTrial& probed = probe.GetReport().Route;
   ASSERT_TRUE(probed.Pending) << probed.Untested;
   EXPECT_TRUE(probed.GridByRule);
+  EXPECT_TRUE(probed.AdamProbe);
   EXPECT_GE(probed.DecideBy, grid.HeldOut.RouteProbeFraction) << "from Adam's start, after the grid's side";
   EXPECT_LT(probed.DecideBy, grid.HeldOut.RouteProbeFraction + 0.1);
   EXPECT_LT(probe.GetReport().InitialGaussians, probed.GridGaussians) << "Harris seeds, not the grid";
@@ -474,6 +475,7 @@ TEST(HeldOutChoices, TheGridsSideOfTheRouteTrialStopsWhereItsFitsLeftWouldPassHa
   const RouteTrial& route = grid.GetReport().Route;
   EXPECT_FALSE(route.Pending);
   EXPECT_TRUE(route.GridByRule);
+  EXPECT_FALSE(route.AdamProbe);
   EXPECT_EQ(grid.GetReport().InitialGaussians, route.FanPixels) << "the grid of every fan pixel";
   EXPECT_EQ(route.Line().rfind("Route = the pixel grid (the rule: the " + std::to_string(route.FanPixels) +
                 " fan pixels of the grid's planes are at most 1e+09 x MaximumGaussians; untested against Harris "
