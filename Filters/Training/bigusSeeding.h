@@ -42,9 +42,10 @@ struct SeedingSettings
   /// PixelGridFanPixelsPerGaussian x MaximumGaussians fan pixels, the field is a pixel grid (SeedGrid: every fan
   /// pixel where this machine's memory holds them, TrainingBytesPerGaussian each and the solve's
   /// ReflectivitySolveBytes; else MaximumGaussians of them at a stride of up to 1.41) with its reflectivities
-  /// solved, and no geometry
-  /// step follows, whatever Iterations and TimeBudget: 11 parameters per Gaussian would outnumber the pixels, and
-  /// Adam overfits them. Applies with the default start only (Harris seeding, InitialGaussians 0, no
+  /// solved, and no geometry step follows, whatever Iterations and TimeBudget: 11 parameters per Gaussian would
+  /// outnumber the pixels, and Adam overfits them. With a time budget the rule is measured (the route trial,
+  /// bigusHeldOutChoices.h): the run starts as Harris seeds and Adam, which take it only if they score above the grid
+  /// on held-out frames. Applies with the default start only (Harris seeding, InitialGaussians 0, no
   /// DenseInitialisation, signed reflectivities).
   bool PixelGridFit = true;
   /// The pixel-grid fit applies while the dense start's planes hold at most this many fan pixels per Gaussian of
