@@ -46,22 +46,6 @@ bool Trainer::PlanRouteTrial(SeedingPlan& plan, std::string* error)
   trial.RulePixelsPerGaussian = this->Settings.Seeding.PixelGridFanPixelsPerGaussian;
   trial.GridByRule = plan.PixelGrid;
   trial.Untested = RouteTrialUntested(*this->Data, this->Settings, plan, this->Reduction != nullptr);
-  const SeedingPlan rule = plan;
-  if (trial.GridByRule && trial.Untested.empty())
-  {
-    // The grid must be measured against the route it displaced: the run starts as Adam's, and Adam has
-    // RouteProbeFraction of the schedule to score above the grid.
-    SeedingSettings adam = this->Settings.Seeding;
-    adam.PixelGridFit = false;
-    const std::int64_t fanPixels = plan.FanPixels;
-    const GridPlanes planes = plan.Planes;
-    if (!PlanSeeding(*this->Data, adam, this->Settings.MaximumGaussians, this->Settings.NonNegativeReflectivity,
-          this->Settings.Solve.L1 > 0, this->SeedShapeOf(), fanPixels, plan, error))
-    {
-      return false;
-    }
-    plan.Planes = planes;
-  }
   if (trial.Untested.empty() && this->Resuming)
   {
     // The frames the grid's side would score (its choices' held-out frames), held out of the fit as in the
@@ -81,12 +65,19 @@ bool Trainer::PlanRouteTrial(SeedingPlan& plan, std::string* error)
     this->State.TrainingSeconds += trial.GridSeconds;
     this->Report.Seconds += trial.GridSeconds;
   }
-  if (trial.GridByRule && !trial.Pending) // nothing measured: the rule's grid stands
+  if (trial.GridByRule && trial.Pending)
   {
-    plan = rule;
-  }
-  else if (trial.GridByRule) // Adam's share of the schedule from its start, after the grid's side
-  {
+    // The rule's grid measured against the route it displaced (where nothing was measured it stands): the run starts
+    // as Adam's, which has RouteProbeFraction of the schedule from its start, after the grid's side, to score above
+    // the grid. The grid, if it stays ahead, is planned again when the run switches to it (SwitchToPixelGrid).
+    SeedingSettings adam = this->Settings.Seeding;
+    adam.PixelGridFit = false;
+    const std::int64_t fanPixels = plan.FanPixels;
+    if (!PlanSeeding(*this->Data, adam, this->Settings.MaximumGaussians, this->Settings.NonNegativeReflectivity,
+          this->Settings.Solve.L1 > 0, this->SeedShapeOf(), fanPixels, plan, error))
+    {
+      return false;
+    }
     trial.AdamProbe = true;
     trial.DecideBy = this->ScheduleFraction() + this->Settings.HeldOut.RouteProbeFraction;
   }
