@@ -62,9 +62,11 @@ bool TrainWithMarks(const TrainingData& data, const TrainerSettings& settings, c
   {
     const double start = Now();
     const double slice = mark - trained;
+    // A mark waits for the field to settle (Trainer::IsSettled: out of the pose trial and of a densification's dip),
+    // so that a row scores what the run goes on from; its time is the time it stopped.
     if (slice > 0 && scheduleLeft() &&
       !trainer.Train(
-        nullptr, [&]() { return Now() - start >= slice; }, error))
+        nullptr, [&]() { return Now() - start >= slice && trainer.IsSettled(); }, error))
     {
       return false;
     }

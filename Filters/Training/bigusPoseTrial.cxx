@@ -23,7 +23,7 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
   auto rewrite = [&](const std::string& how) { this->Poses.AnnotateChoice(this->Report.Settings, how); };
   // The steps the schedule has left: at most Iterations', and at the rate so far what the budget's seconds allow.
   const TrainerSettings& s = this->Settings;
-  const int steps = s.Poses.TrialSteps, from = this->State.Iteration;
+  const int from = this->State.Iteration, steps = this->PoseTrialSteps(from);
   double left = s.Iterations > 0 ? s.Iterations - from : std::numeric_limits<double>::infinity();
   const double seconds = this->TrainingSeconds();
   const double stepping = seconds - this->Report.Route.GridSeconds; // the route trial's grid side took no step
@@ -146,6 +146,20 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
     return this->EndPoseTrial(how, error);
   }
   return keepTrusted(how);
+}
+
+int Trainer::PoseTrialSteps(int from) const
+{
+  const int steps = this->Settings.Poses.TrialSteps, interval = this->Settings.Densification.Interval;
+  if (!this->Settings.Densification.Enabled || interval <= 1 || !this->InDensificationWindow())
+  {
+    return steps;
+  }
+  // The step count nearest TrialSteps whose last step comes just before a densification: its splits take tens of
+  // steps to recover from (docs/FINDINGS.md, "A densification's dip and the pose trial"), so a branch scored right
+  // after one is scored in that dip.
+  const int past = (from + steps + 1) % interval; // steps past the last step before a densification
+  return past == 0 ? steps : (past <= interval / 2 && steps - past >= 1 ? steps - past : steps - past + interval);
 }
 
 bool Trainer::EndPoseTrial(const std::string& how, std::string* error)

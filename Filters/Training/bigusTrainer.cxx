@@ -285,6 +285,14 @@ bool Trainer::InDensificationWindow() const
                                   : this->ScheduleFraction() <= DensifyEndFraction;
 }
 
+bool Trainer::IsSettled() const
+{
+  const DensificationSettings& d = this->Settings.Densification;
+  const int it = this->State.Iteration;
+  const bool dips = d.Enabled && d.Interval > 0 && it >= d.Start && this->InDensificationWindow();
+  return !this->InPoseTrial && (!dips || (it + 1) % d.Interval == 0);
+}
+
 StepStatus Trainer::Step(double* loss, std::string* error)
 {
   TrainingState& state = this->State;

@@ -211,6 +211,14 @@ public:
   /// sweeps are refined (IsSweepRefined).
   const PoseRefiner& GetPoseRefiner() const { return this->Poses; }
   int GetIteration() const { return this->State.Iteration; }
+  /**
+   * Whether the field, stopped now, is one the schedule would go on from without a pending repair: not inside the
+   * pose-refinement trial (an abort there ends the trial untested), and not in the dip of a densification (its splits
+   * cost the liver up to 10 dB held out for tens of steps; docs/FINDINGS.md, "A densification's dip and the pose
+   * trial"): the densification window is closed, or no densification has come yet, or the next step densifies. A
+   * caller that stops a run to score it mid-schedule (`bigus benchmark`'s marks) waits for this.
+   */
+  bool IsSettled() const;
   const TrainingData& GetData() const { return *this->Data; }
   const TrainingEngine& GetEngine() const { return *this->Engine; }
   SliceGeometry Slice(int frame) const { return this->Data->Slice(frame); }
@@ -277,13 +285,18 @@ private:
     const std::function<bool()>& abort, bool& stop, std::string* error);
   /**
    * RefinePoses Auto, where the rule chose to refine, at the refinement's start (PoseRefinementSettings::TrialSteps):
-   * TrialSteps steps on the tracked poses, then from the same state TrialSteps steps with refinement, each scored by
-   * the PSNR of the held-out validation frames at their tracked poses; the better branch goes on (the other's steps
-   * are spent time) and the RefinePoses line says what each scored. Without held-out frames (or data-parallel) the
-   * rule stands, its line says untested. The frames then join the fit unless HoldOutValidationFrames keeps them out.
+   * TrialSteps steps (PoseTrialSteps) on the tracked poses, then from the same state as many with refinement, each
+   * scored by the PSNR of the held-out validation frames at their tracked poses; the better branch goes on (the other's
+   * steps are spent time) and the RefinePoses line says what each scored. Without held-out frames (or data-parallel)
+   * the rule stands, its line says untested. The frames then join the fit unless HoldOutValidationFrames keeps them
+   * out.
    */
   bool TryPoseRefinement(double start, const std::function<void(double, int, double, std::int64_t)>& progress,
     const std::function<bool()>& abort, bool& stop, std::string* error);
+  /// The steps of each of the trial's branches from step @p from: the count nearest TrialSteps whose last step comes
+  /// just before a densification (where the densification window is open), so that no branch is scored in the dip
+  /// of the densification its last step would have made.
+  int PoseTrialSteps(int from) const;
   /// After the trial: the validation frames held out for it alone join the fit (validation goes on with them).
   bool EndPoseTrial(const std::string& how, std::string* error);
   /// Measures the validation loss; keeps a copy of the field when it is the best so far.

@@ -409,3 +409,48 @@ TEST(Densification, TheFinalPrunesBoundHoldsForWhatItRemovesTogether)
   EXPECT_LT(removed, 50); // ... and not the whole spot
   EXPECT_EQ(G.Field.Count(), field.Count() - removed);
 }
+
+// A caller that stops a run mid-schedule to score it (bigus benchmark's marks) waits for Trainer::IsSettled: inside
+// the densification window that is the step before a densification, not the dip after one, where the field's split
+// Gaussians have not yet recovered their fit; before the first densification and after the window, every step.
+TEST(Trainer, AStopThatWaitsForTheFieldToSettleEndsBeforeADensificationNotInItsDip)
+{
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(200, 7), 0.5, heldOut);
+  TrainerSettings s = ShortSettings();
+  s.Iterations = 400;
+  s.Densification.Start = 100;
+  s.Densification.Interval = 100;
+  s.Densification.End = 300;
+  Trainer trainer(data, s);
+  std::string error;
+  ASSERT_TRUE(trainer.Initialize(&error)) << error;
+  auto psnr = [&]() {
+    ImageMetrics metrics;
+    EXPECT_TRUE(trainer.EvaluateOn(trainer.GetData(), trainer.GetData().TrainFrames, metrics, &error)) << error;
+    return metrics.PSNR;
+  };
+  auto trainUntil = [&](int from, bool settled) {
+    ASSERT_TRUE(trainer.Train(
+      nullptr, [&]() { return trainer.GetIteration() >= from && (!settled || trainer.IsSettled()); }, &error))
+      << error;
+  };
+  trainUntil(50, true);
+  EXPECT_EQ(trainer.GetIteration(), 50) << "no densification yet: settled";
+  trainUntil(100, true);
+  EXPECT_EQ(trainer.GetIteration(), 199) << "the step before the densification of step 200";
+  const double before = psnr();
+  trainUntil(200, false);
+  ASSERT_EQ(trainer.GetIteration(), 200);
+  EXPECT_FALSE(trainer.IsSettled());
+  const double after = psnr();
+  trainUntil(200, true);
+  EXPECT_EQ(trainer.GetIteration(), 299);
+  const double recovered = psnr();
+  std::printf("training frames: %.2f dB at step 199, %.2f right after the densification of step 200, %.2f at 299\n",
+    before, after, recovered);
+  EXPECT_LT(after, before - 1) << "the densification's dip, which the settled stops skip";
+  EXPECT_GT(recovered, after + 1);
+  trainUntil(305, true);
+  EXPECT_EQ(trainer.GetIteration(), 305) << "the window closed at 300: settled";
+}

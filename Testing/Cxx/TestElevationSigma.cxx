@@ -309,24 +309,45 @@ TEST(PoseRefinementChoice, ARunStoppedInTheRefinedBranchKeepsTheTrustedBranchsSt
   ASSERT_EQ(trainer.GetSettings().Poses.RefinePoses, PoseRefinement::On) << "the rule refines this sweep";
   std::string error;
   ASSERT_TRUE(trainer.Initialize(&error)) << error;
-  // One abort check per step: 100 before the trial, the one that starts it, 100 in the trusted branch, 40 refined.
+  // One abort check per step: 100 before the trial, the one that starts it, 99 in the trusted branch (the branches
+  // end just before the densification of step 200: Trainer::PoseTrialSteps), 40 refined.
   int checks = 0;
   ASSERT_TRUE(trainer.Run(
-    nullptr, [&]() { return ++checks > 100 + 1 + 100 + 40; }, &error))
+    nullptr, [&]() { return ++checks > 100 + 1 + 99 + 40; }, &error))
     << error;
   EXPECT_EQ(trainer.GetReport().StopReason, "aborted");
-  EXPECT_EQ(trainer.GetIteration(), 200) << "the trusted branch's steps, not the refined branch's 140";
+  EXPECT_EQ(trainer.GetIteration(), 199) << "the trusted branch's steps, not the refined branch's 139";
   EXPECT_EQ(trainer.GetSettings().Poses.RefinePoses, PoseRefinement::Off);
   std::string said;
   for (const std::string& l : trainer.GetReport().Settings)
   {
     said += l.rfind("RefinePoses = ", 0) == 0 ? l : "";
   }
-  EXPECT_NE(said.find("RefinePoses = off (untested: the run stopped during the trial, 40 of its 100 steps with "
-                      "refinement; the 100 on the tracked poses kept"),
+  EXPECT_NE(said.find("RefinePoses = off (untested: the run stopped during the trial, 40 of its 99 steps with "
+                      "refinement; the 99 on the tracked poses kept"),
     std::string::npos)
     << said;
   EXPECT_TRUE(trainer.GetReport().PoseCorrections.empty());
+}
+
+// A stop that waits for the field to settle (Trainer::IsSettled; bigus benchmark's marks) lets the trial run both
+// branches and choose, where a plain abort inside it ends the trial untested (the test above).
+TEST(PoseRefinementChoice, AStopThatWaitsForTheFieldToSettleLetsTheTrialChoose)
+{
+  Trainer trainer(TrialSweep(), TrialSettings(1000, 100)); // the trial from step 100
+  std::string error;
+  ASSERT_TRUE(trainer.Initialize(&error)) << error;
+  int checks = 0;
+  ASSERT_TRUE(trainer.Train(
+    nullptr, [&]() { return ++checks > 100 + 1 + 50 && trainer.IsSettled(); }, &error))
+    << error;
+  EXPECT_EQ(trainer.GetIteration(), 199) << "the branch kept: 99 steps from step 100";
+  std::string said;
+  for (const std::string& l : trainer.GetReport().Settings)
+  {
+    said += l.rfind("RefinePoses = ", 0) == 0 ? l : "";
+  }
+  EXPECT_NE(said.find("measured: 99 steps each way from step 100"), std::string::npos) << said;
 }
 
 // Auto where the rule would refine (speckle correlates): the choice is measured, TrialSteps steps each way from the
@@ -367,7 +388,8 @@ TEST(PoseRefinementChoice, AutoRefinementIsMeasuredOnHeldOutFramesAtTheirTracked
       said += l.rfind("RefinePoses = ", 0) == 0 ? l : "";
     }
     std::printf("%s poses: %s\n", moved ? "perturbed" : "exact", said.c_str());
-    EXPECT_NE(said.find("measured: 300 steps each way"), std::string::npos) << said;
+    // 249 steps from step 150: the branches end at step 399, before the densification of step 400.
+    EXPECT_NE(said.find("measured: 249 steps each way from step 150"), std::string::npos) << said;
     double largest = 0;
     for (const TrainerReport::PoseCorrection& p : trainer.GetReport().PoseCorrections)
     {
