@@ -276,7 +276,7 @@ std::string UpdateGrowth(TrainingState& state, double validation, const Densific
 
 bool DensifyField(TrainingEngine& engine, const TrainingData& data, const RenderOptions& options, double gamma,
   const SeedShape& shape, const DensificationSettings& settings, std::int64_t maximumGaussians, double validation,
-  TrainingState& state, std::string& growthStopReason, std::string* error)
+  TrainingState& state, std::string& growthStopReason, std::string* error, DensificationResult* densified)
 {
   const DensificationSettings& d = settings;
   const std::string stopped = UpdateGrowth(state, validation, d);
@@ -302,6 +302,10 @@ bool DensifyField(TrainingEngine& engine, const TrainingData& data, const Render
       std::min<std::int64_t>(room, std::llround(d.ResidualSeedShare * result.Added)), state.Random, shape,
       state.Gaussians.Field);
     state.Gaussians.ResizeToField();
+  }
+  if (densified)
+  {
+    *densified = result;
   }
   if (state.Growing && result.MaximumReached)
   {

@@ -93,12 +93,13 @@ BIGUSTRAINING_EXPORT DensificationResult DensifyAndPrune(OptimizerState& G, bool
  * Image-GS's residuals rendered by @p engine before the field changes (ResidualSeedShare, RenderResiduals); EA-D
  * (DensifyAndPrune, splitting above SplitScalePixels x @p shape's pixel spacing); the residual seeds in the room
  * left under @p maximumGaussians (SeedResiduals with @p shape); growth stopped when the maximum is reached.
- * @p growthStopReason receives why growth stopped at this call, and is left as it is otherwise. Returns false with
- * @p error when a residual cannot be rendered.
+ * @p growthStopReason receives why growth stopped at this call, and is left as it is otherwise; @p result (when not
+ * null) what DensifyAndPrune split, cloned and pruned. Returns false with @p error when a residual cannot be rendered.
  */
 BIGUSTRAINING_EXPORT bool DensifyField(TrainingEngine& engine, const TrainingData& data, const RenderOptions& options,
   double gamma, const SeedShape& shape, const DensificationSettings& settings, std::int64_t maximumGaussians,
-  double validation, TrainingState& state, std::string& growthStopReason, std::string* error);
+  double validation, TrainingState& state, std::string& growthStopReason, std::string* error,
+  DensificationResult* result = nullptr);
 
 /**
  * The final prune: removes from @p G a set of Gaussians whose removal together changes no pixel inside the mask of a

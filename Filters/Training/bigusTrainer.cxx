@@ -287,10 +287,9 @@ bool Trainer::InDensificationWindow() const
 
 bool Trainer::IsSettled() const
 {
-  const DensificationSettings& d = this->Settings.Densification;
-  const int it = this->State.Iteration;
-  const bool dips = d.Enabled && d.Interval > 0 && it >= d.Start && this->InDensificationWindow();
-  return !this->InPoseTrial && (!dips || (it + 1) % d.Interval == 0);
+  // In the dip: from a densification that split or cloned to the step before the next one (a validation point).
+  const int since = this->State.Iteration - this->LastSplit;
+  return !this->InPoseTrial && (this->LastSplit < 0 || since < 0 || since >= this->Settings.Densification.Interval - 1);
 }
 
 StepStatus Trainer::Step(double* loss, std::string* error)
@@ -372,11 +371,13 @@ bool Trainer::DensifyAndPrune(double validation, std::string* error)
     ? static_cast<std::int64_t>(std::floor(double(s.MaximumGaussians) * double(n) / double(n + copies)))
     : s.MaximumGaussians;
   const bool growing = this->State.Growing;
+  DensificationResult densified;
   if (!DensifyField(*this->Engine, *this->Data, this->Options(), this->Gamma, this->SeedShapeOf(), s.Densification,
-        maximum, validation, this->State, this->Report.GrowthStopReason, error))
+        maximum, validation, this->State, this->Report.GrowthStopReason, error, &densified))
   {
     return false;
   }
+  this->LastSplit = densified.Added > 0 ? this->State.Iteration : this->LastSplit;
   if (growing && !this->State.Growing && copies > 0 && this->Report.GrowthStopReason.rfind("hard maximum", 0) == 0)
   {
     this->Report.GrowthStopReason += vtkfmt::sprintf("; MaximumGaussians %lld less room for the copies gap filling "

@@ -215,8 +215,9 @@ public:
    * Whether the field, stopped now, is one the schedule would go on from without a pending repair: not inside the
    * pose-refinement trial (an abort there ends the trial untested), and not in the dip of a densification (its splits
    * cost the liver up to 10 dB held out for tens of steps; docs/FINDINGS.md, "A densification's dip and the pose
-   * trial"): the densification window is closed, or no densification has come yet, or the next step densifies. A
-   * caller that stops a run to score it mid-schedule (`bigus benchmark`'s marks) waits for this.
+   * trial"): no densification has split or cloned a Gaussian in the last Interval - 1 steps (the step before the next
+   * densification is settled). A caller that stops a run to score it mid-schedule (`bigus
+   * benchmark`'s marks) waits for this.
    */
   bool IsSettled() const;
   const TrainingData& GetData() const { return *this->Data; }
@@ -342,6 +343,7 @@ private:
   bool SigmaByRule = false;           // ElevationSigma came from the rule (MeasureOnHeldOutFrames may measure it)
   PoseRefiner Poses;
   bool InPoseTrial = false; // TryPoseRefinement is running its branches: no checkpoint, no join
+  int LastSplit = -1;       // the iteration of the last densification that split or cloned (IsSettled)
   std::vector<float> S;     // scratch for RenderFrame
 };
 

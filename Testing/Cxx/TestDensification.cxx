@@ -410,15 +410,16 @@ TEST(Densification, TheFinalPrunesBoundHoldsForWhatItRemovesTogether)
   EXPECT_EQ(G.Field.Count(), field.Count() - removed);
 }
 
-// A caller that stops a run mid-schedule to score it (bigus benchmark's marks) waits for Trainer::IsSettled: inside
-// the densification window that is the step before a densification, not the dip after one, where the field's split
-// Gaussians have not yet recovered their fit; before the first densification and after the window, every step.
+// A caller that stops a run mid-schedule to score it (bigus benchmark's marks) waits for Trainer::IsSettled: after a
+// densification that split or cloned, the step before the next densification, not the dip after one, where the
+// field's split Gaussians have not yet recovered their fit; before the first densification, and from the step before
+// where the next would come once the window has closed, every step.
 TEST(Trainer, AStopThatWaitsForTheFieldToSettleEndsBeforeADensificationNotInItsDip)
 {
   std::vector<int> heldOut;
   const TrainingData data = SyntheticSweep(KnownField(200, 7), 0.5, heldOut);
   TrainerSettings s = ShortSettings();
-  s.Iterations = 400;
+  s.Iterations = 500;
   s.Densification.Start = 100;
   s.Densification.Interval = 100;
   s.Densification.End = 300;
@@ -452,5 +453,18 @@ TEST(Trainer, AStopThatWaitsForTheFieldToSettleEndsBeforeADensificationNotInItsD
   EXPECT_LT(after, before - 1) << "the densification's dip, which the settled stops skip";
   EXPECT_GT(recovered, after + 1);
   trainUntil(305, true);
-  EXPECT_EQ(trainer.GetIteration(), 305) << "the window closed at 300: settled";
+  EXPECT_EQ(trainer.GetIteration(), 399) << "the window's last densification, at step 300, split too";
+  trainUntil(420, true);
+  EXPECT_EQ(trainer.GetIteration(), 420) << "no densification since: settled";
+
+  // A densification that only prunes (no room under the maximum) makes no dip: settled at every step.
+  TrainerSettings full = s;
+  full.MaximumGaussians = s.Seeding.InitialGaussians;
+  Trainer capped(data, full);
+  ASSERT_TRUE(capped.Initialize(&error)) << error;
+  ASSERT_TRUE(capped.Train(
+    nullptr, [&]() { return capped.GetIteration() >= 150 && capped.IsSettled(); }, &error))
+    << error;
+  EXPECT_EQ(capped.GetIteration(), 150);
+  EXPECT_LE(capped.GetField().Count(), full.MaximumGaussians);
 }
