@@ -298,6 +298,17 @@ TrainingData TrialSweep()
   std::vector<int> heldOut;
   return Sweep(SpeckleField(12000, 20.0, 7), 0.6, 0.2, 80, heldOut);
 }
+
+/// The report's RefinePoses setting line ("" without one).
+std::string RefinePosesLine(const Trainer& trainer)
+{
+  std::string said;
+  for (const std::string& l : trainer.GetReport().Settings)
+  {
+    said += l.rfind("RefinePoses = ", 0) == 0 ? l : "";
+  }
+  return said;
+}
 }
 
 // A run that stops in the trial's refined branch (here an abort 40 steps into it; on a short time budget, the budget)
@@ -318,11 +329,7 @@ TEST(PoseRefinementChoice, ARunStoppedInTheRefinedBranchKeepsTheTrustedBranchsSt
   EXPECT_EQ(trainer.GetReport().StopReason, "aborted");
   EXPECT_EQ(trainer.GetIteration(), 199) << "the trusted branch's steps, not the refined branch's 139";
   EXPECT_EQ(trainer.GetSettings().Poses.RefinePoses, PoseRefinement::Off);
-  std::string said;
-  for (const std::string& l : trainer.GetReport().Settings)
-  {
-    said += l.rfind("RefinePoses = ", 0) == 0 ? l : "";
-  }
+  const std::string said = RefinePosesLine(trainer);
   EXPECT_NE(said.find("RefinePoses = off (untested: the run stopped during the trial, 40 of its 99 steps with "
                       "refinement; the 99 on the tracked poses kept"),
     std::string::npos)
@@ -342,11 +349,7 @@ TEST(PoseRefinementChoice, AStopThatWaitsForTheFieldToSettleLetsTheTrialChoose)
     nullptr, [&]() { return ++checks > 100 + 1 + 50 && trainer.IsSettled(); }, &error))
     << error;
   EXPECT_EQ(trainer.GetIteration(), 199) << "the branch kept: 99 steps from step 100";
-  std::string said;
-  for (const std::string& l : trainer.GetReport().Settings)
-  {
-    said += l.rfind("RefinePoses = ", 0) == 0 ? l : "";
-  }
+  const std::string said = RefinePosesLine(trainer);
   EXPECT_NE(said.find("measured: 99 steps each way from step 100"), std::string::npos) << said;
 }
 
@@ -382,11 +385,7 @@ TEST(PoseRefinementChoice, AutoRefinementIsMeasuredOnHeldOutFramesAtTheirTracked
     std::string error;
     ASSERT_TRUE(trainer.Initialize(&error)) << error;
     ASSERT_TRUE(trainer.Run(nullptr, nullptr, &error)) << error;
-    std::string said;
-    for (const std::string& l : trainer.GetReport().Settings)
-    {
-      said += l.rfind("RefinePoses = ", 0) == 0 ? l : "";
-    }
+    const std::string said = RefinePosesLine(trainer);
     std::printf("%s poses: %s\n", moved ? "perturbed" : "exact", said.c_str());
     // 249 steps from step 150: the branches end at step 399, before the densification of step 400.
     EXPECT_NE(said.find("measured: 249 steps each way from step 150"), std::string::npos) << said;
