@@ -282,6 +282,7 @@ bigusTrainerSetting(GrowthMargin, double, Densification.GrowthMargin, 0.0, 1.0)
 bigusTrainerSetting(GrowthPatience, int, Densification.GrowthPatience, 1, VTK_INT_MAX)
 bigusTrainerSetting(FillGaps, bool, FillGaps, bigusAnyValue(bool))
 bigusTrainerSetting(MergeTolerance, double, Merge.Tolerance, 0.0, 1.0)
+bigusTrainerSetting(ParameterAverage, double, ParameterAverage, 0.0, 1.0)
 bigusTrainerSetting(Seed, unsigned int, Seed, bigusAnyValue(unsigned int))
 bigusTrainerSetting(FramesPerStep, int, FramesPerStep, 1, 4096)
 bigusTrainerSetting(CoarseFraction, double, CoarseFraction, 0.0, 1.0)
@@ -760,6 +761,7 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
      << "\n";
   os << indent << "FillGaps: " << this->GetFillGaps() << "\n";
   os << indent << "MergeTolerance: " << this->GetMergeTolerance() << "\n";
+  os << indent << "ParameterAverage: " << this->GetParameterAverage() << "\n";
   os << indent << "HoldOutEvery: " << this->HoldOutEvery << ", HoldOutOffset: " << this->HoldOutOffset
      << ", HoldOutSweep: " << this->HoldOutSweep << "\n";
   os << indent << "TrainingFrameList: " << (this->TrainingFrameList ? this->TrainingFrameList->GetNumberOfIds() : 0)

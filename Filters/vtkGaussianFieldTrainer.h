@@ -291,6 +291,13 @@ public:
   virtual void SetMergeTolerance(double value);
   virtual double GetMergeTolerance() const;
   ///@}
+  ///@{ The trained field is an exponential moving average of its parameters (and pose corrections) over the
+  /// schedule's tail, from the densification window's close, with this time constant as a fraction of the schedule
+  /// (Polyak averaging; bigusParameterAverage.h; default 0.0625, 0 = off: the last step's field). The setting line
+  /// `ParameterAverage` in field data TrainingSettings says which steps it averaged.
+  virtual void SetParameterAverage(double value);
+  virtual double GetParameterAverage() const;
+  ///@}
   ///@{ Which frames to train on: all valid frames except those with index % HoldOutEvery ==
   /// HoldOutOffset (HoldOutEvery 0 = none; the index within the frame's own sweep), or the explicit list
   /// when one is set (an index outside the input fails the request); with HoldOutSweep >= 0 (default -1,

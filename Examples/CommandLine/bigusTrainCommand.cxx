@@ -457,13 +457,14 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
     for (vtkIdType i = 0; i < lines->GetNumberOfValues(); ++i)
     {
       // What the run decided after its settings were printed: the pose-refinement trial, the anchor, the route
-      // trial (and, where it took the grid, the grid's own choices).
+      // trial (and, where it took the grid, the grid's own choices), the steps the parameter average took.
       const std::string& line = lines->GetValue(i);
       const bool grid = trainer->GetStopReason() &&
         std::string(trainer->GetStopReason())
             .find("the pixel grid, "
                   "measured") == 0;
       if (line.rfind("PoseAnchor = ", 0) == 0 ||
+        (line.rfind("ParameterAverage = ", 0) == 0 && line.find("; made the field") != std::string::npos) ||
         (line.rfind("RefinePoses = ", 0) == 0 && line.find("measured: ") != std::string::npos) ||
         (line.rfind("Route = ", 0) == 0 && line.find("(measured on ") != std::string::npos) ||
         (grid &&
@@ -731,6 +732,13 @@ Command AddTrainCommand(CLI::App& app)
     ->add_option("--merge-tolerance", settings.Merge.Tolerance,
       "Last, merge neighbouring Gaussians whose moment-matched merge has a relative integrated squared error "
       "below this (as bigus merge does); 0: off")
+    ->capture_default_str()
+    ->check(FiniteRange(0.0, 1.0));
+  trainCommand
+    ->add_option("--parameter-average", settings.ParameterAverage,
+      "The run's field is an exponential moving average of its parameters over the schedule's tail (from the "
+      "densification window's close) with this time constant, a fraction of the schedule; 0: off, the last step's "
+      "field")
     ->capture_default_str()
     ->check(FiniteRange(0.0, 1.0));
   trainCommand

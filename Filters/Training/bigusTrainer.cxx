@@ -1,6 +1,8 @@
 // The BIGUS training loop (see bigusTrainer.h and DESIGN section 4).
 #include "bigusTrainer.h"
 
+#include "bigusParameterAverage.h"
+
 #include <vtk_fmt.h>
 // clang-format off
 #include VTK_FMT(fmt/printf.h)
@@ -387,6 +389,54 @@ bool Trainer::DensifyAndPrune(double validation, std::string* error)
   return this->PushState(error);
 }
 
+bool Trainer::SampleParameterAverage(bool window, std::string* error)
+{
+  // The field's structure is fixed from the window's close on: no densification, the validation frames joined.
+  const int it = this->State.Iteration;
+  if (this->Settings.ParameterAverage <= 0 || window || it % AverageInterval != 0 || !this->HeldOutValidation.empty() ||
+    this->Report.Route.Pending || this->InPoseTrial || this->Poses.IsTrialPending())
+  {
+    return true;
+  }
+  if (!this->HostCurrent && !this->Engine->PullField(this->AverageSample, error))
+  {
+    return false;
+  }
+  AccumulateParameterAverage(this->State, this->HostCurrent ? this->State.Gaussians.Field : this->AverageSample, it,
+    this->ScheduleFraction(), this->Settings.ParameterAverage);
+  return true;
+}
+
+bool Trainer::UseParameterAverage(std::string* error)
+{
+  if (this->State.AverageSamples == 0)
+  {
+    return true;
+  }
+  if (!this->PullState(error))
+  {
+    return false;
+  }
+  const int from = this->State.AverageStart, samples = this->State.AverageSamples;
+  if (!ApplyParameterAverage(this->State))
+  {
+    return true;
+  }
+  this->Poses.ComposePoses(this->State);
+  TrainerReport& r = this->Report;
+  r.AverageSamples = samples;
+  r.AverageFrom = from;
+  r.AverageTo = this->State.Iteration;
+  for (std::string& line : r.Settings)
+  {
+    if (line.rfind("ParameterAverage = ", 0) == 0)
+    {
+      line += vtkfmt::sprintf("; made the field at step %d: %d samples from step %d", r.AverageTo, samples, from);
+    }
+  }
+  return this->PushState(error);
+}
+
 bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>& progress,
   const std::function<bool()>& abort, std::string* error)
 {
@@ -418,6 +468,8 @@ bool Trainer::Train(const std::function<void(double, int, double, std::int64_t)>
   {
     ok = this->Iterate(start, progress, abort, stop, error);
   }
+  // The schedule ended (not a stop asked for): the run's field is the average.
+  ok = ok && (this->Report.StopReason == "aborted" || this->UseParameterAverage(error));
   this->Report.Iterations = state.Iteration;
   this->Report.Seconds += SteadySeconds() - start;
   this->Report.Gamma = this->Gamma;
@@ -514,6 +566,10 @@ bool Trainer::Iterate(double start, const std::function<void(double, int, double
   {
     return false;
   }
+  if (!this->SampleParameterAverage(window, error))
+  {
+    return false;
+  }
   if (s.ConvergenceTolerance > 0 && it % 200 == 0 && recent.Count > 0)
   {
     const double mean = recent.Sum / recent.Count;
@@ -546,6 +602,11 @@ bool Trainer::Finish(std::string* error)
   if (this->Report.GrowthStopReason.empty() && (!s.Densification.Enabled || this->DensificationEnded))
   {
     this->Report.GrowthStopReason = s.Densification.Enabled ? "densification schedule ended" : "densification off";
+  }
+  // A run stopped before its schedule's end delivers the average too; early stopping then weighs it.
+  if (!this->UseParameterAverage(error))
+  {
+    return false;
   }
   // Early stopping: keep the best field seen when the last one scores worse on the validation frames.
   double last = 0;

@@ -89,6 +89,10 @@ struct TrainerReport
   /// RefinePoses: the rigid motion that moved the field and the poses onto the tracked poses at the end
   /// (PoseRefiner::AnchorToTrackedPoses); its line is in Settings.
   PoseAnchor Anchor;
+  /// ParameterAverage: the average made the field (when the schedule ended, or in Finish) of AverageSamples samples
+  /// from step AverageFrom to AverageTo; 0 samples: the last step's field (off, or the run ended before the
+  /// densification window closed).
+  int AverageSamples = 0, AverageFrom = -1, AverageTo = -1;
   /// RefineTimeOffset: the offset (s) added to every frame's timestamp to find its tracked pose.
   double TimeOffset = 0;
   /// RefineImageToProbe: the correction of every frame (rotation vector, rad; translation, mm; CorrectPose).
@@ -251,6 +255,11 @@ private:
     return (this->Settings.ReflectivitySolve || this->PixelGrid) && !this->Settings.NonNegativeReflectivity;
   }
   bool DensifyAndPrune(double validation, std::string* error);
+  /// ParameterAverage: a sample of the field into the average every AverageInterval steps once the field's structure
+  /// is fixed (out of the densification window, after the validation frames joined, no trial pending).
+  bool SampleParameterAverage(bool window, std::string* error);
+  /// The average made the field (ApplyParameterAverage), its poses composed, the report and setting line told.
+  bool UseParameterAverage(std::string* error);
   /// The Adam route: the validation frames (HeldOutChoiceSettings::ValidationStride) taken out of the fit, and their
   /// setting line; too few, the training frames ValidationFrames chooses.
   void HoldOutValidationFrames();
@@ -342,9 +351,10 @@ private:
   bool Resuming = false;              // SetResuming
   bool SigmaByRule = false;           // ElevationSigma came from the rule (MeasureOnHeldOutFrames may measure it)
   PoseRefiner Poses;
-  bool InPoseTrial = false; // TryPoseRefinement is running its branches: no checkpoint, no join
-  int LastSplit = -1;       // the iteration of the last densification that split or cloned (IsSettled)
-  std::vector<float> S;     // scratch for RenderFrame
+  bool InPoseTrial = false;    // TryPoseRefinement is running its branches: no checkpoint, no join
+  int LastSplit = -1;          // the iteration of the last densification that split or cloned (IsSettled)
+  GaussianField AverageSample; // the engine's field, pulled for the parameter average
+  std::vector<float> S;        // scratch for RenderFrame
 };
 
 } // namespace bigus

@@ -84,6 +84,12 @@ std::vector<std::string> DescribeTrainerSettings(const TrainerSettings& s)
       : std::string("FinalPrune = off"),
     DescribeGapFillingSettings(s.FillGaps, s.BeamIntegration, s.GapFilling), DescribeGaussianMergeSettings(s.Merge),
     DescribeReflectivitySolve(s.ReflectivitySolve, s.NonNegativeReflectivity, s.Solve, s.SolveInterval),
+    s.ParameterAverage > 0
+      ? vtkfmt::sprintf("ParameterAverage = %.4g (the run's field: an exponential moving average of the parameters "
+                        "and pose corrections from the densification window's close, time constant %.4g of the "
+                        "schedule)",
+          s.ParameterAverage, s.ParameterAverage)
+      : std::string("ParameterAverage = off (the run's field: the last step's)"),
     vtkfmt::sprintf("Seed = %u, FramesPerStep = %d, Cutoff = %.3g, SparseAdam = %s%s", s.Seed, s.FramesPerStep,
       s.Cutoff, s.SparseAdam ? "on" : "off",
       s.CoarseFraction > 0

@@ -88,6 +88,12 @@ struct TrainerSettings
   double LogScaleLearningRate = 0.01;
   double QuaternionLearningRate = 0.005;
   double ReflectivityLearningRate = 0.01;
+  /// The run's field is the average of its parameters (and pose corrections) over the schedule's tail: an
+  /// exponential moving average with this time constant (a fraction of the schedule), sampled every AverageInterval
+  /// steps from the densification window's close (once the validation frames joined the fit) and made the field when
+  /// the schedule ends or Finish runs (bigusParameterAverage.h; docs/FINDINGS.md, "The parameter average"). 0: off,
+  /// the last step's field.
+  double ParameterAverage = 0.0625;
   /// L1 0.8 + D-SSIM 0.2 (3D Gaussian splatting's balance); the focal frequency loss off (its two DFTs cost about as
   /// much as the rest of the loss).
   ImageLossWeights Loss;
@@ -118,9 +124,9 @@ struct TrainerSettings
 
 /**
  * The `setting` lines (TrainerReport::Settings) that @p s alone fixes, in the report's order: the schedule
- * (Iterations, TimeBudget), densification, gap filling, merge, the reflectivity solve, and the step's own (Seed,
- * FramesPerStep, Cutoff, SparseAdam, the resolution schedule). The lines of choices made from the data
- * (ElevationSigma, the poses, seeding, gamma) are written by the stages that make them.
+ * (Iterations, TimeBudget), densification, gap filling, merge, the reflectivity solve, the parameter average, and the
+ * step's own (Seed, FramesPerStep, Cutoff, SparseAdam, the resolution schedule). The lines of choices made from the
+ * data (ElevationSigma, the poses, seeding, gamma) are written by the stages that make them.
  */
 BIGUSTRAINING_EXPORT std::vector<std::string> DescribeTrainerSettings(const TrainerSettings& s);
 

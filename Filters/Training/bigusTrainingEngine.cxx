@@ -475,7 +475,7 @@ bool TrainingState::Save(const std::string& file, double gamma, std::string* err
   const std::string temporary = TemporaryName(file);
   {
     std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
-    out.write("BIGUSCK6", 8);
+    out.write("BIGUSCK7", 8);
     Put(out, std::int32_t(this->Iteration));
     Put(out, this->LearningRateScale);
     Put(out, gamma);
@@ -525,6 +525,17 @@ bool TrainingState::Save(const std::string& file, double gamma, std::string* err
     Put(out, this->DataDigest);
     Put(out, std::uint32_t(this->RunSettings.size()));
     out.write(this->RunSettings.data(), static_cast<std::streamsize>(this->RunSettings.size()));
+    Put(out, std::int32_t(this->AverageSamples));
+    Put(out, std::int32_t(this->AverageStart));
+    Put(out, this->AverageFraction);
+    Put(out, std::int64_t(this->AverageField.Count()));
+    WriteField(out, this->AverageField);
+    Put(out, std::int64_t(this->AveragePoseCorrections.size()));
+    for (const std::array<double, 6>& xi : this->AveragePoseCorrections)
+    {
+      out.write(reinterpret_cast<const char*>(xi.data()), sizeof(double) * 6);
+    }
+    out.write(reinterpret_cast<const char*>(this->AverageSharedPoseCorrection.data()), sizeof(double) * 7);
     out.close();
     if (!out)
     {
@@ -562,12 +573,12 @@ bool TrainingState::Load(const std::string& file, double& gamma, std::string* er
     return fail("cannot open the checkpoint");
   }
   char magic[8];
-  if (!in.read(magic, 8) || std::memcmp(magic, "BIGUSCK", 7) != 0 || magic[7] < '1' || magic[7] > '6')
+  if (!in.read(magic, 8) || std::memcmp(magic, "BIGUSCK", 7) != 0 || magic[7] < '1' || magic[7] > '7')
   {
     return fail("not a BIGUS checkpoint (bad magic)");
   }
   const bool withBest = magic[7] >= '2', withSeconds = magic[7] >= '3', withPoses = magic[7] >= '4',
-             withShared = magic[7] >= '5', withRun = magic[7] >= '6';
+             withShared = magic[7] >= '5', withRun = magic[7] >= '6', withAverage = magic[7] >= '7';
   TrainingState s;
   std::int32_t iteration, growing, stalled, rolled;
   double storedGamma;
@@ -675,6 +686,35 @@ bool TrainingState::Load(const std::string& file, double& gamma, std::string* er
   if (settingsLength > 0 && !in.read(&s.RunSettings[0], settingsLength))
   {
     return fail("truncated run settings");
+  }
+  if (withAverage)
+  {
+    std::int32_t samples = 0, start = 0;
+    std::int64_t averaged = 0, corrections = 0;
+    if (!Get(in, samples) || !Get(in, start) || !Get(in, s.AverageFraction) || !Get(in, averaged) || samples < 0 ||
+      start < 0 || !(s.AverageFraction >= 0 && s.AverageFraction <= 1) || (averaged != 0 && averaged != n) ||
+      (samples > 0) != (averaged > 0) || !ReadField(in, s.AverageField, averaged))
+    {
+      return fail("truncated or invalid parameter average");
+    }
+    if (!Get(in, corrections) || (corrections != 0 && corrections != poses))
+    {
+      return fail("truncated or invalid parameter average's pose corrections");
+    }
+    s.AveragePoseCorrections.resize(corrections);
+    for (std::array<double, 6>& xi : s.AveragePoseCorrections)
+    {
+      if (!in.read(reinterpret_cast<char*>(xi.data()), sizeof(double) * 6))
+      {
+        return fail("truncated parameter average's pose corrections");
+      }
+    }
+    if (!in.read(reinterpret_cast<char*>(s.AverageSharedPoseCorrection.data()), sizeof(double) * 7))
+    {
+      return fail("truncated parameter average's pose corrections");
+    }
+    s.AverageSamples = samples;
+    s.AverageStart = start;
   }
   s.BestFieldIteration = bestIteration;
   std::istringstream state(text);

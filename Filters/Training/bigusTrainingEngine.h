@@ -174,13 +174,20 @@ struct BIGUSTRAINING_EXPORT TrainingState
   /// them with it. Empty / zero without pose refinement.
   std::vector<std::array<double, 6>> BestPoseCorrections;
   std::array<double, 7> BestSharedPoseCorrection{};
+  // The parameter average over the schedule's tail (TrainerSettings::ParameterAverage, bigusParameterAverage.h)
+  GaussianField AverageField;                                ///< empty until its first sample
+  std::vector<std::array<double, 6>> AveragePoseCorrections; ///< the average of PoseCorrections
+  std::array<double, 7> AverageSharedPoseCorrection{};       ///< the average of SharedPoseCorrection
+  int AverageSamples = 0;                                    ///< samples mixed in; 0: no average
+  int AverageStart = 0;                                      ///< the iteration of its first sample
+  double AverageFraction = 0;                                ///< the schedule fraction of its last sample
   // What the state was trained on, so that a resume on other data or settings is refused (Trainer::LoadCheckpoint):
   std::uint64_t DataDigest = 0; ///< TrainingDataDigest of the run's data; 0: unknown (a file before "BIGUSCK6")
   std::string RunSettings;      ///< the settings a resume must share, "name = value" lines; empty: unknown
 
   /**
    * Writes the state to @p file (written to FILE.tmp, then renamed; the previous file survives a
-   * failure). Little-endian binary, "BIGUSCK6" | int32 iteration | float64 learning-rate scale |
+   * failure). Little-endian binary, "BIGUSCK7" | int32 iteration | float64 learning-rate scale |
    * float64 gamma | int32 growing | float64 best validation loss | int32 stalled growth steps |
    * int32 rolled-back steps | uint32 length + text of the random engine state | int64 N | field, Adam
    * m, Adam v: each [N,3] means, [N,3] log-scales, [N,4] quaternions, [N] reflectivities as float32 |
@@ -189,10 +196,13 @@ struct BIGUSTRAINING_EXPORT TrainingState
    * seconds | int64 P (frames with a pose correction; 0 without pose refinement) | P x (6 float64
    * correction, 6 float64 Adam m, 6 float64 Adam v, int32 steps) | 7 float64 shared correction, 7 Adam m,
    * 7 Adam v, int32 steps | int64 B + B x 6 float64 and 7 float64: the corrections of the best field | uint64 data
-   * digest | uint32 length + text of the run settings. Load also reads "BIGUSCK5" files (no data digest or run
-   * settings: a resume cannot check them), "BIGUSCK4" files (no shared correction), "BIGUSCK3" files (no pose
-   * corrections), "BIGUSCK2" files (no training seconds either: a time budget starts afresh) and "BIGUSCK1" files
-   * (neither those nor a best field: early stopping starts afresh too). Returns false with @p error naming the file.
+   * digest | uint32 length + text of the run settings | int32 average samples | int32 its first iteration | float64
+   * its last schedule fraction | int64 A + the average field as above | int64 Q + Q x 6 float64 | 7 float64: the
+   * average's pose corrections. Load also reads "BIGUSCK6" files (no parameter average: it starts afresh),
+   * "BIGUSCK5" files (no data digest or run settings: a resume cannot check them), "BIGUSCK4" files (no shared
+   * correction), "BIGUSCK3" files (no pose corrections), "BIGUSCK2" files (no training seconds either: a time budget
+   * starts afresh) and "BIGUSCK1" files (neither those nor a best field: early stopping starts afresh too). Returns
+   * false with @p error naming the file.
    */
   bool Save(const std::string& file, double gamma, std::string* error) const;
   /// Reads a state written by Save; on failure (@p error names the file and what is wrong: bad magic,

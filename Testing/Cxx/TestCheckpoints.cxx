@@ -211,7 +211,23 @@ TEST(Trainer, AResumedRunCountsTheSecondsBeforeItsCheckpointTowardsItsTimeBudget
   // ends with their count 0) with the training seconds, version 2 (no training seconds either) with none.
   std::ifstream in(checkpoint, std::ios::binary);
   std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  ASSERT_EQ(bytes.compare(0, 8, "BIGUSCK6"), 0);
+  ASSERT_EQ(bytes.compare(0, 8, "BIGUSCK7"), 0);
+  // Version 6: no parameter average (the file ends with it: two counts, a fraction, the averaged field with its
+  // count, no pose corrections with their count, 7 doubles); here it had started, the window having closed at 60 %.
+  const std::int64_t averaged = first.GetState().AverageField.Count();
+  ASSERT_GT(first.GetState().AverageSamples, 0);
+  ASSERT_EQ(averaged, first.GetField().Count());
+  bytes = bytes.substr(0,
+    bytes.size() - 2 * sizeof(std::int32_t) - sizeof(double) - 2 * sizeof(std::int64_t) -
+      static_cast<std::size_t>(averaged) * 11 * sizeof(float) - 7 * sizeof(double));
+  bytes[7] = '6';
+  std::ofstream(checkpoint + ".v6", std::ios::binary) << bytes;
+  TrainingState six;
+  double sixGamma = 0;
+  ASSERT_TRUE(six.Load(checkpoint + ".v6", sixGamma, &error)) << error;
+  EXPECT_EQ(six.TrainingSeconds, saved);
+  EXPECT_EQ(six.AverageSamples, 0) << "a file before the average: it starts afresh";
+  EXPECT_EQ(six.RunSettings, first.GetState().RunSettings);
   // Version 5: no data digest and run settings (the file ends with them).
   bytes =
     bytes.substr(0, bytes.size() - sizeof(std::uint64_t) - sizeof(std::uint32_t) - first.GetState().RunSettings.size());
@@ -245,6 +261,7 @@ TEST(Trainer, AResumedRunCountsTheSecondsBeforeItsCheckpointTowardsItsTimeBudget
   std::remove((checkpoint + ".v2").c_str());
   std::remove((checkpoint + ".v4").c_str());
   std::remove((checkpoint + ".v5").c_str());
+  std::remove((checkpoint + ".v6").c_str());
 }
 
 TEST(Trainer, CheckpointHoldsTheWholeTrainingState)

@@ -128,17 +128,20 @@ TEST(GaussianFieldTrainer, PipelineOutputsTheFieldOfTheDataModel)
     stored += settings->GetValue(k) + "\n";
   }
   // The lines announced before training, as stored: the run's later decisions rewrite the RefinePoses and
-  // Validation lines (the pose-refinement trial) and add lines at the end (PoseAnchor).
+  // Validation lines (the pose-refinement trial) and the ParameterAverage line (which steps it averaged), and add
+  // lines at the end (PoseAnchor).
   std::istringstream storedLines(stored), announcedLines(announced.Text);
   for (std::string said, kept; std::getline(announcedLines, said);)
   {
     ASSERT_TRUE(static_cast<bool>(std::getline(storedLines, kept))) << said;
     const std::string key = said.substr(0, said.find(" = ") + 3);
-    EXPECT_TRUE(kept == said || (kept.rfind(key, 0) == 0 && (key == "RefinePoses = " || key == "Validation = ")))
+    EXPECT_TRUE(kept == said ||
+      (kept.rfind(key, 0) == 0 && (key == "RefinePoses = " || key == "Validation = " || key == "ParameterAverage = ")))
       << "announced: " << said << "\nstored: " << kept;
   }
-  for (const char* line : { "FanMask = estimated from the frames", "ElevationSigma = ", "(chosen: ", "Gamma = ",
-         "InitialGaussians = 500 (given", "Iterations = 150", "Densification = every 200 steps" })
+  for (const char* line : { "FanMask = estimated from the frames",
+         "ElevationSigma = ", "(chosen: ", "Gamma = ", "InitialGaussians = 500 (given", "Iterations = 150",
+         "Densification = every 200 steps", "; made the field at step 150: " })
   {
     EXPECT_NE(stored.find(line), std::string::npos) << line << " not in\n" << stored;
   }
