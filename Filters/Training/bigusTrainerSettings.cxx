@@ -87,7 +87,8 @@ std::vector<std::string> DescribeTrainerSettings(const TrainerSettings& s)
     s.ParameterAverage > 0
       ? vtkfmt::sprintf("ParameterAverage = %.4g (the run's field: an exponential moving average of the parameters "
                         "and pose corrections from the densification window's close, time constant %.4g of the "
-                        "schedule)",
+                        "schedule; against the last field +0.46 dB on the liver's held-out frames at 600 s, "
+                        "docs/FINDINGS.md)",
           s.ParameterAverage, s.ParameterAverage)
       : std::string("ParameterAverage = off (the run's field: the last step's)"),
     vtkfmt::sprintf("Seed = %u, FramesPerStep = %d, Cutoff = %.3g, SparseAdam = %s%s", s.Seed, s.FramesPerStep,
