@@ -1,6 +1,6 @@
 // Checkpoints (bigus::TrainingState::Save, Load; Trainer::SaveCheckpoint, LoadCheckpoint): a resumed run is the
-// run that went straight through, with its pose corrections and its time budget; the file holds the whole state;
-// files of earlier formats load, bad and truncated ones are refused.
+// run that went straight through, with its pose corrections, its parameter average and its time budget; the file holds
+// the whole state; files of earlier formats load, bad and truncated ones are refused.
 #include "bigusTrainer.h"
 #include "bigusTrainingTestUtilities.h"
 
@@ -27,27 +27,47 @@ TEST(Trainer, ResumingFromACheckpointGivesTheSameField)
   Trainer straight(data, ShortSettings());
   ASSERT_TRUE(straight.Initialize(&error));
   ASSERT_TRUE(straight.Run(nullptr, nullptr, &error)) << error;
+  ASSERT_GT(straight.GetReport().AverageSamples, 0);
 
   const std::string checkpoint = std::string(BIGUS_TEST_OUTPUT) + "/trainer.ckpt";
-  TrainerSettings s = ShortSettings();
-  s.CheckpointFile = checkpoint;
-  s.CheckpointInterval = 110; // after the first densification, so its state is in the file too
-  Trainer first(data, s);
-  ASSERT_TRUE(first.Initialize(&error));
-  ASSERT_TRUE(first.Run(
-    nullptr, [&]() { return first.GetIteration() >= 110; }, &error))
-    << error;
-  EXPECT_EQ(first.GetReport().StopReason, "aborted");
+  // After the first densification, so that its state is in the file too; inside the parameter average (from the
+  // window's close at step 150, a sample every 10 steps), so that the average is.
+  for (const int at : { 110, 180 })
+  {
+    TrainerSettings s = ShortSettings();
+    s.CheckpointFile = checkpoint;
+    s.CheckpointInterval = at;
+    Trainer first(data, s);
+    ASSERT_TRUE(first.Initialize(&error));
+    ASSERT_TRUE(first.Run(
+      nullptr, [&]() { return first.GetIteration() >= at; }, &error))
+      << error;
+    EXPECT_EQ(first.GetReport().StopReason, "aborted");
+    TrainingState saved;
+    double gamma = 0;
+    ASSERT_TRUE(saved.Load(checkpoint, gamma, &error)) << error;
+    EXPECT_EQ(saved.AverageSamples, at == 180 ? 3 : 0);
+    if (at == 180)
+    {
+      EXPECT_EQ(saved.AverageStart, 160);
+      EXPECT_DOUBLE_EQ(saved.AverageFraction, 0.9);
+      ASSERT_EQ(saved.AverageField.Count(), saved.Gaussians.Count());
+      EXPECT_NE(saved.AverageField.Means, saved.Gaussians.Field.Means);
+    }
 
-  Trainer second(data, ShortSettings());
-  ASSERT_TRUE(second.Initialize(&error));
-  ASSERT_TRUE(second.LoadCheckpoint(checkpoint, &error)) << error;
-  EXPECT_EQ(second.GetIteration(), 110);
-  ASSERT_TRUE(second.Run(nullptr, nullptr, &error)) << error;
-  ExpectSameField(straight.GetField(), second.GetField());
+    Trainer second(data, ShortSettings());
+    ASSERT_TRUE(second.Initialize(&error));
+    ASSERT_TRUE(second.LoadCheckpoint(checkpoint, &error)) << error;
+    EXPECT_EQ(second.GetIteration(), at);
+    ASSERT_TRUE(second.Run(nullptr, nullptr, &error)) << error;
+    EXPECT_EQ(second.GetReport().AverageFrom, 160);
+    ExpectSameField(straight.GetField(), second.GetField());
+  }
 
   std::ofstream(checkpoint + ".bad") << "not a checkpoint";
-  EXPECT_FALSE(second.LoadCheckpoint(checkpoint + ".bad", &error));
+  Trainer other(data, ShortSettings());
+  ASSERT_TRUE(other.Initialize(&error));
+  EXPECT_FALSE(other.LoadCheckpoint(checkpoint + ".bad", &error));
   EXPECT_NE(error.find("bad magic"), std::string::npos) << error;
 }
 

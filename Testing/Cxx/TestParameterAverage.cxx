@@ -1,6 +1,6 @@
 // The parameter average over the schedule's tail (bigusParameterAverage.h, TrainerSettings::ParameterAverage): the
 // exponential moving average against its closed form, and a run's field against the average of the fields an
-// observer reads from the same run without it; a resume from a checkpoint inside the tail gives the same field.
+// observer reads from the same run without it (a resume inside the tail: TestCheckpoints).
 #include "bigusParameterAverage.h"
 #include "bigusTrainer.h"
 #include "bigusTrainingTestUtilities.h"
@@ -9,7 +9,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <random>
 #include <string>
 #include <vector>
@@ -256,41 +255,4 @@ TEST(ParameterAverage, TheRunsFieldIsTheAverageOfItsTailSteps)
   EXPECT_LT(largest, 1e-5);
   // And the average is not the last field: the test would pass for a run that ignored the setting otherwise.
   EXPECT_NE(delivered.Means, without.GetField().Means);
-}
-
-TEST(ParameterAverage, AResumeFromACheckpointInTheTailGivesTheSameField)
-{
-  std::vector<int> heldOut;
-  const TrainingData data = SyntheticSweep(KnownField(200, 6), 0.5, heldOut);
-  std::string error;
-  Trainer straight(data, ShortSettings());
-  ASSERT_TRUE(straight.Initialize(&error));
-  ASSERT_TRUE(straight.Run(nullptr, nullptr, &error)) << error;
-  ASSERT_GT(straight.GetReport().AverageSamples, 0);
-
-  const std::string checkpoint = std::string(BIGUS_TEST_OUTPUT) + "/average.ckpt";
-  TrainerSettings s = ShortSettings();
-  s.CheckpointFile = checkpoint;
-  s.CheckpointInterval = 180; // three samples into the average
-  Trainer first(data, s);
-  ASSERT_TRUE(first.Initialize(&error));
-  ASSERT_TRUE(first.Train(
-    nullptr, [&]() { return first.GetIteration() >= 185; }, &error))
-    << error;
-  TrainingState saved;
-  double gamma = 0;
-  ASSERT_TRUE(saved.Load(checkpoint, gamma, &error)) << error;
-  EXPECT_EQ(saved.AverageSamples, 3);
-  EXPECT_EQ(saved.AverageStart, 160);
-  EXPECT_DOUBLE_EQ(saved.AverageFraction, 0.9);
-  ASSERT_EQ(saved.AverageField.Count(), saved.Gaussians.Count());
-  EXPECT_NE(saved.AverageField.Means, saved.Gaussians.Field.Means);
-
-  Trainer second(data, ShortSettings());
-  ASSERT_TRUE(second.Initialize(&error));
-  ASSERT_TRUE(second.LoadCheckpoint(checkpoint, &error)) << error;
-  ASSERT_TRUE(second.Run(nullptr, nullptr, &error)) << error;
-  EXPECT_EQ(second.GetReport().AverageFrom, 160);
-  ExpectSameField(straight.GetField(), second.GetField());
-  std::remove(checkpoint.c_str());
 }
