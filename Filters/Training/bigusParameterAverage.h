@@ -5,7 +5,7 @@
  *        averaging", SIAM J. Control Optim. 30(4), 1992) in its exponential form, as an exponential moving average
  *        of the weights is kept in stochastic-gradient training.
  *
- * Adam moves the log-scales, rotations and reflectivities at constant rates to the end (DESIGN section 4.5), so the
+ * Adam moves the log-scales, rotations and reflectivities at constant rates to the end (DESIGN section 4.3), so the
  * last field carries the noise of its last steps' frames; an average of the iterates keeps the part that the steps
  * agree on. The average starts once the field's structure is fixed (the densification window closed and the
  * validation frames joined the fit) and mixes a sample in every AverageInterval steps:
