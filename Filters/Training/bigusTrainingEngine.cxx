@@ -417,6 +417,39 @@ bool GetVector(std::istream& in, std::vector<T>& v, std::size_t n)
   v.resize(n);
   return static_cast<bool>(in.read(reinterpret_cast<char*>(v.data()), static_cast<std::streamsize>(n * sizeof(T))));
 }
+/// The pose corrections of a field kept beside the run's (the best field's, the parameter average's): int64 P (0, or
+/// the frames with a correction) + P x 6 float64, then the 7 float64 shared correction.
+void WriteKeptCorrections(
+  std::ostream& out, const std::vector<std::array<double, 6>>& frames, const std::array<double, 7>& shared)
+{
+  Put(out, std::int64_t(frames.size()));
+  for (const std::array<double, 6>& xi : frames)
+  {
+    out.write(reinterpret_cast<const char*>(xi.data()), sizeof(double) * 6);
+  }
+  out.write(reinterpret_cast<const char*>(shared.data()), sizeof(double) * 7);
+}
+/// Reads what WriteKeptCorrections wrote; false when it is truncated, its count is neither 0 nor @p poses (the run's
+/// frames with a correction) or its shared correction is not finite.
+bool ReadKeptCorrections(
+  std::istream& in, std::int64_t poses, std::vector<std::array<double, 6>>& frames, std::array<double, 7>& shared)
+{
+  std::int64_t count = 0;
+  if (!Get(in, count) || (count != 0 && count != poses))
+  {
+    return false;
+  }
+  frames.resize(static_cast<std::size_t>(count));
+  for (std::array<double, 6>& xi : frames)
+  {
+    if (!in.read(reinterpret_cast<char*>(xi.data()), sizeof(double) * 6))
+    {
+      return false;
+    }
+  }
+  return in.read(reinterpret_cast<char*>(shared.data()), sizeof(double) * 7) &&
+    std::all_of(shared.begin(), shared.end(), [](double x) { return std::isfinite(x); });
+}
 void WriteField(std::ostream& out, const GaussianField& f)
 {
   PutVector(out, f.Means);
@@ -516,12 +549,7 @@ bool TrainingState::Save(const std::string& file, double gamma, std::string* err
       out.write(reinterpret_cast<const char*>(v->data()), sizeof(double) * 7);
     }
     Put(out, std::int32_t(this->SharedPoseSteps));
-    Put(out, std::int64_t(this->BestPoseCorrections.size()));
-    for (const std::array<double, 6>& xi : this->BestPoseCorrections)
-    {
-      out.write(reinterpret_cast<const char*>(xi.data()), sizeof(double) * 6);
-    }
-    out.write(reinterpret_cast<const char*>(this->BestSharedPoseCorrection.data()), sizeof(double) * 7);
+    WriteKeptCorrections(out, this->BestPoseCorrections, this->BestSharedPoseCorrection);
     Put(out, this->DataDigest);
     Put(out, std::uint32_t(this->RunSettings.size()));
     out.write(this->RunSettings.data(), static_cast<std::streamsize>(this->RunSettings.size()));
@@ -530,12 +558,7 @@ bool TrainingState::Save(const std::string& file, double gamma, std::string* err
     Put(out, this->AverageFraction);
     Put(out, std::int64_t(this->AverageField.Count()));
     WriteField(out, this->AverageField);
-    Put(out, std::int64_t(this->AveragePoseCorrections.size()));
-    for (const std::array<double, 6>& xi : this->AveragePoseCorrections)
-    {
-      out.write(reinterpret_cast<const char*>(xi.data()), sizeof(double) * 6);
-    }
-    out.write(reinterpret_cast<const char*>(this->AverageSharedPoseCorrection.data()), sizeof(double) * 7);
+    WriteKeptCorrections(out, this->AveragePoseCorrections, this->AverageSharedPoseCorrection);
     out.close();
     if (!out)
     {
@@ -658,21 +681,7 @@ bool TrainingState::Load(const std::string& file, double& gamma, std::string* er
       return fail("truncated or invalid shared pose correction");
     }
     s.SharedPoseSteps = steps;
-    std::int64_t best = 0;
-    if (!Get(in, best) || (best != 0 && best != poses))
-    {
-      return fail("truncated or invalid best field's pose corrections");
-    }
-    s.BestPoseCorrections.resize(best);
-    for (std::array<double, 6>& xi : s.BestPoseCorrections)
-    {
-      if (!in.read(reinterpret_cast<char*>(xi.data()), sizeof(double) * 6))
-      {
-        return fail("truncated best field's pose corrections");
-      }
-    }
-    if (!in.read(reinterpret_cast<char*>(s.BestSharedPoseCorrection.data()), sizeof(double) * 7) ||
-      !finite(s.BestSharedPoseCorrection))
+    if (!ReadKeptCorrections(in, poses, s.BestPoseCorrections, s.BestSharedPoseCorrection))
     {
       return fail("truncated or invalid best field's pose corrections");
     }
@@ -690,28 +699,16 @@ bool TrainingState::Load(const std::string& file, double& gamma, std::string* er
   if (withAverage)
   {
     std::int32_t samples = 0, start = 0;
-    std::int64_t averaged = 0, corrections = 0;
+    std::int64_t averaged = 0;
     if (!Get(in, samples) || !Get(in, start) || !Get(in, s.AverageFraction) || !Get(in, averaged) || samples < 0 ||
       start < 0 || !(s.AverageFraction >= 0 && s.AverageFraction <= 1) || (averaged != 0 && averaged != n) ||
       (samples > 0) != (averaged > 0) || !ReadField(in, s.AverageField, averaged))
     {
       return fail("truncated or invalid parameter average");
     }
-    if (!Get(in, corrections) || (corrections != 0 && corrections != poses))
+    if (!ReadKeptCorrections(in, poses, s.AveragePoseCorrections, s.AverageSharedPoseCorrection))
     {
       return fail("truncated or invalid parameter average's pose corrections");
-    }
-    s.AveragePoseCorrections.resize(corrections);
-    for (std::array<double, 6>& xi : s.AveragePoseCorrections)
-    {
-      if (!in.read(reinterpret_cast<char*>(xi.data()), sizeof(double) * 6))
-      {
-        return fail("truncated parameter average's pose corrections");
-      }
-    }
-    if (!in.read(reinterpret_cast<char*>(s.AverageSharedPoseCorrection.data()), sizeof(double) * 7))
-    {
-      return fail("truncated parameter average's pose corrections");
     }
     s.AverageSamples = samples;
     s.AverageStart = start;

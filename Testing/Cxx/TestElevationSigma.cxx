@@ -248,12 +248,8 @@ TEST(PoseRefinementChoice, TheTrainerRefinesTheSweepsTheRuleChooses)
   ASSERT_TRUE(trainer.Initialize(&error)) << error;
   ASSERT_TRUE(trainer.Run(nullptr, nullptr, &error)) << error;
   const TrainerReport& report = trainer.GetReport();
-  bool said = false;
-  for (const std::string& line : report.Settings)
-  {
-    said = said || (line.rfind("RefinePoses = on", 0) == 0 && line.find("sweep 1 trusted") != std::string::npos);
-  }
-  EXPECT_TRUE(said);
+  const std::string said = synthetic::SettingLine(report, "RefinePoses");
+  EXPECT_TRUE(said.rfind("RefinePoses = on", 0) == 0 && said.find("sweep 1 trusted") != std::string::npos) << said;
   int moved = 0;
   for (const TrainerReport::PoseCorrection& p : report.PoseCorrections)
   {
@@ -298,17 +294,6 @@ TrainingData TrialSweep()
   std::vector<int> heldOut;
   return Sweep(SpeckleField(12000, 20.0, 7), 0.6, 0.2, 80, heldOut);
 }
-
-/// The report's RefinePoses setting line ("" without one).
-std::string RefinePosesLine(const Trainer& trainer)
-{
-  std::string said;
-  for (const std::string& l : trainer.GetReport().Settings)
-  {
-    said += l.rfind("RefinePoses = ", 0) == 0 ? l : "";
-  }
-  return said;
-}
 }
 
 // A run that stops in the trial's refined branch (here an abort 40 steps into it; on a short time budget, the budget)
@@ -329,7 +314,7 @@ TEST(PoseRefinementChoice, ARunStoppedInTheRefinedBranchKeepsTheTrustedBranchsSt
   EXPECT_EQ(trainer.GetReport().StopReason, "aborted");
   EXPECT_EQ(trainer.GetIteration(), 199) << "the trusted branch's steps, not the refined branch's 139";
   EXPECT_EQ(trainer.GetSettings().Poses.RefinePoses, PoseRefinement::Off);
-  const std::string said = RefinePosesLine(trainer);
+  const std::string said = synthetic::SettingLine(trainer.GetReport(), "RefinePoses");
   EXPECT_NE(said.find("RefinePoses = off (untested: the run stopped during the trial, 40 of its 99 steps with "
                       "refinement; the 99 on the tracked poses kept"),
     std::string::npos)
@@ -349,7 +334,7 @@ TEST(PoseRefinementChoice, AStopThatWaitsForTheFieldToSettleLetsTheTrialChoose)
     nullptr, [&]() { return ++checks > 100 + 1 + 50 && trainer.IsSettled(); }, &error))
     << error;
   EXPECT_EQ(trainer.GetIteration(), 199) << "the branch kept: 99 steps from step 100";
-  const std::string said = RefinePosesLine(trainer);
+  const std::string said = synthetic::SettingLine(trainer.GetReport(), "RefinePoses");
   EXPECT_NE(said.find("measured: 99 steps each way from step 100"), std::string::npos) << said;
 }
 
@@ -385,7 +370,7 @@ TEST(PoseRefinementChoice, AutoRefinementIsMeasuredOnHeldOutFramesAtTheirTracked
     std::string error;
     ASSERT_TRUE(trainer.Initialize(&error)) << error;
     ASSERT_TRUE(trainer.Run(nullptr, nullptr, &error)) << error;
-    const std::string said = RefinePosesLine(trainer);
+    const std::string said = synthetic::SettingLine(trainer.GetReport(), "RefinePoses");
     std::printf("%s poses: %s\n", moved ? "perturbed" : "exact", said.c_str());
     // 249 steps from step 150: the branches end at step 399, before the densification of step 400.
     EXPECT_NE(said.find("measured: 249 steps each way from step 150"), std::string::npos) << said;

@@ -133,13 +133,12 @@ TEST(HeldOutChoices, TheChosenBeamRendersFramesNoChoiceSawAsWellAsTheBestCandida
   // Taken narrower for the fit on every frame (HeldOutChoiceSettings::ElevationSigmaScale).
   EXPECT_DOUBLE_EQ(report.ElevationSigma, chosen.Value * settings.HeldOut.ElevationSigmaScale);
   EXPECT_EQ(trainer.Options().ElevationSigma, report.ElevationSigma);
-  const auto line = std::find_if(report.Settings.begin(), report.Settings.end(),
-    [](const std::string& l) { return l.rfind("ElevationSigma = ", 0) == 0; });
-  ASSERT_NE(line, report.Settings.end());
-  std::printf("%s\n", line->c_str());
-  EXPECT_NE(line->find("frames held out (every 2nd training frame"), std::string::npos) << *line;
-  EXPECT_NE(line->find("the rule's value"), std::string::npos) << *line;
-  EXPECT_NE(line->find("; taken x 0.707: "), std::string::npos) << *line;
+  const std::string line = synthetic::SettingLine(report, "ElevationSigma");
+  ASSERT_FALSE(line.empty());
+  std::printf("%s\n", line.c_str());
+  EXPECT_NE(line.find("frames held out (every 2nd training frame"), std::string::npos) << line;
+  EXPECT_NE(line.find("the rule's value"), std::string::npos) << line;
+  EXPECT_NE(line.find("; taken x 0.707: "), std::string::npos) << line;
   // Each candidate given, fitted on every training frame, scored on the frames no choice saw; the run's own field
   // (the sigma taken) scores within 0.5 dB of the best of them.
   double best = -1e300;
@@ -162,13 +161,11 @@ TEST(HeldOutChoices, TheChosenBeamRendersFramesNoChoiceSawAsWellAsTheBestCandida
   ASSERT_TRUE(untested.Initialize(&error)) << error;
   EXPECT_EQ(untested.GetReport().ElevationSigma, rule);
   EXPECT_EQ(untested.GetReport().HeldOut.ElevationSigma.Chosen, -1);
-  const std::vector<std::string>& lines = untested.GetReport().Settings;
-  const auto ruleLine =
-    std::find_if(lines.begin(), lines.end(), [](const std::string& l) { return l.rfind("ElevationSigma = ", 0) == 0; });
-  ASSERT_NE(ruleLine, lines.end());
-  EXPECT_NE(ruleLine->find("(chosen: "), std::string::npos) << *ruleLine;
-  EXPECT_NE(ruleLine->find("; untested on held-out frames: the held-out choices are off)"), std::string::npos)
-    << *ruleLine;
+  const std::string ruleLine = synthetic::SettingLine(untested.GetReport(), "ElevationSigma");
+  ASSERT_FALSE(ruleLine.empty());
+  EXPECT_NE(ruleLine.find("(chosen: "), std::string::npos) << ruleLine;
+  EXPECT_NE(ruleLine.find("; untested on held-out frames: the held-out choices are off)"), std::string::npos)
+    << ruleLine;
 }
 
 TEST(HeldOutChoices, TheFinalPruneAndTheMergeAreKeptOnlyWhereHeldOutFramesSayTheyCostLittle)
@@ -200,13 +197,11 @@ TEST(HeldOutChoices, TheFinalPruneAndTheMergeAreKeptOnlyWhereHeldOutFramesSayThe
   EXPECT_LT(r.PrunedPSNR, r.WholePSNR - settings.HeldOut.Tolerance);
   EXPECT_FALSE(r.KeepPrune);
   EXPECT_EQ(trainer.GetSettings().FinalPruneTolerance, 0.0);
-  const std::vector<std::string>& lines = trainer.GetReport().Settings;
-  const auto prune =
-    std::find_if(lines.begin(), lines.end(), [](const std::string& l) { return l.rfind("FinalPrune = ", 0) == 0; });
-  ASSERT_NE(prune, lines.end());
-  std::printf("%s\n", prune->c_str());
-  EXPECT_EQ(prune->rfind("FinalPrune = off (was: on", 0), 0u) << *prune;
-  EXPECT_NE(prune->find("dropped on " + std::to_string(r.Frames) + " held-out frames"), std::string::npos) << *prune;
+  const std::string prune = synthetic::SettingLine(trainer.GetReport(), "FinalPrune");
+  ASSERT_FALSE(prune.empty());
+  std::printf("%s\n", prune.c_str());
+  EXPECT_EQ(prune.rfind("FinalPrune = off (was: on", 0), 0u) << prune;
+  EXPECT_NE(prune.find("dropped on " + std::to_string(r.Frames) + " held-out frames"), std::string::npos) << prune;
   ASSERT_TRUE(trainer.Finish(&error)) << error;
   EXPECT_EQ(trainer.GetReport().PrunedAtEnd, 0);
 
@@ -259,13 +254,11 @@ TEST(HeldOutChoices, TheRouteIsMeasuredWhereTheRuleTakesAdamAndTheBetterRouteTak
   ASSERT_TRUE(trainer.Run(nullptr, nullptr, &error)) << error;
   ASSERT_GE(route.DecidedAt, 0);
   EXPECT_FALSE(route.GridChosen) << "Adam fits this field of Gaussians better than a grid of 20,000 points";
-  const std::vector<std::string>& lines = trainer.GetReport().Settings;
-  const auto line =
-    std::find_if(lines.begin(), lines.end(), [](const std::string& l) { return l.rfind("Route = ", 0) == 0; });
-  ASSERT_NE(line, lines.end());
-  std::printf("%s\n", line->c_str());
-  EXPECT_NE(line->find("measured on " + std::to_string(route.Frames.size()) + " held-out frames"), std::string::npos)
-    << *line;
+  const std::string line = synthetic::SettingLine(trainer.GetReport(), "Route");
+  ASSERT_FALSE(line.empty());
+  std::printf("%s\n", line.c_str());
+  EXPECT_NE(line.find("measured on " + std::to_string(route.Frames.size()) + " held-out frames"), std::string::npos)
+    << line;
   if (route.GridChosen)
   {
     EXPECT_EQ(trainer.GetIteration(), route.DecidedAt) << "the grid takes no step";
@@ -297,19 +290,17 @@ TEST(HeldOutChoices, TheRouteIsMeasuredWhereTheRuleTakesAdamAndTheBetterRouteTak
   EXPECT_GE(chosen, std::max(a, g) - 0.25 * std::abs(a - g));
   EXPECT_EQ(adamAlone.GetReport().Route.Untested, "its measurement is off (MeasureRoute)");
   // The grid taken by the rule and not measured says so, and which routes it leaves untested.
-  const std::vector<std::string>& gridLines = gridAlone.GetReport().Settings;
-  const auto routeLine =
-    std::find_if(gridLines.begin(), gridLines.end(), [](const std::string& l) { return l.rfind("Route = ", 0) == 0; });
-  ASSERT_NE(routeLine, gridLines.end());
+  const std::string routeLine = synthetic::SettingLine(gridAlone.GetReport(), "Route");
+  ASSERT_FALSE(routeLine.empty());
   EXPECT_EQ(
-    routeLine->rfind("Route = the pixel grid (the rule: the " + std::to_string(gridAlone.GetReport().Route.FanPixels) +
+    routeLine.rfind("Route = the pixel grid (the rule: the " + std::to_string(gridAlone.GetReport().Route.FanPixels) +
         " fan pixels of the grid's planes are at most 1e+09 x MaximumGaussians; untested against Harris seeds "
         "and Adam: its measurement is off (MeasureRoute)",
       0),
     0u)
-    << *routeLine;
-  EXPECT_NE(routeLine->find("variable projection and grids at a coarser stride untested"), std::string::npos)
-    << *routeLine;
+    << routeLine;
+  EXPECT_NE(routeLine.find("variable projection and grids at a coarser stride untested"), std::string::npos)
+    << routeLine;
 
   // The same grid taken by the rule (every fan pixel within it) is measured against the route it displaced: the run
   // starts as Adam's, with the trial's frames held out, and Adam, which scores above the grid on them before a quarter
@@ -520,13 +511,11 @@ TEST(HeldOutChoices, TheRouteTrialSwitchesToThePixelGridWhereItScoresHigher)
     ASSERT_TRUE(trainer.Run(nullptr, nullptr, &error)) << error;
     const TrainerReport& report = trainer.GetReport();
     const RouteTrial& route = report.Route;
-    const std::vector<std::string>& lines = report.Settings;
-    const auto line =
-      std::find_if(lines.begin(), lines.end(), [](const std::string& l) { return l.rfind("Route = ", 0) == 0; });
-    ASSERT_NE(line, lines.end());
-    std::printf("%s\n%s\n", line->c_str(), report.StopReason.c_str());
+    const std::string line = synthetic::SettingLine(report, "Route");
+    ASSERT_FALSE(line.empty());
+    std::printf("%s\n%s\n", line.c_str(), report.StopReason.c_str());
     ASSERT_TRUE(route.GridChosen) << "50 Gaussians without densification cannot fit this sweep";
-    EXPECT_EQ(line->rfind("Route = the pixel grid (measured on", 0), 0u) << *line;
+    EXPECT_EQ(line.rfind("Route = the pixel grid (measured on", 0), 0u) << line;
     EXPECT_GE(route.DecidedAt, 600) << "the grid is taken only when the frames would join";
     EXPECT_EQ(trainer.GetIteration(), route.DecidedAt);
     EXPECT_EQ(trainer.GetData().TrainFrames, data.TrainFrames) << "every training frame in the grid's fit";

@@ -41,25 +41,23 @@ GaussianField RandomField(std::int64_t n, std::mt19937_64& rng)
   return f;
 }
 
-/// The field's parameter @p k of group @p q as the weighted mean sum_k c_k f_k / sum_k c_k of @p fields, with
-/// c_k = w_k prod_{j > k} (1 - w_j) and w_0 = 1: the exponential moving average written out.
-double ClosedFormAverage(
-  const std::vector<GaussianField>& fields, const std::vector<double>& weights, int q, std::size_t k)
+/// The exponential moving average of samples mixed in with @p weights (w_0 = 1) written out: the weight of sample k in
+/// the result, c_k = w_k prod_{j > k} (1 - w_j).
+std::vector<double> ClosedFormWeights(const std::vector<double>& weights)
 {
-  double sum = 0;
-  for (std::size_t s = 0; s < fields.size(); ++s)
+  std::vector<double> c(weights.size());
+  for (std::size_t k = 0; k < weights.size(); ++k)
   {
-    double c = s == 0 ? 1.0 : weights[s];
-    for (std::size_t j = s + 1; j < fields.size(); ++j)
+    c[k] = k == 0 ? 1.0 : weights[k];
+    for (std::size_t j = k + 1; j < weights.size(); ++j)
     {
-      c *= 1 - weights[j];
+      c[k] *= 1 - weights[j];
     }
-    sum += c * const_cast<GaussianField&>(fields[s]).Group(q)[k];
   }
-  return sum;
+  return c;
 }
 
-/// Normalises each quaternion of @p field.
+/// Normalises each quaternion ([N,4]) of @p quaternions.
 void NormaliseQuaternions(std::vector<double>& quaternions)
 {
   for (std::size_t k = 0; k + 3 < quaternions.size(); k += 4)
@@ -103,15 +101,11 @@ TEST(ParameterAverage, MixesEachSampleWithTheWeightOfItsScheduleFraction)
   EXPECT_EQ(state.AverageSamples, 6);
   EXPECT_EQ(state.AverageStart, 100);
   EXPECT_EQ(state.AverageFraction, 0.9);
+  const std::vector<double> c = ClosedFormWeights(weights);
   double expectedPose = 0;
-  for (std::size_t s = 0; s < poses.size(); ++s)
+  for (std::size_t k = 0; k < poses.size(); ++k)
   {
-    double c = s == 0 ? 1.0 : weights[s];
-    for (std::size_t j = s + 1; j < poses.size(); ++j)
-    {
-      c *= 1 - weights[j];
-    }
-    expectedPose += c * poses[s];
+    expectedPose += c[k] * poses[k];
   }
   EXPECT_NEAR(state.AveragePoseCorrections[1][4], expectedPose, 1e-12);
   EXPECT_NEAR(state.AverageSharedPoseCorrection[6], -0.1 * expectedPose, 1e-12);
@@ -122,7 +116,12 @@ TEST(ParameterAverage, MixesEachSampleWithTheWeightOfItsScheduleFraction)
     const std::vector<float>& averaged = state.AverageField.Group(q);
     for (std::size_t k = 0; k < averaged.size(); ++k)
     {
-      ASSERT_NEAR(averaged[k], ClosedFormAverage(fields, weights, q, k), 1e-5) << "group " << q << ", entry " << k;
+      double expected = 0;
+      for (std::size_t sample = 0; sample < fields.size(); ++sample)
+      {
+        expected += c[sample] * fields[sample].Group(q)[k];
+      }
+      ASSERT_NEAR(averaged[k], expected, 1e-5) << "group " << q << ", entry " << k;
     }
   }
 
@@ -195,10 +194,9 @@ TEST(ParameterAverage, TheRunsFieldIsTheAverageOfItsTailSteps)
   EXPECT_EQ(report.AverageSamples, 5);
   EXPECT_EQ(report.AverageFrom, 160);
   EXPECT_EQ(report.AverageTo, 200);
-  const auto line = std::find_if(report.Settings.begin(), report.Settings.end(),
-    [](const std::string& l) { return l.rfind("ParameterAverage = ", 0) == 0; });
-  ASSERT_NE(line, report.Settings.end());
-  EXPECT_NE(line->find("made the field at step 200: 5 samples from step 160"), std::string::npos) << *line;
+  const std::string line = SettingLine(report, "ParameterAverage");
+  ASSERT_FALSE(line.empty());
+  EXPECT_NE(line.find("made the field at step 200: 5 samples from step 160"), std::string::npos) << line;
 
   TrainerSettings plain = averaged;
   plain.ParameterAverage = 0;

@@ -19,6 +19,7 @@
 #include <array>
 #include <cmath>
 #include <random>
+#include <string>
 #include <vector>
 
 namespace bigus
@@ -275,6 +276,14 @@ inline TrainerSettings ShortSettings()
   s.Densification.End = 150;
   s.Poses.RefinePoses = PoseRefinement::Off; // exact synthetic poses: the tests of pose refinement switch it on
   return s;
+}
+
+/// The setting line of @p report that starts with "@p name = " ("" when it has none).
+inline std::string SettingLine(const TrainerReport& report, const std::string& name)
+{
+  const auto line = std::find_if(report.Settings.begin(), report.Settings.end(),
+    [&name](const std::string& l) { return l.rfind(name + " = ", 0) == 0; });
+  return line == report.Settings.end() ? std::string() : *line;
 }
 
 /// Every parameter of @p f finite.
