@@ -285,6 +285,7 @@ bigusTrainerSetting(MergeTolerance, double, Merge.Tolerance, 0.0, 1.0)
 bigusTrainerSetting(ParameterAverage, double, ParameterAverage, 0.0, 1.0)
 bigusTrainerSetting(Seed, unsigned int, Seed, bigusAnyValue(unsigned int))
 bigusTrainerSetting(FramesPerStep, int, FramesPerStep, 1, 4096)
+bigusTrainerSetting(TrainingCutoff, double, Cutoff, 2.0, 5.0)
 bigusTrainerSetting(CoarseFraction, double, CoarseFraction, 0.0, 1.0)
 bigusTrainerSetting(CoarseLowPass, bool, CoarseLowPass, bigusAnyValue(bool))
 bigusTrainerSetting(CheckpointInterval, int, CheckpointInterval, 0, VTK_INT_MAX)
@@ -726,6 +727,7 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
   this->Superclass::PrintSelf(os, indent);
   os << indent << "ElevationSigma: " << this->GetElevationSigma() << "\n";
   os << indent << "FramesPerStep: " << this->GetFramesPerStep() << "\n";
+  os << indent << "TrainingCutoff: " << this->GetTrainingCutoff() << "\n";
   os << indent << "CoarseFraction: " << this->GetCoarseFraction() << "\n";
   os << indent << "CoarseLowPass: " << (this->GetCoarseLowPass() ? "On" : "Off") << "\n";
   os << indent << "Controller: " << this->Controller << "\n";

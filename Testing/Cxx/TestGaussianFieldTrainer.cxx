@@ -59,6 +59,7 @@ TEST(GaussianFieldTrainer, PipelineOutputsTheFieldOfTheDataModel)
   trainer->SetInitialGaussians(500);
   trainer->SetHoldOutEvery(4);
   trainer->SetHoldOutOffset(2);
+  trainer->SetTrainingCutoff(4.5); // not the default (4): the setting line below shows it reached the trainer
   int progressEvents = 0;
   vtkNew<vtkCallbackCommand> counter;
   counter->SetClientData(&progressEvents);
@@ -141,7 +142,7 @@ TEST(GaussianFieldTrainer, PipelineOutputsTheFieldOfTheDataModel)
   }
   for (const char* line : { "FanMask = estimated from the frames",
          "ElevationSigma = ", "(chosen: ", "Gamma = ", "InitialGaussians = 500 (given", "Iterations = 150",
-         "Densification = every 200 steps", "; made the field at step 150: " })
+         "Densification = every 200 steps", "Cutoff = 4.5,", "; made the field at step 150: " })
   {
     EXPECT_NE(stored.find(line), std::string::npos) << line << " not in\n" << stored;
   }

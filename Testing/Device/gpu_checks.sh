@@ -11,6 +11,8 @@
 #   profile  the kernels' device time over 400 launches in a 800-step run (Nsight Compute's ncu; profile.log)
 #   growth   the main job at 60 s as in tracked, with the growth stop relaxed and with a larger MaximumGaussians
 #            (growth.log)
+#   cutoff   the main job at 60 s as in tracked, trained at a footprint cut-off of 4 and of 3.5 standard deviations
+#            (--training-cutoff; cutoff.log)
 #   bench    bigus benchmark --backend cuda: the gpu section (the main job at 10 to 100 s on the GPU and on the CPU
 #            cores beside it), then the volume section (bench/BENCHMARKS_gpu.md, bench/BENCHMARKS_volume.md, bench.log)
 # GPU_CHECKS_SECONDS (default 540): every command is stopped when the script has run that long, so that what ran
@@ -128,6 +130,12 @@ if [[ " $sections " == *" growth "* ]]; then
     main60 max1m --growth-patience 1000 --max-gaussians 1000000
     main60 batch4 --frames-per-step 4
   } >"$out/growth.log" 2>&1
+fi
+if [[ " $sections " == *" cutoff "* ]]; then
+  {
+    main60 k4 --training-cutoff 4
+    main60 k35 --training-cutoff 3.5
+  } >"$out/cutoff.log" 2>&1
 fi
 if [[ " $sections " == *" bench "* ]]; then
   for section in gpu volume; do
