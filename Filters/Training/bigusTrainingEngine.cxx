@@ -417,6 +417,11 @@ bool GetVector(std::istream& in, std::vector<T>& v, std::size_t n)
   v.resize(n);
   return static_cast<bool>(in.read(reinterpret_cast<char*>(v.data()), static_cast<std::streamsize>(n * sizeof(T))));
 }
+/// Every entry of a shared pose correction (or one of its Adam moments) finite.
+bool AllFinite(const std::array<double, 7>& v)
+{
+  return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x); });
+}
 /// The pose corrections of a field kept beside the run's (the best field's, the parameter average's): int64 P (0, or
 /// the frames with a correction) + P x 6 float64, then the 7 float64 shared correction.
 void WriteKeptCorrections(
@@ -447,8 +452,7 @@ bool ReadKeptCorrections(
       return false;
     }
   }
-  return in.read(reinterpret_cast<char*>(shared.data()), sizeof(double) * 7) &&
-    std::all_of(shared.begin(), shared.end(), [](double x) { return std::isfinite(x); });
+  return in.read(reinterpret_cast<char*>(shared.data()), sizeof(double) * 7) && AllFinite(shared);
 }
 void WriteField(std::ostream& out, const GaussianField& f)
 {
@@ -672,11 +676,8 @@ bool TrainingState::Load(const std::string& file, double& gamma, std::string* er
         return fail("truncated shared pose correction");
       }
     }
-    auto finite = [](const std::array<double, 7>& v) {
-      return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x); });
-    };
-    if (!Get(in, steps) || steps < 0 || !finite(s.SharedPoseCorrection) || !finite(s.SharedPoseFirstMoment) ||
-      !finite(s.SharedPoseSecondMoment))
+    if (!Get(in, steps) || steps < 0 || !AllFinite(s.SharedPoseCorrection) || !AllFinite(s.SharedPoseFirstMoment) ||
+      !AllFinite(s.SharedPoseSecondMoment))
     {
       return fail("truncated or invalid shared pose correction");
     }
