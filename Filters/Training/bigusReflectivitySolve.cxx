@@ -67,13 +67,14 @@ bool Fail(std::string* error, const std::string& message)
 }
 }
 
-double ReflectivitySolveBytes(std::int64_t gaussians, std::int64_t pixels, bool l1)
+double ReflectivitySolveBytes(std::int64_t gaussians, std::int64_t pixels, bool l1, bool atField)
 {
   // CGLS, per Gaussian: y, s, direction, ridge, the diagonal and P (double), the reflectivities applied (float);
-  // per pixel: the residual and A p (float). FISTA: y, z, the trial point, s at y and at z, the diagonal and P;
-  // per pixel: the residuals at y, at z and at the trial point.
-  return l1 ? double(gaussians) * (7 * sizeof(double) + sizeof(float)) + double(pixels) * 3 * sizeof(float)
-            : double(gaussians) * (6 * sizeof(double) + sizeof(float)) + double(pixels) * 2 * sizeof(float);
+  // per pixel: the residual and A p (float), and at the field its image S0. FISTA: y, z, the trial point, s at y and
+  // at z, the diagonal and P; per pixel: the residuals at y, at z and at the trial point.
+  return l1
+    ? double(gaussians) * (7 * sizeof(double) + sizeof(float)) + double(pixels) * 3 * sizeof(float)
+    : double(gaussians) * (6 * sizeof(double) + sizeof(float)) + double(pixels) * (atField ? 3 : 2) * sizeof(float);
 }
 
 bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const std::vector<int>& allFrames,
@@ -106,7 +107,8 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
   const std::int64_t m = pixels * count;
   // Refused before anything is allocated when its vectors alone would not fit in this machine's memory.
   const bool l1 = settings.L1 > 0;
-  const double needed = ReflectivitySolveBytes(n, m, l1);
+  const bool atField = settings.LinearizeAtField && !l1;
+  const double needed = ReflectivitySolveBytes(n, m, l1, atField);
   const double physical = PhysicalMemoryBytes();
   const bool fits = physical <= 0 || needed <= physical;
   if (reduction && !reduction->AllSucceeded(fits, error))
@@ -121,7 +123,8 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
       needed / 1e6, count, data.Width, data.Height, static_cast<long long>(n), physical / 1e6);
     return Fail(error, text);
   }
-  // Per pixel of the frames solved: sqrt(g) = gamma (1 - I) inside the fan, 0 outside, and the target t.
+  // Per pixel of the frames solved: sqrt(g) = gamma (1 - I) inside the fan, 0 outside, and the target t (or, at the
+  // field, sqrt(g) = I'(c) and the residual I - I(c)).
   const double gamma = options.Gamma;
   std::vector<const float*> recorded(count);
   std::vector<const unsigned char*> masks(count);
@@ -133,7 +136,13 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
   auto intensity = [&](std::int64_t k) {
     return std::min(std::max(double(recorded[k / pixels][k % pixels]), 0.0), settings.MaximumIntensity);
   };
-  auto root = [&](std::int64_t k) { return masks[k / pixels][k % pixels] ? gamma * (1 - intensity(k)) : 0.0; };
+  // LinearizeAtField: the field's image S0 per pixel (filled below before a weight is read), sqrt(g) = I'(c).
+  std::vector<float> field(atField ? m : 0);
+  auto root = [&](std::int64_t k) {
+    return !masks[k / pixels][k % pixels] ? 0.0
+      : atField                           ? gamma * std::exp(-gamma * std::max(double(field[k]), 0.0))
+                                          : gamma * (1 - intensity(k));
+  };
   const double imaged = total(Sum(m, [&](std::int64_t k) { return root(k) > 0 ? 1.0 : 0.0; }));
   if (!communicated)
   {
@@ -157,6 +166,15 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
   } release{ engine };
   // Data-space vectors: the residual rho and q (A p, the weights G, the input of A^T).
   std::vector<float> rho(m), q(m);
+  std::vector<float> applied(n);
+  if (atField)
+  {
+    ForEach(n, [&](std::int64_t i) { applied[i] = reflectivities[i]; });
+    if (!engine.ApplyBasis(applied.data(), frames.data(), count, options, field.data(), error))
+    {
+      return false;
+    }
+  }
   // Jacobi preconditioner P = (diag(A^T G A) + lambda)^(-1/2).
   ForEach(m, [&](std::int64_t k) { q[k] = static_cast<float>(root(k) * root(k)); });
   std::vector<double> diagonal(n, 0.0);
@@ -202,7 +220,6 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
     return r.TimeLimitReached;
   };
   std::vector<double> y(n), s(n);
-  std::vector<float> applied(n);
   if (l1)
   {
     // FISTA with backtracking (Beck and Teboulle, SIAM J. Imaging Sci. 2(1), 2009, section 4) on
@@ -357,15 +374,28 @@ bool SolveReflectivities(TrainingEngine& engine, const TrainingData& data, const
   {
     // CGLS on B y = b, B = [G^1/2 A P; sqrt(lambda) P], b = [G^1/2 t; 0], r = P y.
     std::vector<double> direction(n), ridge(n);
-    ForEach(n, [&](std::int64_t i) { applied[i] = reflectivities[i]; });
-    if (!engine.ApplyBasis(applied.data(), frames.data(), count, options, q.data(), error))
+    if (atField)
     {
-      return false;
+      // rho = g^1/2 (t - S0) = I - I(c): the image's own residual, so that the objective starts at the field's
+      // masked squared intensity error (plus the ridge).
+      ForEach(m, [&](std::int64_t k) {
+        const double c = std::max(double(field[k]), 0.0);
+        const double recordedIntensity = std::min(std::max(double(recorded[k / pixels][k % pixels]), 0.0), 1.0);
+        rho[k] = masks[k / pixels][k % pixels] ? static_cast<float>(recordedIntensity + std::expm1(-gamma * c)) : 0.f;
+      });
     }
-    ForEach(m, [&](std::int64_t k) {
-      const double target = -std::log1p(-intensity(k)) / gamma;
-      rho[k] = static_cast<float>(root(k) * (target - q[k]));
-    });
+    else
+    {
+      ForEach(n, [&](std::int64_t i) { applied[i] = reflectivities[i]; });
+      if (!engine.ApplyBasis(applied.data(), frames.data(), count, options, q.data(), error))
+      {
+        return false;
+      }
+      ForEach(m, [&](std::int64_t k) {
+        const double target = -std::log1p(-intensity(k)) / gamma;
+        rho[k] = static_cast<float>(root(k) * (target - q[k]));
+      });
+    }
     ForEach(n, [&](std::int64_t i) {
       y[i] = reflectivities[i] / P[i];
       ridge[i] = -rootLambda * reflectivities[i];

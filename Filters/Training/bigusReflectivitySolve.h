@@ -19,6 +19,18 @@
  * product renders the frames (matrix free).
  * In exact arithmetic each iteration lowers the objective; it starts from the field's reflectivities.
  *
+ * Linearised at the field instead (ReflectivitySolveSettings::LinearizeAtField, a Gauss-Newton step from the field's
+ * image S0 = A r0): I(S) ~ I(S0) + I'(c) (S - S0) with c = max(S0, 0) and I'(c) = gamma exp(-gamma c) (the right
+ * derivative where the field is rectified), that is g(p) = I'(c)^2 and t(p) = S0 + (I(p) - I(c)) / I'(c). The
+ * objective then starts at the field's masked squared intensity error (plus the ridge). The targets at the
+ * recorded intensities do not: where a trained field's S is below 0 (its image rectified to 0, which Adam uses
+ * freely), they ask for S = t >= 0 and weigh the gap; on the liver's field after 2,000 steps that gap made the
+ * objective 8 times the image's error, and a solve lowered it while the image's fit fell 0.7 dB (docs/FINDINGS.md,
+ * "The reflectivity solve on a trained field"). The trainer's solves stay at the recorded intensities: after seeding
+ * there is no fitted image to linearise at, and variable projection's solves after a densification (whose splits
+ * leave the image far from its fit, where the Gauss-Newton weights I'(c)^2 all but ignore over-bright pixels)
+ * measured worse at the field.
+ *
  * With an L1 term (ReflectivitySolveSettings::L1) the objective gains mu sum_i |r_i| / P_i, a lasso whose
  * solution sets the reflectivities of the Gaussians the data do not need to exactly 0, and the solver is FISTA
  * with backtracking (Beck and Teboulle 2009) on the same scaled system and products.
@@ -29,8 +41,8 @@
  * iteration, which the trainer and the tests read.
  *
  * Memory: two float vectors over every pixel of the frames solved ([frames, H, W]: the residual and
- * A p; the liver's 105 training frames of 739 x 593: 368 MB) and 52 bytes per Gaussian (six double
- * vectors and one float vector). A solve that would need more than the machine's physical memory is
+ * A p; the liver's 105 training frames of 739 x 593: 368 MB; linearised at the field a third, its image S0) and
+ * 52 bytes per Gaussian (six double vectors and one float vector). A solve that would need more than the machine's physical memory is
  * refused before it allocates, with a message that says how much it needed.
  */
 #ifndef bigusReflectivitySolve_h
@@ -66,6 +78,10 @@ struct ReflectivitySolveSettings
   /// more, or with 0, the products are matrix free. The CUDA engine holds its A on the device (DeviceBasis) within
   /// the same bytes and the device's free memory.
   double AssembledMemoryShare = 0.25;
+  /// Where the image map is linearised: false, at the recorded intensities (the targets t above: the fit of a
+  /// geometry whose reflectivities are not yet fitted, seeds); true, at the field's own image S0 = A r0 (a
+  /// Gauss-Newton step: see the file's comment), for a field Adam has trained. CGLS only (FISTA ignores it).
+  bool LinearizeAtField = false;
 };
 
 struct ReflectivitySolveReport
@@ -82,8 +98,9 @@ struct ReflectivitySolveReport
 };
 
 /// Bytes a solve allocates for @p gaussians Gaussians over @p pixels pixels (frames x H x W): 52 per
-/// Gaussian and 8 per pixel; with an L1 term (@p l1) 60 and 12.
-BIGUSTRAINING_EXPORT double ReflectivitySolveBytes(std::int64_t gaussians, std::int64_t pixels, bool l1 = false);
+/// Gaussian and 8 per pixel (12 linearised at the field, @p atField); with an L1 term (@p l1) 60 and 12.
+BIGUSTRAINING_EXPORT double ReflectivitySolveBytes(
+  std::int64_t gaussians, std::int64_t pixels, bool l1 = false, bool atField = false);
 
 /**
  * Solves for the reflectivities of the @p engine's current field on @p frames of @p data (the data
