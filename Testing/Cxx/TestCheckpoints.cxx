@@ -237,51 +237,44 @@ TEST(Trainer, AResumedRunCountsTheSecondsBeforeItsCheckpointTowardsItsTimeBudget
   const std::int64_t averaged = first.GetState().AverageField.Count();
   ASSERT_GT(first.GetState().AverageSamples, 0);
   ASSERT_EQ(averaged, first.GetField().Count());
-  bytes = bytes.substr(0,
-    bytes.size() - 2 * sizeof(std::int32_t) - sizeof(double) - 2 * sizeof(std::int64_t) -
-      static_cast<std::size_t>(averaged) * 11 * sizeof(float) - 7 * sizeof(double));
-  bytes[7] = '6';
-  std::ofstream(checkpoint + ".v6", std::ios::binary) << bytes;
+  // The file of an older format: its last @p cut bytes dropped from the last one's, the version set, written, loaded.
+  auto older = [&](std::size_t cut, char version, TrainingState& state) {
+    bytes = bytes.substr(0, bytes.size() - cut);
+    bytes[7] = version;
+    const std::string file = checkpoint + ".v" + version;
+    std::ofstream(file, std::ios::binary) << bytes;
+    double gamma = 0;
+    const bool ok = state.Load(file, gamma, &error);
+    std::remove(file.c_str());
+    return ok;
+  };
   TrainingState six;
-  double sixGamma = 0;
-  ASSERT_TRUE(six.Load(checkpoint + ".v6", sixGamma, &error)) << error;
+  ASSERT_TRUE(older(2 * sizeof(std::int32_t) + sizeof(double) + 2 * sizeof(std::int64_t) +
+      static_cast<std::size_t>(averaged) * 11 * sizeof(float) + 7 * sizeof(double),
+    '6', six))
+    << error;
   EXPECT_EQ(six.TrainingSeconds, saved);
   EXPECT_EQ(six.AverageSamples, 0) << "a file before the average: it starts afresh";
   EXPECT_EQ(six.RunSettings, first.GetState().RunSettings);
   // Version 5: no data digest and run settings (the file ends with them).
-  bytes =
-    bytes.substr(0, bytes.size() - sizeof(std::uint64_t) - sizeof(std::uint32_t) - first.GetState().RunSettings.size());
-  bytes[7] = '5';
-  std::ofstream(checkpoint + ".v5", std::ios::binary) << bytes;
   TrainingState five;
-  double fiveGamma = 0;
-  ASSERT_TRUE(five.Load(checkpoint + ".v5", fiveGamma, &error)) << error;
+  ASSERT_TRUE(older(sizeof(std::uint64_t) + sizeof(std::uint32_t) + first.GetState().RunSettings.size(), '5', five))
+    << error;
   EXPECT_EQ(five.TrainingSeconds, saved);
   EXPECT_EQ(five.DataDigest, 0u);
-  bytes = bytes.substr(0, bytes.size() - 28 * sizeof(double) - sizeof(std::int32_t) - sizeof(std::int64_t));
-  bytes[7] = '4';
-  std::ofstream(checkpoint + ".v4", std::ios::binary) << bytes;
-  TrainingState old;
-  double gamma = 0;
-  ASSERT_TRUE(old.Load(checkpoint + ".v4", gamma, &error)) << error;
-  EXPECT_EQ(old.TrainingSeconds, saved);
-  EXPECT_EQ(old.SharedPoseSteps, 0);
-  bytes = bytes.substr(0, bytes.size() - sizeof(std::int64_t));
-  bytes[7] = '3';
-  std::ofstream(checkpoint + ".v3", std::ios::binary) << bytes;
-  ASSERT_TRUE(old.Load(checkpoint + ".v3", gamma, &error)) << error;
-  EXPECT_EQ(old.TrainingSeconds, saved);
-  EXPECT_TRUE(old.PoseCorrections.empty());
-  bytes[7] = '2';
-  std::ofstream(checkpoint + ".v2", std::ios::binary) << bytes.substr(0, bytes.size() - sizeof(double));
-  ASSERT_TRUE(old.Load(checkpoint + ".v2", gamma, &error)) << error;
-  EXPECT_EQ(old.TrainingSeconds, 0);
-  EXPECT_EQ(old.Iteration, iteration);
+  TrainingState four;
+  ASSERT_TRUE(older(28 * sizeof(double) + sizeof(std::int32_t) + sizeof(std::int64_t), '4', four)) << error;
+  EXPECT_EQ(four.TrainingSeconds, saved);
+  EXPECT_EQ(four.SharedPoseSteps, 0);
+  TrainingState three;
+  ASSERT_TRUE(older(sizeof(std::int64_t), '3', three)) << error;
+  EXPECT_EQ(three.TrainingSeconds, saved);
+  EXPECT_TRUE(three.PoseCorrections.empty());
+  TrainingState two;
+  ASSERT_TRUE(older(sizeof(double), '2', two)) << error;
+  EXPECT_EQ(two.TrainingSeconds, 0);
+  EXPECT_EQ(two.Iteration, iteration);
   std::remove(checkpoint.c_str());
-  std::remove((checkpoint + ".v2").c_str());
-  std::remove((checkpoint + ".v4").c_str());
-  std::remove((checkpoint + ".v5").c_str());
-  std::remove((checkpoint + ".v6").c_str());
 }
 
 TEST(Trainer, CheckpointHoldsTheWholeTrainingState)
