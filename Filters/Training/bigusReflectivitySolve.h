@@ -42,8 +42,8 @@
  *
  * Memory: two float vectors over every pixel of the frames solved ([frames, H, W]: the residual and
  * A p; the liver's 105 training frames of 739 x 593: 368 MB; linearised at the field a third, its image S0) and
- * 52 bytes per Gaussian (six double vectors and one float vector). A solve that would need more than the machine's physical memory is
- * refused before it allocates, with a message that says how much it needed.
+ * 52 bytes per Gaussian (six double vectors and one float vector). A solve that would need more than the machine's
+ * physical memory is refused before it allocates, with a message that says how much it needed.
  */
 #ifndef bigusReflectivitySolve_h
 #define bigusReflectivitySolve_h
