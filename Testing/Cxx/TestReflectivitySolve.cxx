@@ -110,6 +110,21 @@ void WeightsAndTargets(const TrainingData& data, Eigen::VectorXd& g, Eigen::Vect
   }
 }
 
+/// (A^T G A + lambda I)^-1 A^T G t by LDLT in double, G = diag(@p g): the least-squares truth a solve converges to.
+Eigen::VectorXd DenseRidgeSolve(
+  const Eigen::MatrixXd& A, const Eigen::VectorXd& g, const Eigen::VectorXd& t, double lambda)
+{
+  const Eigen::MatrixXd normal =
+    A.transpose() * g.asDiagonal() * A + lambda * Eigen::MatrixXd::Identity(A.cols(), A.cols());
+  return normal.ldlt().solve(A.transpose() * (g.array() * t.array()).matrix());
+}
+
+/// @p r ([N] float) as a double vector.
+Eigen::VectorXd ToVector(const std::vector<float>& r)
+{
+  return Eigen::Map<const Eigen::VectorXf>(r.data(), static_cast<Eigen::Index>(r.size())).cast<double>();
+}
+
 /// The dense matrix A ([pixels of all frames, N]) of the engine's basis, column by column.
 Eigen::MatrixXd DenseBasis(TrainingEngine& engine, const TrainingData& data, std::int64_t n, const RenderOptions& o)
 {
@@ -234,17 +249,11 @@ TEST(ReflectivitySolve, MatchesADenseDirectSolveOnATinyProblem)
   ReflectivitySolveReport report;
   std::string error;
   ASSERT_TRUE(SolveReflectivities(*engine, data, data.TrainFrames, o, settings, r, &report, &error)) << error;
-  const Eigen::MatrixXd normal =
-    A.transpose() * g.asDiagonal() * A + report.Lambda * Eigen::MatrixXd::Identity(geometry.Count(), geometry.Count());
-  const Eigen::VectorXd expected = normal.ldlt().solve(A.transpose() * (g.array() * t.array()).matrix());
+  const Eigen::VectorXd expected = DenseRidgeSolve(A, g, t, report.Lambda);
   const Eigen::ArrayXd diagonal = (A.array().square().colwise() * g.array()).colwise().sum().transpose();
   const double diagonalMean = diagonal.sum() / (diagonal > 0).count(); // over the Gaussians the frames see
   EXPECT_NEAR(report.Lambda, settings.Ridge * diagonalMean, 1e-6 * report.Lambda);
-  Eigen::VectorXd got(geometry.Count());
-  for (std::int64_t i = 0; i < geometry.Count(); ++i)
-  {
-    got[i] = r[i];
-  }
+  const Eigen::VectorXd got = ToVector(r);
   EXPECT_LT((got - expected).norm(), 1e-6 * expected.norm()) << "got\n" << got << "\nexpected\n" << expected;
 }
 
@@ -284,11 +293,7 @@ TEST(ReflectivitySolve, LinearisedAtTheFieldMatchesADenseGaussNewtonSolve)
   auto engine = EngineFor(data, geometry);
   const RenderOptions o = Options(sigmaE);
   const Eigen::MatrixXd A = DenseBasis(*engine, data, geometry.Count(), o);
-  Eigen::VectorXd r0(geometry.Count());
-  for (std::int64_t i = 0; i < geometry.Count(); ++i)
-  {
-    r0[i] = geometry.Reflectivities[i];
-  }
+  const Eigen::VectorXd r0 = ToVector(geometry.Reflectivities);
   const Eigen::VectorXd S0 = A * r0;
   ASSERT_GT((S0.array() < 0).count(), 20); // the case this linearisation is for
   Eigen::VectorXd g(S0.size()), t(S0.size());
@@ -309,14 +314,8 @@ TEST(ReflectivitySolve, LinearisedAtTheFieldMatchesADenseGaussNewtonSolve)
   ASSERT_TRUE(SolveReflectivities(*engine, data, data.TrainFrames, o, settings, r, &report, &error)) << error;
   EXPECT_NEAR(report.Objective.front(), ImageSquaredError(geometry, data, o) + report.Lambda * r0.squaredNorm(),
     1e-5 * report.Objective.front());
-  const Eigen::MatrixXd normal =
-    A.transpose() * g.asDiagonal() * A + report.Lambda * Eigen::MatrixXd::Identity(geometry.Count(), geometry.Count());
-  const Eigen::VectorXd expected = normal.ldlt().solve(A.transpose() * (g.array() * t.array()).matrix());
-  Eigen::VectorXd got(geometry.Count());
-  for (std::int64_t i = 0; i < geometry.Count(); ++i)
-  {
-    got[i] = r[i];
-  }
+  const Eigen::VectorXd expected = DenseRidgeSolve(A, g, t, report.Lambda);
+  const Eigen::VectorXd got = ToVector(r);
   EXPECT_LT((got - expected).norm(), 1e-5 * expected.norm()) << "got\n" << got << "\nexpected\n" << expected;
 }
 
