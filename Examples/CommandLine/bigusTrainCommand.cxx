@@ -48,6 +48,7 @@ struct TrainOptions
   std::vector<int> Frames; ///< explicit training frames (empty: the hold-out rule)
   double EvaluationInterval = 0;
   std::vector<std::string> RefinedPoses; ///< one per sweep
+  std::vector<double> LossWeights;       ///< --loss-weights: L1, D-SSIM, FFL (empty: the trainer's)
   /// The trainer's settings, the options bound to them: their defaults are the trainer's own.
   TrainerSettings Settings;
 };
@@ -195,6 +196,12 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
       count, o.RefinedPoses.size());
     return 2;
   }
+  if (!o.LossWeights.empty() &&
+    std::all_of(o.LossWeights.begin(), o.LossWeights.end(), [](double w) { return w == 0; }))
+  {
+    std::fprintf(stderr, "bigus: --loss-weights 0 0 0: at least one of L1, D-SSIM and FFL must weigh more than 0\n");
+    return 2;
+  }
   // Before any work: no output replaces an input, and every output can be written.
   // (The checkpoint may be the file a run resumes from.)
   std::vector<std::string> outputs = o.RefinedPoses, inputs = o.Sweeps;
@@ -260,6 +267,12 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
     trainer->SetTrainingFrameList(frames);
   }
   TrainerSettings settings = o.Settings;
+  if (!o.LossWeights.empty())
+  {
+    settings.Loss.L1 = o.LossWeights[0];
+    settings.Loss.DSSIM = o.LossWeights[1];
+    settings.Loss.FFL = o.LossWeights[2];
+  }
   // Without --checkpoint, a run stopped by a signal still leaves one to resume from (only then is it written).
   settings.CheckpointFile = o.Checkpoint.empty() ? o.Output + ".checkpoint" : o.Checkpoint;
   settings.CheckpointInterval = o.Checkpoint.empty() ? 0 : o.CheckpointInterval;
@@ -767,6 +780,17 @@ Command AddTrainCommand(CLI::App& app)
       "docs/FINDINGS.md)")
     ->capture_default_str()
     ->check(FiniteRange(2, 5));
+  trainCommand
+    ->add_option("--loss-weights", train.LossWeights,
+      [&settings] {
+        std::ostringstream text;
+        text << "The image loss's weights of L1, D-SSIM and the focal frequency loss (three numbers; default "
+             << settings.Loss.L1 << " " << settings.Loss.DSSIM << " " << settings.Loss.FFL
+             << "; the FFL's two DFTs cost about as much as the rest of the loss)";
+        return text.str();
+      }())
+    ->expected(3)
+    ->check(FiniteNonNegative(100));
   trainCommand
     ->add_option("--coarse-fraction", settings.CoarseFraction,
       "The resolution schedule: the first fraction (0 to 1) of the schedule steps on every second pixel and row of "

@@ -91,8 +91,10 @@ std::vector<std::string> DescribeTrainerSettings(const TrainerSettings& s)
                         "docs/FINDINGS.md)",
           s.ParameterAverage, s.ParameterAverage)
       : std::string("ParameterAverage = off (the run's field: the last step's)"),
-    vtkfmt::sprintf("Seed = %u, FramesPerStep = %d, Cutoff = %.3g, SparseAdam = %s%s", s.Seed, s.FramesPerStep,
-      s.Cutoff, s.SparseAdam ? "on" : "off",
+    vtkfmt::sprintf(
+      "Seed = %u, FramesPerStep = %d, Loss = %.3g L1 + %.3g D-SSIM + %.3g FFL, Cutoff = %.3g, SparseAdam = "
+      "%s%s",
+      s.Seed, s.FramesPerStep, s.Loss.L1, s.Loss.DSSIM, s.Loss.FFL, s.Cutoff, s.SparseAdam ? "on" : "off",
       s.CoarseFraction > 0
         ? vtkfmt::sprintf(", CoarseFraction = %.3g (a quarter of the pixels per step until then, %s)", s.CoarseFraction,
             s.CoarseLowPass ? "2 x 2 averages through the pixel's low-pass" : "point samples")

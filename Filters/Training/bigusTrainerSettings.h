@@ -125,8 +125,8 @@ struct TrainerSettings
 /**
  * The `setting` lines (TrainerReport::Settings) that @p s alone fixes, in the report's order: the schedule
  * (Iterations, TimeBudget), densification, gap filling, merge, the reflectivity solve, the parameter average, and the
- * step's own (Seed, FramesPerStep, Cutoff, SparseAdam, the resolution schedule). The lines of choices made from the
- * data (ElevationSigma, the poses, seeding, gamma) are written by the stages that make them.
+ * step's own (Seed, FramesPerStep, the loss's weights, Cutoff, SparseAdam, the resolution schedule). The lines of
+ * choices made from the data (ElevationSigma, the poses, seeding, gamma) are written by the stages that make them.
  */
 BIGUSTRAINING_EXPORT std::vector<std::string> DescribeTrainerSettings(const TrainerSettings& s);
 

@@ -246,6 +246,34 @@ def check_signal_stop(sweep, xml, out):
     assert "after %d iterations" % (steps + 20) in out_text, out_text
 
 
+def check_loss_weights(sweep, xml, out):
+    """--loss-weights reaches the loss: Adam moves each parameter by its gradient over the root of its squared
+    gradient's average, so doubling every weight (a power of 2: exact in floating point, but for Adam's epsilon)
+    leaves the field where it was while the loss itself doubles. Without merge and gap filling the fields keep one
+    order to compare."""
+    fields, losses = [], []
+    for weights in (["1", "0", "0"], ["2", "0", "0"]):
+        field = os.path.join(out, "loss_weights_%s.vtp" % weights[0])
+        code, out_text, err = run("train", sweep, "--calibration", xml, "-o", field, "--no-pixel-grid-fit",
+                                  "--iterations", "30", "--elevation-sigma", "1.0", "--merge-tolerance", "0",
+                                  "--no-fill-gaps", "--loss-weights", *weights)
+        assert code == 0, (out_text, err)
+        assert "Loss = %s L1 + 0 D-SSIM + 0 FFL" % weights[0] in out_text, out_text
+        losses.append(float(out_text.split("early stopping kept")[1].split("validation loss ")[1].split()[0]))
+        fields.append(read_field(field))
+    assert abs(losses[1] / losses[0] - 2) < 1e-3, losses
+    a, b = fields
+    assert a.GetNumberOfPoints() == b.GetNumberOfPoints() > 1000
+    moved = np.abs(vtk_to_numpy(a.GetPoints().GetData()) - vtk_to_numpy(b.GetPoints().GetData())).max()
+    assert moved < 0.05, moved  # mm; Adam's epsilon and float rounding over 30 steps: 0.003 measured
+    reflectivity = [vtk_to_numpy(f.GetPointData().GetArray("Reflectivity")) for f in fields]
+    assert np.abs(reflectivity[0] - reflectivity[1]).max() < 0.05 * np.abs(reflectivity[0]).max()
+    code, _, err = run("train", sweep, "--calibration", xml, "-o", os.path.join(out, "loss_weights_0.vtp"),
+                       "--loss-weights", "0", "0", "0")
+    assert code == 2 and "at least one of L1, D-SSIM and FFL" in err, (code, err)
+    assert not os.path.exists(os.path.join(out, "loss_weights_0.vtp"))
+
+
 def check_sweep_without_statuses(field, sweep, xml, out):
     """A sweep file without any status field (PLUS writes them, other tools may not): every frame is
     valid, as vtkUltrasoundSequenceReader, the trainer and the compounder read it."""
@@ -609,6 +637,7 @@ def main():
 
     check_fill_gaps(sweep, xml, out)
     check_merge(sweep, xml, out)
+    check_loss_weights(sweep, xml, out)
     check_refine_poses(sweep, xml, out)
     check_several_sweeps(data, sweep, xml, out)
     check_outputs_before_any_work(field, sweep, xml, out)

@@ -241,6 +241,9 @@ def cases(f):
     for option, values in bad_train_options.items():
         for value in values:
             case("train %s %s" % (option, value), train + [option, value], [option], [out + "_train.vtp"])
+    for weights in (["1", "nan", "0"], ["1", "-1", "0"], ["1", "0"], ["200", "0", "0"], ["0", "0", "0"]):
+        case("train --loss-weights " + " ".join(weights), train + ["--loss-weights"] + weights, ["--loss-weights"],
+             [out + "_train.vtp"])
     case("train --checkpoint-interval -1", train + ["--checkpoint", out + ".ckpt", "--checkpoint-interval", "-1"],
          ["--checkpoint-interval"], [out + "_train.vtp", out + ".ckpt"])
     case("train --checkpoint-interval without --checkpoint", train + ["--checkpoint-interval", "5"],
