@@ -626,6 +626,11 @@ Command AddTrainCommand(CLI::App& app)
     ->capture_default_str()
     ->check(FiniteNonNegative());
   trainCommand
+    ->add_option("--densify-percentile", settings.Densification.Percentile,
+      "Top share (percent) of the attribution score split or cloned at each densification")
+    ->capture_default_str()
+    ->check(FiniteRange(0.0, 100.0));
+  trainCommand
     ->add_option("--growth-margin", settings.Densification.GrowthMargin,
       "Growth stops when the validation loss improves by less than this (relative) on the best so far ...")
     ->capture_default_str()

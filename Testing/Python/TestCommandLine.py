@@ -274,6 +274,21 @@ def check_loss_weights(sweep, xml, out):
     assert not os.path.exists(os.path.join(out, "loss_weights_0.vtp"))
 
 
+def check_densify_percentile(sweep, xml, out):
+    """--densify-percentile reaches densification: 340 steps densify once (step 200; the window ends at 60 % of the
+    schedule), where the top P % of the 20,000 seeds are each split or cloned, one Gaussian more apiece, so the field
+    has 20,000 P / 100 more Gaussians than with P = 0 (both prune the same ones; the final prune differs by a few)."""
+    counts = {}
+    for percentile in (0, 20):
+        field = os.path.join(out, "densify_%d.vtp" % percentile)
+        code, out_text, err = run("train", sweep, "--calibration", xml, "-o", field, "--no-pixel-grid-fit",
+                                  "--iterations", "340", "--elevation-sigma", "1.0", "--initial-gaussians", "20000",
+                                  "--merge-tolerance", "0", "--no-fill-gaps", "--densify-percentile", str(percentile))
+        assert code == 0 and "top %d %% by attribution" % percentile in out_text, (out_text, err)
+        counts[percentile] = read_field(field).GetNumberOfPoints()
+    assert counts[0] <= 20000 and abs(counts[20] - counts[0] - 4000) <= 20, counts
+
+
 def check_sweep_without_statuses(field, sweep, xml, out):
     """A sweep file without any status field (PLUS writes them, other tools may not): every frame is
     valid, as vtkUltrasoundSequenceReader, the trainer and the compounder read it."""
@@ -638,6 +653,7 @@ def main():
     check_fill_gaps(sweep, xml, out)
     check_merge(sweep, xml, out)
     check_loss_weights(sweep, xml, out)
+    check_densify_percentile(sweep, xml, out)
     check_refine_poses(sweep, xml, out)
     check_several_sweeps(data, sweep, xml, out)
     check_outputs_before_any_work(field, sweep, xml, out)

@@ -228,6 +228,7 @@ def cases(f):
         "--max-gaussians": ["0", "-1", "nan"],
         "--initial-gaussians": ["-1"],
         "--growth-margin": ["nan", "2"],
+        "--densify-percentile": ["-1", "101", "nan"],
         "--residual-seeds": ["-1", "101"],
         "--merge-tolerance": ["-0.1", "2", "nan"],
         "--coarse-fraction": ["nan", "1.5", "-0.5"],
