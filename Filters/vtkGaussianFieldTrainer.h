@@ -251,7 +251,9 @@ public:
   virtual void SetMaximumGaussians(vtkIdType value);
   virtual vtkIdType GetMaximumGaussians() const;
   ///@}
-  ///@{ Loss weights (L1, D-SSIM, focal frequency loss).
+  ///@{ Loss weights (L1, D-SSIM, focal frequency loss): a negative one is taken as 0 and NaN leaves them as they
+  /// were; all three 0 is refused by the next update (an error naming the weights, no output: no step would move
+  /// the field).
   virtual void SetLossWeights(double l1, double dssim, double ffl);
   void SetLossWeights(const double weights[3]) { this->SetLossWeights(weights[0], weights[1], weights[2]); }
   void GetLossWeights(double weights[3]) const;

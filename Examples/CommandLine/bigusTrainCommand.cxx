@@ -196,10 +196,11 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
       count, o.RefinedPoses.size());
     return 2;
   }
+  std::string lossError;
   if (!o.LossWeights.empty() &&
-    std::all_of(o.LossWeights.begin(), o.LossWeights.end(), [](double w) { return w == 0; }))
+    !bigus::CheckImageLossWeights({ o.LossWeights[0], o.LossWeights[1], o.LossWeights[2] }, &lossError))
   {
-    std::fprintf(stderr, "bigus: --loss-weights 0 0 0: at least one of L1, D-SSIM and FFL must weigh more than 0\n");
+    std::fprintf(stderr, "bigus: --loss-weights: %s\n", lossError.c_str());
     return 2;
   }
   // Before any work: no output replaces an input, and every output can be written.

@@ -8,10 +8,15 @@
 #include <opencv2/imgproc.hpp>
 
 #include "vtkSMPTools.h"
+#include <vtk_fmt.h>
+// clang-format off
+#include VTK_FMT(fmt/printf.h)
+// clang-format on
 
 #include <algorithm>
 #include <cmath>
 #include <initializer_list>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -248,6 +253,25 @@ ImageLossTerms Compute(const float* rendered, const float* target, const unsigne
   }
   return terms;
 }
+}
+
+bool CheckImageLossWeights(const ImageLossWeights& weights, std::string* error)
+{
+  const double w[3] = { weights.L1, weights.DSSIM, weights.FFL };
+  const bool each = std::all_of(w, w + 3, [](double v) { return std::isfinite(v) && v >= 0; }) &&
+    std::isfinite(weights.FFLAlpha) && weights.FFLAlpha >= 0;
+  if (each && w[0] + w[1] + w[2] > 0)
+  {
+    return true;
+  }
+  if (error)
+  {
+    *error = vtkfmt::sprintf("the image loss's weights (L1 %g, D-SSIM %g, FFL %g, FFL alpha %g) %s", w[0], w[1], w[2],
+      weights.FFLAlpha,
+      each ? "are all 0: no step would move the field; give at least one of L1, D-SSIM and FFL a weight above 0"
+           : "must each be a finite number >= 0");
+  }
+  return false;
 }
 
 struct ImageLossWorkspace::Internals

@@ -20,6 +20,7 @@
 #include "bigusTrainingModule.h" // For export macro
 
 #include <memory>
+#include <string>
 
 namespace bigus
 {
@@ -32,6 +33,13 @@ struct ImageLossWeights
   double FFL = 0.0;
   double FFLAlpha = 1.0; ///< focusing exponent of the FFL spectrum weight
 };
+
+/**
+ * Whether @p weights make a loss a step can descend: each of L1, DSSIM and FFL finite and >= 0, FFLAlpha finite and
+ * >= 0, and at least one of the three weights > 0 (all three 0: every gradient is 0 and no step moves the field).
+ * False with @p error (when not null) naming the weights and what is wrong.
+ */
+BIGUSTRAINING_EXPORT bool CheckImageLossWeights(const ImageLossWeights& weights, std::string* error);
 
 /// The value of each term (unweighted) and the weighted total.
 struct ImageLossTerms

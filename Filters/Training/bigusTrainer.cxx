@@ -109,8 +109,8 @@ bool Trainer::PrepareInitialField(std::string* error)
   const TrainingData& data = *this->Data;
   std::int64_t count = 0;
   std::string gammaLine;
-  if (!CheckTrainingData(data, error) || !this->Poses.Prepare(error) ||
-    !GammaOfTrainingFrames(data, this->Gamma, count, gammaLine, error))
+  if (!CheckImageLossWeights(this->Settings.Loss, error) || !CheckTrainingData(data, error) ||
+    !this->Poses.Prepare(error) || !GammaOfTrainingFrames(data, this->Gamma, count, gammaLine, error))
   {
     return false;
   }

@@ -313,6 +313,37 @@ TEST(Trainer, APoseTheRendererRejectsFailsTheRunWithItsMessage)
   EXPECT_NE(error.find("shear"), std::string::npos) << error;
 }
 
+TEST(Trainer, ALossOfNoWeightOrANegativeOneIsRefusedBeforeAnySeed)
+{
+  // All three weights 0: every gradient is 0, so a run would spend its schedule moving nothing (it used to be
+  // refused only by `bigus train`; the filter and ParaView took it).
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(100, 5), 0.5, heldOut);
+  const struct
+  {
+    ImageLossWeights Weights;
+    const char* Expected;
+  } cases[] = { { { 0, 0, 0 }, "are all 0" }, { { 0.8, -0.2, 0 }, "D-SSIM -0.2" }, { { NAN, 0.2, 0 }, "L1 nan" },
+    { { 0.8, 0.2, 0, INFINITY }, "FFL alpha inf" } };
+  for (const auto& c : cases)
+  {
+    TrainerSettings s = ShortSettings();
+    s.Loss = c.Weights;
+    Trainer trainer(data, s);
+    std::string error;
+    EXPECT_FALSE(trainer.Initialize(&error)) << c.Expected;
+    EXPECT_NE(error.find(c.Expected), std::string::npos) << error;
+    EXPECT_NE(error.find("image loss"), std::string::npos) << error;
+    EXPECT_EQ(trainer.GetState().Gaussians.Field.Count(), 0) << c.Expected;
+  }
+  // One weight above 0 is enough (D-SSIM alone, FFL alone).
+  for (const ImageLossWeights w : { ImageLossWeights{ 0, 1, 0 }, ImageLossWeights{ 0, 0, 1 } })
+  {
+    std::string error;
+    EXPECT_TRUE(CheckImageLossWeights(w, &error)) << error;
+  }
+}
+
 TEST(Trainer, SparseAdamLeavesTheGaussiansAStepDidNotTouchAsTheyWere)
 {
   std::vector<int> heldOut;
