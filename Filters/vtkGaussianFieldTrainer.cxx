@@ -285,7 +285,6 @@ bigusTrainerSetting(MergeTolerance, double, Merge.Tolerance, 0.0, 1.0)
 bigusTrainerSetting(ParameterAverage, double, ParameterAverage, 0.0, 1.0)
 bigusTrainerSetting(Seed, unsigned int, Seed, bigusAnyValue(unsigned int))
 bigusTrainerSetting(FramesPerStep, int, FramesPerStep, 1, 4096)
-bigusTrainerSetting(TrainingCutoff, double, Cutoff, 2.0, 5.0)
 bigusTrainerSetting(CoarseFraction, double, CoarseFraction, 0.0, 1.0)
 bigusTrainerSetting(CoarseLowPass, bool, CoarseLowPass, bigusAnyValue(bool))
 bigusTrainerSetting(CheckpointInterval, int, CheckpointInterval, 0, VTK_INT_MAX)
@@ -304,6 +303,25 @@ void vtkGaussianFieldTrainer::SetRefinePoses(int mode)
 int vtkGaussianFieldTrainer::GetRefinePoses() const
 {
   return static_cast<int>(this->Settings->Poses.RefinePoses);
+}
+
+void vtkGaussianFieldTrainer::SetTrainingCutoff(double value)
+{
+  if (std::isnan(value))
+  {
+    vtkErrorMacro("SetTrainingCutoff: NaN is not a value; the setting stays " << this->GetTrainingCutoff());
+    return;
+  }
+  // 0 or below: automatic; a given cut-off within [2, 5] (a render filter's own range ends at 5).
+  if (Assign(this->Settings->Cutoff, value <= 0 ? 0.0 : std::min(std::max(value, 2.0), 5.0)))
+  {
+    this->Modified();
+  }
+}
+
+double vtkGaussianFieldTrainer::GetTrainingCutoff() const
+{
+  return this->Settings->Cutoff;
 }
 
 void vtkGaussianFieldTrainer::SetLossWeights(double l1, double dssim, double ffl)

@@ -373,12 +373,14 @@ public:
   virtual void SetFramesPerStep(int value);
   virtual int GetFramesPerStep() const;
   ///@}
-  ///@{ The renderer's footprint cut-off while training, in standard deviations (in plane and in elevation; 2 to 5;
-  /// bigus::TrainerSettings::Cutoff, default 4). Each Gaussian's dropped share of a pixel is below |r| exp(-k^2 / 2);
-  /// the trained field is rendered and scored at the render filters' cut-off whatever this is. Smaller makes a step
-  /// faster and fits the footprints' tails less well: 3.5 trains the liver's steps in 0.81 of the time at 0.03 dB
-  /// less held out, but loses where poses are refined and on the pixel-grid fit (docs/FINDINGS.md, "The training
-  /// cut-off").
+  ///@{ The renderer's footprint cut-off of a training step, in standard deviations (in plane and in elevation; 2 to
+  /// 5, or 0: automatic, the default; bigus::TrainerSettings::Cutoff). Each Gaussian's dropped share of a pixel is
+  /// below |r| exp(-k^2 / 2); the trained field is rendered and scored at the render filters' cut-off whatever this
+  /// is. Smaller makes a step faster and fits the footprints' tails less well: 3.5 trains the liver's steps in 0.81
+  /// of the time at 0.03 dB less held out, but loses where poses are refined and on the pixel-grid fit
+  /// (docs/FINDINGS.md, "The training cut-off"), so the automatic choice is 3.5 where Adam steps on trusted poses and
+  /// 4 elsewhere (bigus::Trainer::StepCutoff), validation and the final prune at 4. A value in (0, 2) is taken as 2,
+  /// one below 0 as 0.
   virtual void SetTrainingCutoff(double value);
   virtual double GetTrainingCutoff() const;
   ///@}

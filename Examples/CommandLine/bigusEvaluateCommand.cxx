@@ -161,8 +161,9 @@ int ScoreAtRefinedPoses(vtkPolyData* field, vtkImageData* truth, bigus::Training
   std::vector<std::array<double, 6>> corrections;
   const bigus::TrainerSettings settings;
   if (!bigus::FieldFromPolyData(field, gaussians, model, &message) ||
-    !bigus::RefinePosesWithFieldFrozen(gaussians, data, scored, bigus::RenderOptionsFor(model, -1, settings.Cutoff),
-      settings.Poses, settings.Loss, o.RefineSteps, o.Backend, corrections, &message))
+    !bigus::RefinePosesWithFieldFrozen(gaussians, data, scored,
+      bigus::RenderOptionsFor(model, -1, bigus::FixedTrainingCutoff(settings)), settings.Poses, settings.Loss,
+      o.RefineSteps, o.Backend, corrections, &message))
   {
     return Fail("--refine-poses: " + message);
   }

@@ -26,6 +26,7 @@
 #include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <memory>
 #include <mpi.h>
 #include <sstream>
@@ -780,12 +781,20 @@ Command AddTrainCommand(CLI::App& app)
     ->check(FiniteRange(1, 4096));
   trainCommand
     ->add_option("--training-cutoff", settings.Cutoff,
-      "Footprint cut-off while training, standard deviations (in plane and in elevation; the field is rendered and "
-      "scored at the render filters' 5 whatever this is): smaller makes a step faster and fits the footprints' tails "
-      "less well (3.5: 0.81 times the time of 4 on the liver, but refined poses and the pixel-grid fit lose; "
-      "docs/FINDINGS.md)")
+      "Footprint cut-off of a training step, standard deviations, 2 to 5 (in plane and in elevation; the field is "
+      "rendered and scored at the render filters' 5 whatever this is): smaller makes a step faster and fits the "
+      "footprints' tails less well (3.5: 0.81 times the time of 4 on the liver, but refined poses and the pixel-grid "
+      "fit lose; docs/FINDINGS.md). 0: automatic, 3.5 where Adam steps on trusted poses, 4 where poses are refined or "
+      "reflectivities solved (validation and the final prune at 4)")
     ->capture_default_str()
-    ->check(FiniteRange(2, 5));
+    ->check(CLI::Validator(
+      [range = FiniteRange(2, 5)](std::string& text) mutable -> std::string {
+        const std::string refused = range(text);
+        char* end = nullptr;
+        const bool zero = !text.empty() && std::strtod(text.c_str(), &end) == 0 && *end == '\0';
+        return refused.empty() || zero ? std::string() : refused + " (or 0: automatic)";
+      },
+      "0 or [2, 5]"));
   trainCommand
     ->add_option("--loss-weights", train.LossWeights,
       [&settings] {

@@ -63,6 +63,17 @@ RenderOptions Trainer::Options() const
   return RenderOptionsOf(this->Settings, this->Gamma);
 }
 
+double Trainer::StepCutoff() const
+{
+  if (this->Settings.Cutoff > 0)
+  {
+    return this->Settings.Cutoff;
+  }
+  const bool fine =
+    this->PixelGrid || this->SolvesReflectivities() || this->Poses.GetSettings().Any() || this->Poses.IsTrialPending();
+  return fine ? FineTrainingCutoff : FastTrainingCutoff;
+}
+
 bool Trainer::PullState(std::string* error) const
 {
   if (!this->HostCurrent && !this->Engine->Pull(this->State.Gaussians, error))
@@ -304,7 +315,9 @@ StepStatus Trainer::Step(double* loss, std::string* error)
     f = train[static_cast<std::size_t>(UniformDouble(state.Random) * train.size())];
   }
   const double fraction = this->ScheduleFraction();
-  StepRequest request = StepRequestAt(this->Settings, fraction, state.LearningRateScale, this->Options());
+  RenderOptions options = this->Options();
+  options.Cutoff = this->StepCutoff();
+  StepRequest request = StepRequestAt(this->Settings, fraction, state.LearningRateScale, options);
   request.Frames = frames.data();
   request.Count = static_cast<int>(frames.size());
   request.Iteration = state.Iteration;

@@ -227,7 +227,15 @@ public:
   const TrainingData& GetData() const { return *this->Data; }
   const TrainingEngine& GetEngine() const { return *this->Engine; }
   SliceGeometry Slice(int frame) const { return this->Data->Slice(frame); }
+  /// The run's renderer options at its fixed cut-off (FixedTrainingCutoff): the validation loss, the final prune.
   RenderOptions Options() const;
+  /**
+   * The cut-off of the next step (standard deviations): TrainerSettings::Cutoff where given; where automatic (0)
+   * FineTrainingCutoff on the pixel grid's route, where reflectivities are solved, and while any pose is refined or
+   * the pose-refinement trial is pending (both its branches step at it), else FastTrainingCutoff (Adam on trusted
+   * poses: the liver's main job from the trial's choice on). Resolved at each step, so a checkpoint resumes to it.
+   */
+  double StepCutoff() const;
 
 private:
   /// Options() at the render filters' cutoff whatever the training cutoff: the images a user gets.

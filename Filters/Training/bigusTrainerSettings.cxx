@@ -91,10 +91,16 @@ std::vector<std::string> DescribeTrainerSettings(const TrainerSettings& s)
                         "docs/FINDINGS.md)",
           s.ParameterAverage, s.ParameterAverage)
       : std::string("ParameterAverage = off (the run's field: the last step's)"),
-    vtkfmt::sprintf(
-      "Seed = %u, FramesPerStep = %d, Loss = %.3g L1 + %.3g D-SSIM + %.3g FFL, Cutoff = %.3g, SparseAdam = "
-      "%s%s",
-      s.Seed, s.FramesPerStep, s.Loss.L1, s.Loss.DSSIM, s.Loss.FFL, s.Cutoff, s.SparseAdam ? "on" : "off",
+    vtkfmt::sprintf("Seed = %u, FramesPerStep = %d, Loss = %.3g L1 + %.3g D-SSIM + %.3g FFL, Cutoff = %s, SparseAdam = "
+                    "%s%s",
+      s.Seed, s.FramesPerStep, s.Loss.L1, s.Loss.DSSIM, s.Loss.FFL,
+      s.Cutoff > 0
+        ? vtkfmt::sprintf("%.3g", s.Cutoff)
+        : vtkfmt::sprintf("automatic (a step's: %.3g where Adam steps on trusted poses, %.3g while a pose is "
+                          "refined or its trial pending and where reflectivities are solved; validation and "
+                          "the final prune at %.3g: docs/FINDINGS.md, \"The training cut-off\")",
+            FastTrainingCutoff, FineTrainingCutoff, FineTrainingCutoff),
+      s.SparseAdam ? "on" : "off",
       s.CoarseFraction > 0
         ? vtkfmt::sprintf(", CoarseFraction = %.3g (a quarter of the pixels per step until then, %s)", s.CoarseFraction,
             s.CoarseLowPass ? "2 x 2 averages through the pixel's low-pass" : "point samples")
@@ -127,7 +133,7 @@ RenderOptions RenderOptionsOf(const TrainerSettings& s, double gamma)
   o.ElevationSigma = s.ElevationSigma;
   o.BeamIntegration = s.BeamIntegration;
   o.NonNegativeReflectivity = s.NonNegativeReflectivity;
-  o.Cutoff = s.Cutoff;
+  o.Cutoff = FixedTrainingCutoff(s);
   o.Gamma = gamma;
   return o;
 }

@@ -59,7 +59,7 @@ TEST(GaussianFieldTrainer, PipelineOutputsTheFieldOfTheDataModel)
   trainer->SetInitialGaussians(500);
   trainer->SetHoldOutEvery(4);
   trainer->SetHoldOutOffset(2);
-  trainer->SetTrainingCutoff(4.5); // not the default (4): the setting line below shows it reached the trainer
+  trainer->SetTrainingCutoff(4.5); // not the default (0, automatic): the setting line below shows it arrived
   int progressEvents = 0;
   vtkNew<vtkCallbackCommand> counter;
   counter->SetClientData(&progressEvents);

@@ -347,6 +347,7 @@ TEST(ReferenceResults, TrainingReachesTheRecordedPsnr)
   trainer->SetElevationSigma(training["elevation_sigma"].get<double>());
   trainer->SetCoarseFraction(training["coarse_fraction"].get<double>());
   trainer->SetRefinePoses(training["refine_poses"].get<int>());
+  trainer->SetTrainingCutoff(training["training_cutoff"].get<double>());
   trainer->SetSeed(training["seed"].get<unsigned>());
   trainer->Update();
   ASSERT_GT(trainer->GetNumberOfGaussians(), 0);

@@ -344,6 +344,49 @@ TEST(Trainer, ALossOfNoWeightOrANegativeOneIsRefusedBeforeAnySeed)
   }
 }
 
+TEST(Trainer, TheAutomaticCutoffStepsAt3Point5OnTrustedPosesAnd4WherePosesAreRefined)
+{
+  // The same field stepped from SetField (no seed scale, whose cut-off is the fixed one) for 30 steps: the automatic
+  // cut-off's field is bit for bit the field of the cut-off it resolves to, and not the other's.
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(100, 5), 0.5, heldOut);
+  const GaussianField start = KnownField(60, 2);
+  auto stepped = [&](TrainerSettings s, double cutoff, double* resolved) {
+    s.Cutoff = cutoff;
+    Trainer trainer(data, s);
+    std::string error;
+    EXPECT_TRUE(trainer.SetField(start, &error)) << error;
+    *resolved = trainer.StepCutoff();
+    // Validation and the final prune keep one cut-off whatever the step's: the given one, else 4.
+    EXPECT_EQ(trainer.Options().Cutoff, cutoff > 0 ? cutoff : FineTrainingCutoff);
+    double loss = 0;
+    for (int k = 0; k < 30; ++k)
+    {
+      EXPECT_EQ(trainer.Step(&loss, &error), StepStatus::Done) << error;
+    }
+    return trainer.GetField().Means;
+  };
+  TrainerSettings trusted = ShortSettings(); // RefinePoses Off, Adam alone
+  TrainerSettings refined = ShortSettings();
+  refined.Poses.RefinePoses = PoseRefinement::On;
+  refined.Poses.Start = 0;
+  TrainerSettings solved = ShortSettings();
+  solved.ReflectivitySolve = true;
+  double k = 0, given = 0;
+  const std::vector<float> automatic = stepped(trusted, 0, &k);
+  EXPECT_EQ(k, FastTrainingCutoff);
+  EXPECT_EQ(automatic, stepped(trusted, FastTrainingCutoff, &given));
+  EXPECT_NE(automatic, stepped(trusted, FineTrainingCutoff, &given));
+  const std::vector<float> automaticRefined = stepped(refined, 0, &k);
+  EXPECT_EQ(k, FineTrainingCutoff);
+  EXPECT_EQ(automaticRefined, stepped(refined, FineTrainingCutoff, &given));
+  EXPECT_NE(automaticRefined, stepped(refined, FastTrainingCutoff, &given));
+  stepped(solved, 0, &k);
+  EXPECT_EQ(k, FineTrainingCutoff);
+  stepped(trusted, 4.5, &k); // a given cut-off is the step's
+  EXPECT_EQ(k, 4.5);
+}
+
 TEST(Trainer, SparseAdamLeavesTheGaussiansAStepDidNotTouchAsTheyWere)
 {
   std::vector<int> heldOut;

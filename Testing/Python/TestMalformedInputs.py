@@ -229,6 +229,7 @@ def cases(f):
         "--initial-gaussians": ["-1"],
         "--growth-margin": ["nan", "2"],
         "--densify-percentile": ["-1", "101", "nan"],
+        "--training-cutoff": ["1", "-1", "6", "nan"],
         "--residual-seeds": ["-1", "101"],
         "--merge-tolerance": ["-0.1", "2", "nan"],
         "--coarse-fraction": ["nan", "1.5", "-0.5"],

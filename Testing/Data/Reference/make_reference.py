@@ -39,6 +39,7 @@ TRAINING = {
     "elevation_sigma": 0.5,
     "coarse_fraction": 0,
     "refine_poses": 0,
+    "training_cutoff": 4,
     "seed": 1,
     "threads": 1,
 }
@@ -66,7 +67,7 @@ def train(bigus_exe, field, seed):
         "--holdout-offset", str(t["holdout_offset"]), "--iterations", str(t["iterations"]),
         "--initial-gaussians", str(t["initial_gaussians"]), "--max-gaussians", str(t["max_gaussians"]),
         "--elevation-sigma", str(t["elevation_sigma"]), "--coarse-fraction", str(t["coarse_fraction"]),
-        "--seed", str(seed), "--threads", str(t["threads"]),
+        "--training-cutoff", str(t["training_cutoff"]), "--seed", str(seed), "--threads", str(t["threads"]),
         *(["--refine-poses"] if t["refine_poses"] == 1 else ["--no-refine-poses"] if t["refine_poses"] == 0 else []))
     reader = vtk.vtkXMLPolyDataReader()
     reader.SetFileName(field)
