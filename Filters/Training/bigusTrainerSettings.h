@@ -162,7 +162,7 @@ BIGUSTRAINING_EXPORT SeedShape SeedShapeOf(const TrainerSettings& s, double pixe
  * scored the same 8,000 steps within 0.03 dB of 4 in 0.81 times the time (+0.16 dB at 300 s), and within 0.08 dB on
  * the other sweeps of the main section; but refined poses lost 4 dB at 3.5 (a footprint's edge adds 2.2e-3 |r| at
  * once as a pose moves it across a pixel) and the 240-slice pixel-grid fit 0.8 dB (docs/FINDINGS.md, "The training
- * cut-off").
+ * cut-off"); the automatic choice measured: "The automatic training cut-off".
  */
 constexpr double FineTrainingCutoff = 4.0;
 constexpr double FastTrainingCutoff = 3.5;
