@@ -69,8 +69,10 @@ double Trainer::StepCutoff() const
   {
     return this->Settings.Cutoff;
   }
-  const bool fine =
-    this->PixelGrid || this->SolvesReflectivities() || this->Poses.GetSettings().Any() || this->Poses.IsTrialPending();
+  // Poses move only from the refinement's start: the steps before it are Adam's on trusted poses, and the trial's
+  // two branches both step at the fine cut-off (what the refined one needs; the trusted one compared alike).
+  const bool fine = this->PixelGrid || this->SolvesReflectivities() || this->InPoseTrial ||
+    this->Poses.RefinesAt(this->ScheduleFraction());
   return fine ? FineTrainingCutoff : FastTrainingCutoff;
 }
 

@@ -231,9 +231,10 @@ public:
   RenderOptions Options() const;
   /**
    * The cut-off of the next step (standard deviations): TrainerSettings::Cutoff where given; where automatic (0)
-   * FineTrainingCutoff on the pixel grid's route, where reflectivities are solved, and while any pose is refined or
-   * the pose-refinement trial is pending (both its branches step at it), else FastTrainingCutoff (Adam on trusted
-   * poses: the liver's main job from the trial's choice on). Resolved at each step, so a checkpoint resumes to it.
+   * FineTrainingCutoff on the pixel grid's route, where reflectivities are solved, while any pose is refined
+   * (PoseRefinementSettings::Start on) and in both branches of the pose-refinement trial, else FastTrainingCutoff
+   * (Adam on trusted poses, the steps before the refinement's start included: the liver's main job outside its
+   * trial). Resolved at each step, so a checkpoint resumes to it.
    */
   double StepCutoff() const;
 

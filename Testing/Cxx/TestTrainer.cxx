@@ -381,6 +381,25 @@ TEST(Trainer, TheAutomaticCutoffStepsAt3Point5OnTrustedPosesAnd4WherePosesAreRef
   EXPECT_EQ(k, FineTrainingCutoff);
   EXPECT_EQ(automaticRefined, stepped(refined, FineTrainingCutoff, &given));
   EXPECT_NE(automaticRefined, stepped(refined, FastTrainingCutoff, &given));
+  // Refined from half the schedule: no pose moves in the first 30 steps, which are the 3.5 field's; from step 100
+  // the poses move and the cut-off is 4.
+  TrainerSettings later = refined;
+  later.Poses.Start = 0.5;
+  const std::vector<float> automaticBefore = stepped(later, 0, &k);
+  EXPECT_EQ(k, FastTrainingCutoff);
+  EXPECT_EQ(automaticBefore, stepped(later, FastTrainingCutoff, &given));
+  EXPECT_NE(automaticBefore, stepped(later, FineTrainingCutoff, &given));
+  {
+    Trainer trainer(data, later);
+    std::string error;
+    ASSERT_TRUE(trainer.SetField(start, &error)) << error;
+    double loss = 0;
+    while (trainer.GetState().Iteration < 100 && trainer.Step(&loss, &error) == StepStatus::Done)
+    {
+      EXPECT_EQ(trainer.StepCutoff(), trainer.GetState().Iteration < 100 ? FastTrainingCutoff : FineTrainingCutoff);
+    }
+    EXPECT_EQ(trainer.GetState().Iteration, 100) << error;
+  }
   stepped(solved, 0, &k);
   EXPECT_EQ(k, FineTrainingCutoff);
   stepped(trusted, 4.5, &k); // a given cut-off is the step's
