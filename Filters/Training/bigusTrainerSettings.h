@@ -87,6 +87,9 @@ struct TrainerSettings
   /// Adam over the Gaussians a step touched only (StepRequest::SparseAdam). Off: every Gaussian's moments decay and
   /// its parameters move every step (the ablation).
   bool SparseAdam = true;
+  /// Adam's learning rates (per step; log-scale in log mm, reflectivity in intensity units). Twice the mean's or
+  /// the log-scale's gained per step on the liver and lost or tied at the main job's 300 s (the larger Gaussians'
+  /// slower steps): docs/FINDINGS.md, "Adam's learning rates, measured on held-out frames".
   double MeanLearningRate = 0.02;       ///< mm per step at the start ...
   double MeanLearningRateFinal = 0.002; ///< ... decaying exponentially to this at the end of the schedule
   double LogScaleLearningRate = 0.01;
