@@ -48,10 +48,10 @@ struct TrainerSettings
   bool NonNegativeReflectivity = false;
   /// Renderer cutoff k of a training step, standard deviations (Evaluate renders at the filters' 5): a smaller one
   /// makes a step faster and fits the footprints' tails less well. 0 (default): automatic, Trainer::StepCutoff:
-  /// FastTrainingCutoff where Adam steps on trusted poses (before the pose refinement's start too),
-  /// FineTrainingCutoff where a pose is refined, in both branches of the pose trial and where reflectivities are
-  /// solved. The validation loss and the final prune take FixedTrainingCutoff
-  /// (this, or FineTrainingCutoff where automatic), so that what they compare does not change with the step's.
+  /// FastTrainingCutoff where Adam steps on trusted poses (before the pose refinement's start too), FineTrainingCutoff
+  /// where a pose is refined, in both branches of the pose trial and where reflectivities are solved. The validation
+  /// loss and the final prune take FixedTrainingCutoff (this, or FineTrainingCutoff where automatic), so that what
+  /// they compare does not change with the step's.
   double Cutoff = 0;
   // The first field (bigusSeeding.h)
   SeedingSettings Seeding;

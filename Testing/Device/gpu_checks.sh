@@ -12,8 +12,8 @@
 #   growth   the main job at 60 s as in tracked, with the growth stop relaxed and with a larger MaximumGaussians
 #            (growth.log)
 #   cutoff   the main job at 60 s as in tracked, trained at a footprint cut-off of 4 and of 3.5 standard deviations
-#            from the first step (--training-cutoff; cutoff.log), against tracked's automatic one (4 until the pose
-#            trial trusts the poses, 3.5 from then on)
+#            from the first step (--training-cutoff; cutoff.log), against tracked's automatic one (4 in the pose
+#            trial's branches, 3.5 before and, where it trusts the poses, after them)
 #   dense    the main job at 60 s as in tracked, densifying the top 10 % to a maximum of 1 M Gaussians, with and
 #            without the growth stop relaxed (dense.log; on 2 cores, 8,000 steps so scored 40.08 dB against 39.72)
 #   bench    bigus benchmark --backend cuda: the gpu section (the main job at 10 to 100 s on the GPU and on the CPU
