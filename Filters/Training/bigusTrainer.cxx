@@ -65,14 +65,19 @@ RenderOptions Trainer::Options() const
 
 double Trainer::StepCutoff() const
 {
+  return this->CutoffAt(this->ScheduleFraction());
+}
+
+double Trainer::CutoffAt(double fraction) const
+{
   if (this->Settings.Cutoff > 0)
   {
     return this->Settings.Cutoff;
   }
   // Poses move only from the refinement's start: the steps before it are Adam's on trusted poses, and the trial's
   // two branches both step at the fine cut-off (what the refined one needs; the trusted one compared alike).
-  const bool fine = this->PixelGrid || this->SolvesReflectivities() || this->InPoseTrial ||
-    this->Poses.RefinesAt(this->ScheduleFraction());
+  const bool fine =
+    this->PixelGrid || this->SolvesReflectivities() || this->InPoseTrial || this->Poses.RefinesAt(fraction);
   return fine ? FineTrainingCutoff : FastTrainingCutoff;
 }
 
@@ -318,7 +323,7 @@ StepStatus Trainer::Step(double* loss, std::string* error)
   }
   const double fraction = this->ScheduleFraction();
   RenderOptions options = this->Options();
-  options.Cutoff = this->StepCutoff();
+  options.Cutoff = this->CutoffAt(fraction);
   StepRequest request = StepRequestAt(this->Settings, fraction, state.LearningRateScale, options);
   request.Frames = frames.data();
   request.Count = static_cast<int>(frames.size());

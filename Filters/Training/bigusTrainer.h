@@ -326,6 +326,9 @@ private:
    * learning rate decays and the densification window closes along it.
    */
   double ScheduleFraction() const;
+  /// StepCutoff's rule for a step at @p fraction of the schedule: Step resolves it at the fraction that also decides
+  /// whether the step moves the poses, so the two never disagree across a clock read.
+  double CutoffAt(double fraction) const;
   /// The run's seconds inside Train so far (TrainingState::TrainingSeconds, plus the call in progress).
   double TrainingSeconds() const;
   bool InDensificationWindow() const;
