@@ -172,6 +172,14 @@ std::unique_ptr<Trainer> FitAndScore(const TrainingData& data, const std::vector
   return fit;
 }
 
+/// Why the held-out fits stopped @p elapsed seconds after they started: @p what (the fits still to come) would pass
+/// the @p allowed seconds (HeldOutChoiceSettings::MaximumSeconds, which the route trial sets to half the budget).
+std::string FitsStoppedForTime(double elapsed, const std::string& what, double allowed)
+{
+  return vtkfmt::sprintf(
+    "its fits stopped after %.1f s, as %s would pass the %.3g s allowed (half the budget)", elapsed, what, allowed);
+}
+
 /// The index of the first candidate of @p candidates within @p tolerance dB of the best; -1 when there is none.
 int FirstWithinTolerance(const std::vector<HeldOutCandidate>& candidates, double tolerance)
 {
@@ -214,9 +222,9 @@ struct CandidateFits
     const int left = std::max(1, this->Planned - this->Done);
     if (this->MaximumSeconds > 0 && elapsed + left * this->LastFitSeconds > this->MaximumSeconds)
     {
-      this->OutOfTime = vtkfmt::sprintf("its fits stopped after %d in %.1f s, as the %d left (the last took %.1f s) "
-                                        "would pass the %.3g s allowed (half the budget)",
-        this->Done, elapsed, left, this->LastFitSeconds, this->MaximumSeconds);
+      this->OutOfTime = FitsStoppedForTime(elapsed,
+        vtkfmt::sprintf("the %d left after %d (the last took %.1f s)", left, this->Done, this->LastFitSeconds),
+        this->MaximumSeconds);
       return false;
     }
     return true;
@@ -546,11 +554,9 @@ bool MeasurePixelGridRoute(
     }
   }
   trial.Untested = trial.Frames.size() < 2 || !trial.Grid.Ridge.Untested.empty() ? trial.Grid.Ridge.Untested
-    : last > left
-    ? vtkfmt::sprintf("its fits stopped after %.1f s, as the route's fit (about %.1f s) would pass the %.3g s "
-                      "allowed (half the budget)",
-        SteadySeconds() - start, last, grid.HeldOut.MaximumSeconds)
-    : std::string();
+    : last > left ? FitsStoppedForTime(SteadySeconds() - start, vtkfmt::sprintf("the route's fit (about %.1f s)", last),
+                      grid.HeldOut.MaximumSeconds)
+                  : std::string();
   if (!trial.Untested.empty())
   {
     trial.Frames.clear();
