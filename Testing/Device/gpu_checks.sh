@@ -15,7 +15,8 @@
 #            from the first step (--training-cutoff; cutoff.log), against tracked's automatic one (4 in the pose
 #            trial's branches, 3.5 before and, where it trusts the poses, after them)
 #   dense    the main job at 60 s as in tracked, densifying the top 10 % to a maximum of 1 M Gaussians, with and
-#            without the growth stop relaxed (dense.log; on 2 cores, 8,000 steps so scored 40.08 dB against 39.72)
+#            without the growth stop relaxed (dense.log; on 2 cores at the steps the device takes in 60 s, 10,000
+#            steps so scored 40.11 dB, the defaults' 15,000 39.97: docs/FINDINGS.md, "The device's 60 s predicted")
 #   bench    bigus benchmark --backend cuda: the gpu section (the main job at 10 to 100 s on the GPU and on the CPU
 #            cores beside it), then the volume section (bench/BENCHMARKS_gpu.md, bench/BENCHMARKS_volume.md, bench.log)
 # GPU_CHECKS_SECONDS (default 540): every command is stopped when the script has run that long, so that what ran
