@@ -471,7 +471,8 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
   {
     for (vtkIdType i = 0; i < lines->GetNumberOfValues(); ++i)
     {
-      // What the run decided after its settings were printed: the pose-refinement trial, the anchor, the route
+      // What the run decided after its settings were printed: the pose-refinement trial (and when the frames it
+      // held out joined the fit), the anchor, the route
       // trial (and, where it took the grid, the grid's own choices), the steps the parameter average took.
       const std::string& line = lines->GetValue(i);
       const bool grid = trainer->GetStopReason() &&
@@ -481,6 +482,7 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
       if (line.rfind("PoseAnchor = ", 0) == 0 ||
         (line.rfind("ParameterAverage = ", 0) == 0 && line.find("; made the field") != std::string::npos) ||
         (line.rfind("RefinePoses = ", 0) == 0 && line.find("measured: ") != std::string::npos) ||
+        (line.rfind("Validation = ", 0) == 0 && line.find("; in the fit from step ") != std::string::npos) ||
         (line.rfind("Route = ", 0) == 0 && line.find("(measured on ") != std::string::npos) ||
         (grid &&
           (line.rfind("ElevationSigma = ", 0) == 0 || line.rfind("Ridge = ", 0) == 0 ||

@@ -177,8 +177,8 @@ bool Trainer::EndPoseTrial(const std::string& how, std::string* error)
   {
     if (line.rfind("Validation = ", 0) == 0)
     {
-      line += vtkfmt::sprintf("; held out for the pose-refinement trial%s, then fitted from step %d",
-        how.empty() ? " (not run)" : "", this->State.Iteration);
+      line += vtkfmt::sprintf(
+        "; in the fit from step %d%s", this->State.Iteration, how.empty() ? " (the trial made no choice)" : "");
     }
   }
   return this->Engine->SetData(this->Data.get(), error);

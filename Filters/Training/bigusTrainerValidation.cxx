@@ -56,8 +56,11 @@ void Trainer::HoldOutValidationFrames()
   HeldOutChoiceSettings held = this->Settings.HeldOut;
   held.HoldOutValidationFrames = held.HoldOutValidationFrames || this->Poses.IsTrialPending();
   // The route trial's frames, where it is pending: the pixel grid's fits never saw them.
+  // Held out for the pose trial alone, they join the fit when it ends (EndPoseTrial), not at the window's close.
+  const bool trialAlone = !this->Settings.HeldOut.HoldOutValidationFrames && !this->Report.Route.Pending;
   r.ValidationFrames = ChooseValidationFrames(*this->Data, held,
-    this->Report.Route.Pending ? this->Report.Route.Frames : std::vector<int>(), r.ValidationHeldOut, line);
+    this->Report.Route.Pending ? this->Report.Route.Frames : std::vector<int>(), r.ValidationHeldOut, line,
+    trialAlone ? "the pose-refinement trial ends" : "the densification window closes");
   r.Settings.push_back(line);
   if (r.ValidationHeldOut)
   {

@@ -24,7 +24,7 @@ std::vector<int> ValidationFrames(const TrainingData& data)
 }
 
 std::vector<int> ChooseValidationFrames(TrainingData& data, const HeldOutChoiceSettings& settings,
-  const std::vector<int>& given, bool& heldOut, std::string& line)
+  const std::vector<int>& given, bool& heldOut, std::string& line, const std::string& until)
 {
   const HeldOutChoiceSettings& h = settings;
   const bool holdOut = h.HoldOutValidationFrames || !given.empty();
@@ -45,13 +45,14 @@ std::vector<int> ChooseValidationFrames(TrainingData& data, const HeldOutChoiceS
   train.erase(std::remove_if(
                 train.begin(), train.end(), [&](int f) { return std::binary_search(frames.begin(), frames.end(), f); }),
     train.end());
-  line = vtkfmt::sprintf("Validation = %d held-out frames (%s): out of the fit until the densification window "
-                         "closes, then in it; growth stops and early stopping keeps a field on them",
+  line = vtkfmt::sprintf("Validation = %d held-out frames (%s): out of the fit until %s, then in it; growth stops "
+                         "and early stopping keeps a field on them",
     int(frames.size()),
     given.empty() ? vtkfmt::sprintf(
                       "one in %d training frames of a sweep, at most %d", h.ValidationStride, h.MaximumValidationFrames)
                       .c_str()
-                  : "the route trial's, which no fit of the pixel grid saw");
+                  : "the route trial's, which no fit of the pixel grid saw",
+    until);
   return frames;
 }
 

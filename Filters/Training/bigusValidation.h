@@ -31,10 +31,12 @@ BIGUSTRAINING_EXPORT std::vector<int> ValidationFrames(const TrainingData& data)
  * route trial's, RouteTrial::Frames) where there are any, else with HoldOutValidationFrames, HeldOutFrames(@p data,
  * ValidationStride, MaximumValidationFrames) when there are at least MinimumValidationFrames (and 2) of them; either
  * taken out of @p data's TrainFrames (@p heldOut true); otherwise ValidationFrames(@p data), training frames
- * (@p heldOut false). @p line receives the stage's setting line ("Validation = ...").
+ * (@p heldOut false). @p line receives the stage's setting line ("Validation = ..."), which says that held-out frames
+ * are out of the fit until @p until (when the trainer joins them).
  */
 BIGUSTRAINING_EXPORT std::vector<int> ChooseValidationFrames(TrainingData& data, const HeldOutChoiceSettings& settings,
-  const std::vector<int>& given, bool& heldOut, std::string& line);
+  const std::vector<int>& given, bool& heldOut, std::string& line,
+  const std::string& until = "the densification window closes");
 
 /// @p frames (held out by ChooseValidationFrames) back into @p data's TrainFrames, in order.
 BIGUSTRAINING_EXPORT void JoinTrainingFrames(TrainingData& data, const std::vector<int>& frames);

@@ -336,6 +336,14 @@ TEST(PoseRefinementChoice, AStopThatWaitsForTheFieldToSettleLetsTheTrialChoose)
   EXPECT_EQ(trainer.GetIteration(), 199) << "the branch kept: 99 steps from step 100";
   const std::string said = synthetic::SettingLine(trainer.GetReport(), "RefinePoses");
   EXPECT_NE(said.find("measured: 99 steps each way from step 100"), std::string::npos) << said;
+  // The trial's held-out frames joined the fit at its end, not at the densification window's close, and the line
+  // says so.
+  const std::string validation = synthetic::SettingLine(trainer.GetReport(), "Validation");
+  EXPECT_NE(validation.find("out of the fit until the pose-refinement trial ends, then in it"), std::string::npos)
+    << validation;
+  EXPECT_NE(validation.find("; in the fit from step 199"), std::string::npos) << validation;
+  EXPECT_EQ(validation.find("densification window"), std::string::npos) << validation;
+  EXPECT_FALSE(trainer.GetReport().ValidationHeldOut);
 }
 
 // Auto where the rule would refine (speckle correlates): the choice is measured, TrialSteps steps each way from the
