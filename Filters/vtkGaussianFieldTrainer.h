@@ -234,8 +234,10 @@ public:
    * ConvergenceTolerance (relative, 0 = off); whichever ends first. The mean learning rate decays and
    * the densification window (to 60 %) closes along the schedule, which is the larger of
    * steps / Iterations and seconds / TimeBudget: with Iterations 0 and a TimeBudget the budget alone is
-   * the schedule and training runs until it (Iterations 0 without a budget means 3000). A run
-   * scheduled by time is not reproducible step for step; one scheduled by Iterations is.
+   * the schedule and training runs until it (Iterations 0 without a budget means 3000). The end-of-run
+   * stages (final prune, gap filling, merge) follow the budget's last step: on the liver's 300 s main job
+   * on 2 cores they took 6 to 12 s more (docs/FINDINGS.md). A run scheduled by time is not reproducible
+   * step for step; one scheduled by Iterations is.
    */
   virtual void SetIterations(int value);
   virtual int GetIterations() const;

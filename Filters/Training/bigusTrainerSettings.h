@@ -70,7 +70,8 @@ struct TrainerSettings
   /// when neither is. With both, whichever ends first, and the schedule follows the one further along.
   int Iterations = DefaultIterations;
   /// Seconds of training of the run, 0 = no limit: every Train call counts, and a run resumed from a
-  /// checkpoint counts the seconds trained before it (TrainingState::TrainingSeconds).
+  /// checkpoint counts the seconds trained before it (TrainingState::TrainingSeconds). The end-of-run stages (final
+  /// prune, gap filling, merge) follow the last step the budget allows (6 to 12 s after the liver's 300 s on 2 cores).
   double TimeBudget = 0;
   int FramesPerStep = 1; ///< training frames rendered per step (the batch); losses are averaged
   /// The resolution schedule: steps in the first CoarseFraction of the schedule see their frames on every second
