@@ -421,9 +421,29 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
   }
   else if (best && last)
   {
-    std::printf("early stopping %s (validation loss %.5f at iteration %.0f, %.5f at the end)\n",
-      best->GetTuple1(0) < last->GetTuple1(0) ? "kept an earlier field" : "kept the last field", best->GetTuple1(0),
-      fd->GetArray("BestIteration")->GetTuple1(0), last->GetTuple1(0));
+    // Where the parameter average made the run's last field, the field early stopping kept replaced the average.
+    bool averaged = false;
+    if (vtkStringArray* lines = vtkStringArray::SafeDownCast(fd->GetAbstractArray("TrainingSettings")))
+    {
+      for (vtkIdType i = 0; i < lines->GetNumberOfValues(); ++i)
+      {
+        const std::string& line = lines->GetValue(i);
+        averaged = averaged ||
+          (line.rfind("ParameterAverage = ", 0) == 0 && line.find("; made the field at step ") != std::string::npos);
+      }
+    }
+    if (averaged && best->GetTuple1(0) < last->GetTuple1(0))
+    {
+      std::printf("early stopping kept the field of iteration %.0f over the parameter average (validation loss %.5f "
+                  "against the average's %.5f)\n",
+        fd->GetArray("BestIteration")->GetTuple1(0), best->GetTuple1(0), last->GetTuple1(0));
+    }
+    else
+    {
+      std::printf("early stopping %s (validation loss %.5f at iteration %.0f, %.5f at the end)\n",
+        best->GetTuple1(0) < last->GetTuple1(0) ? "kept an earlier field" : "kept the last field", best->GetTuple1(0),
+        fd->GetArray("BestIteration")->GetTuple1(0), last->GetTuple1(0));
+    }
   }
   if (vtkAbstractArray* gaps = fd->GetAbstractArray("GapFilling"))
   {

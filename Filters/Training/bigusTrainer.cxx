@@ -639,6 +639,17 @@ bool Trainer::Finish(std::string* error)
   this->Report.BestIteration = this->State.BestFieldIteration;
   if (this->Report.ValidationJoinedAt < 0 && RestoreBestField(this->State, last))
   {
+    // Where the average made the field, it is the field it replaced that early stopping kept.
+    this->Report.AverageReplaced = this->Report.AverageSamples > 0;
+    for (std::string& line : this->Report.Settings)
+    {
+      if (this->Report.AverageReplaced && line.rfind("ParameterAverage = ", 0) == 0)
+      {
+        line += vtkfmt::sprintf("; early stopping then kept the field of step %d instead (validation loss %.5f "
+                                "against the average's %.5f)",
+          this->State.BestFieldIteration, this->State.BestFieldLoss, last);
+      }
+    }
     this->Poses.ComposePoses(this->State); // the best field's poses
     if (!this->PushState(error))
     {

@@ -93,6 +93,9 @@ struct TrainerReport
   /// from step AverageFrom to AverageTo; 0 samples: the last step's field (off, or the run ended before the
   /// densification window closed).
   int AverageSamples = 0, AverageFrom = -1, AverageTo = -1;
+  /// The average scored worse on the validation frames than a field early stopping had kept (BestIteration), which
+  /// is the run's field instead (Finish); the ParameterAverage line says so.
+  bool AverageReplaced = false;
   /// RefineTimeOffset: the offset (s) added to every frame's timestamp to find its tracked pose.
   double TimeOffset = 0;
   /// RefineImageToProbe: the correction of every frame (rotation vector, rad; translation, mm; CorrectPose).

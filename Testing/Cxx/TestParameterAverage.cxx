@@ -177,6 +177,41 @@ TEST(ParameterAverage, AQuaternionEntersOnTheAveragesSideAndAChangedFieldRestart
   EXPECT_EQ(state.AverageField.Reflectivities, c.Reflectivities);
 }
 
+// An average that scores worse on the validation frames than the last field they scored is replaced in Finish by that
+// field (early stopping), and the ParameterAverage line says so: a time constant of 100 schedules keeps the average at
+// its first sample, the field of step 160, while the field of step 200, validated at the densification interval, fits
+// better. The run's field is then the plain run's, bit for bit.
+TEST(ParameterAverage, AnAverageThatScoresWorseThanTheLastFieldIsReplacedAndTheLineSaysSo)
+{
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(200, 6), 0.5, heldOut);
+  std::string error;
+  TrainerSettings lagging = ShortSettings();
+  lagging.ParameterAverage = 100;
+  Trainer with(data, lagging);
+  ASSERT_TRUE(with.Initialize(&error)) << error;
+  ASSERT_TRUE(with.Run(nullptr, nullptr, &error)) << error;
+  const TrainerReport& report = with.GetReport();
+  EXPECT_EQ(report.AverageSamples, 5);
+  EXPECT_TRUE(report.AverageReplaced);
+  EXPECT_EQ(report.BestIteration, 200);
+  EXPECT_LT(report.BestValidationLoss, report.LastValidationLoss) << "the average scored worse";
+  const std::string line = SettingLine(report, "ParameterAverage");
+  EXPECT_NE(line.find("made the field at step 200: 5 samples from step 160; early stopping then kept the field of "
+                      "step 200 instead (validation loss "),
+    std::string::npos)
+    << line;
+
+  TrainerSettings plain = lagging;
+  plain.ParameterAverage = 0;
+  Trainer without(data, plain);
+  ASSERT_TRUE(without.Initialize(&error)) << error;
+  ASSERT_TRUE(without.Run(nullptr, nullptr, &error)) << error;
+  EXPECT_FALSE(without.GetReport().AverageReplaced);
+  EXPECT_EQ(with.GetField().Means, without.GetField().Means);
+  EXPECT_EQ(with.GetField().Reflectivities, without.GetField().Reflectivities);
+}
+
 TEST(ParameterAverage, TheRunsFieldIsTheAverageOfItsTailSteps)
 {
   // Two runs of one schedule, one with the average (the default) and one without that an observer stops every
