@@ -173,14 +173,9 @@ bool Trainer::EndPoseTrial(const std::string& how, std::string* error)
   this->HeldOutValidation.clear();
   this->Report.ValidationHeldOut = false;
   this->Recent = LossWindow(); // the joined frames' first losses are no sign of convergence
-  for (std::string& line : this->Report.Settings)
-  {
-    if (line.rfind("Validation = ", 0) == 0)
-    {
-      line += vtkfmt::sprintf(
-        "; in the fit from step %d%s", this->State.Iteration, how.empty() ? " (the trial made no choice)" : "");
-    }
-  }
+  this->AppendToSetting("Validation = ",
+    vtkfmt::sprintf(
+      "; in the fit from step %d%s", this->State.Iteration, how.empty() ? " (the trial made no choice)" : ""));
   return this->Engine->SetData(this->Data.get(), error);
 }
 

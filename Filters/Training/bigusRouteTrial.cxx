@@ -161,12 +161,8 @@ bool Trainer::SwitchToPixelGrid(std::string* error)
     return false;
   }
   ReplaceLine(lines, "Gamma = ", gammaLine + " (of every training frame, for the pixel grid)");
-  const std::size_t validation = LineOf(lines, "Validation = ");
-  if (validation < lines.size())
-  {
-    lines[validation] +=
-      vtkfmt::sprintf("; joined the fit at step %d, where the route trial took the pixel grid", trial.DecidedAt);
-  }
+  this->AppendToSetting("Validation = ",
+    vtkfmt::sprintf("; joined the fit at step %d, where the route trial took the pixel grid", trial.DecidedAt));
   TrainingState& state = this->State;
   state.Gaussians = OptimizerState();
   // Adam's best field is no candidate: Finish's validation keeps the grid (early stopping has nothing earlier).

@@ -280,6 +280,17 @@ SeedShape Trainer::SeedShapeOf() const
   return bigus::SeedShapeOf(this->Settings, this->PixelSpacing, this->Gamma);
 }
 
+void Trainer::AppendToSetting(const std::string& prefix, const std::string& text)
+{
+  std::vector<std::string>& lines = this->Report.Settings;
+  const auto line =
+    std::find_if(lines.begin(), lines.end(), [&](const std::string& l) { return l.rfind(prefix, 0) == 0; });
+  if (line != lines.end())
+  {
+    *line += text;
+  }
+}
+
 double Trainer::TrainingSeconds() const
 {
   return this->TrainStart > 0
@@ -447,13 +458,8 @@ bool Trainer::UseParameterAverage(std::string* error)
   r.AverageSamples = samples;
   r.AverageFrom = from;
   r.AverageTo = this->State.Iteration;
-  for (std::string& line : r.Settings)
-  {
-    if (line.rfind("ParameterAverage = ", 0) == 0)
-    {
-      line += vtkfmt::sprintf("; made the field at step %d: %d samples from step %d", r.AverageTo, samples, from);
-    }
-  }
+  this->AppendToSetting("ParameterAverage = ",
+    vtkfmt::sprintf("; made the field at step %d: %d samples from step %d", r.AverageTo, samples, from));
   return this->PushState(error);
 }
 
@@ -641,14 +647,12 @@ bool Trainer::Finish(std::string* error)
   {
     // Where the average made the field, it is the field it replaced that early stopping kept.
     this->Report.AverageReplaced = this->Report.AverageSamples > 0;
-    for (std::string& line : this->Report.Settings)
+    if (this->Report.AverageReplaced)
     {
-      if (this->Report.AverageReplaced && line.rfind("ParameterAverage = ", 0) == 0)
-      {
-        line += vtkfmt::sprintf("; early stopping then kept the field of step %d instead (validation loss %.5f "
-                                "against the average's %.5f)",
-          this->State.BestFieldIteration, this->State.BestFieldLoss, last);
-      }
+      this->AppendToSetting("ParameterAverage = ",
+        vtkfmt::sprintf("; early stopping then kept the field of step %d instead (validation loss %.5f against the "
+                        "average's %.5f)",
+          this->State.BestFieldIteration, this->State.BestFieldLoss, last));
     }
     this->Poses.ComposePoses(this->State); // the best field's poses
     if (!this->PushState(error))

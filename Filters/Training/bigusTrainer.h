@@ -332,6 +332,9 @@ private:
   /// StepCutoff's rule for a step at @p fraction of the schedule: Step resolves it at the fraction that also decides
   /// whether the step moves the poses, so the two never disagree across a clock read.
   double CutoffAt(double fraction) const;
+  /// Appends @p text to the setting line (TrainerReport::Settings) that starts with @p prefix, where there is one:
+  /// what the run decided after the line was written.
+  void AppendToSetting(const std::string& prefix, const std::string& text);
   /// The run's seconds inside Train so far (TrainingState::TrainingSeconds, plus the call in progress).
   double TrainingSeconds() const;
   bool InDensificationWindow() const;
