@@ -24,6 +24,11 @@
 #include "vtkStreamingDemandDrivenPipeline.h"
 #include "vtkStringArray.h"
 
+#include <vtk_fmt.h>
+// clang-format off
+#include VTK_FMT(fmt/printf.h)
+// clang-format on
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -481,7 +486,10 @@ int vtkGaussianFieldTrainer::RequestData(
   }
   vtkNew<vtkDoubleArray> history;
   history->SetName("HeldOutPSNR");
-  history->SetNumberOfComponents(2);
+  history->SetNumberOfComponents(3);
+  history->SetComponentName(0, "Seconds");
+  history->SetComponentName(1, "PSNR");
+  history->SetComponentName(2, "Iteration");
   const auto start = std::chrono::steady_clock::now();
   double nextEvaluation = 0;
   std::string evaluationError; // a held-out frame the renderer refused stops the run
@@ -493,7 +501,7 @@ int vtkGaussianFieldTrainer::RequestData(
       evaluationError = "held-out evaluation: " + evaluationError;
       return false;
     }
-    const double row[2] = { seconds, metrics.PSNR };
+    const double row[3] = { seconds, metrics.PSNR, static_cast<double>(trainer.GetIteration()) };
     history->InsertNextTuple(row);
     return true;
   };
@@ -738,6 +746,40 @@ int vtkGaussianFieldTrainer::RequestData(
   this->StopReason = report.StopReason;
   this->GrowthStopReason = report.GrowthStopReason;
   return 1;
+}
+
+std::string vtkGaussianFieldTrainer::DescribeHeldOutPSNR(vtkDataArray* history)
+{
+  if (!history || history->GetNumberOfTuples() == 0 || history->GetNumberOfComponents() < 2)
+  {
+    return {};
+  }
+  const bool iterations = history->GetNumberOfComponents() >= 3;
+  const auto when = [&](vtkIdType k) {
+    const double seconds = history->GetComponent(k, 0);
+    return iterations ? vtkfmt::sprintf("iteration %.0f (%.0f s)", history->GetComponent(k, 2), seconds)
+                      : vtkfmt::sprintf("%.0f s", seconds);
+  };
+  const vtkIdType n = history->GetNumberOfTuples();
+  vtkIdType best = 0;
+  for (vtkIdType k = 1; k < n; ++k)
+  {
+    best = history->GetComponent(k, 1) > history->GetComponent(best, 1) ? k : best;
+  }
+  const double top = history->GetComponent(best, 1), last = history->GetComponent(n - 1, 1);
+  if (n == 1)
+  {
+    return vtkfmt::sprintf("1 measurement: %.2f dB at %s", last, when(0));
+  }
+  std::string text = vtkfmt::sprintf("%lld measurements: best %.2f dB at %s; last %.2f dB at %s",
+    static_cast<long long>(n), top, when(best), last, when(n - 1));
+  if (top - last > HeldOutPSNRDropReported)
+  {
+    text += vtkfmt::sprintf(", %.2f dB below the best: more steps lowered the score on frames the fit did not see "
+                            "(its training frames overfitted for these views); a shorter schedule may score higher",
+      top - last);
+  }
+  return text;
 }
 
 void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)

@@ -80,6 +80,7 @@ struct TrainerSettings;
 
 class vtkMultiProcessController;
 
+class vtkDataArray;
 class vtkIdList;
 
 class BIGUSFILTERS_EXPORT vtkGaussianFieldTrainer : public vtkPolyDataAlgorithm
@@ -317,10 +318,26 @@ public:
   ///@}
   ///@{ Every EvaluationInterval seconds of training (0 = never), render the held-out frames (valid
   /// frames not trained on) and record their mean masked PSNR: field data "HeldOutPSNR" of the output,
-  /// tuples (seconds since the start, dB). The evaluation time counts towards TimeBudget.
+  /// tuples (seconds since the start, dB, iteration), the last one of the field after the end-of-run stages
+  /// (DescribeHeldOutPSNR says what the curve shows). The evaluation time counts towards TimeBudget.
   vtkSetClampMacro(EvaluationInterval, double, 0.0, 1e9);
   vtkGetMacro(EvaluationInterval, double);
   ///@}
+
+  /**
+   * What a "HeldOutPSNR" array says (tuples seconds, dB[, iteration]; files written before the iteration column
+   * have two components), in one line: the best mean PSNR of the held-out frames and when, and the last. Where the
+   * last is more than HeldOutPSNRDropReported (0.1 dB) below the best, the line says that more steps lowered the
+   * score on frames the fit did not see: the training frames were overfitted for these views (on the spine
+   * phantom's 16 frames the best came at a tenth of a 3000-step schedule, and a 1200-step schedule scored 0.4 dB
+   * above it: docs/FINDINGS.md, "The spine phantom's held-out PSNR through a schedule"), and a shorter schedule may
+   * score higher. Empty for a null or empty array, or one of fewer than 2 components. What the run decides is
+   * unchanged: the held-out frames are the user's, and a choice made on them would leave them no test.
+   */
+  static std::string DescribeHeldOutPSNR(vtkDataArray* history);
+  /// dB: DescribeHeldOutPSNR names a fall of the held-out PSNR from its best above this (the curve of one run moves
+  /// by a few hundredths between measurements as Adam steps on single frames).
+  static constexpr double HeldOutPSNRDropReported = 0.1;
   ///@{ Random seed.
   virtual void SetSeed(unsigned int value);
   virtual unsigned int GetSeed() const;

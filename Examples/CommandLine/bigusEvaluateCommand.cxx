@@ -7,6 +7,7 @@
 #include "bigusTrainer.h"
 #include "vtkDataArray.h"
 #include "vtkFieldData.h"
+#include "vtkGaussianFieldTrainer.h"
 #include "vtkGaussianFieldReslice.h"
 #include "vtkGaussianFieldSequenceRenderer.h"
 #include "vtkIdList.h"
@@ -468,9 +469,14 @@ int EvaluateInto(const EvaluateOptions& o)
     }
     for (vtkIdType k = 0; k < history->GetNumberOfTuples(); ++k)
     {
-      report["held_out_psnr_against_time"].push_back(
-        { { "seconds", history->GetComponent(k, 0) }, { "psnr", history->GetComponent(k, 1) } });
+      nlohmann::json point = { { "seconds", history->GetComponent(k, 0) }, { "psnr", history->GetComponent(k, 1) } };
+      if (history->GetNumberOfComponents() >= 3)
+      {
+        point["iteration"] = static_cast<int>(history->GetComponent(k, 2));
+      }
+      report["held_out_psnr_against_time"].push_back(point);
     }
+    report["held_out_psnr_while_training"] = vtkGaussianFieldTrainer::DescribeHeldOutPSNR(history);
   }
   vtkDataArray* corrections = field->GetFieldData()->GetArray("PoseCorrections");
   if (corrections && corrections->GetNumberOfComponents() == 7 && corrections->GetNumberOfTuples() > 0 &&
@@ -498,6 +504,11 @@ int EvaluateInto(const EvaluateOptions& o)
   std::printf("%6s %8.2f %8.4f %8.4f %8.4f  (%zu frames, %zu left out: empty mask; %.1f ms per rendered frame)\n",
     "mean", mean.PSNR, mean.SSIM, mean.NCC, mean.Speckle, used, frames.size() - used,
     1e3 * renderer->GetSecondsPerFrame());
+  if (report.contains("held_out_psnr_while_training"))
+  {
+    std::printf("while training (bigus train --evaluate-every), the frames it did not train on: %s\n",
+      report["held_out_psnr_while_training"].get<std::string>().c_str());
+  }
   const std::string path = o.Report + "/metrics.json";
   // A failed write (disk full) is not published: the temporary goes, an existing file stays.
   return WriteText(path, report.dump(2) + "\n") ? 0 : Fail(path + ": cannot write");

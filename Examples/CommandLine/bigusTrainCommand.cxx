@@ -457,6 +457,11 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
   {
     std::printf("solves         %s\n", solves->GetVariantValue(0).ToString().c_str());
   }
+  const std::string curve = vtkGaussianFieldTrainer::DescribeHeldOutPSNR(fd->GetArray("HeldOutPSNR"));
+  if (!curve.empty())
+  {
+    std::printf("held-out PSNR  %s\n", curve.c_str());
+  }
   std::printf("backend        %s\n", trainer->GetBackendInUse());
   if (processes.Controller && processes.Controller->GetNumberOfProcesses() > 1)
   {
@@ -860,7 +865,8 @@ Command AddTrainCommand(CLI::App& app)
     ->check(CLI::ExistingFile);
   trainCommand
     ->add_option("--evaluate-every", train.EvaluationInterval,
-      "Record the held-out PSNR every S seconds (field data HeldOutPSNR; 0: never)")
+      "Record the held-out PSNR every S seconds (field data HeldOutPSNR: seconds, dB, iteration; 0: never); the "
+      "run's summary then says its best and last point, and whether more steps lowered it (overfitting)")
     ->check(FiniteNonNegative());
   return { trainCommand, [options, iterations] {
             TrainOptions& train = *options;

@@ -17,11 +17,14 @@
 #include "vtkPointData.h"
 #include "vtkPolyData.h"
 #include "vtkStreamingDemandDrivenPipeline.h"
+#include "vtkSmartPointer.h"
 #include "vtkStringArray.h"
 #include "vtkUltrasoundSequenceReader.h"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <sstream>
@@ -31,12 +34,12 @@
 using namespace bigus;
 using namespace bigus::synthetic;
 
-TEST(GaussianFieldTrainer, PipelineOutputsTheFieldOfTheDataModel)
+namespace
 {
-  std::vector<int> heldOut;
-  const TrainingData data = SyntheticSweep(KnownField(150, 9), 0.5, heldOut);
-  // The synthetic sweep as a tracked frame sequence (unsigned char, as a reader gives it).
-  vtkNew<vtkImageData> sequence;
+/// @p data as a tracked frame sequence (unsigned char, as a reader gives it).
+vtkSmartPointer<vtkImageData> TrackedSequence(const TrainingData& data)
+{
+  auto sequence = vtkSmartPointer<vtkImageData>::New();
   sequence->SetDimensions(W, H, data.Count());
   sequence->AllocateScalars(VTK_UNSIGNED_CHAR, 1);
   auto* pixels = static_cast<unsigned char*>(sequence->GetScalarPointer());
@@ -52,6 +55,15 @@ TEST(GaussianFieldTrainer, PipelineOutputsTheFieldOfTheDataModel)
     poses->InsertNextTuple(m.data());
   }
   sequence->GetFieldData()->AddArray(poses);
+  return sequence;
+}
+} // namespace
+
+TEST(GaussianFieldTrainer, PipelineOutputsTheFieldOfTheDataModel)
+{
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(150, 9), 0.5, heldOut);
+  vtkSmartPointer<vtkImageData> sequence = TrackedSequence(data);
 
   vtkNew<vtkGaussianFieldTrainer> trainer;
   trainer->SetInputData(sequence);
@@ -184,6 +196,68 @@ TEST(GaussianFieldTrainer, PipelineOutputsTheFieldOfTheDataModel)
   ASSERT_EQ(messages->Errors.size(), 1u);
   EXPECT_NE(messages->Errors[0].find("frame " + std::to_string(data.Count()) + " is outside"), std::string::npos)
     << messages->Errors[0];
+}
+
+// EvaluationInterval's curve (HeldOutPSNR: seconds, dB, iteration) and what DescribeHeldOutPSNR reads in it: the
+// best point and the last, and a fall from the best past 0.1 dB named as overfitting (the spine phantom's curve).
+TEST(GaussianFieldTrainer, TheHeldOutCurveRecordsItsIterationsAndNamesAFallFromItsBest)
+{
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(150, 9), 0.5, heldOut);
+  vtkNew<vtkGaussianFieldTrainer> trainer;
+  trainer->SetInputData(TrackedSequence(data));
+  trainer->SetIterations(60);
+  trainer->SetInitialGaussians(300);
+  trainer->SetHoldOutEvery(4);
+  trainer->SetHoldOutOffset(2);
+  trainer->SetEvaluationInterval(1e-9); // at every progress report (every 10 steps), and once after Finish
+  trainer->Update();
+  vtkDataArray* curve = trainer->GetOutput()->GetFieldData()->GetArray("HeldOutPSNR");
+  ASSERT_NE(curve, nullptr);
+  ASSERT_EQ(curve->GetNumberOfComponents(), 3);
+  EXPECT_STREQ(curve->GetComponentName(2), "Iteration");
+  const vtkIdType n = curve->GetNumberOfTuples();
+  ASSERT_EQ(n, 7) << "steps 10 to 60, then the finished field";
+  for (vtkIdType k = 0; k < n; ++k)
+  {
+    EXPECT_EQ(curve->GetComponent(k, 2), std::min<double>(10.0 * (k + 1), 60.0)) << k;
+    EXPECT_GE(curve->GetComponent(k, 0), k > 0 ? curve->GetComponent(k - 1, 0) : 0.0) << k;
+    EXPECT_TRUE(std::isfinite(curve->GetComponent(k, 1)) && curve->GetComponent(k, 1) > 0) << k;
+  }
+  EXPECT_NE(vtkGaussianFieldTrainer::DescribeHeldOutPSNR(curve).find("7 measurements: best "), std::string::npos);
+
+  // The spine phantom's curve in short (docs/FINDINGS.md): best at step 860, 0.47 dB lower at the end.
+  vtkNew<vtkDoubleArray> spine;
+  spine->SetNumberOfComponents(3);
+  for (const auto& row : std::vector<std::array<double, 3>>{
+         { 0.1, 7.63, 10 }, { 16.0, 21.03, 860 }, { 70.0, 20.86, 1980 }, { 146.0, 20.56, 3000 } })
+  {
+    spine->InsertNextTuple(row.data());
+  }
+  const std::string said = vtkGaussianFieldTrainer::DescribeHeldOutPSNR(spine);
+  for (const char* part : { "4 measurements: best 21.03 dB at iteration 860 (16 s); last 20.56 dB at iteration 3000 "
+                            "(146 s), 0.47 dB below the best: more steps lowered the score",
+         "a shorter schedule may score higher" })
+  {
+    EXPECT_NE(said.find(part), std::string::npos) << part << " not in " << said;
+  }
+  // Within 0.1 dB of the best, or rising to the end (the liver), no fall is named.
+  spine->SetComponent(3, 1, 20.94);
+  EXPECT_EQ(vtkGaussianFieldTrainer::DescribeHeldOutPSNR(spine).find("below the best"), std::string::npos);
+  spine->SetComponent(3, 1, 21.50);
+  EXPECT_NE(
+    vtkGaussianFieldTrainer::DescribeHeldOutPSNR(spine).find("best 21.50 dB at iteration 3000"), std::string::npos);
+  // A file written before the iteration column: seconds alone. No curve: nothing to say.
+  vtkNew<vtkDoubleArray> old;
+  old->SetNumberOfComponents(2);
+  old->InsertNextTuple2(16.0, 21.03);
+  old->InsertNextTuple2(146.0, 20.56);
+  EXPECT_NE(vtkGaussianFieldTrainer::DescribeHeldOutPSNR(old).find("best 21.03 dB at 16 s; last 20.56 dB at 146 s, "
+                                                                   "0.47 dB below"),
+    std::string::npos)
+    << vtkGaussianFieldTrainer::DescribeHeldOutPSNR(old);
+  EXPECT_EQ(vtkGaussianFieldTrainer::DescribeHeldOutPSNR(nullptr), "");
+  EXPECT_EQ(vtkGaussianFieldTrainer::DescribeHeldOutPSNR(vtkNew<vtkDoubleArray>()), "");
 }
 
 // A slice downstream of the trainer asks for its own small extent: the reader still reads every frame,

@@ -614,6 +614,8 @@ def main():
     assert code == 0, (out_text, err)
     # The cropped sweep's fan holds fewer pixels than --max-gaussians: the defaults fit the pixel grid.
     assert "stop: the pixel-grid fit" in out_text and "after 0 iterations" in out_text, out_text
+    # --evaluate-every: the held-out frames scored once, the finished field at iteration 0, and the run says so.
+    assert "held-out PSNR  1 measurement: " in out_text and " dB at iteration 0 (" in out_text, out_text
     reader = vtk.vtkXMLPolyDataReader()
     reader.SetFileName(field)
     reader.Update()
@@ -711,6 +713,12 @@ def main():
     assert all(0 < f["psnr"] <= 100 for f in metrics["frames"])
     for name in ("slice_orthogonal.png", "slice_oblique.png", "psnr_against_time.png"):
         assert os.path.getsize(os.path.join(report, name)) > 0, name
+    # The field's curve (bigus train --evaluate-every): its point, with the iteration it was scored at, and its line.
+    curve = metrics["held_out_psnr_against_time"]
+    assert len(curve) == 1 and curve[0]["iteration"] == 0 and 0 < curve[0]["psnr"] <= 100, curve
+    said = "1 measurement: %.2f dB at iteration 0 (" % curve[0]["psnr"]
+    assert metrics["held_out_psnr_while_training"].startswith(said), metrics["held_out_psnr_while_training"]
+    assert "while training (bigus train --evaluate-every), the frames it did not train on: " + said in out_text
     code, _, err = run("evaluate", field, sweep, "--calibration", xml, "--frames", "2", "25", "--report", report)
     assert code == 1 and err.count("\n") == 1 and "frame 25 is outside the 20 frames" in err, (code, err)
     check_metrics_write_failure(field, sweep, xml, report)
