@@ -694,10 +694,17 @@ Command AddTrainCommand(CLI::App& app)
     "memory and half the budget, the route is measured on held-out frames: the grid against Harris seeds and Adam, "
     "the better takes the run (where the rule takes the grid, Adam must pass it within a quarter of the budget): the "
     "Route line)");
-  trainCommand->add_flag("--held-out-validation", settings.HeldOut.HoldOutValidationFrames,
+  auto* heldOutValidation = trainCommand->add_flag_callback(
+    "--held-out-validation", [&settings] { settings.HeldOut.HoldOutValidationFrames = ValidationHoldOut::On; },
     "Validate on frames held out of the fit until the densification window closes (one in 8 training frames of a "
-    "sweep, 4 to 8 of them), then joined to it: growth stops and early stopping keeps a field on frames the fit has "
-    "not seen (default: on training frames)");
+    "sweep, or one in 4 of a short one, 4 to 8 of them), then joined to it: growth stops and early stopping keeps a "
+    "field on frames the fit has not seen (default: held out where the sweeps' neighbouring training frames share "
+    "no speckle, as the Validation setting line says; on training frames elsewhere)");
+  trainCommand
+    ->add_flag_callback(
+      "--no-held-out-validation", [&settings] { settings.HeldOut.HoldOutValidationFrames = ValidationHoldOut::Off; },
+      "Validate on training frames whatever the speckle (see --held-out-validation)")
+    ->excludes(heldOutValidation);
   trainCommand
     ->add_option("--solve-memory", settings.Solve.AssembledMemoryShare,
       "Share of this machine's memory that a reflectivity solve may hold as the assembled basis (its products then "

@@ -164,7 +164,8 @@ int Trainer::PoseTrialSteps(int from) const
 
 bool Trainer::EndPoseTrial(const std::string& how, std::string* error)
 {
-  if (this->Settings.HeldOut.HoldOutValidationFrames || this->HeldOutValidation.empty() || this->Report.Route.Pending)
+  if (this->Settings.HeldOut.HoldOutValidationFrames == ValidationHoldOut::On || this->HeldOutValidation.empty() ||
+    this->Report.Route.Pending)
   {
     return true; // held out for their own sake, or for the route trial, which decides when they join
   }

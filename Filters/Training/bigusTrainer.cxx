@@ -51,6 +51,17 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
   this->Report.Settings.insert(this->Report.Settings.end(), described.begin(), described.end());
   this->Poses.Configure(this->Data.get(), this->Settings.Poses, measuredSweeps, this->State, this->Report.Settings);
   this->Settings.Poses = this->Poses.GetSettings();
+  // Auto resolved here, as RefinePoses is, from the same measurement (HoldOutValidationFrames writes its line).
+  ValidationHoldOut& holdOut = this->Settings.HeldOut.HoldOutValidationFrames;
+  if (holdOut == ValidationHoldOut::Auto)
+  {
+    std::string reason;
+    const bool held = HoldOutValidationByRule(measuredSweeps(), reason);
+    holdOut = held ? ValidationHoldOut::On : ValidationHoldOut::Off;
+    this->ValidationRule = (held ? "; held out by the rule, as no sweep's training frames share speckle: "
+                                 : "; the rule holds them out only where no sweep's training frames share speckle: ") +
+      reason;
+  }
   this->Engine->SetData(this->Data.get(), nullptr);
 }
 

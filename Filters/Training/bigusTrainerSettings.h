@@ -122,7 +122,8 @@ struct TrainerSettings
   // Pose refinement (bigusPoseRefinement.h)
   PoseRefinementSettings Poses;
   /// The choices measured on held-out frames (bigusHeldOutChoices.h): ElevationSigma on the pixel-grid route, and
-  /// (HoldOutValidationFrames, off by default) the Adam route's validation frames held out of the fit.
+  /// (HoldOutValidationFrames; Auto: where the training frames share no speckle) the Adam route's validation frames
+  /// held out of the fit.
   HeldOutChoiceSettings HeldOut;
   // Run
   unsigned Seed = 1;

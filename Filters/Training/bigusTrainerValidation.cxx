@@ -53,15 +53,16 @@ void Trainer::HoldOutValidationFrames()
   TrainerReport& r = this->Report;
   std::string line;
   // The pose-refinement trial scores on held-out frames too (TryPoseRefinement).
-  HeldOutChoiceSettings held = this->Settings.HeldOut;
-  held.HoldOutValidationFrames = held.HoldOutValidationFrames || this->Poses.IsTrialPending();
+  HeldOutChoiceSettings held = this->Settings.HeldOut; // HoldOutValidationFrames On or Off (the constructor)
+  const bool asked = held.HoldOutValidationFrames == ValidationHoldOut::On;
+  held.HoldOutValidationFrames = asked || this->Poses.IsTrialPending() ? ValidationHoldOut::On : ValidationHoldOut::Off;
   // The route trial's frames, where it is pending: the pixel grid's fits never saw them.
   // Held out for the pose trial alone, they join the fit when it ends (EndPoseTrial), not at the window's close.
-  const bool trialAlone = !this->Settings.HeldOut.HoldOutValidationFrames && !this->Report.Route.Pending;
+  const bool trialAlone = !asked && !this->Report.Route.Pending;
   r.ValidationFrames = ChooseValidationFrames(*this->Data, held,
     this->Report.Route.Pending ? this->Report.Route.Frames : std::vector<int>(), r.ValidationHeldOut, line,
     trialAlone ? "the pose-refinement trial ends" : "the densification window closes");
-  r.Settings.push_back(line);
+  r.Settings.push_back(line + this->ValidationRule);
   if (r.ValidationHeldOut)
   {
     this->HeldOutValidation = r.ValidationFrames;

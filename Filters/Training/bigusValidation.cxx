@@ -27,11 +27,17 @@ std::vector<int> ChooseValidationFrames(TrainingData& data, const HeldOutChoiceS
   const std::vector<int>& given, bool& heldOut, std::string& line, const std::string& until)
 {
   const HeldOutChoiceSettings& h = settings;
-  const bool holdOut = h.HoldOutValidationFrames || !given.empty();
+  const bool holdOut = h.HoldOutValidationFrames == ValidationHoldOut::On || !given.empty();
   const int minimum = given.empty() ? std::max(2, h.MinimumValidationFrames) : 1;
+  int stride = h.ValidationStride;
   std::vector<int> frames = !given.empty() ? given
-    : holdOut                              ? HeldOutFrames(data, h.ValidationStride, h.MaximumValidationFrames)
+    : holdOut                              ? HeldOutFrames(data, stride, h.MaximumValidationFrames)
                                            : std::vector<int>();
+  if (holdOut && given.empty() && static_cast<int>(frames.size()) < minimum && h.SparseValidationStride < stride)
+  {
+    stride = std::max(2, h.SparseValidationStride);
+    frames = HeldOutFrames(data, stride, h.MaximumValidationFrames);
+  }
   heldOut = static_cast<int>(frames.size()) >= minimum;
   if (!heldOut)
   {
@@ -48,12 +54,30 @@ std::vector<int> ChooseValidationFrames(TrainingData& data, const HeldOutChoiceS
   line = vtkfmt::sprintf("Validation = %d held-out frames (%s): out of the fit until %s, then in it; growth stops "
                          "and early stopping keeps a field on them",
     int(frames.size()),
-    given.empty() ? vtkfmt::sprintf(
-                      "one in %d training frames of a sweep, at most %d", h.ValidationStride, h.MaximumValidationFrames)
-                      .c_str()
-                  : "the route trial's, which no fit of the pixel grid saw",
+    given.empty()
+      ? vtkfmt::sprintf("one in %d training frames of a sweep, at most %d", stride, h.MaximumValidationFrames).c_str()
+      : "the route trial's, which no fit of the pixel grid saw",
     until);
   return frames;
+}
+
+bool HoldOutValidationByRule(const std::vector<SweepDecorrelation>& sweeps, std::string& reason)
+{
+  const PoseRefinementChoice measured = ChoosePoseRefinement(sweeps);
+  const std::size_t n = measured.Correlation.size();
+  bool uncorrelated = n > 0;
+  reason.clear();
+  for (std::size_t s = 0; s < n; ++s)
+  {
+    const double rho = measured.Correlation[s];
+    const bool below = rho >= 0 && rho < PoseRefinementMinimumCorrelation;
+    uncorrelated = uncorrelated && below;
+    reason += (s > 0 ? "; " : "") + (n > 1 ? vtkfmt::sprintf("sweep %zu: ", s) : std::string()) +
+      (rho < 0 ? std::string("its frames cannot be measured")
+               : vtkfmt::sprintf("speckle correlation %.2f at the training frames' spacing %.3g mm %s %.2g", rho,
+                   measured.Spacing[s], below ? "<" : ">=", PoseRefinementMinimumCorrelation));
+  }
+  return uncorrelated;
 }
 
 void JoinTrainingFrames(TrainingData& data, const std::vector<int>& frames)

@@ -357,7 +357,7 @@ TEST(PoseRefinementChoice, AutoRefinementIsMeasuredOnHeldOutFramesAtTheirTracked
   // The frames the trainer will hold out for the trial (every 8th training frame), so that only the others err.
   TrainingData copy = exact;
   HeldOutChoiceSettings held = s.HeldOut;
-  held.HoldOutValidationFrames = true;
+  held.HoldOutValidationFrames = ValidationHoldOut::On;
   bool heldOutOk = false;
   std::string line;
   const std::vector<int> trial = ChooseValidationFrames(copy, held, {}, heldOutOk, line);

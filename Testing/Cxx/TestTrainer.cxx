@@ -782,8 +782,46 @@ TEST(Trainer, SpinePhantomShortRunLearnsAndBeatsTheNearestFrameOnHeldOutFrames)
   EXPECT_LT(rendered, nearest);
 }
 
+// The spine phantom's neighbouring training frames share no speckle (correlation 0.05 at their 1.85 mm): by
+// default its validation frames are held out of the fit (HoldOutValidationByRule), one in 4 of its 16 training frames
+// as one in 8 gives 2 (SparseValidationStride), and the Validation line says why. Asked for, training frames decide.
+TEST(Trainer, TheSpinePhantomsUncorrelatedFramesAreValidatedOnFramesHeldOutOfTheFit)
+{
+  std::vector<int> heldOut;
+  const TrainingData data = SpineData(heldOut);
+  for (const ValidationHoldOut asked : { ValidationHoldOut::Auto, ValidationHoldOut::Off })
+  {
+    TrainerSettings s = SpineSettings(300);
+    s.HeldOut.HoldOutValidationFrames = asked;
+    Trainer trainer(data, s);
+    std::string error;
+    ASSERT_TRUE(trainer.Initialize(&error)) << error;
+    const TrainerReport& r = trainer.GetReport();
+    const std::string line = SettingLine(r, "Validation");
+    if (asked == ValidationHoldOut::Off)
+    {
+      EXPECT_FALSE(r.ValidationHeldOut) << line;
+      EXPECT_EQ(trainer.GetData().TrainFrames, data.TrainFrames);
+      EXPECT_EQ(line.find("the rule"), std::string::npos) << line;
+      continue;
+    }
+    EXPECT_EQ(trainer.GetSettings().HeldOut.HoldOutValidationFrames, ValidationHoldOut::On);
+    ASSERT_TRUE(r.ValidationHeldOut) << line;
+    // Every 4th of the training frames from the 2nd, never the first or the last: the sweep's frames 3, 8, 13, 19.
+    EXPECT_EQ(r.ValidationFrames,
+      (std::vector<int>{ data.TrainFrames[2], data.TrainFrames[6], data.TrainFrames[10], data.TrainFrames[14] }));
+    EXPECT_EQ(trainer.GetData().TrainFrames.size(), data.TrainFrames.size() - 4);
+    for (const char* part : { "Validation = 4 held-out frames (one in 4 training frames of a sweep, at most 8)",
+           "; held out by the rule, as no sweep's training frames share speckle: speckle correlation 0.0", " < 0.3" })
+    {
+      EXPECT_NE(line.find(part), std::string::npos) << part << " not in " << line;
+    }
+  }
+}
+
 // Early stopping: the field Finish keeps is the best the run passed through on the validation frames,
-// so a run twice as long (same seed, its schedule stretched) never ends with a higher validation loss.
+// so a run twice as long (same seed, its schedule stretched) never ends with a higher validation loss. On training
+// frames (the spine's are held out by default, HoldOutValidationByRule, and measured after they join decide nothing).
 TEST(Trainer, ARunTwiceAsLongNeverEndsWorseOnTheValidationFrames)
 {
   std::vector<int> heldOut;
@@ -791,7 +829,8 @@ TEST(Trainer, ARunTwiceAsLongNeverEndsWorseOnTheValidationFrames)
   double validation[2] = { 0, 0 };
   for (int run = 0; run < 2; ++run)
   {
-    const TrainerSettings s = SpineSettings(300 * (run + 1));
+    TrainerSettings s = SpineSettings(300 * (run + 1));
+    s.HeldOut.HoldOutValidationFrames = ValidationHoldOut::Off;
     Trainer trainer(data, s);
     std::string error;
     ASSERT_TRUE(trainer.Initialize(&error)) << error;
@@ -810,13 +849,15 @@ TEST(Trainer, ARunTwiceAsLongNeverEndsWorseOnTheValidationFrames)
 TEST(Trainer, VariableProjectionEndsWithALowerTrainingLossThanAdamAloneOnTheSpinePhantom)
 {
   // The same seed and the same 300 steps (equal steps, not equal time: a test never depends on the
-  // clock; the solves cost extra time, measured in the note), with and without the solve.
+  // clock; the solves cost extra time, measured in the note), with and without the solve, every training
+  // frame fitted throughout (validation on training frames).
   std::vector<int> heldOut;
   const TrainingData data = SpineData(heldOut);
   double loss[2];
   for (int solve = 0; solve < 2; ++solve)
   {
     TrainerSettings s = SpineSettings(300);
+    s.HeldOut.HoldOutValidationFrames = ValidationHoldOut::Off;
     s.ReflectivitySolve = solve == 1;
     Trainer trainer(data, s);
     std::string error;

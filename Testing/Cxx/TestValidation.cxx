@@ -41,6 +41,36 @@ TEST(Validation, EveryEighthOfTheTrainingFramesAtMostEight)
   }
 }
 
+// HoldOutValidationByRule: held out only where every sweep was measured and none correlates at its training frames'
+// spacing below the pose rule's 0.3; the correlation there is the measured curve's, linear between its bins (by hand
+// below: 0.6 at 1 mm, 0.2 at 2 mm, so 0.4 at 1.5 mm and 0.1 at 2.25 mm past a bin of 0 at 2.5 mm).
+TEST(Validation, HeldOutWhereNoSweepsNeighbouringFramesShareSpeckle)
+{
+  auto sweep = [](double spacing) {
+    SweepDecorrelation s;
+    s.Measured = true;
+    s.Measurement.Distance = { 1.0, 2.0, 2.5 };
+    s.Measurement.Correlation = { 0.6, 0.2, 0.0 };
+    s.Measurement.NeighbourSpacing = spacing;
+    return s;
+  };
+  SweepDecorrelation unmeasured;
+  unmeasured.Error = "fewer than two training frames";
+  std::string reason;
+  EXPECT_TRUE(HoldOutValidationByRule({ sweep(2.25) }, reason));
+  EXPECT_EQ(reason, "speckle correlation 0.10 at the training frames' spacing 2.25 mm < 0.3");
+  EXPECT_FALSE(HoldOutValidationByRule({ sweep(1.5) }, reason));
+  EXPECT_EQ(reason, "speckle correlation 0.40 at the training frames' spacing 1.5 mm >= 0.3");
+  EXPECT_TRUE(HoldOutValidationByRule({ sweep(2.25), sweep(3.0) }, reason)) << reason;
+  EXPECT_FALSE(HoldOutValidationByRule({ sweep(2.25), sweep(1.5) }, reason));
+  EXPECT_EQ(reason,
+    "sweep 0: speckle correlation 0.10 at the training frames' spacing 2.25 mm < 0.3; sweep 1: "
+    "speckle correlation 0.40 at the training frames' spacing 1.5 mm >= 0.3");
+  EXPECT_FALSE(HoldOutValidationByRule({ sweep(2.25), unmeasured }, reason));
+  EXPECT_NE(reason.find("sweep 1: its frames cannot be measured"), std::string::npos) << reason;
+  EXPECT_FALSE(HoldOutValidationByRule({}, reason));
+}
+
 // Early stopping: KeepIfBest keeps the field of the lowest loss seen (not a later, worse one, nor a NaN), with its
 // iteration and pose corrections; RestoreBestField brings it back, moments zeroed, only when the last loss is worse.
 TEST(Validation, EarlyStoppingKeepsAndRestoresTheBestFieldWithItsPoses)
@@ -92,7 +122,7 @@ TEST(Validation, HeldOutFramesAreNotFittedBeforeTheyJoin)
   std::vector<int> testFrames;
   const TrainingData data = SyntheticSweep(truth, 0.5, testFrames);
   TrainerSettings s = ShortSettings(); // the window closes at step 150, the next validation (200) joins
-  s.HeldOut.HoldOutValidationFrames = true;
+  s.HeldOut.HoldOutValidationFrames = ValidationHoldOut::On;
   const std::vector<int> held = HeldOutFrames(data, s.HeldOut.ValidationStride, s.HeldOut.MaximumValidationFrames);
   ASSERT_GE(held.size(), 2u);
   const std::size_t pixels = std::size_t(data.Width) * data.Height;
@@ -153,7 +183,7 @@ TEST(Validation, HeldOutFramesKeepTheirTrackedPosesThroughAMidRunEvaluation)
   std::vector<int> testFrames;
   const TrainingData data = SyntheticSweep(KnownField(400, 3), 0.5, testFrames);
   TrainerSettings s = ShortSettings();
-  s.HeldOut.HoldOutValidationFrames = true;
+  s.HeldOut.HoldOutValidationFrames = ValidationHoldOut::On;
   s.Poses.RefinePoses = PoseRefinement::On;
   s.Poses.Start = 0;
   Trainer trainer(data, s);
