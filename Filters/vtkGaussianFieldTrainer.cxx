@@ -310,6 +310,20 @@ int vtkGaussianFieldTrainer::GetRefinePoses() const
   return static_cast<int>(this->Settings->Poses.RefinePoses);
 }
 
+void vtkGaussianFieldTrainer::SetHeldOutValidation(int mode)
+{
+  if (Assign(this->Settings->HeldOut.HoldOutValidationFrames,
+        static_cast<bigus::ValidationHoldOut>(std::min(std::max(mode, 0), 2))))
+  {
+    this->Modified();
+  }
+}
+
+int vtkGaussianFieldTrainer::GetHeldOutValidation() const
+{
+  return static_cast<int>(this->Settings->HeldOut.HoldOutValidationFrames);
+}
+
 void vtkGaussianFieldTrainer::SetTrainingCutoff(double value)
 {
   if (std::isnan(value))
@@ -800,6 +814,7 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "SolveL1: " << this->GetSolveL1() << "\n";
   os << indent << "DenseInitialisation: " << this->GetDenseInitialisation() << "\n";
   os << indent << "PixelGridFit: " << this->GetPixelGridFit() << "\n";
+  os << indent << "HeldOutValidation: " << this->GetHeldOutValidation() << "\n";
   os << indent << "RefinePoses: " << this->GetRefinePoses() << "\n";
   os << indent << "PoseSmoothness: " << this->GetPoseSmoothness() << "\n";
   os << indent << "PoseRefinementStart: " << this->GetPoseRefinementStart() << "\n";

@@ -157,6 +157,21 @@ public:
   virtual bool GetPixelGridFit() const;
   vtkBooleanMacro(PixelGridFit, bool);
   ///@}
+  ///@{ The validation frames, on which growth stops and early stopping keeps a field
+  /// (bigus::HeldOutChoiceSettings::HoldOutValidationFrames): HELD_OUT_VALIDATION_OFF (0, training frames),
+  /// HELD_OUT_VALIDATION_ON (1, held out of the fit until the densification window closes, then joined to it) or
+  /// HELD_OUT_VALIDATION_AUTO (2, the default: held out where no sweep's neighbouring training frames share speckle,
+  /// bigus::HoldOutValidationByRule). TrainingSettings' Validation line says which frames decided and why.
+  enum
+  {
+    HELD_OUT_VALIDATION_OFF = 0,
+    HELD_OUT_VALIDATION_ON = 1,
+    HELD_OUT_VALIDATION_AUTO = 2
+  };
+  virtual void SetHeldOutValidation(int value);
+  virtual int GetHeldOutValidation() const;
+  void SetHeldOutValidationToAuto() { this->SetHeldOutValidation(HELD_OUT_VALIDATION_AUTO); }
+  ///@}
   ///@{ Pose refinement: a rigid correction of each training frame's pose, optimised with the field
   /// (bigus::PoseRefinementSettings::RefinePoses): POSE_REFINEMENT_OFF (0, the tracked poses are trusted),
   /// POSE_REFINEMENT_ON (1, every sweep's training frames) or POSE_REFINEMENT_AUTO (2, the default: chosen sweep by

@@ -260,6 +260,44 @@ TEST(GaussianFieldTrainer, TheHeldOutCurveRecordsItsIterationsAndNamesAFallFromI
   EXPECT_EQ(vtkGaussianFieldTrainer::DescribeHeldOutPSNR(vtkNew<vtkDoubleArray>()), "");
 }
 
+// HeldOutValidation reaches the run: On holds one in 8 of the 45 training frames out of the fit (the Validation line
+// says so), Off validates on training frames; out of range is clamped to Auto.
+TEST(GaussianFieldTrainer, HeldOutValidationDecidesWhichFramesValidate)
+{
+  std::vector<int> heldOut;
+  const TrainingData data = SyntheticSweep(KnownField(150, 9), 0.5, heldOut);
+  vtkSmartPointer<vtkImageData> sequence = TrackedSequence(data);
+  for (const int mode :
+    { vtkGaussianFieldTrainer::HELD_OUT_VALIDATION_ON, vtkGaussianFieldTrainer::HELD_OUT_VALIDATION_OFF })
+  {
+    vtkNew<vtkGaussianFieldTrainer> trainer;
+    trainer->SetInputData(sequence);
+    trainer->SetIterations(20);
+    trainer->SetInitialGaussians(300);
+    trainer->SetHoldOutEvery(4);
+    trainer->SetHoldOutOffset(2);
+    trainer->SetHeldOutValidation(mode);
+    trainer->Update();
+    auto* settings =
+      vtkStringArray::SafeDownCast(trainer->GetOutput()->GetFieldData()->GetAbstractArray("TrainingSettings"));
+    ASSERT_NE(settings, nullptr);
+    std::string line;
+    for (vtkIdType k = 0; k < settings->GetNumberOfValues(); ++k)
+    {
+      line = settings->GetValue(k).rfind("Validation = ", 0) == 0 ? settings->GetValue(k) : line;
+    }
+    EXPECT_EQ(line.rfind(mode == vtkGaussianFieldTrainer::HELD_OUT_VALIDATION_ON
+                  ? "Validation = 5 held-out frames (one in 8 training frames of a sweep"
+                  : "Validation = 8 training frames",
+                0),
+      0u)
+      << line;
+  }
+  vtkNew<vtkGaussianFieldTrainer> clamped;
+  clamped->SetHeldOutValidation(7);
+  EXPECT_EQ(clamped->GetHeldOutValidation(), vtkGaussianFieldTrainer::HELD_OUT_VALIDATION_AUTO);
+}
+
 // A slice downstream of the trainer asks for its own small extent: the reader still reads every frame,
 // and the field, being points, does not carry the sequence's WHOLE_EXTENT (the executive copies it by
 // default; an image filter after the field that fails its RequestInformation kept it, and ParaView then
