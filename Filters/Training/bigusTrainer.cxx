@@ -55,12 +55,8 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
   ValidationHoldOut& holdOut = this->Settings.HeldOut.HoldOutValidationFrames;
   if (holdOut == ValidationHoldOut::Auto)
   {
-    std::string reason;
-    const bool held = HoldOutValidationByRule(measuredSweeps(), reason);
-    holdOut = held ? ValidationHoldOut::On : ValidationHoldOut::Off;
-    this->ValidationRule = (held ? "; held out by the rule, as no sweep's training frames share speckle: "
-                                 : "; the rule holds them out only where no sweep's training frames share speckle: ") +
-      reason;
+    holdOut =
+      HoldOutValidationByRule(measuredSweeps(), this->ValidationRule) ? ValidationHoldOut::On : ValidationHoldOut::Off;
   }
   this->Engine->SetData(this->Data.get(), nullptr);
 }

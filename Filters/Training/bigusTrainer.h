@@ -366,7 +366,7 @@ private:
   bool DensificationEnded = false;    // the last Train call ended past the densification window
   bool PixelGrid = false;             // the field is the pixel-grid fit (PixelGridFit): Train takes no step
   std::vector<int> HeldOutValidation; // validation frames out of the fit until JoinValidationFrames; empty after
-  std::string ValidationRule;         // HoldOutValidationFrames Auto: why the rule held them out or not, for the line
+  std::string ValidationRule;         // HoldOutValidationFrames Auto: the rule's measurement, for the line; else empty
   bool Resuming = false;              // SetResuming
   bool SigmaByRule = false;           // ElevationSigma came from the rule (MeasureOnHeldOutFrames may measure it)
   PoseRefiner Poses;

@@ -62,7 +62,12 @@ void Trainer::HoldOutValidationFrames()
   r.ValidationFrames = ChooseValidationFrames(*this->Data, held,
     this->Report.Route.Pending ? this->Report.Route.Frames : std::vector<int>(), r.ValidationHeldOut, line,
     trialAlone ? "the pose-refinement trial ends" : "the densification window closes");
-  r.Settings.push_back(line + this->ValidationRule);
+  // Where the rule decided (HoldOutValidationFrames Auto), what it measured.
+  const std::string& rule = this->ValidationRule;
+  const char* said = !asked ? "; the rule holds them out only where no sweep's training frames share speckle: "
+    : r.ValidationHeldOut   ? "; held out by the rule, as no sweep's training frames share speckle: "
+                            : "; the rule would hold them out, as no sweep's training frames share speckle: ";
+  r.Settings.push_back(line + (rule.empty() ? std::string() : said + rule));
   if (r.ValidationHeldOut)
   {
     this->HeldOutValidation = r.ValidationFrames;

@@ -817,6 +817,19 @@ TEST(Trainer, TheSpinePhantomsUncorrelatedFramesAreValidatedOnFramesHeldOutOfThe
       EXPECT_NE(line.find(part), std::string::npos) << part << " not in " << line;
     }
   }
+  // Its first 8 training frames alone: one in 4 gives 2, too few; the training frames decide and the line says why.
+  TrainingData few = data;
+  few.TrainFrames.resize(8);
+  Trainer trainer(few, SpineSettings(300));
+  std::string error;
+  ASSERT_TRUE(trainer.Initialize(&error)) << error;
+  const std::string line = SettingLine(trainer.GetReport(), "Validation");
+  EXPECT_FALSE(trainer.GetReport().ValidationHeldOut) << line;
+  EXPECT_EQ(line.rfind("Validation = 8 training frames (too few training frames to hold 4 out); the rule would hold "
+                       "them out, as no sweep's training frames share speckle: speckle correlation ",
+              0),
+    0u)
+    << line;
 }
 
 // Early stopping: the field Finish keeps is the best the run passed through on the validation frames,
