@@ -775,16 +775,16 @@ std::string vtkGaussianFieldTrainer::DescribeHeldOutPSNR(vtkDataArray* history)
                       : vtkfmt::sprintf("%.0f s", seconds);
   };
   const vtkIdType n = history->GetNumberOfTuples();
+  if (n == 1)
+  {
+    return vtkfmt::sprintf("1 measurement: %.2f dB at %s", history->GetComponent(0, 1), when(0));
+  }
   vtkIdType best = 0;
   for (vtkIdType k = 1; k < n; ++k)
   {
     best = history->GetComponent(k, 1) > history->GetComponent(best, 1) ? k : best;
   }
   const double top = history->GetComponent(best, 1), last = history->GetComponent(n - 1, 1);
-  if (n == 1)
-  {
-    return vtkfmt::sprintf("1 measurement: %.2f dB at %s", last, when(0));
-  }
   std::string text = vtkfmt::sprintf("%lld measurements: best %.2f dB at %s; last %.2f dB at %s",
     static_cast<long long>(n), top, when(best), last, when(n - 1));
   if (top - last > HeldOutPSNRDropReported)

@@ -344,9 +344,9 @@ public:
    * have two components), in one line: the best mean PSNR of the held-out frames and when, and the last. Where the
    * last is more than HeldOutPSNRDropReported (0.1 dB) below the best, the line says that more steps lowered the
    * score on frames the fit did not see: the training frames were overfitted for these views (on the spine
-   * phantom's 16 frames the best came at a tenth of a 3000-step schedule, and a 1200-step schedule scored 0.4 dB
-   * above it: docs/FINDINGS.md, "The spine phantom's held-out PSNR through a schedule"), and a shorter schedule may
-   * score higher. Empty for a null or empty array, or one of fewer than 2 components. What the run decides is
+   * phantom's 16 frames the best came at step 860 of a 3000-step schedule, and a 1200-step schedule scored 0.4 dB
+   * above its end: docs/FINDINGS.md, "The spine phantom's held-out PSNR through a schedule"), and a shorter schedule
+   * may score higher. Empty for a null or empty array, or one of fewer than 2 components. What the run decides is
    * unchanged: the held-out frames are the user's, and a choice made on them would leave them no test.
    */
   static std::string DescribeHeldOutPSNR(vtkDataArray* history);
