@@ -266,6 +266,7 @@ bigusTrainerSetting(SolveMemoryShare, double, Solve.AssembledMemoryShare, 0.0, 1
 bigusTrainerSetting(HeldOutChoices, bool, HeldOut.Enabled, bigusAnyValue(bool))
 bigusTrainerSetting(DenseInitialisation, bool, Seeding.DenseInitialisation, bigusAnyValue(bool))
 bigusTrainerSetting(PixelGridFit, bool, Seeding.PixelGridFit, bigusAnyValue(bool))
+bigusTrainerSetting(MeasuredTail, bool, HeldOut.MeasuredTail, bigusAnyValue(bool))
 bigusTrainerSetting(PoseSmoothness, double, Poses.Smoothness, 0.0, 1e12)
 bigusTrainerSetting(PoseTrialSteps, int, Poses.TrialSteps, 0, 1000000)
 bigusTrainerSetting(PoseRefinementStart, double, Poses.Start, -1.0, 1.0)
@@ -815,6 +816,7 @@ void vtkGaussianFieldTrainer::PrintSelf(ostream& os, vtkIndent indent)
   os << indent << "DenseInitialisation: " << this->GetDenseInitialisation() << "\n";
   os << indent << "PixelGridFit: " << this->GetPixelGridFit() << "\n";
   os << indent << "HeldOutValidation: " << this->GetHeldOutValidation() << "\n";
+  os << indent << "MeasuredTail: " << this->GetMeasuredTail() << "\n";
   os << indent << "RefinePoses: " << this->GetRefinePoses() << "\n";
   os << indent << "PoseSmoothness: " << this->GetPoseSmoothness() << "\n";
   os << indent << "PoseRefinementStart: " << this->GetPoseRefinementStart() << "\n";

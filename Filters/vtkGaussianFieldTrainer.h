@@ -172,6 +172,14 @@ public:
   virtual int GetHeldOutValidation() const;
   void SetHeldOutValidationToAuto() { this->SetHeldOutValidation(HELD_OUT_VALIDATION_AUTO); }
   ///@}
+  ///@{ The measured tail (bigus::HeldOutChoiceSettings::MeasuredTail, default on): where the validation frames were
+  /// held out of the fit and early stopping went back to an earlier field when they joined it, the run goes on as many
+  /// steps after the join as the fit took to that field, then stops (StopReason "measured tail (...)"), its field the
+  /// last step's. Off: the fit goes on to the schedule's end.
+  virtual void SetMeasuredTail(bool value);
+  virtual bool GetMeasuredTail() const;
+  vtkBooleanMacro(MeasuredTail, bool);
+  ///@}
   ///@{ Pose refinement: a rigid correction of each training frame's pose, optimised with the field
   /// (bigus::PoseRefinementSettings::RefinePoses): POSE_REFINEMENT_OFF (0, the tracked poses are trusted),
   /// POSE_REFINEMENT_ON (1, every sweep's training frames) or POSE_REFINEMENT_AUTO (2, the default: chosen sweep by

@@ -4,6 +4,11 @@
 // and joining them changes the data the loop trains on.
 #include "bigusTrainer.h"
 
+#include <vtk_fmt.h>
+// clang-format off
+#include VTK_FMT(fmt/printf.h)
+// clang-format on
+
 #include <limits>
 
 namespace bigus
@@ -67,6 +72,11 @@ void Trainer::HoldOutValidationFrames()
   const char* said = !asked ? "; the rule holds them out only where no sweep's training frames share speckle: "
     : r.ValidationHeldOut   ? "; held out by the rule, as no sweep's training frames share speckle: "
                             : "; the rule would hold them out, as no sweep's training frames share speckle: ";
+  if (asked && r.ValidationHeldOut && held.MeasuredTail)
+  {
+    line += "; where early stopping then goes back to an earlier field, the run stops as many steps after the join as "
+            "the fit took to that field (measured tail)";
+  }
   r.Settings.push_back(line + (rule.empty() ? std::string() : said + rule));
   if (r.ValidationHeldOut)
   {
@@ -90,7 +100,8 @@ bool Trainer::JoinValidationFrames(const double* last, std::string* error)
   {
     return false;
   }
-  if (last && RestoreBestField(this->State, *last))
+  const bool restored = last && RestoreBestField(this->State, *last);
+  if (restored)
   {
     this->Poses.ComposePoses(this->State); // the best field's poses
     if (!this->PushState(error))
@@ -101,7 +112,22 @@ bool Trainer::JoinValidationFrames(const double* last, std::string* error)
   JoinTrainingFrames(*this->Data, this->HeldOutValidation);
   this->HeldOutValidation.clear();
   this->Recent = LossWindow(); // the joined frames' first losses are no sign of convergence
-  this->Report.ValidationJoinedAt = this->State.Iteration;
+  TrainingState& state = this->State;
+  this->Report.ValidationJoinedAt = state.Iteration;
+  // The measured tail: the frames held out for their own sake measured that the steps after the field early stopping
+  // went back to overfitted; the fit with them goes on as many steps as it took to that field.
+  const HeldOutChoiceSettings& held = this->Settings.HeldOut;
+  if (restored && held.MeasuredTail && held.HoldOutValidationFrames == ValidationHoldOut::On)
+  {
+    state.MeasuredTailEnd = state.Iteration + state.BestFieldIteration;
+    if (this->Settings.ParameterAverage > 0)
+    {
+      this->AppendToSetting("ParameterAverage = ",
+        vtkfmt::sprintf("; not taken: the run ends with a measured tail of %d steps from the join at step %d, whose "
+                        "first steps fit the joined frames (the field is its last step's)",
+          state.BestFieldIteration, state.Iteration));
+    }
+  }
   return this->Engine->SetData(this->Data.get(), error);
 }
 

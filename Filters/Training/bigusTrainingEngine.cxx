@@ -512,7 +512,7 @@ bool TrainingState::Save(const std::string& file, double gamma, std::string* err
   const std::string temporary = TemporaryName(file);
   {
     std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
-    out.write("BIGUSCK7", 8);
+    out.write("BIGUSCK8", 8);
     Put(out, std::int32_t(this->Iteration));
     Put(out, this->LearningRateScale);
     Put(out, gamma);
@@ -563,6 +563,7 @@ bool TrainingState::Save(const std::string& file, double gamma, std::string* err
     Put(out, std::int64_t(this->AverageField.Count()));
     WriteField(out, this->AverageField);
     WriteKeptCorrections(out, this->AveragePoseCorrections, this->AverageSharedPoseCorrection);
+    Put(out, std::int32_t(this->MeasuredTailEnd));
     out.close();
     if (!out)
     {
@@ -600,12 +601,13 @@ bool TrainingState::Load(const std::string& file, double& gamma, std::string* er
     return fail("cannot open the checkpoint");
   }
   char magic[8];
-  if (!in.read(magic, 8) || std::memcmp(magic, "BIGUSCK", 7) != 0 || magic[7] < '1' || magic[7] > '7')
+  if (!in.read(magic, 8) || std::memcmp(magic, "BIGUSCK", 7) != 0 || magic[7] < '1' || magic[7] > '8')
   {
     return fail("not a BIGUS checkpoint (bad magic)");
   }
   const bool withBest = magic[7] >= '2', withSeconds = magic[7] >= '3', withPoses = magic[7] >= '4',
-             withShared = magic[7] >= '5', withRun = magic[7] >= '6', withAverage = magic[7] >= '7';
+             withShared = magic[7] >= '5', withRun = magic[7] >= '6', withAverage = magic[7] >= '7',
+             withTail = magic[7] >= '8';
   TrainingState s;
   std::int32_t iteration, growing, stalled, rolled;
   double storedGamma;
@@ -714,6 +716,12 @@ bool TrainingState::Load(const std::string& file, double& gamma, std::string* er
     s.AverageSamples = samples;
     s.AverageStart = start;
   }
+  std::int32_t tailEnd = -1;
+  if (withTail && (!Get(in, tailEnd) || tailEnd < -1))
+  {
+    return fail("truncated or invalid measured tail");
+  }
+  s.MeasuredTailEnd = tailEnd;
   s.BestFieldIteration = bestIteration;
   std::istringstream state(text);
   state >> s.Random;

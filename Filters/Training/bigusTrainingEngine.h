@@ -181,13 +181,16 @@ struct BIGUSTRAINING_EXPORT TrainingState
   int AverageSamples = 0;                                    ///< samples mixed in; 0: no average
   int AverageStart = 0;                                      ///< the iteration of its first sample
   double AverageFraction = 0;                                ///< the schedule fraction of its last sample
+  /// The step the run stops at after its held-out validation frames joined the fit (HeldOutChoiceSettings::
+  /// MeasuredTail); -1: none, the schedule decides.
+  int MeasuredTailEnd = -1;
   // What the state was trained on, so that a resume on other data or settings is refused (Trainer::LoadCheckpoint):
   std::uint64_t DataDigest = 0; ///< TrainingDataDigest of the run's data; 0: unknown (a file before "BIGUSCK6")
   std::string RunSettings;      ///< the settings a resume must share, "name = value" lines; empty: unknown
 
   /**
    * Writes the state to @p file (written to FILE.tmp, then renamed; the previous file survives a
-   * failure). Little-endian binary, "BIGUSCK7" | int32 iteration | float64 learning-rate scale |
+   * failure). Little-endian binary, "BIGUSCK8" | int32 iteration | float64 learning-rate scale |
    * float64 gamma | int32 growing | float64 best validation loss | int32 stalled growth steps |
    * int32 rolled-back steps | uint32 length + text of the random engine state | int64 N | field, Adam
    * m, Adam v: each [N,3] means, [N,3] log-scales, [N,4] quaternions, [N] reflectivities as float32 |
@@ -198,7 +201,8 @@ struct BIGUSTRAINING_EXPORT TrainingState
    * 7 Adam v, int32 steps | int64 B + B x 6 float64 and 7 float64: the corrections of the best field | uint64 data
    * digest | uint32 length + text of the run settings | int32 average samples | int32 its first iteration | float64
    * its last schedule fraction | int64 A + the average field as above | int64 Q + Q x 6 float64 | 7 float64: the
-   * average's pose corrections. Load also reads "BIGUSCK6" files (no parameter average: it starts afresh),
+   * average's pose corrections | int32 the measured tail's end (-1: none). Load also reads "BIGUSCK7" files (no
+   * measured tail: the schedule decides), "BIGUSCK6" files (no parameter average: it starts afresh),
    * "BIGUSCK5" files (no data digest or run settings: a resume cannot check them), "BIGUSCK4" files (no shared
    * correction), "BIGUSCK3" files (no pose corrections), "BIGUSCK2" files (no training seconds either: a time budget
    * starts afresh) and "BIGUSCK1" files (neither those nor a best field: early stopping starts afresh too). Returns

@@ -231,7 +231,7 @@ TEST(Trainer, AResumedRunCountsTheSecondsBeforeItsCheckpointTowardsItsTimeBudget
   // ends with their count 0) with the training seconds, version 2 (no training seconds either) with none.
   std::ifstream in(checkpoint, std::ios::binary);
   std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  ASSERT_EQ(bytes.compare(0, 8, "BIGUSCK7"), 0);
+  ASSERT_EQ(bytes.compare(0, 8, "BIGUSCK8"), 0);
   // Version 6: no parameter average (the file ends with it: two counts, a fraction, the averaged field with its
   // count, no pose corrections with their count, 7 doubles); here it had started, the window having closed at 60 %.
   const std::int64_t averaged = first.GetState().AverageField.Count();
@@ -248,6 +248,11 @@ TEST(Trainer, AResumedRunCountsTheSecondsBeforeItsCheckpointTowardsItsTimeBudget
     std::remove(file.c_str());
     return ok;
   };
+  // Version 7: no measured tail (the file ends with its end step, here none).
+  TrainingState seven;
+  ASSERT_TRUE(older(sizeof(std::int32_t), '7', seven)) << error;
+  EXPECT_EQ(seven.MeasuredTailEnd, -1);
+  EXPECT_EQ(seven.AverageSamples, first.GetState().AverageSamples);
   TrainingState six;
   ASSERT_TRUE(older(2 * sizeof(std::int32_t) + sizeof(double) + 2 * sizeof(std::int64_t) +
       static_cast<std::size_t>(averaged) * 11 * sizeof(float) + 7 * sizeof(double),
@@ -348,6 +353,10 @@ TEST(Trainer, CheckpointHoldsTheWholeTrainingState)
   EXPECT_FALSE(loaded.Load(file + ".cut", gamma, &error));
   EXPECT_NE(error.find("truncated"), std::string::npos) << error;
   EXPECT_EQ(loaded.Iteration, before);
+  // Its last field, the measured tail's end step, cut short.
+  std::ofstream(file + ".cut", std::ios::binary) << bytes.substr(0, bytes.size() - 2);
+  EXPECT_FALSE(loaded.Load(file + ".cut", gamma, &error));
+  EXPECT_NE(error.find("truncated or invalid measured tail"), std::string::npos) << error;
   std::remove(file.c_str());
   std::remove((file + ".cut").c_str());
 }

@@ -29,6 +29,7 @@
 #include <cstdio>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 using namespace bigus;
@@ -267,10 +268,14 @@ TEST(GaussianFieldTrainer, HeldOutValidationDecidesWhichFramesValidate)
   std::vector<int> heldOut;
   const TrainingData data = SyntheticSweep(KnownField(150, 9), 0.5, heldOut);
   vtkSmartPointer<vtkImageData> sequence = TrackedSequence(data);
-  for (const int mode :
-    { vtkGaussianFieldTrainer::HELD_OUT_VALIDATION_ON, vtkGaussianFieldTrainer::HELD_OUT_VALIDATION_OFF })
+  // Held out with the measured tail (the default), held out without it, training frames.
+  for (const auto& [mode, tail] : { std::make_pair(vtkGaussianFieldTrainer::HELD_OUT_VALIDATION_ON, true),
+         std::make_pair(vtkGaussianFieldTrainer::HELD_OUT_VALIDATION_ON, false),
+         std::make_pair(vtkGaussianFieldTrainer::HELD_OUT_VALIDATION_OFF, true) })
   {
     vtkNew<vtkGaussianFieldTrainer> trainer;
+    EXPECT_TRUE(trainer->GetMeasuredTail());
+    trainer->SetMeasuredTail(tail);
     trainer->SetInputData(sequence);
     trainer->SetIterations(20);
     trainer->SetInitialGaussians(300);
@@ -292,6 +297,9 @@ TEST(GaussianFieldTrainer, HeldOutValidationDecidesWhichFramesValidate)
                 0),
       0u)
       << line;
+    const bool said = line.find("the run stops as many steps after the join as the fit took to that field (measured "
+                                "tail)") != std::string::npos;
+    EXPECT_EQ(said, mode == vtkGaussianFieldTrainer::HELD_OUT_VALIDATION_ON && tail) << line;
   }
   vtkNew<vtkGaussianFieldTrainer> clamped;
   clamped->SetHeldOutValidation(7);

@@ -832,6 +832,68 @@ TEST(Trainer, TheSpinePhantomsUncorrelatedFramesAreValidatedOnFramesHeldOutOfThe
     << line;
 }
 
+// The measured tail: on the spine phantom the held-out validation frames score step 600's field above step 700's (the
+// steps after it overfit the 12 training frames), so when they join the fit at step 700 the run returns to that field
+// and goes on as many steps as it took to it, then stops with the last step's field. A run resumed from a checkpoint
+// written in the tail stops where the straight run did, with the same field; off, the run goes on past the tail.
+TEST(Trainer, WhereTheHeldOutFramesScoredAnEarlierFieldTheRunStopsAfterAsManyStepsAsItTook)
+{
+  std::vector<int> heldOut;
+  const TrainingData data = SpineData(heldOut);
+  TrainerSettings s = SpineSettings(1400);
+  s.Densification.End = 650; // the frames join at the next validation, step 700
+  std::string error;
+  Trainer straight(data, s);
+  ASSERT_TRUE(straight.Initialize(&error)) << error;
+  ASSERT_TRUE(straight.GetReport().ValidationHeldOut);
+  EXPECT_NE(SettingLine(straight.GetReport(), "Validation")
+              .find("the run stops as many steps after the join as the fit took to that field (measured tail)"),
+    std::string::npos);
+  // Stopped 20 steps into the tail and written; then on to its end.
+  const std::string checkpoint = std::string(BIGUS_TEST_OUTPUT) + "/tail.ckpt";
+  ASSERT_TRUE(straight.Train(
+    nullptr, [&]() { return straight.GetIteration() >= 720; }, &error))
+    << error;
+  ASSERT_TRUE(straight.SaveCheckpoint(checkpoint, &error)) << error;
+  ASSERT_TRUE(straight.Run(nullptr, nullptr, &error)) << error;
+  const TrainerReport& r = straight.GetReport();
+  const int joined = r.ValidationJoinedAt, best = straight.GetState().BestFieldIteration;
+  std::printf(
+    "joined at %d, best field of step %d, stopped at %d: %s\n", joined, best, r.Iterations, r.StopReason.c_str());
+  ASSERT_EQ(joined, 700);
+  ASSERT_EQ(best, 600) << "the held-out frames' best field";
+  EXPECT_EQ(straight.GetState().MeasuredTailEnd, 1300);
+  EXPECT_EQ(r.Iterations, 1300);
+  EXPECT_EQ(r.StopReason,
+    "measured tail (600 steps after the held-out validation frames joined the fit at step 700, as many as the fit "
+    "took to the field they scored best)");
+  EXPECT_EQ(r.AverageSamples, 0) << "the tail's field is its last step's";
+  EXPECT_NE(SettingLine(r, "ParameterAverage").find("; not taken: the run ends with a measured tail of 600 steps"),
+    std::string::npos);
+
+  Trainer resumed(data, s);
+  ASSERT_TRUE(resumed.Initialize(&error)) << error;
+  ASSERT_TRUE(resumed.LoadCheckpoint(checkpoint, &error)) << error;
+  EXPECT_EQ(resumed.GetState().MeasuredTailEnd, 1300);
+  ASSERT_TRUE(resumed.Run(nullptr, nullptr, &error)) << error;
+  EXPECT_EQ(resumed.GetReport().Iterations, 1300);
+  EXPECT_EQ(resumed.GetReport().StopReason, r.StopReason);
+  ExpectSameField(resumed.GetField(), straight.GetField());
+  std::remove(checkpoint.c_str());
+
+  // Off: the same run returns to step 600's field at the join and sets no end (the schedule's decides).
+  s.HeldOut.MeasuredTail = false;
+  Trainer going(data, s);
+  ASSERT_TRUE(going.Initialize(&error)) << error;
+  ASSERT_TRUE(going.Train(
+    nullptr, [&]() { return going.GetIteration() > joined; }, &error))
+    << error;
+  EXPECT_EQ(going.GetReport().ValidationJoinedAt, joined);
+  EXPECT_EQ(going.GetState().BestFieldIteration, best);
+  EXPECT_EQ(going.GetState().MeasuredTailEnd, -1);
+  EXPECT_EQ(SettingLine(going.GetReport(), "Validation").find("measured tail"), std::string::npos);
+}
+
 // Early stopping: the field Finish keeps is the best the run passed through on the validation frames,
 // so a run twice as long (same seed, its schedule stretched) never ends with a higher validation loss. On training
 // frames (the spine's are held out by default, HoldOutValidationByRule, and measured after they join decide nothing).
