@@ -298,8 +298,15 @@ private:
   bool SwitchToPixelGrid(std::string* error);
   /// The held-out validation frames join the fit (with RefinePoses, from their tracked poses, as they were scored),
   /// from the best field they scored when the @p last validation loss (if given) is worse (RestoreBestField); after
-  /// this, a validation loss is recorded but no longer decides.
+  /// this, a validation loss is recorded but no longer decides. Where it went back so at the window's close and the
+  /// frames were held out for their own sake (MeasuresTail), the run ends BestFieldIteration steps later
+  /// (TrainingState::MeasuredTailEnd).
   bool JoinValidationFrames(const double* last, std::string* error);
+  /// Whether the held-out validation frames set a measured tail where early stopping goes back at their join
+  /// (HeldOutChoiceSettings::MeasuredTail, with HoldOutValidationFrames On).
+  bool MeasuresTail() const;
+  /// The ParameterAverage line's note that the run ends with its measured tail's last field.
+  void NoteMeasuredTail();
   /// One turn of Train's loop: the stop checks, a step, then what the schedule does at its iteration (validation,
   /// densification, solve, convergence, checkpoint, progress). @p stop: the run ends here (the report says why);
   /// false with @p error on an unrecoverable problem.

@@ -62,7 +62,36 @@ bool Trainer::ReadCheckpoint(const std::string& file, std::string* error)
   }
   this->Gamma = gamma;
   this->PixelGrid = false; // a checkpoint comes from a run that takes steps: it goes on with them
-  return this->PushState(error) && (this->InDensificationWindow() || this->JoinValidationFrames(nullptr, error));
+  if (!this->PushState(error))
+  {
+    return false;
+  }
+  TrainingState& state = this->State;
+  if (!this->MeasuresTail())
+  {
+    state.MeasuredTailEnd = -1; // asked off for the resumed run: the schedule ends it
+  }
+  else if (state.MeasuredTailEnd >= 0)
+  {
+    this->NoteMeasuredTail();
+  }
+  // Frames the checkpoint's run had joined to its fit join it now (at the step they joined there); where its window
+  // had closed but they had not joined yet, they join at the next validation, as they would have (Iterate).
+  const int joinedAt = state.ValidationJoinedAt;
+  if (this->InDensificationWindow() || joinedAt == -1)
+  {
+    return true;
+  }
+  if (!this->JoinValidationFrames(nullptr, error))
+  {
+    return false;
+  }
+  if (joinedAt >= 0)
+  {
+    state.ValidationJoinedAt = joinedAt;
+    this->Report.ValidationJoinedAt = joinedAt;
+  }
+  return true;
 }
 
 } // namespace bigus

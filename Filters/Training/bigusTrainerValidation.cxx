@@ -72,7 +72,7 @@ void Trainer::HoldOutValidationFrames()
   const char* said = !asked ? "; the rule holds them out only where no sweep's training frames share speckle: "
     : r.ValidationHeldOut   ? "; held out by the rule, as no sweep's training frames share speckle: "
                             : "; the rule would hold them out, as no sweep's training frames share speckle: ";
-  if (asked && r.ValidationHeldOut && held.MeasuredTail)
+  if (r.ValidationHeldOut && this->MeasuresTail())
   {
     line += "; where early stopping then goes back to an earlier field, the run stops as many steps after the join as "
             "the fit took to that field (measured tail)";
@@ -113,22 +113,35 @@ bool Trainer::JoinValidationFrames(const double* last, std::string* error)
   this->HeldOutValidation.clear();
   this->Recent = LossWindow(); // the joined frames' first losses are no sign of convergence
   TrainingState& state = this->State;
+  state.ValidationJoinedAt = state.Iteration;
   this->Report.ValidationJoinedAt = state.Iteration;
   // The measured tail: the frames held out for their own sake measured that the steps after the field early stopping
-  // went back to overfitted; the fit with them goes on as many steps as it took to that field.
-  const HeldOutChoiceSettings& held = this->Settings.HeldOut;
-  if (restored && held.MeasuredTail && held.HoldOutValidationFrames == ValidationHoldOut::On)
+  // went back to overfitted; the fit with them goes on as many steps as it took to that field. Only at the window's
+  // close (a route trial that took Adam joins them earlier, while the field still grows).
+  if (restored && this->MeasuresTail() && !this->InDensificationWindow())
   {
     state.MeasuredTailEnd = state.Iteration + state.BestFieldIteration;
-    if (this->Settings.ParameterAverage > 0)
-    {
-      this->AppendToSetting("ParameterAverage = ",
-        vtkfmt::sprintf("; not taken: the run ends with a measured tail of %d steps from the join at step %d, whose "
-                        "first steps fit the joined frames (the field is its last step's)",
-          state.BestFieldIteration, state.Iteration));
-    }
+    this->NoteMeasuredTail();
   }
   return this->Engine->SetData(this->Data.get(), error);
+}
+
+bool Trainer::MeasuresTail() const
+{
+  const HeldOutChoiceSettings& held = this->Settings.HeldOut;
+  return held.MeasuredTail && held.HoldOutValidationFrames == ValidationHoldOut::On;
+}
+
+void Trainer::NoteMeasuredTail()
+{
+  const TrainingState& state = this->State;
+  if (this->Settings.ParameterAverage > 0)
+  {
+    this->AppendToSetting("ParameterAverage = ",
+      vtkfmt::sprintf("; not taken: the run ends with a measured tail of %d steps from the join at step %d, whose "
+                      "first steps fit the joined frames (the field is its last step's)",
+        state.BestFieldIteration, state.MeasuredTailEnd - state.BestFieldIteration));
+  }
 }
 
 void Trainer::PlaceUntrainedFrames()

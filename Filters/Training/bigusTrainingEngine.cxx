@@ -563,6 +563,7 @@ bool TrainingState::Save(const std::string& file, double gamma, std::string* err
     Put(out, std::int64_t(this->AverageField.Count()));
     WriteField(out, this->AverageField);
     WriteKeptCorrections(out, this->AveragePoseCorrections, this->AverageSharedPoseCorrection);
+    Put(out, std::int32_t(this->ValidationJoinedAt));
     Put(out, std::int32_t(this->MeasuredTailEnd));
     out.close();
     if (!out)
@@ -716,11 +717,12 @@ bool TrainingState::Load(const std::string& file, double& gamma, std::string* er
     s.AverageSamples = samples;
     s.AverageStart = start;
   }
-  std::int32_t tailEnd = -1;
-  if (withTail && (!Get(in, tailEnd) || tailEnd < -1))
+  std::int32_t joinedAt = -2, tailEnd = -1;
+  if (withTail && (!Get(in, joinedAt) || !Get(in, tailEnd) || joinedAt < -1 || tailEnd < -1))
   {
-    return fail("truncated or invalid measured tail");
+    return fail("truncated or invalid validation join or measured tail");
   }
+  s.ValidationJoinedAt = joinedAt;
   s.MeasuredTailEnd = tailEnd;
   s.BestFieldIteration = bestIteration;
   std::istringstream state(text);

@@ -181,6 +181,9 @@ struct BIGUSTRAINING_EXPORT TrainingState
   int AverageSamples = 0;                                    ///< samples mixed in; 0: no average
   int AverageStart = 0;                                      ///< the iteration of its first sample
   double AverageFraction = 0;                                ///< the schedule fraction of its last sample
+  /// The step the held-out validation frames joined the fit (Trainer::JoinValidationFrames); -1: not yet, or none
+  /// held out; -2: unknown (a checkpoint before "BIGUSCK8", whose frames join when it resumes past the window's close).
+  int ValidationJoinedAt = -1;
   /// The step the run stops at after its held-out validation frames joined the fit (HeldOutChoiceSettings::
   /// MeasuredTail); -1: none, the schedule decides.
   int MeasuredTailEnd = -1;
@@ -201,8 +204,9 @@ struct BIGUSTRAINING_EXPORT TrainingState
    * 7 Adam v, int32 steps | int64 B + B x 6 float64 and 7 float64: the corrections of the best field | uint64 data
    * digest | uint32 length + text of the run settings | int32 average samples | int32 its first iteration | float64
    * its last schedule fraction | int64 A + the average field as above | int64 Q + Q x 6 float64 | 7 float64: the
-   * average's pose corrections | int32 the measured tail's end (-1: none). Load also reads "BIGUSCK7" files (no
-   * measured tail: the schedule decides), "BIGUSCK6" files (no parameter average: it starts afresh),
+   * average's pose corrections | int32 the step the validation frames joined (-1: not yet) | int32 the measured
+   * tail's end (-1: none). Load also reads "BIGUSCK7" files (no measured tail: the schedule decides; the join step
+   * unknown, -2), "BIGUSCK6" files (no parameter average: it starts afresh),
    * "BIGUSCK5" files (no data digest or run settings: a resume cannot check them), "BIGUSCK4" files (no shared
    * correction), "BIGUSCK3" files (no pose corrections), "BIGUSCK2" files (no training seconds either: a time budget
    * starts afresh) and "BIGUSCK1" files (neither those nor a best field: early stopping starts afresh too). Returns

@@ -248,9 +248,10 @@ TEST(Trainer, AResumedRunCountsTheSecondsBeforeItsCheckpointTowardsItsTimeBudget
     std::remove(file.c_str());
     return ok;
   };
-  // Version 7: no measured tail (the file ends with its end step, here none).
+  // Version 7: no validation join or measured tail (the file ends with their steps, here none).
   TrainingState seven;
-  ASSERT_TRUE(older(sizeof(std::int32_t), '7', seven)) << error;
+  ASSERT_TRUE(older(2 * sizeof(std::int32_t), '7', seven)) << error;
+  EXPECT_EQ(seven.ValidationJoinedAt, -2) << "unknown in a file before the join was written";
   EXPECT_EQ(seven.MeasuredTailEnd, -1);
   EXPECT_EQ(seven.AverageSamples, first.GetState().AverageSamples);
   TrainingState six;
@@ -333,6 +334,8 @@ TEST(Trainer, CheckpointHoldsTheWholeTrainingState)
   EXPECT_EQ(loaded.SharedPoseSteps, saved.SharedPoseSteps);
   EXPECT_EQ(loaded.BestPoseCorrections, saved.BestPoseCorrections);
   EXPECT_EQ(loaded.BestSharedPoseCorrection, saved.BestSharedPoseCorrection);
+  EXPECT_EQ(loaded.ValidationJoinedAt, saved.ValidationJoinedAt);
+  EXPECT_EQ(loaded.MeasuredTailEnd, saved.MeasuredTailEnd);
   // A run with the same settings resumes at the same poses; one that does not refine the shared correction
   // refuses the checkpoint.
   Trainer resumed(data, settings);
@@ -356,7 +359,7 @@ TEST(Trainer, CheckpointHoldsTheWholeTrainingState)
   // Its last field, the measured tail's end step, cut short.
   std::ofstream(file + ".cut", std::ios::binary) << bytes.substr(0, bytes.size() - 2);
   EXPECT_FALSE(loaded.Load(file + ".cut", gamma, &error));
-  EXPECT_NE(error.find("truncated or invalid measured tail"), std::string::npos) << error;
+  EXPECT_NE(error.find("truncated or invalid validation join or measured tail"), std::string::npos) << error;
   std::remove(file.c_str());
   std::remove((file + ".cut").c_str());
 }

@@ -835,7 +835,8 @@ TEST(Trainer, TheSpinePhantomsUncorrelatedFramesAreValidatedOnFramesHeldOutOfThe
 // The measured tail: on the spine phantom the held-out validation frames score step 600's field above step 700's (the
 // steps after it overfit the 12 training frames), so when they join the fit at step 700 the run returns to that field
 // and goes on as many steps as it took to it, then stops with the last step's field. A run resumed from a checkpoint
-// written in the tail stops where the straight run did, with the same field; off, the run goes on past the tail.
+// written in the tail, or between the window's close and the join, stops where the straight run did, with the same
+// field; off, the run goes on past the tail.
 TEST(Trainer, WhereTheHeldOutFramesScoredAnEarlierFieldTheRunStopsAfterAsManyStepsAsItTook)
 {
   std::vector<int> heldOut;
@@ -849,12 +850,17 @@ TEST(Trainer, WhereTheHeldOutFramesScoredAnEarlierFieldTheRunStopsAfterAsManySte
   EXPECT_NE(SettingLine(straight.GetReport(), "Validation")
               .find("the run stops as many steps after the join as the fit took to that field (measured tail)"),
     std::string::npos);
-  // Stopped 20 steps into the tail and written; then on to its end.
-  const std::string checkpoint = std::string(BIGUS_TEST_OUTPUT) + "/tail.ckpt";
-  ASSERT_TRUE(straight.Train(
-    nullptr, [&]() { return straight.GetIteration() >= 720; }, &error))
-    << error;
-  ASSERT_TRUE(straight.SaveCheckpoint(checkpoint, &error)) << error;
+  // Written after the window's close (650) before the join (700), and 20 steps into the tail; then on to its end.
+  const std::string output = BIGUS_TEST_OUTPUT;
+  const std::vector<std::pair<int, std::string>> checkpoints = { { 660, output + "/before_join.ckpt" },
+    { 720, output + "/tail.ckpt" } };
+  for (const auto& [at, file] : checkpoints)
+  {
+    ASSERT_TRUE(straight.Train(
+      nullptr, [&, at = at]() { return straight.GetIteration() >= at; }, &error))
+      << error;
+    ASSERT_TRUE(straight.SaveCheckpoint(file, &error)) << error;
+  }
   ASSERT_TRUE(straight.Run(nullptr, nullptr, &error)) << error;
   const TrainerReport& r = straight.GetReport();
   const int joined = r.ValidationJoinedAt, best = straight.GetState().BestFieldIteration;
@@ -871,15 +877,20 @@ TEST(Trainer, WhereTheHeldOutFramesScoredAnEarlierFieldTheRunStopsAfterAsManySte
   EXPECT_NE(SettingLine(r, "ParameterAverage").find("; not taken: the run ends with a measured tail of 600 steps"),
     std::string::npos);
 
-  Trainer resumed(data, s);
-  ASSERT_TRUE(resumed.Initialize(&error)) << error;
-  ASSERT_TRUE(resumed.LoadCheckpoint(checkpoint, &error)) << error;
-  EXPECT_EQ(resumed.GetState().MeasuredTailEnd, 1300);
-  ASSERT_TRUE(resumed.Run(nullptr, nullptr, &error)) << error;
-  EXPECT_EQ(resumed.GetReport().Iterations, 1300);
-  EXPECT_EQ(resumed.GetReport().StopReason, r.StopReason);
-  ExpectSameField(resumed.GetField(), straight.GetField());
-  std::remove(checkpoint.c_str());
+  for (const auto& [at, file] : checkpoints)
+  {
+    Trainer resumed(data, s);
+    ASSERT_TRUE(resumed.Initialize(&error)) << error;
+    ASSERT_TRUE(resumed.LoadCheckpoint(file, &error)) << error;
+    EXPECT_EQ(resumed.GetState().MeasuredTailEnd, at < joined ? -1 : 1300) << at;
+    EXPECT_EQ(resumed.GetReport().ValidationJoinedAt, at < joined ? -1 : joined) << at;
+    ASSERT_TRUE(resumed.Run(nullptr, nullptr, &error)) << error;
+    EXPECT_EQ(resumed.GetReport().Iterations, 1300) << at;
+    EXPECT_EQ(resumed.GetReport().StopReason, r.StopReason) << at;
+    EXPECT_EQ(resumed.GetReport().ValidationJoinedAt, joined) << at;
+    ExpectSameField(resumed.GetField(), straight.GetField());
+    std::remove(file.c_str());
+  }
 
   // Off: the same run returns to step 600's field at the join and sets no end (the schedule's decides).
   s.HeldOut.MeasuredTail = false;

@@ -651,6 +651,14 @@ def main():
     reader.Update()
     frames = reader.GetOutput().GetFieldData().GetArray("TrainingFrames")
     assert sorted(int(frames.GetTuple1(k)) for k in range(frames.GetNumberOfTuples())) == [0, 1, 3]
+    # Validation frames held out (one in 4 of the 20, never the first or last: 5): the Validation line names the
+    # measured tail, which --no-measured-tail takes away.
+    for extra, named in (((), True), (("--no-measured-tail",), False)):
+        code, out_text, err = run("train", sweep, "--calibration", xml, "-o", listed, "--no-pixel-grid-fit",
+                                  "--held-out-validation", "--iterations", "5", "--elevation-sigma", "1.0", *extra)
+        assert code == 0, err
+        line = [l for l in out_text.splitlines() if "Validation = " in l][0]
+        assert "Validation = 5 held-out frames" in line and ("(measured tail)" in line) == named, line
 
     check_fill_gaps(sweep, xml, out)
     check_merge(sweep, xml, out)
