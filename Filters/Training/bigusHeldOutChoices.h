@@ -110,7 +110,8 @@ struct HeldOutChoiceSettings
    * resolved On) and, when they joined it, early stopping went back to an earlier field (the steps after it overfitted
    * the training frames for the views between them), the run goes on after the join for as many steps as the fit took
    * to that field (TrainingState::BestFieldIteration), then stops ("measured tail"; TrainingState::MeasuredTailEnd),
-   * its field the last step's (no parameter average: the tail's first steps fit the joined frames). The spine
+   * its field the last step's (the parameter average, whose samples include the tail's first steps, before the joined
+   * frames fit, is dropped; where the schedule ends first, it ends the run as before). The spine
    * phantom (5 test frames, tracked poses): 21.32 dB at 3,000 steps (the tail from 2,000 to 2,600) against 21.14
    * going on to the schedule's end, 21.24 at 8,000 (5,000 to 5,600) against 20.73 (docs/FINDINGS.md, "The measured
    * tail"). false: the fit goes on to the schedule's end.

@@ -97,11 +97,16 @@ bool ApplyParameterAverage(TrainingState& state)
     state.PoseCorrections = state.AveragePoseCorrections;
     state.SharedPoseCorrection = state.AverageSharedPoseCorrection;
   }
+  DropParameterAverage(state);
+  return true;
+}
+
+void DropParameterAverage(TrainingState& state)
+{
   state.AverageField = GaussianField();
   state.AveragePoseCorrections.clear();
   state.AverageSharedPoseCorrection = {};
   state.AverageSamples = 0;
-  return true;
 }
 
 } // namespace bigus

@@ -52,6 +52,9 @@ BIGUSTRAINING_EXPORT void AccumulateParameterAverage(
  */
 BIGUSTRAINING_EXPORT bool ApplyParameterAverage(TrainingState& state);
 
+/// Clears @p state's average (no sample: AverageSamples 0), leaving its field as it is.
+BIGUSTRAINING_EXPORT void DropParameterAverage(TrainingState& state);
+
 } // namespace bigus
 
 #endif

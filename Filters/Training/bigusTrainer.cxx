@@ -432,7 +432,7 @@ bool Trainer::SampleParameterAverage(bool window, std::string* error)
   // The field's structure is fixed from the window's close on: no densification, the validation frames joined.
   const int it = this->State.Iteration;
   if (this->Settings.ParameterAverage <= 0 || window || it % AverageInterval != 0 || !this->HeldOutValidation.empty() ||
-    this->Report.Route.Pending || this->InPoseTrial || this->Poses.IsTrialPending() || this->State.MeasuredTailEnd >= 0)
+    this->Report.Route.Pending || this->InPoseTrial || this->Poses.IsTrialPending())
   {
     return true;
   }
@@ -546,10 +546,7 @@ bool Trainer::Iterate(double start, const std::function<void(double, int, double
   if (state.MeasuredTailEnd >= 0 && state.Iteration >= state.MeasuredTailEnd)
   {
     stop = true;
-    this->Report.StopReason = vtkfmt::sprintf("measured tail (%d steps after the held-out validation frames joined "
-                                              "the fit at step %d, as many as the fit took to the field they scored "
-                                              "best)",
-      state.BestFieldIteration, state.MeasuredTailEnd - state.BestFieldIteration);
+    this->EndMeasuredTail();
     return true;
   }
   // With a time budget the pose trial waits for the run's first steps: their rate (seeding and solves included) says

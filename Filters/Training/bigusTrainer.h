@@ -305,8 +305,10 @@ private:
   /// Whether the held-out validation frames set a measured tail where early stopping goes back at their join
   /// (HeldOutChoiceSettings::MeasuredTail, with HoldOutValidationFrames On).
   bool MeasuresTail() const;
-  /// The ParameterAverage line's note that the run ends with its measured tail's last field.
-  void NoteMeasuredTail();
+  /// The run stops at its measured tail's end (TrainingState::MeasuredTailEnd) with its last step's field: the stop
+  /// reason says why, and the parameter average (whose samples from the join include the tail's first steps, before
+  /// the joined frames fit) is dropped, as its line says.
+  void EndMeasuredTail();
   /// One turn of Train's loop: the stop checks, a step, then what the schedule does at its iteration (validation,
   /// densification, solve, convergence, checkpoint, progress). @p stop: the run ends here (the report says why);
   /// false with @p error on an unrecoverable problem.

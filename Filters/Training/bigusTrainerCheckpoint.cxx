@@ -71,10 +71,6 @@ bool Trainer::ReadCheckpoint(const std::string& file, std::string* error)
   {
     state.MeasuredTailEnd = -1; // asked off for the resumed run: the schedule ends it
   }
-  else if (state.MeasuredTailEnd >= 0)
-  {
-    this->NoteMeasuredTail();
-  }
   // Frames the checkpoint's run had joined to its fit join it now (at the step they joined there); where its window
   // had closed but they had not joined yet, they join at the next validation, as they would have (Iterate).
   const int joinedAt = state.ValidationJoinedAt;

@@ -4,6 +4,8 @@
 // and joining them changes the data the loop trains on.
 #include "bigusTrainer.h"
 
+#include "bigusParameterAverage.h"
+
 #include <vtk_fmt.h>
 // clang-format off
 #include VTK_FMT(fmt/printf.h)
@@ -121,7 +123,6 @@ bool Trainer::JoinValidationFrames(const double* last, std::string* error)
   if (restored && this->MeasuresTail() && !this->InDensificationWindow())
   {
     state.MeasuredTailEnd = state.Iteration + state.BestFieldIteration;
-    this->NoteMeasuredTail();
   }
   return this->Engine->SetData(this->Data.get(), error);
 }
@@ -132,16 +133,21 @@ bool Trainer::MeasuresTail() const
   return held.MeasuredTail && held.HoldOutValidationFrames == ValidationHoldOut::On;
 }
 
-void Trainer::NoteMeasuredTail()
+void Trainer::EndMeasuredTail()
 {
-  const TrainingState& state = this->State;
+  TrainingState& state = this->State;
+  const int tail = state.BestFieldIteration, joined = state.MeasuredTailEnd - tail;
+  this->Report.StopReason = vtkfmt::sprintf("measured tail (%d steps after the held-out validation frames joined the "
+                                            "fit at step %d, as many as the fit took to the field they scored best)",
+    tail, joined);
   if (this->Settings.ParameterAverage > 0)
   {
     this->AppendToSetting("ParameterAverage = ",
-      vtkfmt::sprintf("; not taken: the run ends with a measured tail of %d steps from the join at step %d, whose "
+      vtkfmt::sprintf("; not taken: the run ended with its measured tail of %d steps from the join at step %d, whose "
                       "first steps fit the joined frames (the field is its last step's)",
-        state.BestFieldIteration, state.MeasuredTailEnd - state.BestFieldIteration));
+        tail, joined));
   }
+  DropParameterAverage(state);
 }
 
 void Trainer::PlaceUntrainedFrames()

@@ -874,7 +874,8 @@ TEST(Trainer, WhereTheHeldOutFramesScoredAnEarlierFieldTheRunStopsAfterAsManySte
     "measured tail (600 steps after the held-out validation frames joined the fit at step 700, as many as the fit "
     "took to the field they scored best)");
   EXPECT_EQ(r.AverageSamples, 0) << "the tail's field is its last step's";
-  EXPECT_NE(SettingLine(r, "ParameterAverage").find("; not taken: the run ends with a measured tail of 600 steps"),
+  EXPECT_NE(SettingLine(r, "ParameterAverage")
+              .find("; not taken: the run ended with its measured tail of 600 steps from the join at step 700"),
     std::string::npos);
 
   for (const auto& [at, file] : checkpoints)
@@ -889,6 +890,20 @@ TEST(Trainer, WhereTheHeldOutFramesScoredAnEarlierFieldTheRunStopsAfterAsManySte
     EXPECT_EQ(resumed.GetReport().StopReason, r.StopReason) << at;
     EXPECT_EQ(resumed.GetReport().ValidationJoinedAt, joined) << at;
     ExpectSameField(resumed.GetField(), straight.GetField());
+    if (at > joined)
+    {
+      // A schedule that ends before the tail: the schedule ends the run, its field the parameter average, as before.
+      TrainerSettings shorter = s;
+      shorter.Iterations = 800;
+      Trainer early(data, shorter);
+      ASSERT_TRUE(early.Initialize(&error)) << error;
+      ASSERT_TRUE(early.LoadCheckpoint(file, &error)) << error;
+      ASSERT_TRUE(early.Run(nullptr, nullptr, &error)) << error;
+      EXPECT_EQ(early.GetReport().StopReason, "iterations");
+      EXPECT_EQ(early.GetReport().Iterations, 800);
+      EXPECT_GT(early.GetReport().AverageSamples, 0) << SettingLine(early.GetReport(), "ParameterAverage");
+      EXPECT_EQ(SettingLine(early.GetReport(), "ParameterAverage").find("not taken"), std::string::npos);
+    }
     std::remove(file.c_str());
   }
 
