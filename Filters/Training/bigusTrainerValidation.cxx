@@ -136,7 +136,7 @@ bool Trainer::MeasuresTail() const
 void Trainer::EndMeasuredTail()
 {
   TrainingState& state = this->State;
-  const int tail = state.BestFieldIteration, joined = state.MeasuredTailEnd - tail;
+  const int joined = state.ValidationJoinedAt, tail = state.MeasuredTailEnd - joined;
   this->Report.StopReason = vtkfmt::sprintf("measured tail (%d steps after the held-out validation frames joined the "
                                             "fit at step %d, as many as the fit took to the field they scored best)",
     tail, joined);
