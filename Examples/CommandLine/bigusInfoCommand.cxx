@@ -157,7 +157,8 @@ int RunInfo(const InfoOptions& options)
     {
       std::printf("frame spacing  %.3f mm between neighbouring frames along the elevation axis (median)\n",
         decorrelation.NeighbourSpacing);
-      std::printf("speckle        decorrelation sigma %.3f mm; correlation at", decorrelation.DecorrelationSigma);
+      std::printf("speckle        decorrelation sigma %.3f mm (its fit's correlation at 0 mm %.3f); correlation at",
+        decorrelation.DecorrelationSigma, decorrelation.ZeroDistanceCorrelation);
       for (std::size_t k = 0; k < decorrelation.Distance.size(); k += 2)
       {
         std::printf(" %.2f:%.3f", decorrelation.Distance[k], decorrelation.Correlation[k]);

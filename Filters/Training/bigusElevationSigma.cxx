@@ -260,6 +260,19 @@ bool MeasureElevationDecorrelation(const TrainingData& data, const ElevationDeco
     }
     return false;
   }
+  FitElevationDecorrelation(result);
+  return true;
+}
+
+void FitElevationDecorrelation(ElevationDecorrelation& result)
+{
+  result.DecorrelationSigma = 0;
+  result.ZeroDistanceCorrelation = 0;
+  if (result.Correlation.empty() || result.Samples.size() != result.Correlation.size() ||
+    result.Distance.size() != result.Correlation.size())
+  {
+    return;
+  }
   // Weighted least squares of ln rho on d^2, down to half the first bin's correlation.
   const double half = 0.5 * result.Correlation.front();
   double sw = 0, sx = 0, sy = 0, sxx = 0, sxy = 0;
@@ -276,7 +289,8 @@ bool MeasureElevationDecorrelation(const TrainingData& data, const ElevationDeco
   const double denominator = sw * sxx - sx * sx;
   const double slope = denominator > 0 ? (sw * sxy - sx * sy) / denominator : 0.0;
   result.DecorrelationSigma = slope < 0 ? std::sqrt(-1.0 / (4 * slope)) : 0.0;
-  return true;
+  const double rho0 = denominator > 0 ? std::exp((sy - slope * sx) / sw) : 0.0;
+  result.ZeroDistanceCorrelation = std::isfinite(rho0) ? rho0 : 0.0; // a first bin at or below 0 fits nothing
 }
 
 std::vector<SweepDecorrelation> MeasureSweeps(const TrainingData& data)
@@ -343,21 +357,22 @@ ElevationSigmaChoice ChooseElevationSigma(const std::vector<SweepDecorrelation>&
   {
     ++bins;
   }
-  const bool correlated = m.DecorrelationSigma > 0 && m.Correlation.front() >= 0.3 && bins >= 3;
+  const bool correlated = m.DecorrelationSigma > 0 && m.ZeroDistanceCorrelation >= 0.3 && bins >= 3;
   if (correlated)
   {
     choice.Sigma = ElevationSigmaDecorrelationFactor * m.DecorrelationSigma;
     std::snprintf(text, sizeof(text),
-      "%.2g x the speckle decorrelation sigma %.3g mm of the training frames, %.3g mm apart (median)",
-      ElevationSigmaDecorrelationFactor, m.DecorrelationSigma, m.NeighbourSpacing);
+      "%.2g x the speckle decorrelation sigma %.3g mm of the training frames (correlation %.2f at 0 mm by its fit), "
+      "%.3g mm apart (median)",
+      ElevationSigmaDecorrelationFactor, m.DecorrelationSigma, m.ZeroDistanceCorrelation, m.NeighbourSpacing);
   }
   else
   {
     choice.Sigma = ElevationSigmaSpacingFactor * m.NeighbourSpacing;
     std::snprintf(text, sizeof(text),
       "%.2g x the median spacing %.3g mm of neighbouring training frames, whose speckle does not correlate "
-      "across it",
-      ElevationSigmaSpacingFactor, m.NeighbourSpacing);
+      "across it (correlation %.2f at 0 mm by the fit, %d bins before the first halves)",
+      ElevationSigmaSpacingFactor, m.NeighbourSpacing, m.ZeroDistanceCorrelation, bins);
   }
   choice.Reason = sweepText + text;
   if (!(choice.Sigma > 0))

@@ -41,8 +41,20 @@ struct BIGUSTRAINING_EXPORT ElevationDecorrelation
   std::vector<double> Correlation; ///< normalised cross-correlation of the high-passed intensities per bin
   std::vector<long> Samples;       ///< pixel pairs per bin
   double DecorrelationSigma = 0;   ///< mm; 0 when too few pairs overlap
-  double NeighbourSpacing = 0;     ///< mm, median over fan pixels of the distance to the next training frame's plane
+  /// rho0 of the fit: the correlation it extrapolates to d = 0 (0 where there is no fit). Read instead of the first
+  /// bin, which in a sparse sweep holds only the pixels where two tilted frames cross (their speckle turned in
+  /// plane against each other, so it correlates less than the bins after it) and few of them.
+  double ZeroDistanceCorrelation = 0;
+  double NeighbourSpacing = 0; ///< mm, median over fan pixels of the distance to the next training frame's plane
 };
+
+/**
+ * The fit of @p m's bins (Distance, Correlation, Samples; filled by MeasureElevationDecorrelation): the least squares
+ * of ln rho = ln rho0 - d^2 / (4 sigma^2), each bin weighted by its pixel pairs, over the bins from the first down to
+ * half its correlation. Sets DecorrelationSigma (0 where the fitted slope is not negative) and
+ * ZeroDistanceCorrelation (rho0; 0 where nothing fits); both 0 for bins of unequal lengths or none.
+ */
+BIGUSTRAINING_EXPORT void FitElevationDecorrelation(ElevationDecorrelation& m);
 
 /// Settings of the measurement (defaults are the ones ChooseElevationSigma uses).
 struct ElevationDecorrelationSettings
@@ -87,8 +99,9 @@ struct BIGUSTRAINING_EXPORT ElevationSigmaChoice
 
 /**
  * The elevation sigma for @p data's training frames (TrainerSettings::ElevationSigma 0).
- * - Where the speckle of neighbouring frames still correlates (the first bin's correlation is at
- *   least 0.3 and at least three bins fall before it halves): sigma = ElevationSigmaDecorrelationFactor
+ * - Where the speckle of neighbouring frames still correlates (the fit's ZeroDistanceCorrelation is at
+ *   least 0.3 and at least three bins fall before the first bin's correlation halves):
+ *   sigma = ElevationSigmaDecorrelationFactor
  *   (0.4) x DecorrelationSigma. The measured decorrelation is that of the beam and of the scatterers' own
  *   extent along the elevation axis together (sigma_measured^2 = sigma^2 + s^2); a Gaussian field supplies
  *   the second through its scales, so the beam takes a sixth of the variance and the Gaussians keep the

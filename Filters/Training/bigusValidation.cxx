@@ -69,13 +69,16 @@ bool HoldOutValidationByRule(const std::vector<SweepDecorrelation>& sweeps, std:
   reason.clear();
   for (std::size_t s = 0; s < n; ++s)
   {
+    // Spacing 0 says the sweep could not be measured; a measured correlation may be negative (speckle that shares
+    // nothing at that spacing, minus the noise), and is below the threshold like any other.
+    const bool wasMeasured = measured.Spacing[s] > 0;
     const double rho = measured.Correlation[s];
-    const bool below = rho >= 0 && rho < PoseRefinementMinimumCorrelation;
+    const bool below = wasMeasured && rho < PoseRefinementMinimumCorrelation;
     uncorrelated = uncorrelated && below;
     reason += (s > 0 ? "; " : "") + (n > 1 ? vtkfmt::sprintf("sweep %zu: ", s) : std::string()) +
-      (rho < 0 ? std::string("its frames cannot be measured")
-               : vtkfmt::sprintf("speckle correlation %.2f at the training frames' spacing %.3g mm %s %.2g", rho,
-                   measured.Spacing[s], below ? "<" : ">=", PoseRefinementMinimumCorrelation));
+      (!wasMeasured ? std::string("its frames cannot be measured")
+                    : vtkfmt::sprintf("speckle correlation %.2f at the training frames' spacing %.3g mm %s %.2g", rho,
+                        measured.Spacing[s], below ? "<" : ">=", PoseRefinementMinimumCorrelation));
   }
   return uncorrelated;
 }

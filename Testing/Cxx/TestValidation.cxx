@@ -66,6 +66,12 @@ TEST(Validation, HeldOutWhereNoSweepsNeighbouringFramesShareSpeckle)
   EXPECT_EQ(reason,
     "sweep 0: speckle correlation 0.10 at the training frames' spacing 2.25 mm < 0.3; sweep 1: "
     "speckle correlation 0.40 at the training frames' spacing 1.5 mm >= 0.3");
+  // A measured correlation below 0 (the liver's training frames taken one in 4, 3 mm apart: -0.06) shares nothing:
+  // held out, as any below 0.3; only a sweep that could not be measured keeps the training frames.
+  SweepDecorrelation anticorrelated = sweep(2.5);
+  anticorrelated.Measurement.Correlation.back() = -0.06;
+  EXPECT_TRUE(HoldOutValidationByRule({ anticorrelated }, reason)) << reason;
+  EXPECT_EQ(reason, "speckle correlation -0.06 at the training frames' spacing 2.5 mm < 0.3");
   EXPECT_FALSE(HoldOutValidationByRule({ sweep(2.25), unmeasured }, reason));
   EXPECT_NE(reason.find("sweep 1: its frames cannot be measured"), std::string::npos) << reason;
   EXPECT_FALSE(HoldOutValidationByRule({}, reason));
