@@ -11,6 +11,7 @@
 #include VTK_FMT(fmt/printf.h)
 // clang-format on
 
+#include <algorithm>
 #include <limits>
 
 namespace bigus
@@ -140,12 +141,17 @@ void Trainer::EndMeasuredTail()
   this->Report.StopReason = vtkfmt::sprintf("measured tail (%d steps after the held-out validation frames joined the "
                                             "fit at step %d, as many as the fit took to the field they scored best)",
     tail, joined);
-  if (this->Settings.ParameterAverage > 0)
+  // Said once: a later Train call on the stopped run stops here again.
+  const std::string said =
+    vtkfmt::sprintf("; not taken: the run ended with its measured tail of %d steps from the join "
+                    "at step %d, whose first steps fit the joined frames (the field is its last "
+                    "step's)",
+      tail, joined);
+  const std::vector<std::string>& lines = this->Report.Settings;
+  if (this->Settings.ParameterAverage > 0 &&
+    std::none_of(lines.begin(), lines.end(), [&](const std::string& l) { return l.find(said) != std::string::npos; }))
   {
-    this->AppendToSetting("ParameterAverage = ",
-      vtkfmt::sprintf("; not taken: the run ended with its measured tail of %d steps from the join at step %d, whose "
-                      "first steps fit the joined frames (the field is its last step's)",
-        tail, joined));
+    this->AppendToSetting("ParameterAverage = ", said);
   }
   DropParameterAverage(state);
 }

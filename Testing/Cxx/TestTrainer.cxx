@@ -892,6 +892,11 @@ TEST(Trainer, WhereTheHeldOutFramesScoredAnEarlierFieldTheRunStopsAfterAsManySte
     ExpectSameField(resumed.GetField(), straight.GetField());
     if (at > joined)
     {
+      // Trained again once stopped: it stops at once, and the ParameterAverage line says "not taken" once.
+      ASSERT_TRUE(resumed.Train(nullptr, nullptr, &error)) << error;
+      EXPECT_EQ(resumed.GetReport().Iterations, 1300);
+      const std::string average = SettingLine(resumed.GetReport(), "ParameterAverage");
+      EXPECT_EQ(average.find("not taken"), average.rfind("not taken")) << average;
       // A schedule that ends before the tail: the schedule ends the run, its field the parameter average, as before.
       TrainerSettings shorter = s;
       shorter.Iterations = 800;
