@@ -148,8 +148,8 @@ constexpr double PoseRefinementMinimumCorrelation = 0.3;
 struct BIGUSTRAINING_EXPORT PoseRefinementChoice
 {
   std::vector<char> Sweeps;        ///< [sweeps] 1 where the sweep's training frames are refined
-  std::vector<double> Correlation; ///< [sweeps] CorrelationAtNeighbourSpacing; -1 where it could not be measured
-  std::vector<double> Spacing;     ///< [sweeps] NeighbourSpacing, mm; 0 where it could not be measured
+  std::vector<double> Correlation; ///< [sweeps] CorrelationAtNeighbourSpacing (may be below 0); -1 where not measured
+  std::vector<double> Spacing;     ///< [sweeps] NeighbourSpacing, mm; 0 where not measured (what tells it)
   std::string Reason;              ///< one line: the rule and the measured values, sweep by sweep
   bool Any() const;                ///< whether any sweep is refined
 };
