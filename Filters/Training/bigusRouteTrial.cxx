@@ -127,7 +127,24 @@ bool Trainer::DecideRoute(const double* last, bool closing, std::string* error)
     return this->SwitchToPixelGrid(error);
   }
   SeedingPlan adam; // the Adam route's choices: said untested (no pixel-grid candidate is fitted)
-  return this->MeasureOnHeldOutFrames(0, adam, error) && this->JoinValidationFrames(last, error);
+  if (!this->MeasureOnHeldOutFrames(0, adam, error))
+  {
+    return false;
+  }
+  // Held out for their own sake too (HoldOutValidationFrames On: no sweep's frames share speckle), they stay out until
+  // the window's close, as their Validation line says: growth and early stopping go on deciding on frames the fit has
+  // not seen, and the measured tail follows their join (docs/FINDINGS.md, "The route trial's frames"). Held out for
+  // the trial alone, they join now.
+  if (this->Settings.HeldOut.HoldOutValidationFrames == ValidationHoldOut::On && this->InDensificationWindow())
+  {
+    return true;
+  }
+  if (this->InDensificationWindow())
+  {
+    this->AppendToSetting("Validation = ",
+      vtkfmt::sprintf("; joined the fit at step %d, where the route trial took Adam", trial.DecidedAt));
+  }
+  return this->JoinValidationFrames(last, error);
 }
 
 bool Trainer::SwitchToPixelGrid(std::string* error)
