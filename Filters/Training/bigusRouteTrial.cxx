@@ -135,11 +135,12 @@ bool Trainer::DecideRoute(const double* last, bool closing, std::string* error)
   // the window's close, as their Validation line says: growth and early stopping go on deciding on frames the fit has
   // not seen, and the measured tail follows their join (docs/FINDINGS.md, "The route trial's frames"). Held out for
   // the trial alone, they join now.
-  if (this->Settings.HeldOut.HoldOutValidationFrames == ValidationHoldOut::On && this->InDensificationWindow())
+  const bool window = this->InDensificationWindow();
+  if (window && this->Settings.HeldOut.HoldOutValidationFrames == ValidationHoldOut::On)
   {
     return true;
   }
-  if (this->InDensificationWindow())
+  if (window)
   {
     this->AppendToSetting("Validation = ",
       vtkfmt::sprintf("; joined the fit at step %d, where the route trial took Adam", trial.DecidedAt));
