@@ -447,9 +447,10 @@ PoseRefinementChoice ChoosePoseRefinement(const std::vector<SweepDecorrelation>&
   return choice;
 }
 
-double ElevationSigmaSetting(
-  double given, const std::function<const std::vector<SweepDecorrelation>&()>& sweeps, bool& byRule, std::string& line)
+double ElevationSigmaSetting(double given, const std::function<const std::vector<SweepDecorrelation>&()>& sweeps,
+  bool& byRule, std::string& line, double& spacing)
 {
+  spacing = 0;
   byRule = !(given > 0); // 0, negative or NaN: the rule
   if (!byRule)
   {
@@ -458,6 +459,7 @@ double ElevationSigmaSetting(
   }
   const ElevationSigmaChoice choice = ChooseElevationSigma(sweeps());
   line = vtkfmt::sprintf("ElevationSigma = %.4g mm (chosen: ", choice.Sigma) + choice.Reason + ")";
+  spacing = choice.Measurement.NeighbourSpacing;
   return choice.Sigma;
 }
 

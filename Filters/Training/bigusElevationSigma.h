@@ -127,9 +127,11 @@ BIGUSTRAINING_EXPORT ElevationSigmaChoice ChooseElevationSigma(const std::vector
 /**
  * A run's ElevationSigma (mm) and its `setting` line: @p given (> 0) as it is, "(given)"; otherwise
  * ChooseElevationSigma of @p sweeps() (measured only then), "(chosen: the rule's reason)", and @p byRule true.
+ * @p spacing receives the measured sweep's NeighbourSpacing (mm) where the rule measured one, else 0.
  */
-BIGUSTRAINING_EXPORT double ElevationSigmaSetting(
-  double given, const std::function<const std::vector<SweepDecorrelation>&()>& sweeps, bool& byRule, std::string& line);
+BIGUSTRAINING_EXPORT double ElevationSigmaSetting(double given,
+  const std::function<const std::vector<SweepDecorrelation>&()>& sweeps, bool& byRule, std::string& line,
+  double& spacing);
 
 /// The factors of ChooseElevationSigma's two rules.
 constexpr double ElevationSigmaDecorrelationFactor = 0.4;

@@ -458,7 +458,12 @@ std::string SeedField(const TrainingData& data, const SeedingPlan& plan, const S
         : vtkfmt::sprintf("chosen: one per 200 of the %lld fan pixels of the training frames, 20,000 to half the "
                           "maximum",
             static_cast<long long>(plan.FanPixels))) +
-    (s.HarrisInitialisation ? "; Harris seeding)" : "; uniform random seeding)");
+    (s.HarrisInitialisation ? "; Harris seeding" : "; uniform random seeding") +
+    (shape.FrameSpacing > 0
+        ? vtkfmt::sprintf(", %.3g mm across their frame: %.2g x the training frames' spacing %.3g mm, wider than the "
+                          "beam %.3g mm)",
+            shape.ElevationScale, s.ElevationSpacingFactor, shape.FrameSpacing, shape.ElevationSigma)
+        : std::string(")"));
   std::mt19937_64 rng(seed * 7919ULL + 17);
   if (s.HarrisInitialisation)
   {

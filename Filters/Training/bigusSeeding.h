@@ -59,6 +59,18 @@ struct SeedingSettings
   bool GridCountByMemory = true;
   double UniformShare = 0.1;       ///< share of Harris seeds drawn uniformly inside the mask
   double InitialScalePixels = 1.5; ///< pixels: in-plane standard deviation of a Harris or uniform seed
+  /**
+   * Harris and residual seeds' scale across their frame (SeedShape::ElevationScale): the beam
+   * (TrainerSettings::ElevationSigma), or this times the training frames' median spacing where that is wider and
+   * the beam rule measured the spacing (ElevationSigma 0: the ElevationSigma line's "mm apart"). A seed then reaches
+   * the view midway to the next frame at one scale, where a beam narrower than the gaps (a sparse sweep whose speckle
+   * still correlates) leaves the views between frames empty until Adam stretches the seeds that far: the liver's
+   * training frames taken one in 3 (2.29 mm apart, beam 0.319 mm) scored 34.47 dB on 35 test frames at 3,000 steps
+   * against 33.87 with seeds at the beam, one in 4 (3.03 mm, 0.284 mm) 33.78 against 32.75 (docs/FINDINGS.md, "Seeds
+   * across a sparse sweep's gaps"). Where the beam is half the spacing or wider (every bundled sweep whole) nothing
+   * changes. 0: the beam.
+   */
+  double ElevationSpacingFactor = 0.5;
 };
 
 /**
@@ -84,9 +96,12 @@ BIGUSTRAINING_EXPORT double UniformDouble(std::mt19937_64& rng);
 /// How seeds are shaped.
 struct SeedShape
 {
-  double PixelSpacing = 1;   ///< mm, the training frames' mean in-plane pixel spacing
-  double InPlaneScale = 1;   ///< mm, Harris and uniform seeds' scale (InitialScalePixels x PixelSpacing)
-  double ElevationScale = 1; ///< mm, Harris seeds' scale across their frame (sigma_E, or a pixel without the beam)
+  double PixelSpacing = 1; ///< mm, the training frames' mean in-plane pixel spacing
+  double InPlaneScale = 1; ///< mm, Harris and uniform seeds' scale (InitialScalePixels x PixelSpacing)
+  /// mm, Harris and residual seeds' scale across their frame: sigma_E (or a pixel without the beam), or
+  /// SeedingSettings::ElevationSpacingFactor x FrameSpacing where that is wider
+  double ElevationScale = 1;
+  double FrameSpacing = 0;   ///< mm, the training frames' spacing ElevationScale was widened for (0: not widened)
   double ElevationSigma = 0; ///< mm, the beam the field renders with (0: the thin plane); the dense start's planes
   double UniformShare = 0.2; ///< Harris seeding: share of the seeds spread uniformly over the fan
   double Gamma = 1;          ///< of I = 1 - exp(-gamma max(S, 0))

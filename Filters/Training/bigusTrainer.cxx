@@ -43,8 +43,8 @@ Trainer::Trainer(TrainingData data, const TrainerSettings& settings, std::unique
     return measured;
   };
   std::string sigmaLine;
-  this->Settings.ElevationSigma =
-    ElevationSigmaSetting(this->Settings.ElevationSigma, measuredSweeps, this->SigmaByRule, sigmaLine);
+  this->Settings.ElevationSigma = ElevationSigmaSetting(
+    this->Settings.ElevationSigma, measuredSweeps, this->SigmaByRule, sigmaLine, this->FrameSpacing);
   this->Report.Settings.push_back(sigmaLine);
   this->Report.ElevationSigma = this->Settings.ElevationSigma;
   const std::vector<std::string> described = DescribeTrainerSettings(this->Settings);
@@ -284,7 +284,7 @@ bool Trainer::SetField(const GaussianField& field, std::string* error)
 
 SeedShape Trainer::SeedShapeOf() const
 {
-  return bigus::SeedShapeOf(this->Settings, this->PixelSpacing, this->Gamma);
+  return bigus::SeedShapeOf(this->Settings, this->PixelSpacing, this->Gamma, this->FrameSpacing);
 }
 
 void Trainer::AppendToSetting(const std::string& prefix, const std::string& text)

@@ -378,6 +378,7 @@ private:
   std::string ValidationRule;         // HoldOutValidationFrames Auto: the rule's measurement, for the line; else empty
   bool Resuming = false;              // SetResuming
   bool SigmaByRule = false;           // ElevationSigma came from the rule (MeasureOnHeldOutFrames may measure it)
+  double FrameSpacing = 0;            // mm, the training frames' median spacing the rule measured (seeds; 0: given)
   PoseRefiner Poses;
   bool InPoseTrial = false;    // TryPoseRefinement is running its branches: no checkpoint, no join
   int LastSplit = -1;          // the iteration of the last densification that split or cloned (IsSettled)

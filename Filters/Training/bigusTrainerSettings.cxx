@@ -117,13 +117,19 @@ TrainerSettings ScheduledSettings(TrainerSettings s)
   return s;
 }
 
-SeedShape SeedShapeOf(const TrainerSettings& s, double pixelSpacing, double gamma)
+SeedShape SeedShapeOf(const TrainerSettings& s, double pixelSpacing, double gamma, double frameSpacing)
 {
   SeedShape shape;
   shape.PixelSpacing = pixelSpacing;
   shape.InPlaneScale = s.Seeding.InitialScalePixels * pixelSpacing;
   shape.ElevationSigma = s.BeamIntegration ? s.ElevationSigma : 0.0;
   shape.ElevationScale = shape.ElevationSigma > 0 ? shape.ElevationSigma : pixelSpacing;
+  const double across = s.Seeding.ElevationSpacingFactor * frameSpacing;
+  if (shape.ElevationSigma > 0 && across > shape.ElevationScale)
+  {
+    shape.ElevationScale = across;
+    shape.FrameSpacing = frameSpacing;
+  }
   shape.UniformShare = s.Seeding.UniformShare;
   shape.Gamma = gamma;
   return shape;

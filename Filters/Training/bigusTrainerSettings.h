@@ -160,8 +160,10 @@ BIGUSTRAINING_EXPORT std::string ResumeSettingsDifference(const std::string& wri
 BIGUSTRAINING_EXPORT TrainerSettings ScheduledSettings(TrainerSettings s);
 
 /// The seeds' shape (bigusSeeding.h) of a run of @p s on frames of mean in-plane pixel spacing @p pixelSpacing (mm)
-/// with intensity exponent @p gamma.
-BIGUSTRAINING_EXPORT SeedShape SeedShapeOf(const TrainerSettings& s, double pixelSpacing, double gamma);
+/// with intensity exponent @p gamma; @p frameSpacing (mm, 0 = unknown) is the training frames' median spacing, which
+/// widens the seeds' elevation scale to SeedingSettings::ElevationSpacingFactor of it where that exceeds the beam.
+BIGUSTRAINING_EXPORT SeedShape SeedShapeOf(
+  const TrainerSettings& s, double pixelSpacing, double gamma, double frameSpacing = 0);
 
 /**
  * The automatic training cut-offs (TrainerSettings::Cutoff 0), standard deviations. On the liver's main job 3.5

@@ -314,7 +314,9 @@ TEST(GaussianFieldTrainer, HeldOutValidationDecidesWhichFramesValidate)
 // decorrelates over the liver's beam (sigma about 0.8 mm, as every frame's) although the first bin, where tilted frames
 // cross, lies lower than the next: the beam is the fit's (0.4 x its sigma), not the frame spacing, which scored 1.2 dB
 // lower held out on both. Neither shares speckle at its spacing (the one in 4 measures below 0): the validation frames
-// are held out of the fit.
+// are held out of the fit. The seeds span half the frames' spacing across their frame, wider than that beam
+// (SeedingSettings::ElevationSpacingFactor; docs/FINDINGS.md, "Seeds across a sparse sweep's gaps"): the spacing
+// checked here from the poses alone.
 TEST(GaussianFieldTrainer, ASparseSweepTakesTheBeamItsSpeckleMeasures)
 {
   vtkNew<vtkUltrasoundSequenceReader> reader;
@@ -355,6 +357,39 @@ TEST(GaussianFieldTrainer, ASparseSweepTakesTheBeamItsSpeckleMeasures)
     EXPECT_NEAR(beam.Sigma, ElevationSigmaDecorrelationFactor * m.DecorrelationSigma, 1e-12) << beam.Reason;
     std::string reason;
     EXPECT_TRUE(HoldOutValidationByRule(measured, reason)) << reason;
+    // The median over consecutive training frames of the distance from one's image centre to the next one's plane.
+    std::vector<double> gaps;
+    for (std::size_t k = 0; k + 1 < data.TrainFrames.size(); ++k)
+    {
+      const std::array<double, 16>& a = data.Poses[data.TrainFrames[k]];
+      const std::array<double, 16>& b = data.Poses[data.TrainFrames[k + 1]];
+      double centre[3];
+      for (int r = 0; r < 3; ++r)
+      {
+        centre[r] = a[4 * r] * 0.5 * data.Width + a[4 * r + 1] * 0.5 * data.Height + a[4 * r + 3] - b[4 * r + 3];
+      }
+      const double n[3] = { b[4] * b[9] - b[8] * b[5], b[8] * b[1] - b[0] * b[9], b[0] * b[5] - b[4] * b[1] };
+      const double length = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+      gaps.push_back(std::abs(centre[0] * n[0] + centre[1] * n[1] + centre[2] * n[2]) / length);
+    }
+    std::nth_element(gaps.begin(), gaps.begin() + gaps.size() / 2, gaps.end());
+    const double spacing = gaps[gaps.size() / 2];
+    TrainerSettings settings;
+    settings.Seeding.InitialGaussians = 2000;
+    Trainer trainer(data, settings);
+    ASSERT_TRUE(trainer.Initialize(&error)) << error;
+    const GaussianField& seeds = trainer.GetField();
+    ASSERT_EQ(seeds.Count(), 2000);
+    for (std::int64_t i = 0; i < seeds.Count(); ++i)
+    {
+      ASSERT_NEAR(std::exp(seeds.LogScales[3 * i + 2]), 0.5 * spacing, 0.1 * spacing)
+        << "seed " << i << "; spacing " << spacing << " mm from the poses, " << m.NeighbourSpacing << " measured";
+    }
+    const std::vector<std::string>& lines = trainer.GetReport().Settings;
+    EXPECT_TRUE(std::any_of(lines.begin(), lines.end(), [](const std::string& l) {
+      return l.rfind("InitialGaussians = 2000 (given; Harris seeding, ", 0) == 0 &&
+        l.find("mm across their frame: 0.5 x the training frames' spacing") != std::string::npos;
+    }));
   }
 }
 

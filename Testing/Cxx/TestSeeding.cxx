@@ -189,6 +189,31 @@ TEST(Seeding, HarrisSeedsAreOnePer200FanPixelsBetweenTheirBounds)
   EXPECT_EQ(plan.Count, 1234);
 }
 
+// A seed's scale across its frame (SeedShapeOf): the beam, or half the training frames' spacing where that is wider
+// (a sparse sweep whose speckle correlates: docs/FINDINGS.md, "Seeds across a sparse sweep's gaps"); a pixel without
+// the beam; the beam where no spacing was measured (given) or the factor is 0.
+TEST(Seeding, ASeedSpansHalfTheFramesSpacingWhereTheBeamIsNarrower)
+{
+  TrainerSettings s;
+  s.ElevationSigma = 0.3;
+  SeedShape shape = SeedShapeOf(s, 0.2, 1.0, 2.29);
+  EXPECT_DOUBLE_EQ(shape.ElevationScale, 0.5 * 2.29);
+  EXPECT_DOUBLE_EQ(shape.FrameSpacing, 2.29);
+  EXPECT_DOUBLE_EQ(shape.ElevationSigma, 0.3); // the beam the field renders with is not widened
+  shape = SeedShapeOf(s, 0.2, 1.0, 0.5);       // the beam is wider than half the spacing: the beam
+  EXPECT_DOUBLE_EQ(shape.ElevationScale, 0.3);
+  EXPECT_EQ(shape.FrameSpacing, 0.0);
+  shape = SeedShapeOf(s, 0.2, 1.0); // no spacing measured (ElevationSigma given)
+  EXPECT_DOUBLE_EQ(shape.ElevationScale, 0.3);
+  s.Seeding.ElevationSpacingFactor = 0;
+  EXPECT_DOUBLE_EQ(SeedShapeOf(s, 0.2, 1.0, 2.29).ElevationScale, 0.3);
+  s.Seeding.ElevationSpacingFactor = 0.5;
+  s.BeamIntegration = false; // the thin plane: a pixel across
+  shape = SeedShapeOf(s, 0.2, 1.0, 2.29);
+  EXPECT_DOUBLE_EQ(shape.ElevationScale, 0.2);
+  EXPECT_EQ(shape.FrameSpacing, 0.0);
+}
+
 TEST(Seeding, MoreInitialGaussiansThanTheMaximumAreRefusedNamingBoth)
 {
   const TrainingData data = ParallelFrames(12, W, H, 48);
