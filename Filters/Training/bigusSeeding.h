@@ -65,8 +65,8 @@ struct SeedingSettings
    * the beam rule measured the spacing (ElevationSigma 0: the ElevationSigma line's "mm apart"). A seed then reaches
    * the view midway to the next frame at one scale, where a beam narrower than the gaps (a sparse sweep whose speckle
    * still correlates) leaves the views between frames empty until Adam stretches the seeds that far: the liver's
-   * training frames taken one in 3 (2.29 mm apart, beam 0.319 mm) scored 34.47 dB on 35 test frames at 3,000 steps
-   * against 33.87 with seeds at the beam, one in 4 (3.03 mm, 0.284 mm) 33.78 against 32.75 (docs/FINDINGS.md, "Seeds
+   * training frames taken one in 3 (2.29 mm apart, beam 0.319 mm) scored 34.41 dB on 35 test frames at 3,000 steps
+   * against 33.87 with seeds at the beam, one in 4 (3.03 mm, 0.284 mm) 33.86 against 32.75 (docs/FINDINGS.md, "Seeds
    * across a sparse sweep's gaps"). Where the beam is half the spacing or wider (every bundled sweep whole) nothing
    * changes. 0: the beam.
    */

@@ -26,6 +26,7 @@ std::string ResumeSettings(const TrainerSettings& s)
   line("Seeding.InitialGaussians", static_cast<double>(s.Seeding.InitialGaussians));
   line("Seeding.DenseInitialisation", s.Seeding.DenseInitialisation);
   line("Seeding.PixelGridFit", s.Seeding.PixelGridFit);
+  line("Seeding.ElevationSpacingFactor", s.Seeding.ElevationSpacingFactor);
   line("Loss.L1", s.Loss.L1);
   line("Loss.DSSIM", s.Loss.DSSIM);
   line("Loss.FFL", s.Loss.FFL);
