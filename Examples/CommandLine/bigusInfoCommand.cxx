@@ -5,6 +5,7 @@
 #include "bigusElevationSigma.h"
 #include "bigusGaussianFieldData.h"
 #include "bigusSliceFrame.h"
+#include "bigusTrainerSettings.h"
 #include "vtkDataArray.h"
 #include "vtkFieldData.h"
 #include "vtkImageData.h"
@@ -166,6 +167,12 @@ int RunInfo(const InfoOptions& options)
       std::printf(" (mm:NCC)\n");
     }
     std::printf("elevation sigma %.3f mm, as `bigus train` chooses it: %s\n", choice.Sigma, choice.Reason.c_str());
+    // The Harris seeds' scale across their frame, as `bigus train` sets it from the same measurement (SeedShapeOf).
+    bigus::TrainerSettings seeding;
+    seeding.ElevationSigma = choice.Sigma;
+    const bigus::SeedShape shape = bigus::SeedShapeOf(seeding, 1.0, 1.0, decorrelation.NeighbourSpacing);
+    std::printf("seeds          %.3f mm across their frame: %s\n", shape.ElevationScale,
+      shape.FrameSpacing > 0 ? "half the frame spacing, wider than the beam" : "the beam");
     // With every frame trained on; a hold-out widens the training frames' spacing.
     const bigus::PoseRefinementChoice refine = bigus::ChoosePoseRefinement(measured);
     std::printf("pose refinement %s by default, every frame trained on: %s\n", refine.Any() ? "on" : "off",
