@@ -14,6 +14,10 @@
 #include "vtkUltrasoundFanMask.h"
 
 #include <CLI/CLI.hpp>
+#include <vtk_fmt.h>
+// clang-format off
+#include VTK_FMT(fmt/printf.h)
+// clang-format on
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -171,8 +175,10 @@ int RunInfo(const InfoOptions& options)
     bigus::TrainerSettings seeding;
     seeding.ElevationSigma = choice.Sigma;
     const bigus::SeedShape shape = bigus::SeedShapeOf(seeding, 1.0, 1.0, decorrelation.NeighbourSpacing);
-    std::printf("seeds          %.3f mm across their frame: %s\n", shape.ElevationScale,
-      shape.FrameSpacing > 0 ? "half the frame spacing, wider than the beam" : "the beam");
+    const std::string why = shape.FrameSpacing > 0
+      ? vtkfmt::sprintf("%.3g x the frame spacing, wider than the beam", seeding.Seeding.ElevationSpacingFactor)
+      : std::string("the beam");
+    std::printf("seeds          %.3f mm across their frame: %s\n", shape.ElevationScale, why.c_str());
     // With every frame trained on; a hold-out widens the training frames' spacing.
     const bigus::PoseRefinementChoice refine = bigus::ChoosePoseRefinement(measured);
     std::printf("pose refinement %s by default, every frame trained on: %s\n", refine.Any() ? "on" : "off",

@@ -125,7 +125,84 @@ bool MeasureElevationDecorrelation(const TrainingData& data, const ElevationDeco
   const int gaps = std::max(1, settings.MaximumPairGap);
   std::vector<CorrelationSums> total(bins);
   std::vector<double> neighbourDistances;
-  std::map<int, cv::Mat> highPassed; // by position in frames: the window [a, a + gaps]
+  // By position in frames, over the window [a, a + gaps]: each frame high-passed, and its sampled fan pixels in the
+  // reference frame (x, y, z, high-passed value).
+  std::map<int, cv::Mat> highPassed;
+  std::map<int, std::vector<double>> sampled;
+  auto sample = [&](std::size_t k) {
+    const unsigned char* mask = data.MaskOf(frames[k]);
+    const long inFan = std::count_if(mask, mask + pixels, [](unsigned char v) { return v != 0; });
+    const long stride = std::max<long>(1, inFan / std::max<long>(1, settings.PixelsPerFrame));
+    std::vector<double> points;
+    long seen = 0;
+    const FramePlane& A = planes[k];
+    const cv::Mat& hp = highPassed.at(static_cast<int>(k));
+    for (std::size_t p = 0; p < pixels; ++p)
+    {
+      if (!mask[p] || seen++ % stride != 0)
+      {
+        continue;
+      }
+      const double i = double(p % data.Width), j = double(p / data.Width);
+      const double x = i * A.PixelToPlane[0] + j * A.PixelToPlane[1], y = j * A.PixelToPlane[2];
+      for (int c = 0; c < 3; ++c)
+      {
+        points.push_back(A.Origin[c] + x * A.F[0][c] + y * A.F[1][c]);
+      }
+      points.push_back(hp.at<float>(static_cast<int>(j), static_cast<int>(i)));
+    }
+    return points;
+  };
+  // Frame from's sampled pixels against frame to, bilinear there, into sums by distance.
+  auto correlate = [&](std::size_t from, std::size_t to, std::vector<CorrelationSums>& sums) {
+    const std::vector<double>& points = sampled.at(static_cast<int>(from));
+    const FramePlane& B = planes[to];
+    const cv::Mat& hpB = highPassed.at(static_cast<int>(to));
+    const unsigned char* maskB = data.MaskOf(frames[to]);
+    for (std::size_t k = 0; k + 3 < points.size(); k += 4)
+    {
+      double r[3] = { 0, 0, 0 };
+      for (int row = 0; row < 3; ++row)
+      {
+        for (int c = 0; c < 3; ++c)
+        {
+          r[row] += B.F[row][c] * (points[k + c] - B.Origin[c]);
+        }
+      }
+      const double d = std::abs(r[2]);
+      const int bin = static_cast<int>(d / settings.BinWidthMm);
+      const double j = r[1] / B.PixelToPlane[2];
+      const double i = (r[0] - j * B.PixelToPlane[1]) / B.PixelToPlane[0];
+      const int i0 = static_cast<int>(std::floor(i)), j0 = static_cast<int>(std::floor(j));
+      if (bin >= bins || i0 < 0 || j0 < 0 || i0 + 1 >= data.Width || j0 + 1 >= data.Height)
+      {
+        continue;
+      }
+      const std::size_t q = std::size_t(j0) * data.Width + i0;
+      if (!maskB[q] || !maskB[q + 1] || !maskB[q + data.Width] || !maskB[q + data.Width + 1])
+      {
+        continue;
+      }
+      const double fi = i - i0, fj = j - j0;
+      const double value = (1 - fj) * ((1 - fi) * hpB.at<float>(j0, i0) + fi * hpB.at<float>(j0, i0 + 1)) +
+        fj * ((1 - fi) * hpB.at<float>(j0 + 1, i0) + fi * hpB.at<float>(j0 + 1, i0 + 1));
+      sums[bin].Add(points[k + 3], value);
+    }
+  };
+  // The distance of frame from's sampled pixels to frame to's plane.
+  auto distances = [&](std::size_t from, std::size_t to) {
+    const std::vector<double>& points = sampled.at(static_cast<int>(from));
+    const FramePlane& B = planes[to];
+    for (std::size_t k = 0; k + 3 < points.size(); k += 4)
+    {
+      double z = 0;
+      for (int c = 0; c < 3; ++c)
+      {
+        z += B.F[2][c] * (points[k + c] - B.Origin[c]);
+      }
+      neighbourDistances.push_back(std::abs(z));
+    }
+  };
   for (std::size_t a = 0; a + 1 < frames.size(); ++a)
   {
     // Pairs within one sweep (the training frames are in order, a sweep's frames one after the other).
@@ -139,6 +216,7 @@ bool MeasureElevationDecorrelation(const TrainingData& data, const ElevationDeco
       continue;
     }
     highPassed.erase(highPassed.begin(), highPassed.lower_bound(static_cast<int>(a)));
+    sampled.erase(sampled.begin(), sampled.lower_bound(static_cast<int>(a)));
     std::vector<std::size_t> missing;
     for (std::size_t b = a; b <= last; ++b)
     {
@@ -146,6 +224,7 @@ bool MeasureElevationDecorrelation(const TrainingData& data, const ElevationDeco
       {
         missing.push_back(b);
         highPassed[static_cast<int>(b)];
+        sampled[static_cast<int>(b)];
       }
     }
     vtkSMPTools::For(0, static_cast<vtkIdType>(missing.size()), [&](vtkIdType b0, vtkIdType b1) {
@@ -153,68 +232,17 @@ bool MeasureElevationDecorrelation(const TrainingData& data, const ElevationDeco
       {
         const std::size_t b = missing[m];
         highPassed.at(static_cast<int>(b)) = HighPass(data, frames[b], settings.HighPassMm / spacing);
+        sampled.at(static_cast<int>(b)) = sample(b);
       }
     });
-    // The sampled fan pixels of frame a, in the reference frame.
-    const unsigned char* maskA = data.MaskOf(frames[a]);
-    const long inFan = std::count_if(maskA, maskA + pixels, [](unsigned char v) { return v != 0; });
-    const long stride = std::max<long>(1, inFan / std::max<long>(1, settings.PixelsPerFrame));
-    std::vector<double> points; // x, y, z, high-passed value
-    long seen = 0;
-    const FramePlane& A = planes[a];
-    const cv::Mat& hpA = highPassed.at(static_cast<int>(a));
-    for (std::size_t p = 0; p < pixels; ++p)
-    {
-      if (!maskA[p] || seen++ % stride != 0)
-      {
-        continue;
-      }
-      const double i = double(p % data.Width), j = double(p / data.Width);
-      const double x = i * A.PixelToPlane[0] + j * A.PixelToPlane[1], y = j * A.PixelToPlane[2];
-      for (int c = 0; c < 3; ++c)
-      {
-        points.push_back(A.Origin[c] + x * A.F[0][c] + y * A.F[1][c]);
-      }
-      points.push_back(hpA.at<float>(static_cast<int>(j), static_cast<int>(i)));
-    }
+    // Each pair both ways (frame a's sampled pixels against frame b, and b's against a), so that the measurement
+    // does not depend on which of the two comes first: a sweep recorded in the other direction measures the same.
     std::vector<std::vector<CorrelationSums>> perGap(last - a, std::vector<CorrelationSums>(bins));
-    std::vector<double> nextDistances;
     vtkSMPTools::For(0, static_cast<vtkIdType>(last - a), [&](vtkIdType g0, vtkIdType g1) {
       for (vtkIdType g = g0; g < g1; ++g)
       {
-        const std::size_t b = a + 1 + g;
-        const FramePlane& B = planes[b];
-        const cv::Mat& hpB = highPassed.at(static_cast<int>(b));
-        const unsigned char* maskB = data.MaskOf(frames[b]);
-        for (std::size_t k = 0; k + 3 < points.size(); k += 4)
-        {
-          double r[3] = { 0, 0, 0 };
-          for (int row = 0; row < 3; ++row)
-          {
-            for (int c = 0; c < 3; ++c)
-            {
-              r[row] += B.F[row][c] * (points[k + c] - B.Origin[c]);
-            }
-          }
-          const double d = std::abs(r[2]);
-          const int bin = static_cast<int>(d / settings.BinWidthMm);
-          const double j = r[1] / B.PixelToPlane[2];
-          const double i = (r[0] - j * B.PixelToPlane[1]) / B.PixelToPlane[0];
-          const int i0 = static_cast<int>(std::floor(i)), j0 = static_cast<int>(std::floor(j));
-          if (bin >= bins || i0 < 0 || j0 < 0 || i0 + 1 >= data.Width || j0 + 1 >= data.Height)
-          {
-            continue;
-          }
-          const std::size_t q = std::size_t(j0) * data.Width + i0;
-          if (!maskB[q] || !maskB[q + 1] || !maskB[q + data.Width] || !maskB[q + data.Width + 1])
-          {
-            continue;
-          }
-          const double fi = i - i0, fj = j - j0;
-          const double value = (1 - fj) * ((1 - fi) * hpB.at<float>(j0, i0) + fi * hpB.at<float>(j0, i0 + 1)) +
-            fj * ((1 - fi) * hpB.at<float>(j0 + 1, i0) + fi * hpB.at<float>(j0 + 1, i0 + 1));
-          perGap[g][bin].Add(points[k + 3], value);
-        }
+        correlate(a, a + 1 + g, perGap[g]);
+        correlate(a + 1 + g, a, perGap[g]);
       }
     });
     for (const auto& gap : perGap)
@@ -224,17 +252,9 @@ bool MeasureElevationDecorrelation(const TrainingData& data, const ElevationDeco
         total[bin].Add(gap[bin]);
       }
     }
-    // Distance to the next frame's plane, at every sampled pixel.
-    const FramePlane& B = planes[a + 1];
-    for (std::size_t k = 0; k + 3 < points.size(); k += 4)
-    {
-      double z = 0;
-      for (int c = 0; c < 3; ++c)
-      {
-        z += B.F[2][c] * (points[k + c] - B.Origin[c]);
-      }
-      neighbourDistances.push_back(std::abs(z));
-    }
+    // Distance between neighbouring frames' planes, at every sampled pixel of either.
+    distances(a, a + 1);
+    distances(a + 1, a);
   }
   if (!neighbourDistances.empty())
   {

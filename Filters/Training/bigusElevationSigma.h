@@ -28,7 +28,9 @@ namespace bigus
  * Biol. 23(2), 1997; Prager et al., Ultrasound Med. Biol. 29(3), 2003). The measurement pairs every
  * training frame with the next MaximumPairGap training frames: each sampled fan pixel of the first is
  * placed in the reference frame (its ImageToReference), its distance d to the second frame's plane is
- * taken and the second frame is sampled (bilinear) where the pixel projects onto it. Intensities are
+ * taken and the second frame is sampled (bilinear) where the pixel projects onto it; and the same the other way
+ * (the second frame's sampled pixels against the first), so that a sweep read in the other order measures the same
+ * (docs/FINDINGS.md, "The speckle measured both ways"). Intensities are
  * high-passed first (minus a masked Gaussian mean of HighPassMm), so anatomy that persists across
  * frames does not count as correlation. Pixel pairs are binned by d; per bin the normalised cross
  * correlation is computed. DecorrelationSigma is the sigma of the least-squares fit of
@@ -45,7 +47,8 @@ struct BIGUSTRAINING_EXPORT ElevationDecorrelation
   /// bin, which in a sparse sweep holds only the pixels where two tilted frames cross (their speckle turned in
   /// plane against each other, so it correlates less than the bins after it) and few of them.
   double ZeroDistanceCorrelation = 0;
-  double NeighbourSpacing = 0; ///< mm, median over fan pixels of the distance to the next training frame's plane
+  /// mm, median over the sampled fan pixels of neighbouring training frames of the distance to the other's plane
+  double NeighbourSpacing = 0;
 };
 
 /**

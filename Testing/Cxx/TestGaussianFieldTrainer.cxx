@@ -357,20 +357,36 @@ TEST(GaussianFieldTrainer, ASparseSweepTakesTheBeamItsSpeckleMeasures)
     EXPECT_NEAR(beam.Sigma, ElevationSigmaDecorrelationFactor * m.DecorrelationSigma, 1e-12) << beam.Reason;
     std::string reason;
     EXPECT_TRUE(HoldOutValidationByRule(measured, reason)) << reason;
-    // The median over consecutive training frames of the distance from one's image centre to the next one's plane.
+    // The median over the fan pixels of consecutive training frames (every 8th column and row) of the distance from
+    // either's pixel to the other's plane, from the poses alone.
     std::vector<double> gaps;
-    for (std::size_t k = 0; k + 1 < data.TrainFrames.size(); ++k)
-    {
-      const std::array<double, 16>& a = data.Poses[data.TrainFrames[k]];
-      const std::array<double, 16>& b = data.Poses[data.TrainFrames[k + 1]];
-      double centre[3];
-      for (int r = 0; r < 3; ++r)
-      {
-        centre[r] = a[4 * r] * 0.5 * data.Width + a[4 * r + 1] * 0.5 * data.Height + a[4 * r + 3] - b[4 * r + 3];
-      }
+    auto addGaps = [&](int from, int to) {
+      const std::array<double, 16>& a = data.Poses[from];
+      const std::array<double, 16>& b = data.Poses[to];
       const double n[3] = { b[4] * b[9] - b[8] * b[5], b[8] * b[1] - b[0] * b[9], b[0] * b[5] - b[4] * b[1] };
       const double length = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-      gaps.push_back(std::abs(centre[0] * n[0] + centre[1] * n[1] + centre[2] * n[2]) / length);
+      const unsigned char* mask = data.MaskOf(from);
+      for (int j = 0; j < data.Height; j += 8)
+      {
+        for (int i = 0; i < data.Width; i += 8)
+        {
+          if (!mask[std::size_t(j) * data.Width + i])
+          {
+            continue;
+          }
+          double z = 0;
+          for (int r = 0; r < 3; ++r)
+          {
+            z += (a[4 * r] * i + a[4 * r + 1] * j + a[4 * r + 3] - b[4 * r + 3]) * n[r] / length;
+          }
+          gaps.push_back(std::abs(z));
+        }
+      }
+    };
+    for (std::size_t k = 0; k + 1 < data.TrainFrames.size(); ++k)
+    {
+      addGaps(data.TrainFrames[k], data.TrainFrames[k + 1]);
+      addGaps(data.TrainFrames[k + 1], data.TrainFrames[k]);
     }
     std::nth_element(gaps.begin(), gaps.begin() + gaps.size() / 2, gaps.end());
     const double spacing = gaps[gaps.size() / 2];
@@ -382,7 +398,7 @@ TEST(GaussianFieldTrainer, ASparseSweepTakesTheBeamItsSpeckleMeasures)
     ASSERT_EQ(seeds.Count(), 2000);
     for (std::int64_t i = 0; i < seeds.Count(); ++i)
     {
-      ASSERT_NEAR(std::exp(seeds.LogScales[3 * i + 2]), 0.5 * spacing, 0.1 * spacing)
+      ASSERT_NEAR(std::exp(seeds.LogScales[3 * i + 2]), 0.5 * spacing, 0.02 * spacing)
         << "seed " << i << "; spacing " << spacing << " mm from the poses, " << m.NeighbourSpacing << " measured";
     }
     const std::vector<std::string>& lines = trainer.GetReport().Settings;

@@ -600,12 +600,12 @@ def main():
     code, out_text, _ = run("info", sweep, "--calibration", xml)
     assert code == 0 and "frames         20 (20 valid)" in out_text, out_text
     # The seeds' scale across their frame (SeedingSettings::ElevationSpacingFactor): the wider of the beam and half
-    # the frame spacing, both as printed (this sweep: 0.258 mm and 0.569 mm, so half the spacing).
+    # the frame spacing, both as printed (this sweep: 0.330 mm and 0.569 mm, so the beam).
     spacing = float(out_text.split("frame spacing  ")[1].split()[0])
     beam = float(out_text.split("elevation sigma ")[1].split()[0])
     seeds = float(out_text.split("seeds          ")[1].split()[0])
     assert abs(seeds - max(beam, 0.5 * spacing)) < 2e-3, out_text
-    assert ("half the frame spacing" in out_text) == (0.5 * spacing > beam), out_text
+    assert ("0.5 x the frame spacing" in out_text) == (0.5 * spacing > beam), out_text
     # The backends and their self-checks: the CPU renderer is the reference; "auto" names one that passed
     # (where a built CUDA backend cannot run, it is listed with why).
     code, out_text, err = run("info", "--backends")
