@@ -180,19 +180,6 @@ bool SeveralSweepsSection(BenchmarkContext& context, std::string* error)
   {
     return Failed("several sweeps: " + *error, error);
   }
-  if (!quick)
-  {
-    // The two sweeps' 475k fan pixels fit under the default MaximumGaussians (500k): a Gaussian per fan pixel.
-    // Under the previous default (400k) the grid is coarser (a stride of 1.1 pixels).
-    TrainerSettings tight = defaults;
-    tight.MaximumGaussians = 400000;
-    if (!TrainToBudget(
-          both, tight, "BIGUS defaults but MaximumGaussians 400,000 (a coarser grid)", row,
-          [&](Trainer& trainer, Row& r) { return score(trainer, r); }, error))
-    {
-      return Failed("several sweeps: " + *error, error);
-    }
-  }
   const std::vector<double> marks = quick ? std::vector<double>{ 4 } : std::vector<double>{ 60, 300, 600 };
   TrainerSettings adam;
   adam.Seeding.PixelGridFit = false;

@@ -41,7 +41,7 @@ struct BIGUSTRAINING_EXPORT ElevationDecorrelation
 {
   std::vector<double> Distance;    ///< bin centres, mm
   std::vector<double> Correlation; ///< normalised cross-correlation of the high-passed intensities per bin
-  std::vector<long> Samples;       ///< pixel pairs per bin
+  std::vector<long> Samples;       ///< pixel pairs per bin (each pair of frames sampled both ways)
   double DecorrelationSigma = 0;   ///< mm; 0 when too few pairs overlap
   /// rho0 of the fit: the correlation it extrapolates to d = 0 (0 where there is no fit). Read instead of the first
   /// bin, which in a sparse sweep holds only the pixels where two tilted frames cross (their speckle turned in

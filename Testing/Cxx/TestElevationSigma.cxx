@@ -99,12 +99,12 @@ TEST(ElevationSigma, DecorrelationOfASpeckleFieldGivesItsBeamSigma)
   }
 }
 
-// A fanning sweep (each frame tilted 0.4 degrees from the last about its top row and shifted 0.037 mm sideways, so no
-// pixel of one frame falls on a pixel of another) measures the same read in either order: every pair is sampled both
-// ways, at one frame's pixels and bilinear in the other's. Sampled one way only (the first frame of each pair at its
-// pixels), the liver read backwards measured 0.868 mm against 0.841 read forwards (`bigus info`; docs/FINDINGS.md, "The
-// speckle measured both ways").
-TEST(ElevationSigma, ASweepReadBackwardsMeasuresTheSame)
+// A fanning sweep (each frame tilted 0.4 degrees from the last about its top row, 0.06 mm further along z and shifted
+// 0.037 mm sideways, so no pixel of one frame falls on a pixel of another) measures the same read in either order:
+// every pair is sampled both ways, at one frame's pixels and bilinear in the other's. Sampled one way only (the first
+// frame of each pair at its pixels), the liver read backwards measured 0.868 mm against 0.841 read forwards (`bigus
+// info`; docs/FINDINGS.md, "The speckle measured both ways").
+TEST(ElevationSigma, ASweepReadBackwardsOrMovedRigidlyMeasuresTheSame)
 {
   const GaussianField truth = SpeckleField(20000, 8.0, 7);
   const int frames = 30;
@@ -115,21 +115,25 @@ TEST(ElevationSigma, ASweepReadBackwardsMeasuresTheSame)
     poses.push_back({ Pixel, 0, 0, 0.037 * k, 0, Pixel * std::cos(tilt), 0, 0, 0, Pixel * std::sin(tilt), 0,
       0.06 * (k - 0.5 * (frames - 1)), 0, 0, 0, 1 });
   }
-  std::vector<std::array<double, 16>> backwards(poses.rbegin(), poses.rend());
   std::vector<int> heldOut;
-  ElevationDecorrelation read[2];
-  int which = 0;
-  for (const auto* order : { &poses, &backwards })
+  TrainingData data = RenderedSweep(truth, poses, W, H, 0.4, heldOut);
+  data.TrainFrames.clear();
+  for (int k = 0; k < data.Count(); ++k)
   {
-    TrainingData data = RenderedSweep(truth, *order, W, H, 0.4, heldOut);
-    data.TrainFrames.clear();
-    for (int k = 0; k < data.Count(); ++k)
-    {
-      data.TrainFrames.push_back(k);
-    }
-    std::string error;
-    ASSERT_TRUE(MeasureElevationDecorrelation(data, ElevationDecorrelationSettings(), read[which++], &error)) << error;
+    data.TrainFrames.push_back(k);
   }
+  // The same images and poses, last frame first.
+  TrainingData backwards = data;
+  const std::size_t pixels = std::size_t(W) * H;
+  for (int k = 0; k < frames; ++k)
+  {
+    backwards.Poses[k] = data.Poses[frames - 1 - k];
+    std::copy_n(data.Frames.begin() + pixels * (frames - 1 - k), pixels, backwards.Frames.begin() + pixels * k);
+  }
+  ElevationDecorrelation read[2];
+  std::string error;
+  ASSERT_TRUE(MeasureElevationDecorrelation(data, ElevationDecorrelationSettings(), read[0], &error)) << error;
+  ASSERT_TRUE(MeasureElevationDecorrelation(backwards, ElevationDecorrelationSettings(), read[1], &error)) << error;
   std::printf("forwards: decorrelation sigma %.6f mm, spacing %.6f mm; backwards: %.6f mm, %.6f mm\n",
     read[0].DecorrelationSigma, read[0].NeighbourSpacing, read[1].DecorrelationSigma, read[1].NeighbourSpacing);
   ASSERT_EQ(read[0].Distance, read[1].Distance);
@@ -141,6 +145,43 @@ TEST(ElevationSigma, ASweepReadBackwardsMeasuresTheSame)
   EXPECT_NEAR(read[0].DecorrelationSigma, read[1].DecorrelationSigma, 1e-9);
   EXPECT_EQ(read[0].NeighbourSpacing, read[1].NeighbourSpacing);
   EXPECT_NEAR(read[0].DecorrelationSigma, std::sqrt(0.4 * 0.4 + 0.05 * 0.05), 0.15 * 0.4); // and still the beam
+
+  // The same frames in another reference frame (every pose turned 37 degrees about (3, -5, 8) and moved by (250, -120,
+  // 400) mm, as another tracker's base would put them) measure the same: only distances between frames count.
+  const double axis[3] = { 0.3 / std::sqrt(0.98), -0.5 / std::sqrt(0.98), 0.8 / std::sqrt(0.98) };
+  const double angle = 37 * 3.141592653589793 / 180, c = std::cos(angle), s = std::sin(angle);
+  double R[3][3];
+  for (int r = 0; r < 3; ++r)
+  {
+    for (int q = 0; q < 3; ++q)
+    {
+      const double cross = r == q ? 0.0 : (((q - r + 3) % 3 == 1) ? -1.0 : 1.0) * axis[3 - r - q];
+      R[r][q] = (r == q ? c : 0.0) + s * cross + (1 - c) * axis[r] * axis[q];
+    }
+  }
+  const double shift[3] = { 250, -120, 400 };
+  for (std::array<double, 16>& pose : data.Poses)
+  {
+    const std::array<double, 16> before = pose;
+    for (int r = 0; r < 3; ++r)
+    {
+      for (int q = 0; q < 4; ++q)
+      {
+        pose[4 * r + q] =
+          R[r][0] * before[q] + R[r][1] * before[4 + q] + R[r][2] * before[8 + q] + (q == 3 ? shift[r] : 0);
+      }
+    }
+  }
+  ElevationDecorrelation moved;
+  ASSERT_TRUE(MeasureElevationDecorrelation(data, ElevationDecorrelationSettings(), moved, &error)) << error;
+  ASSERT_EQ(moved.Distance, read[0].Distance);
+  EXPECT_EQ(moved.Samples, read[0].Samples);
+  for (std::size_t b = 0; b < moved.Correlation.size(); ++b)
+  {
+    EXPECT_NEAR(moved.Correlation[b], read[0].Correlation[b], 1e-9) << "bin " << moved.Distance[b] << " mm";
+  }
+  EXPECT_NEAR(moved.DecorrelationSigma, read[0].DecorrelationSigma, 1e-9);
+  EXPECT_NEAR(moved.NeighbourSpacing, read[0].NeighbourSpacing, 1e-9);
 }
 
 // The rule on two sweeps of known sigma and spacing: frames farther apart than the beam (sigma 0.3 mm,
