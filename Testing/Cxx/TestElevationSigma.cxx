@@ -5,6 +5,7 @@
 #include "bigusTrainingTestUtilities.h"
 #include "bigusValidation.h"
 
+#include <Eigen/Geometry>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -130,58 +131,38 @@ TEST(ElevationSigma, ASweepReadBackwardsOrMovedRigidlyMeasuresTheSame)
     backwards.Poses[k] = data.Poses[frames - 1 - k];
     std::copy_n(data.Frames.begin() + pixels * (frames - 1 - k), pixels, backwards.Frames.begin() + pixels * k);
   }
+  // Every bin, sample count, fit and spacing of @p b as of @p a (the spacing within @p spacingTolerance, mm).
+  auto expectSame = [](const ElevationDecorrelation& a, const ElevationDecorrelation& b, double spacingTolerance) {
+    ASSERT_EQ(a.Distance, b.Distance);
+    EXPECT_EQ(a.Samples, b.Samples);
+    for (std::size_t bin = 0; bin < a.Correlation.size(); ++bin)
+    {
+      EXPECT_NEAR(a.Correlation[bin], b.Correlation[bin], 1e-9) << "bin " << a.Distance[bin] << " mm";
+    }
+    EXPECT_NEAR(a.DecorrelationSigma, b.DecorrelationSigma, 1e-9);
+    EXPECT_NEAR(a.NeighbourSpacing, b.NeighbourSpacing, spacingTolerance);
+  };
   ElevationDecorrelation read[2];
   std::string error;
   ASSERT_TRUE(MeasureElevationDecorrelation(data, ElevationDecorrelationSettings(), read[0], &error)) << error;
   ASSERT_TRUE(MeasureElevationDecorrelation(backwards, ElevationDecorrelationSettings(), read[1], &error)) << error;
   std::printf("forwards: decorrelation sigma %.6f mm, spacing %.6f mm; backwards: %.6f mm, %.6f mm\n",
     read[0].DecorrelationSigma, read[0].NeighbourSpacing, read[1].DecorrelationSigma, read[1].NeighbourSpacing);
-  ASSERT_EQ(read[0].Distance, read[1].Distance);
-  EXPECT_EQ(read[0].Samples, read[1].Samples);
-  for (std::size_t b = 0; b < read[0].Correlation.size(); ++b)
-  {
-    EXPECT_NEAR(read[0].Correlation[b], read[1].Correlation[b], 1e-9) << "bin " << read[0].Distance[b] << " mm";
-  }
-  EXPECT_NEAR(read[0].DecorrelationSigma, read[1].DecorrelationSigma, 1e-9);
-  EXPECT_EQ(read[0].NeighbourSpacing, read[1].NeighbourSpacing);
+  expectSame(read[0], read[1], 0.0);
   EXPECT_NEAR(read[0].DecorrelationSigma, std::sqrt(0.4 * 0.4 + 0.05 * 0.05), 0.15 * 0.4); // and still the beam
 
   // The same frames in another reference frame (every pose turned 37 degrees about (3, -5, 8) and moved by (250, -120,
   // 400) mm, as another tracker's base would put them) measure the same: only distances between frames count.
-  const double axis[3] = { 0.3 / std::sqrt(0.98), -0.5 / std::sqrt(0.98), 0.8 / std::sqrt(0.98) };
-  const double angle = 37 * 3.141592653589793 / 180, c = std::cos(angle), s = std::sin(angle);
-  double R[3][3];
-  for (int r = 0; r < 3; ++r)
-  {
-    for (int q = 0; q < 3; ++q)
-    {
-      const double cross = r == q ? 0.0 : (((q - r + 3) % 3 == 1) ? -1.0 : 1.0) * axis[3 - r - q];
-      R[r][q] = (r == q ? c : 0.0) + s * cross + (1 - c) * axis[r] * axis[q];
-    }
-  }
-  const double shift[3] = { 250, -120, 400 };
+  Eigen::Affine3d motion(Eigen::AngleAxisd(37 * 3.141592653589793 / 180, Eigen::Vector3d(0.3, -0.5, 0.8).normalized()));
+  motion.translation() = Eigen::Vector3d(250, -120, 400);
   for (std::array<double, 16>& pose : data.Poses)
   {
-    const std::array<double, 16> before = pose;
-    for (int r = 0; r < 3; ++r)
-    {
-      for (int q = 0; q < 4; ++q)
-      {
-        pose[4 * r + q] =
-          R[r][0] * before[q] + R[r][1] * before[4 + q] + R[r][2] * before[8 + q] + (q == 3 ? shift[r] : 0);
-      }
-    }
+    Eigen::Map<Eigen::Matrix<double, 4, 4, Eigen::RowMajor>> matrix(pose.data());
+    matrix = (motion.matrix() * matrix).eval();
   }
   ElevationDecorrelation moved;
   ASSERT_TRUE(MeasureElevationDecorrelation(data, ElevationDecorrelationSettings(), moved, &error)) << error;
-  ASSERT_EQ(moved.Distance, read[0].Distance);
-  EXPECT_EQ(moved.Samples, read[0].Samples);
-  for (std::size_t b = 0; b < moved.Correlation.size(); ++b)
-  {
-    EXPECT_NEAR(moved.Correlation[b], read[0].Correlation[b], 1e-9) << "bin " << moved.Distance[b] << " mm";
-  }
-  EXPECT_NEAR(moved.DecorrelationSigma, read[0].DecorrelationSigma, 1e-9);
-  EXPECT_NEAR(moved.NeighbourSpacing, read[0].NeighbourSpacing, 1e-9);
+  expectSame(read[0], moved, 1e-9);
 }
 
 // The rule on two sweeps of known sigma and spacing: frames farther apart than the beam (sigma 0.3 mm,
