@@ -68,8 +68,8 @@ struct GaussianMergeReport
  * merges the pairs in order of error, each Gaussian at most once (the merge takes the lower index, the order
  * of the field is kept otherwise); passes repeat while a pass merges at least 1 % of the field, up to
  * MaximumPasses. Deterministic. Errors accumulate over passes: a Gaussian merged in k passes may be off by
- * up to about k times the tolerance. Memory while it runs: about 140 bytes per Gaussian (each one's best merge
- * and partner) besides the locator's; its time on the README jobs' fields: docs/FINDINGS.md, "Merging".
+ * up to about k times the tolerance. Memory while it runs: about 140 bytes per Gaussian (its moments, its best
+ * merge's error and partner) besides the locator's; its time on the README jobs' fields: docs/FINDINGS.md, "Merging".
  */
 BIGUSTRAINING_EXPORT GaussianMergeReport MergeGaussians(GaussianField& field, const GaussianMergeSettings& settings);
 /// The same on a training state's field: when any pair merged, every Gaussian starts with fresh optimiser moments and

@@ -254,6 +254,31 @@ TEST(GaussianMerging, IdenticalTwinsMergeExactlyAndOppositeSignsNever)
   EXPECT_EQ(MergeGaussianPair(a, b).Error, 1.0);
 }
 
+TEST(GaussianMerging, AMergeThinnerThanTheSmallestScaleIsJudgedAsTheClampedGaussianItStores)
+{
+  // Twins 1e-7 mm thick along z: the moment-matched merge is as thin, but a stored scale is at least 1e-6 mm, so the
+  // field would hold a Gaussian 10 times thicker (the same mass). Its error is that Gaussian's: the x and y factors
+  // of the pair and the merge are equal, so the relative integrated squared error is that of the z factors alone,
+  // f(z) = 2 r exp(-z^2 / 2 s^2) against h(z) = 2 r (s / t) exp(-z^2 / 2 t^2), with s = 1e-7, t = 1e-6 (mm):
+  // ||f||^2 = 4 r^2 sqrt(pi) s, ||h||^2 = 4 r^2 (s / t)^2 sqrt(pi) t, <f, h> = 4 r^2 (s / t) sqrt(2 pi) s t / sqrt(s^2
+  // + t^2).
+  const double s = 1e-7, t = 1e-6;
+  const GaussianParams a = MakeGaussian({ 1, 2, 3 }, { 0.5, 0.2, s }, { 1, 0, 0, 0 }, 0.3);
+  const double ff = std::sqrt(M_PI) * s, hh = (s / t) * (s / t) * std::sqrt(M_PI) * t;
+  const double fh = (s / t) * std::sqrt(2 * M_PI) * s * t / std::sqrt(s * s + t * t);
+  const double expected = (ff + hh - 2 * fh) / ff;
+  const GaussianPairMerge merge = MergeGaussianPair(a, a);
+  EXPECT_NEAR(merge.Error, expected, 1e-9) << "the unclamped merge would err by 0";
+  EXPECT_GT(merge.Error, 0.3);
+  EXPECT_NEAR(
+    std::exp(merge.Merged.LogScale[0]) * std::exp(merge.Merged.LogScale[1]) * std::exp(merge.Merged.LogScale[2]),
+    0.5 * 0.2 * t, 1e-9 * 0.5 * 0.2 * t);
+  EXPECT_NEAR(merge.Merged.Reflectivity, 0.6 * s / t, 1e-9);
+  // Twice as thick as the clamp: nothing is clamped, the twins merge exactly.
+  const GaussianParams b = MakeGaussian({ 1, 2, 3 }, { 0.5, 0.2, 2 * t }, { 1, 0, 0, 0 }, 0.3);
+  EXPECT_NEAR(MergeGaussianPair(b, b).Error, 0, 1e-9);
+}
+
 TEST(GaussianMerging, FieldOfTwinsMergesBackToTheFieldItCameFrom)
 {
   // Each Gaussian of a field cut into two halves (FieldAndTwins): merging must undo exactly the cuts, and the
