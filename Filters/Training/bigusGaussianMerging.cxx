@@ -203,10 +203,6 @@ MomentMerge MergeOf(const std::vector<Moments>& moments, std::int64_t i, std::in
 GaussianPairMerge MergeGaussianPair(const GaussianParams& ga, const GaussianParams& gb)
 {
   GaussianPairMerge result;
-  if (!(ga.Reflectivity * gb.Reflectivity > 0))
-  {
-    return result;
-  }
   const MomentMerge merge = MergeMoments(ToMoments(ga), ToMoments(gb));
   if (MergedParams(merge, result.Merged))
   {
@@ -258,7 +254,7 @@ GaussianMergeReport MergeGaussians(GaussianField& field, const GaussianMergeSett
         for (vtkIdType k = 0; k < ids->GetNumberOfIds(); ++k)
         {
           const std::int64_t j = ids->GetId(k);
-          if (j == i || !(moments[i].R * moments[j].R > 0))
+          if (j == i)
           {
             continue;
           }

@@ -260,8 +260,8 @@ TEST(GaussianMerging, AMergeThinnerThanTheSmallestScaleIsJudgedAsTheClampedGauss
   // field would hold a Gaussian 10 times thicker (the same mass). Its error is that Gaussian's: the x and y factors
   // of the pair and the merge are equal, so the relative integrated squared error is that of the z factors alone,
   // f(z) = 2 r exp(-z^2 / 2 s^2) against h(z) = 2 r (s / t) exp(-z^2 / 2 t^2), with s = 1e-7, t = 1e-6 (mm):
-  // ||f||^2 = 4 r^2 sqrt(pi) s, ||h||^2 = 4 r^2 (s / t)^2 sqrt(pi) t, <f, h> = 4 r^2 (s / t) sqrt(2 pi) s t / sqrt(s^2
-  // + t^2).
+  // ||f||^2 = 4 r^2 sqrt(pi) s, ||h||^2 = 4 r^2 (s / t)^2 sqrt(pi) t,
+  // <f, h> = 4 r^2 (s / t) sqrt(2 pi) s t / sqrt(s^2 + t^2).
   const double s = 1e-7, t = 1e-6;
   const GaussianParams a = MakeGaussian({ 1, 2, 3 }, { 0.5, 0.2, s }, { 1, 0, 0, 0 }, 0.3);
   const double ff = std::sqrt(M_PI) * s, hh = (s / t) * (s / t) * std::sqrt(M_PI) * t;
