@@ -230,8 +230,9 @@ public:
   ///@}
   ///@{ RefinePoses Auto, where the speckle rule would refine: steps taken each way (on the tracked poses, with
   /// refinement) from the refinement's start, scored on held-out frames at their tracked poses, the better going on
-  /// (default 400; 0: the rule alone; bigus::PoseRefinementSettings::TrialSteps). TrainingSettings' RefinePoses line
-  /// gives both scores.
+  /// (default 400; 0: the rule alone; bigus::PoseRefinementSettings::TrialSteps). Where the steps left are fewer than
+  /// 10 x these under a time budget (4 x without one) the trial is not run and the tracked poses are kept. The
+  /// TrainingSettings' RefinePoses line gives both scores, or why the choice is untested.
   virtual void SetPoseTrialSteps(int value);
   virtual int GetPoseTrialSteps() const;
   ///@}

@@ -496,8 +496,8 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
   {
     for (vtkIdType i = 0; i < lines->GetNumberOfValues(); ++i)
     {
-      // What the run decided after its settings were printed: the pose-refinement trial (and when the frames it
-      // held out joined the fit), the anchor, the route
+      // What the run decided after its settings were printed: the pose-refinement trial or why it was not run (and
+      // when the frames it held out joined the fit), the anchor, the route
       // trial (and, where it took the grid, the grid's own choices), the steps the parameter average took.
       const std::string& line = lines->GetValue(i);
       const bool grid = trainer->GetStopReason() &&
@@ -506,7 +506,8 @@ int TrainOnThisProcess(const TrainOptions& o, Processes& processes)
                   "measured") == 0;
       if (line.rfind("PoseAnchor = ", 0) == 0 ||
         (line.rfind("ParameterAverage = ", 0) == 0 && line.find("; made the field") != std::string::npos) ||
-        (line.rfind("RefinePoses = ", 0) == 0 && line.find("measured: ") != std::string::npos) ||
+        (line.rfind("RefinePoses = ", 0) == 0 &&
+          (line.find("measured: ") != std::string::npos || line.find("untested: ") != std::string::npos)) ||
         (line.rfind("Validation = ", 0) == 0 && line.find("; in the fit from step ") != std::string::npos) ||
         (line.rfind("Route = ", 0) == 0 && line.find("(measured on ") != std::string::npos) ||
         (grid &&
@@ -754,8 +755,9 @@ Command AddTrainCommand(CLI::App& app)
   trainCommand
     ->add_option("--pose-trial-steps", settings.Poses.TrialSteps,
       "Where the default (Auto) would refine the poses: steps taken each way (on the tracked poses, with refinement) "
-      "from the refinement's start, scored on held-out frames at their tracked poses, the better going on (0: the "
-      "speckle rule alone; the RefinePoses setting line says what each scored)")
+      "from the refinement's start, scored on held-out frames at their tracked poses, the better going on; where the "
+      "steps left are fewer than 10 x N under --time-budget (4 x N without), the tracked poses are kept untested (0: "
+      "the speckle rule alone; the RefinePoses setting line says what each scored, or why untested)")
     ->capture_default_str()
     ->excludes("--no-refine-poses")
     ->excludes("--refine-poses")

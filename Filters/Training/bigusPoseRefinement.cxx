@@ -152,15 +152,15 @@ void PoseRefiner::TurnOffCorrections(TrainingState& state, std::vector<std::stri
   }
 }
 
-void PoseRefiner::EndTrialWithoutRoom(int iterations, double timeBudget, std::vector<std::string>& lines)
+std::string PoseRefiner::TrialWithoutRoom(int iterations, double timeBudget) const
 {
   const double left = (1 - this->Settings.Start) * iterations;
-  if (this->TrialPending && timeBudget <= 0 && iterations > 0 && left < 4.0 * this->Settings.TrialSteps)
+  if (!this->TrialPending || timeBudget > 0 || iterations <= 0 || left >= 4.0 * this->Settings.TrialSteps)
   {
-    this->TrialPending = false;
-    this->AnnotateChoice(lines,
-      vtkfmt::sprintf("untested: the schedule leaves %.0f steps, fewer than 4 x %d", left, this->Settings.TrialSteps));
+    return {};
   }
+  return vtkfmt::sprintf("untested: the schedule leaves %.0f steps, fewer than 4 x %d; the tracked poses kept", left,
+    this->Settings.TrialSteps);
 }
 
 void PoseRefiner::AnnotateChoice(std::vector<std::string>& lines, const std::string& how) const
@@ -448,9 +448,21 @@ bool PoseRefiner::Resume(
   TrainingState& loaded, std::vector<std::string>& lines, const std::string& file, bool& trialDone, std::string* error)
 {
   trialDone = false;
+  // A checkpoint written before any correction moved holds the tracked poses alone: a run that keeps them (given, or
+  // untested where its shorter schedule leaves no room for the trial) goes on from it without corrections.
+  if (this->Settings.RefinePoses != PoseRefinement::On &&
+    std::none_of(loaded.PoseSteps.begin(), loaded.PoseSteps.end(), [](int steps) { return steps > 0; }))
+  {
+    for (auto* v : { &loaded.PoseCorrections, &loaded.PoseFirstMoment, &loaded.PoseSecondMoment,
+           &loaded.BestPoseCorrections, &loaded.AveragePoseCorrections })
+    {
+      v->clear();
+    }
+    loaded.PoseSteps.clear();
+  }
   if (this->TrialPending && loaded.PoseCorrections.empty())
   {
-    this->TurnOffCorrections(loaded, lines, "measured before the checkpoint " + file + " was written");
+    this->TurnOffCorrections(loaded, lines, "decided before the checkpoint " + file + " was written");
     trialDone = true;
   }
   else if (this->TrialPending &&

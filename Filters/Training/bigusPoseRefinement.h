@@ -150,9 +150,9 @@ public:
   /// Adds what the trial found (@p how) to the `RefinePoses = on (...)` line of @p lines.
   void AnnotateChoice(std::vector<std::string>& lines, const std::string& how) const;
   /// Where a pending trial cannot run within a schedule of @p iterations steps and no time budget (@p timeBudget
-  /// <= 0, s): fewer than 4 x TrialSteps steps left after Start. The trial ends untested (the rule's choice stands)
-  /// and the `RefinePoses` line of @p lines says so.
-  void EndTrialWithoutRoom(int iterations, double timeBudget, std::vector<std::string>& lines);
+  /// <= 0, s), fewer than 4 x TrialSteps steps left after Start: why, for the `RefinePoses` line (the trainer then
+  /// keeps the tracked poses untested: Trainer::KeepTrackedPoses). Empty where the trial has room or none is pending.
+  std::string TrialWithoutRoom(int iterations, double timeBudget) const;
   /// What the `RefinePoses = on (...)` line said when Configure wrote it, without the brackets (empty where it
   /// wrote no such line): why the rule refines, kept for a line that later replaces it.
   const std::string& GetRuleText() const { return this->RuleText; }

@@ -20,7 +20,6 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
 {
   this->Poses.EndTrial(); // one trial, whatever it finds
   const std::vector<int> frames = this->HeldOutValidation;
-  auto rewrite = [&](const std::string& how) { this->Poses.AnnotateChoice(this->Report.Settings, how); };
   // The steps the schedule has left: at most Iterations', and at the rate so far what the budget's seconds allow.
   const TrainerSettings& s = this->Settings;
   const int from = this->State.Iteration, steps = this->PoseTrialSteps(from);
@@ -31,12 +30,25 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
   {
     left = std::min(left, (s.TimeBudget - seconds) * from / stepping);
   }
-  if (frames.empty() || this->Reduction || left < 4.0 * steps)
+  // Under a time budget the branch the trial discards is steps the run loses, so it runs only where they are at most
+  // a tenth of the steps left; without one they cost time, not steps, and 4 x leaves the run room after it. At 60 s
+  // on the liver 4 x cost 1.8 dB held out for branches 0.4 dB apart (docs/FINDINGS.md, "The pose trial's price at
+  // short budgets").
+  const double room = s.TimeBudget > 0 ? 10.0 : 4.0;
+  if (frames.empty() || this->Reduction || left < room * steps)
   {
-    rewrite(this->Reduction ? "untested: data-parallel runs keep the rule's choice"
-        : frames.empty()
-        ? "untested: too few training frames to hold any out for the trial"
-        : vtkfmt::sprintf("untested: the schedule leaves about %.0f steps, fewer than 4 x %d", left, steps));
+    // Untested, the simplest candidate is kept (as the held-out choices take): the tracked poses.
+    std::string why = "untested: too few training frames to hold any out for the trial";
+    if (this->Reduction)
+    {
+      why = "untested: a data-parallel run cannot hold the trial";
+    }
+    else if (!frames.empty())
+    {
+      why = vtkfmt::sprintf("untested: the %s leaves about %.0f steps, fewer than %.0f x %d",
+        s.TimeBudget > 0 ? "budget" : "schedule", left, room, steps);
+    }
+    this->KeepTrackedPoses(why + "; the tracked poses kept");
     return this->EndPoseTrial("", error);
   }
   // Both branches from the state at the refinement's start.
@@ -77,7 +89,7 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
   // reason stands.
   auto stopped = [&]() {
     this->InPoseTrial = false;
-    rewrite("untested: the run stopped during the trial");
+    this->KeepTrackedPoses("untested: the run stopped during the trial, in its branch on the tracked poses");
     return this->EndPoseTrial("", error);
   };
   if (stop)
@@ -121,9 +133,7 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
                                    : vtkfmt::sprintf("untested: the run stopped during the trial, %d of its %d steps "
                                                      "with refinement; the %d on the tracked poses kept",
                                        refinedSteps, steps, steps);
-    this->Poses.TurnOffCorrections(
-      this->State, this->Report.Settings, said + "; the rule alone: on, " + this->Poses.GetRuleText());
-    this->Settings.Poses = this->Poses.GetSettings();
+    this->KeepTrackedPoses(said);
     return this->EndPoseTrial(stop ? "" : how, error);
   };
   if (stop)
@@ -142,10 +152,17 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
     steps, from, frames.size(), refined, trusted, tolerance);
   if (refined > trusted + tolerance)
   {
-    rewrite(how);
+    this->Poses.AnnotateChoice(this->Report.Settings, how);
     return this->EndPoseTrial(how, error);
   }
   return keepTrusted(how);
+}
+
+void Trainer::KeepTrackedPoses(const std::string& why)
+{
+  this->Poses.TurnOffCorrections(
+    this->State, this->Report.Settings, why + "; the rule alone: on, " + this->Poses.GetRuleText());
+  this->Settings.Poses = this->Poses.GetSettings();
 }
 
 int Trainer::PoseTrialSteps(int from) const

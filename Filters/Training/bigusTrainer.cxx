@@ -163,8 +163,12 @@ bool Trainer::PrepareInitialField(std::string* error)
   }
   if (!plan.PixelGrid)
   {
-    // A schedule too short for the pose-refinement trial keeps the rule's choice (no frame is held out for it).
-    this->Poses.EndTrialWithoutRoom(this->Settings.Iterations, this->Settings.TimeBudget, this->Report.Settings);
+    // A schedule too short for the pose-refinement trial keeps the tracked poses (no frame is held out for it).
+    const std::string noRoom = this->Poses.TrialWithoutRoom(this->Settings.Iterations, this->Settings.TimeBudget);
+    if (!noRoom.empty())
+    {
+      this->KeepTrackedPoses(noRoom);
+    }
     // Before gamma and the seeds, which read only the fitted frames (the rules measured at construction, the seed
     // count and the pixel spacing read every training frame).
     this->HoldOutValidationFrames();

@@ -318,9 +318,10 @@ private:
    * RefinePoses Auto, where the rule chose to refine, at the refinement's start (PoseRefinementSettings::TrialSteps):
    * TrialSteps steps (PoseTrialSteps) on the tracked poses, then from the same state as many with refinement, each
    * scored by the PSNR of the held-out validation frames at their tracked poses; the better branch goes on (the other's
-   * steps are spent time) and the RefinePoses line says what each scored. Without held-out frames (or data-parallel)
-   * the rule stands, its line says untested. The frames then join the fit unless HoldOutValidationFrames keeps them
-   * out.
+   * steps are spent time) and the RefinePoses line says what each scored. Without held-out frames, data-parallel,
+   * or where the steps left are fewer than 10 x the branch's under a time budget (4 x without one), the trial is
+   * not run and the tracked poses are kept (KeepTrackedPoses), the line says untested. The frames then join the fit
+   * unless HoldOutValidationFrames keeps them out.
    */
   bool TryPoseRefinement(double start, const std::function<void(double, int, double, std::int64_t)>& progress,
     const std::function<bool()>& abort, bool& stop, std::string* error);
@@ -328,6 +329,9 @@ private:
   /// just before a densification (where the densification window is open), so that no branch is scored in the dip
   /// of the densification its last step would have made.
   int PoseTrialSteps(int from) const;
+  /// Ends RefinePoses Auto's choice with the tracked poses (PoseRefiner::TurnOffCorrections): the trial chose them,
+  /// or could not be run. The RefinePoses line says @p why and what the rule would have done.
+  void KeepTrackedPoses(const std::string& why);
   /// After the trial: the validation frames held out for it alone join the fit (validation goes on with them).
   bool EndPoseTrial(const std::string& how, std::string* error);
   /// Measures the validation loss; keeps a copy of the field when it is the best so far.

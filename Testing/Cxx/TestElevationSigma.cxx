@@ -436,6 +436,53 @@ TEST(PoseRefinementChoice, ARunStoppedInTheRefinedBranchKeepsTheTrustedBranchsSt
   EXPECT_TRUE(trainer.GetReport().PoseCorrections.empty());
 }
 
+// Where the schedule leaves no room for the trial, Auto keeps the simplest candidate, the tracked poses, untested:
+// without a time budget fewer than 4 x TrialSteps steps after the refinement's start (judged before any frame is held
+// out), under one fewer than 10 x the branch's steps (its discarded branch would be lost to the run). The same sweep
+// and settings without the budget run the trial (the next test). The line says why and what the rule would do; no
+// pose moves.
+TEST(PoseRefinementChoice, ATrialWithoutRoomKeepsTheTrackedPosesUntested)
+{
+  const TrainingData data = TrialSweep();
+  TrainerSettings shortSchedule = TrialSettings(300, 100); // 270 steps after the start
+  TrainerSettings budget = TrialSettings(1000, 100);       // 900 steps after the start, the trial's branches 99
+  budget.TimeBudget = 1e6;                                 // seconds: the iterations bound the steps left
+  for (const TrainerSettings* s : { &shortSchedule, &budget })
+  {
+    Trainer trainer(data, *s);
+    ASSERT_EQ(trainer.GetSettings().Poses.RefinePoses, PoseRefinement::On) << "the rule refines this sweep";
+    std::string error;
+    ASSERT_TRUE(trainer.Initialize(&error)) << error;
+    int checks = 0; // the decision comes at step 30 or 100; 20 steps after it are enough
+    ASSERT_TRUE(trainer.Run(
+      nullptr, [&]() { return ++checks > (s == &budget ? 120 : 50); }, &error))
+      << error;
+    const std::string said = synthetic::SettingLine(trainer.GetReport(), "RefinePoses");
+    const std::string why = s == &budget ? "the budget leaves about 900 steps, fewer than 10 x 99"
+                                         : "the schedule leaves 270 steps, fewer than 4 x 100";
+    EXPECT_EQ(
+      said.rfind("RefinePoses = off (untested: " + why + "; the tracked poses kept; the rule alone: on, ", 0), 0u)
+      << said;
+    EXPECT_NE(said.find("the sweep refined"), std::string::npos) << said;
+    EXPECT_EQ(trainer.GetSettings().Poses.RefinePoses, PoseRefinement::Off);
+    EXPECT_TRUE(trainer.GetReport().PoseCorrections.empty());
+    EXPECT_EQ(trainer.GetData().Poses, data.Poses);
+    EXPECT_GT(trainer.GetIteration(), s == &budget ? 100 : 30) << "the run went on past the decision";
+    // The short schedule is judged before any frame is held out for the trial; under the budget the frames held out
+    // for it join the fit at the decision.
+    const std::string validation = synthetic::SettingLine(trainer.GetReport(), "Validation");
+    if (s == &budget)
+    {
+      EXPECT_NE(validation.find("; in the fit from step 100 (the trial made no choice)"), std::string::npos)
+        << validation;
+    }
+    else
+    {
+      EXPECT_EQ(validation.find("until the pose-refinement trial ends"), std::string::npos) << validation;
+    }
+  }
+}
+
 // A stop that waits for the field to settle (Trainer::IsSettled; bigus benchmark's marks) lets the trial run both
 // branches and choose, where a plain abort inside it ends the trial untested (the test above).
 TEST(PoseRefinementChoice, AStopThatWaitsForTheFieldToSettleLetsTheTrialChoose)
