@@ -400,8 +400,8 @@ def check_refine_poses(sweep, xml, out):
     code, _, err = run("train", sweep, "--calibration", xml, "-o", field, "--no-refine-poses", "--refine-poses")
     assert code != 0 and "excludes" in err, (code, err)
     # The default decides from the sweep's speckle: the setting line says what it chose and why, and the field data
-    # holds corrections exactly when it refines. 20 steps leave no room to measure the rule's refinement, so where the
-    # rule refines, the tracked poses are kept untested and the line says so.
+    # holds corrections exactly when it refines. The rule refines this sweep (its frames' speckle correlates), but 20
+    # steps leave no room to measure that, so the tracked poses are kept untested and the line says so.
     code, out_text, err = run("train", sweep, "--calibration", xml, "-o", field, "--holdout-every", "4",
                               "--holdout-offset", "2", "--iterations", "20", "--initial-gaussians", "2000",
                               "--no-pixel-grid-fit", "--elevation-sigma", "1.0")
@@ -412,10 +412,10 @@ def check_refine_poses(sweep, xml, out):
     reader.SetFileName(field)
     reader.Update()
     chosen = reader.GetOutput().GetFieldData().GetArray("PoseCorrections") is not None
-    assert not chosen and line[0].startswith("setting        RefinePoses = off ("), line[0]
-    if "the sweep refined" in line[0]:
-        assert "untested: the schedule leaves 16 steps, fewer than 4 x 400; the tracked poses kept; the rule alone: on" \
-            in line[0], line[0]
+    untested = ("setting        RefinePoses = off (untested: the schedule leaves 16 steps, fewer than 4 x 400; the "
+                "tracked poses kept; the rule alone: on, ")
+    assert not chosen and line[0].startswith(untested), line[0]
+    assert "the sweep refined" in line[0], line[0]
     code, out_text, err = run("train", sweep, "--calibration", xml, "-o", field, "--holdout-every", "4",
                               "--holdout-offset", "2", "--iterations", "60", "--initial-gaussians", "2000",
                               "--no-pixel-grid-fit", "--elevation-sigma", "1.0", "--refine-poses",
