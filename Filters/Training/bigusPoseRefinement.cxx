@@ -28,6 +28,18 @@ void AdamSteps(int count, const double* g, const double* rate, int t, double* x,
     AdamUpdate(x[k], first[k], second[k], g[k], rate[k], bias);
   }
 }
+
+/// Drops every per-frame correction of @p state, its Adam moments and step counts, and the kept copies (the best
+/// field's, the parameter average's): a checkpoint then holds no count of corrections the run does not have.
+void ClearCorrections(TrainingState& state)
+{
+  for (auto* v : { &state.PoseCorrections, &state.PoseFirstMoment, &state.PoseSecondMoment, &state.BestPoseCorrections,
+         &state.AveragePoseCorrections })
+  {
+    v->clear();
+  }
+  state.PoseSteps.clear();
+}
 }
 
 void PoseRefiner::Configure(TrainingData* data, const PoseRefinementSettings& settings,
@@ -139,10 +151,7 @@ void PoseRefiner::TurnOffCorrections(TrainingState& state, std::vector<std::stri
   this->Settings.RefinePoses = PoseRefinement::Off;
   this->TrialPending = false;
   std::fill(this->RefinedSweeps.begin(), this->RefinedSweeps.end(), 0);
-  state.PoseCorrections.clear();
-  state.PoseFirstMoment.clear();
-  state.PoseSecondMoment.clear();
-  state.PoseSteps.clear();
+  ClearCorrections(state);
   for (std::string& line : lines)
   {
     if (line.rfind("RefinePoses = ", 0) == 0)
@@ -155,12 +164,13 @@ void PoseRefiner::TurnOffCorrections(TrainingState& state, std::vector<std::stri
 std::string PoseRefiner::TrialWithoutRoom(int iterations, double timeBudget) const
 {
   const double left = (1 - this->Settings.Start) * iterations;
-  if (!this->TrialPending || timeBudget > 0 || iterations <= 0 || left >= 4.0 * this->Settings.TrialSteps)
+  const double room = TrialRoom(false);
+  if (!this->TrialPending || timeBudget > 0 || iterations <= 0 || left >= room * this->Settings.TrialSteps)
   {
     return {};
   }
-  return vtkfmt::sprintf("untested: the schedule leaves %.0f steps, fewer than 4 x %d; the tracked poses kept", left,
-    this->Settings.TrialSteps);
+  return vtkfmt::sprintf("untested: the schedule leaves %.0f steps, fewer than %.0f x %d; the tracked poses kept", left,
+    room, this->Settings.TrialSteps);
 }
 
 void PoseRefiner::AnnotateChoice(std::vector<std::string>& lines, const std::string& how) const
@@ -453,12 +463,7 @@ bool PoseRefiner::Resume(
   if (this->Settings.RefinePoses != PoseRefinement::On &&
     std::none_of(loaded.PoseSteps.begin(), loaded.PoseSteps.end(), [](int steps) { return steps > 0; }))
   {
-    for (auto* v : { &loaded.PoseCorrections, &loaded.PoseFirstMoment, &loaded.PoseSecondMoment,
-           &loaded.BestPoseCorrections, &loaded.AveragePoseCorrections })
-    {
-      v->clear();
-    }
-    loaded.PoseSteps.clear();
+    ClearCorrections(loaded);
   }
   if (this->TrialPending && loaded.PoseCorrections.empty())
   {

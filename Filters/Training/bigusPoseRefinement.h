@@ -153,6 +153,10 @@ public:
   /// <= 0, s), fewer than 4 x TrialSteps steps left after Start: why, for the `RefinePoses` line (the trainer then
   /// keeps the tracked poses untested: Trainer::KeepTrackedPoses). Empty where the trial has room or none is pending.
   std::string TrialWithoutRoom(int iterations, double timeBudget) const;
+  /// The steps a trial needs left, in branches: 10 under a time budget (@p timeBudget; the branch it discards is lost
+  /// to the run), 4 without one (there it costs time, not steps; docs/FINDINGS.md, "The pose trial's price at short
+  /// budgets").
+  static double TrialRoom(bool timeBudget) { return timeBudget ? 10.0 : 4.0; }
   /// What the `RefinePoses = on (...)` line said when Configure wrote it, without the brackets (empty where it
   /// wrote no such line): why the rule refines, kept for a line that later replaces it.
   const std::string& GetRuleText() const { return this->RuleText; }

@@ -30,11 +30,9 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
   {
     left = std::min(left, (s.TimeBudget - seconds) * from / stepping);
   }
-  // Under a time budget the branch the trial discards is steps the run loses, so it runs only where they are at most
-  // a tenth of the steps left; without one they cost time, not steps, and 4 x leaves the run room after it. At 60 s
-  // on the liver 4 x cost 1.8 dB held out for branches 0.4 dB apart (docs/FINDINGS.md, "The pose trial's price at
-  // short budgets").
-  const double room = s.TimeBudget > 0 ? 10.0 : 4.0;
+  // Under a time budget the branch the trial discards is steps the run loses: at 60 s on the liver 4 x cost 1.8 dB
+  // held out for branches 0.4 dB apart (PoseRefiner::TrialRoom).
+  const double room = PoseRefiner::TrialRoom(s.TimeBudget > 0);
   if (frames.empty() || this->Reduction || left < room * steps)
   {
     // Untested, the simplest candidate is kept (as the held-out choices take): the tracked poses.
