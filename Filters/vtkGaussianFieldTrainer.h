@@ -229,10 +229,11 @@ public:
   vtkBooleanMacro(AnchorPosesToTracked, bool);
   ///@}
   ///@{ RefinePoses Auto, where the speckle rule would refine: steps taken each way (on the tracked poses, with
-  /// refinement) from the refinement's start, scored on held-out frames at their tracked poses, the better going on
-  /// (default 400; 0: the rule alone; bigus::PoseRefinementSettings::TrialSteps). Where the steps left are fewer than
-  /// 10 x these under a time budget (4 x without one) the trial is not run and the tracked poses are kept. The
-  /// TrainingSettings' RefinePoses line gives both scores, or why the choice is untested.
+  /// refinement) from the refinement's start (where chosen, 40 % of the schedule at the earliest:
+  /// bigus::PoseRefiner::TrialStart), scored on held-out frames at their tracked poses, the better going on (default
+  /// 400; 0: the rule alone; bigus::PoseRefinementSettings::TrialSteps). Where the steps left after the start are
+  /// fewer than 10 x these under a time budget (4 x without one) the trial is not run and the tracked poses are kept.
+  /// The TrainingSettings' RefinePoses line gives both scores, or why the choice is untested.
   virtual void SetPoseTrialSteps(int value);
   virtual int GetPoseTrialSteps() const;
   ///@}
@@ -242,8 +243,8 @@ public:
   virtual double GetPoseSmoothness() const;
   ///@}
   ///@{ Where poses are refined: the share of the schedule (0 to 1) trained on the tracked poses before the
-  /// corrections move; negative (default): chosen from the tracked path's jitter (bigus::ChoosePoseRefinementStart;
-  /// TrainingSettings says why).
+  /// corrections move; negative (default): chosen from the tracked path's jitter (bigus::ChoosePoseRefinementStart),
+  /// and where the choice is measured (PoseTrialSteps) 0.4 at the earliest (TrainingSettings says why).
   virtual void SetPoseRefinementStart(double value);
   virtual double GetPoseRefinementStart() const;
   ///@}

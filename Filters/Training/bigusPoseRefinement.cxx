@@ -75,6 +75,15 @@ void PoseRefiner::Configure(TrainingData* data, const PoseRefinementSettings& se
       ChoosePoseRefinementStart(*data, s.RefinePoses == PoseRefinement::On ? this->RefinedSweeps : std::vector<char>());
     s.Start = start.Start;
     startBy = start.Reason;
+    if (this->TrialPending && s.Start < TrialStart)
+    {
+      // Refinement comes only through the trial here, and a trial scored earlier keeps the tracked poses whatever
+      // they are.
+      startBy = vtkfmt::sprintf("chosen: the pose trial's start, %.0f %% (from the seeds' field or from 20 %% its "
+                                "branches score alike); the path's jitter alone: %.0f %%, %s",
+        100 * TrialStart, 100 * s.Start, startBy.substr(std::string("chosen: ").size()));
+      s.Start = TrialStart;
+    }
   }
   if (s.RefinePoses == PoseRefinement::On)
   {
@@ -169,8 +178,9 @@ std::string PoseRefiner::TrialWithoutRoom(int iterations, double timeBudget) con
   {
     return {};
   }
-  return vtkfmt::sprintf("untested: the schedule leaves %.0f steps, fewer than %.0f x %d; the tracked poses kept", left,
-    room, this->Settings.TrialSteps);
+  return vtkfmt::sprintf("untested: the schedule leaves %.0f steps after the trial's start, fewer than %.0f x %d; the "
+                         "tracked poses kept",
+    left, room, this->Settings.TrialSteps);
 }
 
 void PoseRefiner::AnnotateChoice(std::vector<std::string>& lines, const std::string& how) const

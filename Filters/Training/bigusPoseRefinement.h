@@ -157,6 +157,11 @@ public:
   /// to the run), 4 without one (there it costs time, not steps; docs/FINDINGS.md, "The pose trial's price at short
   /// budgets").
   static double TrialRoom(bool timeBudget) { return timeBudget ? 10.0 : 4.0; }
+  /// The earliest share of the schedule a trial starts at where Start is chosen (negative): scored from the seeds'
+  /// field, or from 20 %, the branches' 400 steps cannot show refinement's gain (its corrections first wander while
+  /// the field forms); from 40 % they do, on a liver sweep whose training poses were moved by 0.5 degrees and 0.5 mm
+  /// (docs/FINDINGS.md, "The pose trial from 40 % of the schedule").
+  static constexpr double TrialStart = 0.4;
   /// What the `RefinePoses = on (...)` line said when Configure wrote it, without the brackets (empty where it
   /// wrote no such line): why the rule refines, kept for a line that later replaces it.
   const std::string& GetRuleText() const { return this->RuleText; }

@@ -20,20 +20,10 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
 {
   this->Poses.EndTrial(); // one trial, whatever it finds
   const std::vector<int> frames = this->HeldOutValidation;
-  // The steps the schedule has left: at most Iterations', and at the rate so far what the budget's seconds allow.
   const TrainerSettings& s = this->Settings;
   const int from = this->State.Iteration, steps = this->PoseTrialSteps(from);
-  double left = s.Iterations > 0 ? s.Iterations - from : std::numeric_limits<double>::infinity();
-  const double seconds = this->TrainingSeconds();
-  const double stepping = seconds - this->Report.Route.GridSeconds; // the route trial's grid side took no step
-  if (s.TimeBudget > 0 && stepping > 0 && from > 0)                 // Iterate waits for 10 steps under a time budget
-  {
-    left = std::min(left, (s.TimeBudget - seconds) * from / stepping);
-  }
-  // Under a time budget the branch the trial discards is steps the run loses: at 60 s on the liver 4 x cost 1.8 dB
-  // held out for branches 0.4 dB apart (PoseRefiner::TrialRoom).
-  const double room = PoseRefiner::TrialRoom(s.TimeBudget > 0);
-  if (frames.empty() || this->Reduction || left < room * steps)
+  double left = 0;
+  if (frames.empty() || this->Reduction || !this->PoseTrialHasRoom(left))
   {
     // Untested, the simplest candidate is kept (as the held-out choices take): the tracked poses.
     std::string why = "untested: too few training frames to hold any out for the trial";
@@ -43,8 +33,8 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
     }
     else if (!frames.empty())
     {
-      why = vtkfmt::sprintf("untested: the %s leaves about %.0f steps, fewer than %.0f x %d",
-        s.TimeBudget > 0 ? "budget" : "schedule", left, room, steps);
+      why = vtkfmt::sprintf("untested: the %s leaves about %.0f steps after the trial's start, fewer than %.0f x %d",
+        s.TimeBudget > 0 ? "budget" : "schedule", left, PoseRefiner::TrialRoom(s.TimeBudget > 0), s.Poses.TrialSteps);
     }
     this->KeepTrackedPoses(why + "; the tracked poses kept");
     return this->EndPoseTrial("", error);
@@ -161,6 +151,30 @@ void Trainer::KeepTrackedPoses(const std::string& why)
   this->Poses.TurnOffCorrections(
     this->State, this->Report.Settings, why + "; the rule alone: on, " + this->Poses.GetRuleText());
   this->Settings.Poses = this->Poses.GetSettings();
+}
+
+double Trainer::StepsLeftAfter(double fraction) const
+{
+  const TrainerSettings& s = this->Settings;
+  const int from = this->State.Iteration;
+  double left = s.Iterations > 0 ? s.Iterations - std::max<double>(from, fraction * s.Iterations)
+                                 : std::numeric_limits<double>::infinity();
+  const double seconds = this->TrainingSeconds();
+  const double stepping = seconds - this->Report.Route.GridSeconds; // the route trial's grid side took no step
+  if (s.TimeBudget > 0 && stepping > 0 && from > 0)
+  {
+    left = std::min(left, (s.TimeBudget - std::max(seconds, fraction * s.TimeBudget)) * from / stepping);
+  }
+  return left;
+}
+
+bool Trainer::PoseTrialHasRoom(double& left) const
+{
+  // Under a time budget the branch the trial discards is steps the run loses: at 60 s on the liver 4 x cost 1.8 dB
+  // held out for branches 0.4 dB apart (PoseRefiner::TrialRoom). The branch's steps are TrialSteps give or take the
+  // half densification interval PoseTrialSteps moves its end by.
+  left = this->StepsLeftAfter(this->Poses.GetSettings().Start);
+  return left >= PoseRefiner::TrialRoom(this->Settings.TimeBudget > 0) * this->Settings.Poses.TrialSteps;
 }
 
 int Trainer::PoseTrialSteps(int from) const

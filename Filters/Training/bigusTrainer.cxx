@@ -554,10 +554,12 @@ bool Trainer::Iterate(double start, const std::function<void(double, int, double
     return true;
   }
   // With a time budget the pose trial waits for the run's first steps: their rate (seeding and solves included) says
-  // whether the budget leaves room for both branches (TryPoseRefinement).
+  // whether the budget leaves room for both branches, judged at every step until the trial's start
+  // (TryPoseRefinement).
   const bool rateKnown = s.TimeBudget <= 0 || state.Iteration >= 10;
+  double left = 0;
   if (this->Poses.IsTrialPending() && !this->InPoseTrial && rateKnown &&
-    this->Poses.RefinesAt(this->ScheduleFraction()))
+    (this->Poses.RefinesAt(this->ScheduleFraction()) || (s.TimeBudget > 0 && !this->PoseTrialHasRoom(left))))
   {
     return this->TryPoseRefinement(start, progress, abort, stop, error);
   }

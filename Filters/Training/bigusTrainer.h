@@ -315,7 +315,9 @@ private:
   bool Iterate(double start, const std::function<void(double, int, double, std::int64_t)>& progress,
     const std::function<bool()>& abort, bool& stop, std::string* error);
   /**
-   * RefinePoses Auto, where the rule chose to refine, at the refinement's start (PoseRefinementSettings::TrialSteps):
+   * RefinePoses Auto, where the rule chose to refine, at the refinement's start (PoseRefinementSettings::TrialSteps;
+   * PoseRefiner::TrialStart at the earliest where the start is chosen), or before it under a time budget where the
+   * steps left will not hold the trial (PoseTrialHasRoom):
    * TrialSteps steps (PoseTrialSteps) on the tracked poses, then from the same state as many with refinement, each
    * scored by the PSNR of the held-out validation frames at their tracked poses; the better branch goes on (the other's
    * steps are spent time) and the RefinePoses line says what each scored. Without held-out frames, data-parallel,
@@ -325,6 +327,14 @@ private:
    */
   bool TryPoseRefinement(double start, const std::function<void(double, int, double, std::int64_t)>& progress,
     const std::function<bool()>& abort, bool& stop, std::string* error);
+  /// The steps the schedule leaves after the share @p fraction of it (or after the current step, where later): at most
+  /// Iterations', and under a time budget what its seconds allow at the rate of the steps so far (the route trial's
+  /// grid side took none; unbounded before the first step).
+  double StepsLeftAfter(double fraction) const;
+  /// Whether the steps left after the pose refinement's start (StepsLeftAfter) hold PoseRefiner::TrialRoom x
+  /// TrialSteps: under a time budget judged at every step before the start too, so that a trial without room ends
+  /// as soon as the rate says so and the frames held out for it join the fit. @p left: those steps.
+  bool PoseTrialHasRoom(double& left) const;
   /// The steps of each of the trial's branches from step @p from: the count nearest TrialSteps whose last step comes
   /// just before a densification (where the densification window is open), so that no branch is scored in the dip
   /// of the densification its last step would have made.

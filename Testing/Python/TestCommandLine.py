@@ -412,8 +412,11 @@ def check_refine_poses(sweep, xml, out):
     reader.SetFileName(field)
     reader.Update()
     chosen = reader.GetOutput().GetFieldData().GetArray("PoseCorrections") is not None
-    untested = ("setting        RefinePoses = off (untested: the schedule leaves 16 steps, fewer than 4 x 400; the "
-                "tracked poses kept; the rule alone: on, ")
+    # The trial would start at 40 % of the schedule (PoseRefiner::TrialStart), the path's jitter alone at 20 %.
+    untested = ("setting        RefinePoses = off (untested: the schedule leaves 12 steps after the trial's start, fewer "
+                "than 4 x 400; the tracked poses kept; the rule alone: on, from 40 % of the schedule, chosen: the pose "
+                "trial's start, 40 % (from the seeds' field or from 20 % its branches score alike); the path's jitter "
+                "alone: 20 %, the tracked path jitters ")
     assert not chosen and line[0].startswith(untested), line[0]
     assert "the sweep refined" in line[0], line[0]
     code, out_text, err = run("train", sweep, "--calibration", xml, "-o", field, "--holdout-every", "4",
