@@ -554,14 +554,18 @@ bool Trainer::Iterate(double start, const std::function<void(double, int, double
     return true;
   }
   // With a time budget the pose trial waits for the run's first steps: their rate (seeding and solves included) says
-  // whether the budget leaves room for both branches, judged at every step until the trial's start
-  // (TryPoseRefinement).
+  // whether the budget leaves room for both branches (TryPoseRefinement). Before the trial's start it ends one
+  // without room once the recent steps' rate says so (their frames then join the fit early).
   const bool rateKnown = s.TimeBudget <= 0 || state.Iteration >= 10;
-  double left = 0;
-  if (this->Poses.IsTrialPending() && !this->InPoseTrial && rateKnown &&
-    (this->Poses.RefinesAt(this->ScheduleFraction()) || (s.TimeBudget > 0 && !this->PoseTrialHasRoom(left))))
+  if (this->Poses.IsTrialPending() && !this->InPoseTrial && rateKnown)
   {
-    return this->TryPoseRefinement(start, progress, abort, stop, error);
+    double left = 0;
+    bool recent = false;
+    const bool due = this->Poses.RefinesAt(this->ScheduleFraction());
+    if (due || (s.TimeBudget > 0 && !this->PoseTrialHasRoom(left, &recent) && recent))
+    {
+      return this->TryPoseRefinement(start, progress, abort, stop, error);
+    }
   }
   double loss = 0;
   if (this->Step(&loss, error) == StepStatus::Failed)
@@ -582,9 +586,14 @@ bool Trainer::Iterate(double start, const std::function<void(double, int, double
   const int it = state.Iteration;
   double validation = 0;
   const DensificationSettings& d = s.Densification;
-  if (it % d.Interval == 0 && !this->CheckValidation(validation, error))
+  if (it % d.Interval == 0)
   {
-    return false;
+    this->RateMarkIteration = { this->RateMarkIteration[1], it };
+    this->RateMarkSeconds = { this->RateMarkSeconds[1], this->TrainingSeconds() };
+    if (!this->CheckValidation(validation, error))
+    {
+      return false;
+    }
   }
   const bool window = this->InDensificationWindow();
   const bool densify = d.Enabled && it >= d.Start && it % d.Interval == 0 && window;

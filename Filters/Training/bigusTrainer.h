@@ -328,13 +328,15 @@ private:
   bool TryPoseRefinement(double start, const std::function<void(double, int, double, std::int64_t)>& progress,
     const std::function<bool()>& abort, bool& stop, std::string* error);
   /// The steps the schedule leaves after the share @p fraction of it (or after the current step, where later): at most
-  /// Iterations', and under a time budget what its seconds allow at the rate of the steps so far (the route trial's
-  /// grid side took none; unbounded before the first step).
-  double StepsLeftAfter(double fraction) const;
+  /// Iterations', and under a time budget what its seconds allow at the rate of the recent steps (from the end of the
+  /// densification interval before last, validations, densifications and solves included; before the second such
+  /// end, of every step so far, the route trial's grid side excluded, which took none; unbounded before the first
+  /// step). @p recent: whether that rate was the recent one.
+  double StepsLeftAfter(double fraction, bool* recent = nullptr) const;
   /// Whether the steps left after the pose refinement's start (StepsLeftAfter) hold PoseRefiner::TrialRoom x
-  /// TrialSteps: under a time budget judged at every step before the start too, so that a trial without room ends
-  /// as soon as the rate says so and the frames held out for it join the fit. @p left: those steps.
-  bool PoseTrialHasRoom(double& left) const;
+  /// TrialSteps. @p left: those steps; @p recent: whether they were judged from the recent rate (before the start
+  /// the trainer ends a trial without room only then: the first steps' rate counts the seeding).
+  bool PoseTrialHasRoom(double& left, bool* recent = nullptr) const;
   /// The steps of each of the trial's branches from step @p from: the count nearest TrialSteps whose last step comes
   /// just before a densification (where the densification window is open), so that no branch is scored in the dip
   /// of the densification its last step would have made.
@@ -394,8 +396,12 @@ private:
   bool SigmaByRule = false;           // ElevationSigma came from the rule (MeasureOnHeldOutFrames may measure it)
   double FrameSpacing = 0;            // mm, the training frames' median spacing the rule measured (seeds; 0: given)
   PoseRefiner Poses;
-  bool InPoseTrial = false;    // TryPoseRefinement is running its branches: no checkpoint, no join
-  int LastSplit = -1;          // the iteration of the last densification that split or cloned (IsSettled)
+  bool InPoseTrial = false; // TryPoseRefinement is running its branches: no checkpoint, no join
+  int LastSplit = -1;       // the iteration of the last densification that split or cloned (IsSettled)
+  // The iteration and training seconds at the last two densification intervals' ends (-1: none yet), for the rate of
+  // the recent steps (StepsLeftAfter).
+  std::array<int, 2> RateMarkIteration{ { -1, -1 } };
+  std::array<double, 2> RateMarkSeconds{};
   GaussianField AverageSample; // the engine's field, pulled for the parameter average
   std::vector<float> S;        // scratch for RenderFrame
 };

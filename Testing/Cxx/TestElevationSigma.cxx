@@ -445,21 +445,22 @@ TEST(PoseRefinementChoice, ATrialWithoutRoomKeepsTheTrackedPosesUntested)
 {
   const TrainingData data = TrialSweep();
   TrainerSettings shortSchedule = TrialSettings(300, 100); // 270 steps after the start
-  TrainerSettings budget = TrialSettings(1000, 100);       // 900 steps after the start, the trial's branches 99
-  budget.TimeBudget = 1e6;                                 // seconds: the iterations bound the steps left
+  TrainerSettings budget = TrialSettings(2000, 150);       // the start at step 800, 1200 steps after it
+  budget.Poses.Start = 0.4;
+  budget.TimeBudget = 1e6; // seconds: the iterations bound the steps left
   for (const TrainerSettings* s : { &shortSchedule, &budget })
   {
     Trainer trainer(data, *s);
     ASSERT_EQ(trainer.GetSettings().Poses.RefinePoses, PoseRefinement::On) << "the rule refines this sweep";
     std::string error;
     ASSERT_TRUE(trainer.Initialize(&error)) << error;
-    int checks = 0; // the decision comes at step 30 or 100; 20 steps after it are enough
+    int checks = 0; // the decision comes at step 30 or 400; 20 steps after it are enough
     ASSERT_TRUE(trainer.Run(
-      nullptr, [&]() { return ++checks > (s == &budget ? 120 : 50); }, &error))
+      nullptr, [&]() { return ++checks > (s == &budget ? 420 : 50); }, &error))
       << error;
     const std::string said = synthetic::SettingLine(trainer.GetReport(), "RefinePoses");
     const std::string why = s == &budget
-      ? "the budget leaves about 900 steps after the trial's start, fewer than 10 x 100"
+      ? "the budget leaves about 1200 steps after the trial's start, fewer than 10 x 150"
       : "the schedule leaves 270 steps after the trial's start, fewer than 4 x 100";
     EXPECT_EQ(
       said.rfind("RefinePoses = off (untested: " + why + "; the tracked poses kept; the rule alone: on, ", 0), 0u)
@@ -468,14 +469,14 @@ TEST(PoseRefinementChoice, ATrialWithoutRoomKeepsTheTrackedPosesUntested)
     EXPECT_EQ(trainer.GetSettings().Poses.RefinePoses, PoseRefinement::Off);
     EXPECT_TRUE(trainer.GetReport().PoseCorrections.empty());
     EXPECT_EQ(trainer.GetData().Poses, data.Poses);
-    EXPECT_GT(trainer.GetIteration(), s == &budget ? 100 : 30) << "the run went on past the decision";
+    EXPECT_GT(trainer.GetIteration(), s == &budget ? 400 : 30) << "the run went on past the decision";
     // The short schedule is judged before any frame is held out for the trial; under the budget the frames held out
-    // for it join the fit at the decision, made at the first step whose rate is known (10), not at the trial's start
-    // (100).
+    // for it join the fit at the decision: before the trial's start (800), at the first step the recent rate is
+    // known (the end of the second densification interval, 400).
     const std::string validation = synthetic::SettingLine(trainer.GetReport(), "Validation");
     if (s == &budget)
     {
-      EXPECT_NE(validation.find("; in the fit from step 10 (the trial made no choice)"), std::string::npos)
+      EXPECT_NE(validation.find("; in the fit from step 400 (the trial made no choice)"), std::string::npos)
         << validation;
     }
     else
