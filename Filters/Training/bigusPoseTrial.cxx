@@ -160,8 +160,9 @@ double Trainer::StepsLeftAfter(double fraction, bool* recent) const
   double left = s.Iterations > 0 ? s.Iterations - std::max<double>(from, fraction * s.Iterations)
                                  : std::numeric_limits<double>::infinity();
   const double seconds = this->TrainingSeconds();
-  // The field grows and the steps slow: on the liver at 300 s the mean rate of 3,615 steps promised about 5,400 more
-  // where the budget held 2,054 (docs/FINDINGS.md, "The pose trial from 40 % of the schedule").
+  // The steps slow as the run goes on (the field grows; from the refinement's start they take the fine cut-off): on
+  // the liver at 300 s the mean rate of 3,615 steps promised about 5,400 more where the budget held 2,054, and the
+  // recent rate still overstates (docs/FINDINGS.md, "The pose trial from 40 % of the schedule").
   const int mark = this->RateMarkIteration[0];
   const bool windowed = mark >= 0 && mark < from && this->RateMarkSeconds[0] < seconds;
   const double steps = windowed ? from - mark : from;
