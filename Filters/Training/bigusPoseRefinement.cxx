@@ -170,19 +170,6 @@ void PoseRefiner::TurnOffCorrections(TrainingState& state, std::vector<std::stri
   }
 }
 
-std::string PoseRefiner::TrialWithoutRoom(int iterations, double timeBudget) const
-{
-  const double left = (1 - this->Settings.Start) * iterations;
-  const double room = TrialRoom(false);
-  if (!this->TrialPending || timeBudget > 0 || iterations <= 0 || left >= room * this->Settings.TrialSteps)
-  {
-    return {};
-  }
-  return vtkfmt::sprintf("untested: the schedule leaves %.0f steps after the trial's start, fewer than %.0f x %d; the "
-                         "tracked poses kept",
-    left, room, this->Settings.TrialSteps);
-}
-
 void PoseRefiner::AnnotateChoice(std::vector<std::string>& lines, const std::string& how) const
 {
   const std::string on = "RefinePoses = on (";

@@ -149,10 +149,6 @@ public:
   void EndTrial() { this->TrialPending = false; }
   /// Adds what the trial found (@p how) to the `RefinePoses = on (...)` line of @p lines.
   void AnnotateChoice(std::vector<std::string>& lines, const std::string& how) const;
-  /// Where a pending trial cannot run within a schedule of @p iterations steps and no time budget (@p timeBudget
-  /// <= 0, s), fewer than 4 x TrialSteps steps left after Start: why, for the `RefinePoses` line (the trainer then
-  /// keeps the tracked poses untested: Trainer::KeepTrackedPoses). Empty where the trial has room or none is pending.
-  std::string TrialWithoutRoom(int iterations, double timeBudget) const;
   /// The steps a trial needs left, in branches: 10 under a time budget (@p timeBudget; the branch it discards is lost
   /// to the run), 4 without one (there it costs time, not steps; docs/FINDINGS.md, "The pose trial's price at short
   /// budgets").

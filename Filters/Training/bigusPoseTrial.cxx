@@ -20,10 +20,9 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
 {
   this->Poses.EndTrial(); // one trial, whatever it finds
   const std::vector<int> frames = this->HeldOutValidation;
-  const TrainerSettings& s = this->Settings;
   const int from = this->State.Iteration, steps = this->PoseTrialSteps(from);
-  double left = 0;
-  if (frames.empty() || this->Reduction || !this->PoseTrialHasRoom(left))
+  const std::string noRoom = this->PoseTrialWithoutRoom();
+  if (frames.empty() || this->Reduction || !noRoom.empty())
   {
     // Untested, the simplest candidate is kept (as the held-out choices take): the tracked poses.
     std::string why = "untested: too few training frames to hold any out for the trial";
@@ -33,8 +32,7 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
     }
     else if (!frames.empty())
     {
-      why = vtkfmt::sprintf("untested: the %s leaves about %.0f steps after the trial's start, fewer than %.0f x %d",
-        s.TimeBudget > 0 ? "budget" : "schedule", left, PoseRefiner::TrialRoom(s.TimeBudget > 0), s.Poses.TrialSteps);
+      why = noRoom;
     }
     this->KeepTrackedPoses(why + "; the tracked poses kept");
     return this->EndPoseTrial("", error);
@@ -180,13 +178,21 @@ double Trainer::StepsLeftAfter(double fraction, bool* recent) const
   return left;
 }
 
-bool Trainer::PoseTrialHasRoom(double& left, bool* recent) const
+std::string Trainer::PoseTrialWithoutRoom(bool* recent) const
 {
   // Under a time budget the branch the trial discards is steps the run loses: at 60 s on the liver 4 x cost 1.8 dB
   // held out for branches 0.4 dB apart (PoseRefiner::TrialRoom). The branch's steps are TrialSteps give or take the
   // half densification interval PoseTrialSteps moves its end by.
-  left = this->StepsLeftAfter(this->Poses.GetSettings().Start, recent);
-  return left >= PoseRefiner::TrialRoom(this->Settings.TimeBudget > 0) * this->Settings.Poses.TrialSteps;
+  const double left = this->StepsLeftAfter(this->Poses.GetSettings().Start, recent);
+  const bool budget = this->Settings.TimeBudget > 0;
+  const double room = PoseRefiner::TrialRoom(budget);
+  const int steps = this->Settings.Poses.TrialSteps;
+  if (left >= room * steps)
+  {
+    return {};
+  }
+  return vtkfmt::sprintf("untested: the %s leaves %s%.0f steps after the trial's start, fewer than %.0f x %d",
+    budget ? "budget" : "schedule", budget ? "about " : "", left, room, steps);
 }
 
 int Trainer::PoseTrialSteps(int from) const

@@ -163,11 +163,13 @@ bool Trainer::PrepareInitialField(std::string* error)
   }
   if (!plan.PixelGrid)
   {
-    // A schedule too short for the pose-refinement trial keeps the tracked poses (no frame is held out for it).
-    const std::string noRoom = this->Poses.TrialWithoutRoom(this->Settings.Iterations, this->Settings.TimeBudget);
+    // A schedule too short for the pose-refinement trial keeps the tracked poses (no frame is held out for it; under
+    // a time budget the steps left are judged from the rate, once there is one: Iterate).
+    const std::string noRoom =
+      this->Poses.IsTrialPending() && this->Settings.TimeBudget <= 0 ? this->PoseTrialWithoutRoom() : std::string();
     if (!noRoom.empty())
     {
-      this->KeepTrackedPoses(noRoom);
+      this->KeepTrackedPoses(noRoom + "; the tracked poses kept");
     }
     // Before gamma and the seeds, which read only the fitted frames (the rules measured at construction, the seed
     // count and the pixel spacing read every training frame).
@@ -559,10 +561,9 @@ bool Trainer::Iterate(double start, const std::function<void(double, int, double
   const bool rateKnown = s.TimeBudget <= 0 || state.Iteration >= 10;
   if (this->Poses.IsTrialPending() && !this->InPoseTrial && rateKnown)
   {
-    double left = 0;
     bool recent = false;
     const bool due = this->Poses.RefinesAt(this->ScheduleFraction());
-    if (due || (s.TimeBudget > 0 && !this->PoseTrialHasRoom(left, &recent) && recent))
+    if (due || (s.TimeBudget > 0 && !this->PoseTrialWithoutRoom(&recent).empty() && recent))
     {
       return this->TryPoseRefinement(start, progress, abort, stop, error);
     }

@@ -317,7 +317,7 @@ private:
   /**
    * RefinePoses Auto, where the rule chose to refine, at the refinement's start (PoseRefinementSettings::TrialSteps;
    * PoseRefiner::TrialStart at the earliest where the start is chosen), or before it under a time budget where the
-   * steps left will not hold the trial (PoseTrialHasRoom):
+   * steps left will not hold the trial (PoseTrialWithoutRoom):
    * TrialSteps steps (PoseTrialSteps) on the tracked poses, then from the same state as many with refinement, each
    * scored by the PSNR of the held-out validation frames at their tracked poses; the better branch goes on (the other's
    * steps are spent time) and the RefinePoses line says what each scored. Without held-out frames, data-parallel,
@@ -333,10 +333,12 @@ private:
   /// end, of every step so far, the route trial's grid side excluded, which took none; unbounded before the first
   /// step). @p recent: whether that rate was the recent one.
   double StepsLeftAfter(double fraction, bool* recent = nullptr) const;
-  /// Whether the steps left after the pose refinement's start (StepsLeftAfter) hold PoseRefiner::TrialRoom x
-  /// TrialSteps. @p left: those steps; @p recent: whether they were judged from the recent rate (before the start
-  /// the trainer ends a trial without room only then: the first steps' rate counts the seeding).
-  bool PoseTrialHasRoom(double& left, bool* recent = nullptr) const;
+  /// Where the steps left after the pose refinement's start (StepsLeftAfter) are fewer than PoseRefiner::TrialRoom x
+  /// TrialSteps: why, for the `RefinePoses` line (the trial is not run: KeepTrackedPoses); empty where they hold it.
+  /// Judged at Initialize for an Iterations schedule without a time budget (before any frame is held out), and under
+  /// a budget at the start and before it. @p recent: whether the steps were judged from the recent rate (before the
+  /// start the trainer ends a trial without room only then: the first steps' rate counts the seeding).
+  std::string PoseTrialWithoutRoom(bool* recent = nullptr) const;
   /// The steps of each of the trial's branches from step @p from: the count nearest TrialSteps whose last step comes
   /// just before a densification (where the densification window is open), so that no branch is scored in the dip
   /// of the densification its last step would have made.
