@@ -232,7 +232,9 @@ public:
   /// refinement) from the refinement's start (where chosen, 40 % of the schedule at the earliest:
   /// bigus::PoseRefiner::TrialStart), scored on held-out frames at their tracked poses, the better going on (default
   /// 400; 0: the rule alone; bigus::PoseRefinementSettings::TrialSteps). Where the steps left after the start are
-  /// fewer than 10 x these under a time budget (4 x without one) the trial is not run and the tracked poses are kept.
+  /// fewer than 10 x these under a time budget (4 x without one) the trial is not run: the poses are refined from the
+  /// first steps where the tracked path jitters over 0.35 mm from frame to frame, and kept elsewhere
+  /// (bigus::PoseRefiner::RefineUntested).
   /// The TrainingSettings' RefinePoses line gives both scores, or why the choice is untested.
   virtual void SetPoseTrialSteps(int value);
   virtual int GetPoseTrialSteps() const;

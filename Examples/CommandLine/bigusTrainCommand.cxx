@@ -757,8 +757,9 @@ Command AddTrainCommand(CLI::App& app)
       "Where the default (Auto) would refine the poses: steps taken each way (on the tracked poses, with refinement) "
       "from the refinement's start (where chosen, 40 % of the schedule at the earliest), scored on held-out frames at "
       "their tracked poses, the better going on; where the steps left after it are fewer than 10 x N under "
-      "--time-budget (4 x N without), the tracked poses are kept untested (0: "
-      "the speckle rule alone; the RefinePoses setting line says what each scored, or why untested)")
+      "--time-budget (4 x N without), the choice is untested: refined from the first steps where the tracked path "
+      "jitters over 0.35 mm from frame to frame, the tracked poses kept elsewhere (0: the speckle rule alone; the "
+      "RefinePoses setting line says what each scored, or why untested)")
     ->capture_default_str()
     ->excludes("--no-refine-poses")
     ->excludes("--refine-poses")

@@ -67,14 +67,20 @@ void PoseRefiner::Configure(TrainingData* data, const PoseRefinementSettings& se
     }
   }
   // The start of the corrections, where not given: from the jitter of the corrected sweeps' tracked paths (every
-  // sweep where only the shared corrections are refined).
+  // sweep where only the shared corrections are refined). A pending trial keeps the path's rule too: where the trial
+  // cannot run, the path decides (RefineUntested).
   std::string startBy;
-  if (s.Start < 0)
+  this->StartChosen = s.Start < 0;
+  this->PathStart = PoseRefinementStartChoice();
+  if (this->StartChosen || this->TrialPending)
   {
-    const PoseRefinementStartChoice start =
+    this->PathStart =
       ChoosePoseRefinementStart(*data, s.RefinePoses == PoseRefinement::On ? this->RefinedSweeps : std::vector<char>());
-    s.Start = start.Start;
-    startBy = start.Reason;
+  }
+  if (this->StartChosen)
+  {
+    s.Start = this->PathStart.Start;
+    startBy = this->PathStart.Reason;
     if (this->TrialPending && s.Start < TrialStart)
     {
       // Refinement comes only through the trial here, and a trial scored earlier keeps the tracked poses whatever
@@ -168,6 +174,32 @@ void PoseRefiner::TurnOffCorrections(TrainingState& state, std::vector<std::stri
       line = "RefinePoses = off (" + reason + ")";
     }
   }
+}
+
+bool PoseRefiner::RefineUntested(std::vector<std::string>& lines, const std::string& why)
+{
+  if (this->Settings.RefinePoses != PoseRefinement::On || !this->PathStart.Jitters)
+  {
+    return false;
+  }
+  this->TrialPending = false;
+  if (this->StartChosen)
+  {
+    this->Settings.Start = this->PathStart.Start;
+  }
+  const std::string chosen = "chosen: ", &path = this->PathStart.Reason;
+  const std::string said = why +
+    vtkfmt::sprintf("; refined without it from %.0f %% of the schedule, as the tracked path says: %s; the rule alone: ",
+      100 * this->Settings.Start, path.rfind(chosen, 0) == 0 ? path.substr(chosen.size()) : path) +
+    this->RuleText;
+  for (std::string& line : lines)
+  {
+    if (line.rfind("RefinePoses = on (", 0) == 0)
+    {
+      line = "RefinePoses = on (" + said + ")";
+    }
+  }
+  return true;
 }
 
 void PoseRefiner::AnnotateChoice(std::vector<std::string>& lines, const std::string& how) const
@@ -470,7 +502,12 @@ bool PoseRefiner::Resume(
   else if (this->TrialPending &&
     std::any_of(loaded.PoseSteps.begin(), loaded.PoseSteps.end(), [](int steps) { return steps > 0; }))
   {
+    // Refined by the trial, or untested where the path jitters (RefineUntested, which may have started them earlier).
     this->EndTrial();
+    if (this->StartChosen && this->PathStart.Jitters)
+    {
+      this->Settings.Start = std::min(this->Settings.Start, this->PathStart.Start);
+    }
     trialDone = true;
   }
   return this->CheckCheckpoint(loaded, file, error);

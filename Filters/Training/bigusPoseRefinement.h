@@ -147,6 +147,16 @@ public:
   /// clears it, whatever the trial found.
   bool IsTrialPending() const { return this->TrialPending; }
   void EndTrial() { this->TrialPending = false; }
+  /**
+   * Where RefinePoses Auto's trial cannot be run (@p why, "untested: ..."), the tracked path decides: where a refined
+   * sweep's path jitters over PoseRefinementEarlyJitter (a tracker's noise shows in the path itself), refinement goes
+   * on without the trial from the path's start (ChoosePoseRefinementStart: 0; the given Start where one was given), the
+   * trial ends and the `RefinePoses = on (...)` line of @p lines says why; returns true. Elsewhere returns false and
+   * changes nothing (the caller keeps the tracked poses, the simplest candidate). On a liver sweep whose training
+   * poses were moved by 0.5 degrees and 0.5 mm, refinement from the first step scored higher than the tracked poses
+   * at 60 and 120 s on 2 cores, where the trial has no room (docs/FINDINGS.md, "Untested, the tracked path decides").
+   */
+  bool RefineUntested(std::vector<std::string>& lines, const std::string& why);
   /// Adds what the trial found (@p how) to the `RefinePoses = on (...)` line of @p lines.
   void AnnotateChoice(std::vector<std::string>& lines, const std::string& how) const;
   /// The steps a trial needs left, in branches: 10 under a time budget (@p timeBudget; the branch it discards is lost
@@ -224,7 +234,9 @@ private:
   std::vector<char> RefinedSweeps; // RefinePoses: 1 for each sweep whose training frames are refined
   bool Suspended = false;
   bool TrialPending = false;
-  std::string RuleText; // the `RefinePoses = on (...)` line's text as Configure wrote it
+  bool StartChosen = false;            // Start was negative: chosen by Configure
+  PoseRefinementStartChoice PathStart; // the tracked path's rule (where Start is chosen or a trial is pending)
+  std::string RuleText;                // the `RefinePoses = on (...)` line's text as Configure wrote it
 };
 
 /**

@@ -75,6 +75,7 @@ PoseRefinementStartChoice ChoosePoseRefinementStart(const TrainingData& data, co
     measured += jitter < 0 ? std::string(" too few frames") : std::string(text);
   }
   const bool jitters = largest > PoseRefinementEarlyJitter;
+  choice.Jitters = jitters;
   if (jitters)
   {
     choice.Start = 0; // else the struct's default, 0.2

@@ -89,8 +89,9 @@ BIGUSTRAINING_EXPORT double TrackedPathJitter(const TrainingData& data, int swee
 /// When the pose corrections start to move (TrainerSettings::PoseRefinementStart negative), and why.
 struct BIGUSTRAINING_EXPORT PoseRefinementStartChoice
 {
-  double Start = 0.2; ///< share of the schedule trained on the tracked poses first
-  std::string Reason; ///< one line: the rule and each sweep's jitter
+  double Start = 0.2;   ///< share of the schedule trained on the tracked poses first
+  std::string Reason;   ///< one line: the rule and each sweep's jitter
+  bool Jitters = false; ///< a sweep's path jitters over PoseRefinementEarlyJitter (Start is then 0)
 };
 
 /// The tracked path's jitter (mm, TrackedPathJitter) above which the corrections move from the first step: about

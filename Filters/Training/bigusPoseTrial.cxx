@@ -24,7 +24,7 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
   const std::string noRoom = this->PoseTrialWithoutRoom();
   if (frames.empty() || this->Reduction || !noRoom.empty())
   {
-    // Untested, the simplest candidate is kept (as the held-out choices take): the tracked poses.
+    // Untested: the tracked path decides (DecideUntestedTrial).
     std::string why = "untested: too few training frames to hold any out for the trial";
     if (this->Reduction)
     {
@@ -34,7 +34,7 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
     {
       why = noRoom;
     }
-    this->KeepTrackedPoses(why + "; the tracked poses kept");
+    this->DecideUntestedTrial(why);
     return this->EndPoseTrial("", error);
   }
   // Both branches from the state at the refinement's start.
@@ -144,6 +144,18 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
   return keepTrusted(how);
 }
 
+void Trainer::DecideUntestedTrial(const std::string& why)
+{
+  // Where the path jitters, refinement without the trial; elsewhere the simplest candidate (as the held-out choices
+  // take): the tracked poses.
+  if (this->Poses.RefineUntested(this->Report.Settings, why))
+  {
+    this->Settings.Poses = this->Poses.GetSettings();
+    return;
+  }
+  this->KeepTrackedPoses(why + "; the tracked poses kept");
+}
+
 void Trainer::KeepTrackedPoses(const std::string& why)
 {
   this->Poses.TurnOffCorrections(
@@ -158,9 +170,10 @@ double Trainer::StepsLeftAfter(double fraction, bool* recent) const
   double left = s.Iterations > 0 ? s.Iterations - std::max<double>(from, fraction * s.Iterations)
                                  : std::numeric_limits<double>::infinity();
   const double seconds = this->TrainingSeconds();
-  // The steps slow as the run goes on (the field grows; from the refinement's start they take the fine cut-off): on
-  // the liver at 300 s the mean rate of 3,615 steps promised about 5,400 more where the budget held 2,054, and the
-  // recent rate still overstates (docs/FINDINGS.md, "The pose trial from 40 % of the schedule").
+  // The steps slow as the run goes on (the field grows; from the refinement's start they take the fine cut-off, from
+  // half the budget every pixel): on the liver at 300 s the mean rate of 3,615 steps promised about 5,400 more where
+  // the budget held 2,054, and the recent rate still overstates (docs/FINDINGS.md, "The pose trial from 40 % of the
+  // schedule", "Untested, the tracked path decides").
   const int mark = this->RateMarkIteration[0];
   const bool windowed = mark >= 0 && mark < from && this->RateMarkSeconds[0] < seconds;
   const double steps = windowed ? from - mark : from;

@@ -163,13 +163,13 @@ bool Trainer::PrepareInitialField(std::string* error)
   }
   if (!plan.PixelGrid)
   {
-    // A schedule too short for the pose-refinement trial keeps the tracked poses (no frame is held out for it; under
-    // a time budget the steps left are judged from the rate, once there is one: Iterate).
+    // A schedule too short for the pose-refinement trial decides untested (no frame is held out for it; under a time
+    // budget the steps left are judged from the rate, once there is one: Iterate).
     const std::string noRoom =
       this->Poses.IsTrialPending() && this->Settings.TimeBudget <= 0 ? this->PoseTrialWithoutRoom() : std::string();
     if (!noRoom.empty())
     {
-      this->KeepTrackedPoses(noRoom + "; the tracked poses kept");
+      this->DecideUntestedTrial(noRoom);
     }
     // Before gamma and the seeds, which read only the fitted frames (the rules measured at construction, the seed
     // count and the pixel spacing read every training frame).

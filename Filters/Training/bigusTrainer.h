@@ -322,8 +322,8 @@ private:
    * scored by the PSNR of the held-out validation frames at their tracked poses; the better branch goes on (the other's
    * steps are spent time) and the RefinePoses line says what each scored. Without held-out frames, data-parallel,
    * or where the steps left are fewer than 10 x the branch's under a time budget (4 x without one), the trial is
-   * not run and the tracked poses are kept (KeepTrackedPoses), the line says untested. The frames then join the fit
-   * unless HoldOutValidationFrames keeps them out.
+   * not run and the choice is untested (DecideUntestedTrial), the line says so. The frames then join the fit unless
+   * HoldOutValidationFrames keeps them out.
    */
   bool TryPoseRefinement(double start, const std::function<void(double, int, double, std::int64_t)>& progress,
     const std::function<bool()>& abort, bool& stop, std::string* error);
@@ -334,7 +334,7 @@ private:
   /// step). @p recent: whether that rate was the recent one.
   double StepsLeftAfter(double fraction, bool* recent = nullptr) const;
   /// Where the steps left after the pose refinement's start (StepsLeftAfter) are fewer than PoseRefiner::TrialRoom x
-  /// TrialSteps: why, for the `RefinePoses` line (the trial is not run: KeepTrackedPoses); empty where they hold it.
+  /// TrialSteps: why, for the `RefinePoses` line (the trial is not run: DecideUntestedTrial); empty where they hold it.
   /// Judged at Initialize for an Iterations schedule without a time budget (before any frame is held out), and under
   /// a budget at the start and before it. @p recent: whether the steps were judged from the recent rate (before the
   /// start the trainer ends a trial without room only then: the first steps' rate counts the seeding).
@@ -343,9 +343,13 @@ private:
   /// just before a densification (where the densification window is open), so that no branch is scored in the dip
   /// of the densification its last step would have made.
   int PoseTrialSteps(int from) const;
-  /// Ends RefinePoses Auto's choice with the tracked poses (PoseRefiner::TurnOffCorrections): the trial chose them,
-  /// or could not be run. The RefinePoses line says @p why and what the rule would have done.
+  /// Ends RefinePoses Auto's choice with the tracked poses (PoseRefiner::TurnOffCorrections): the trial chose them or
+  /// stopped in a branch, or could not be run (DecideUntestedTrial). The RefinePoses line says @p why and what the
+  /// rule would have done.
   void KeepTrackedPoses(const std::string& why);
+  /// Ends RefinePoses Auto's choice where its trial cannot be run (@p why): refinement without it where the tracked
+  /// path jitters (PoseRefiner::RefineUntested), the tracked poses elsewhere (KeepTrackedPoses).
+  void DecideUntestedTrial(const std::string& why);
   /// After the trial: the validation frames held out for it alone join the fit (validation goes on with them).
   bool EndPoseTrial(const std::string& how, std::string* error);
   /// Measures the validation loss; keeps a copy of the field when it is the best so far.

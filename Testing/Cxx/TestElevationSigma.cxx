@@ -486,6 +486,40 @@ TEST(PoseRefinementChoice, ATrialWithoutRoomKeepsTheTrackedPosesUntested)
   }
 }
 
+// Where the trial cannot run and the tracked path jitters (its training poses moved by 0.5 degrees and 0.5 mm each at
+// random: the path's rule reads over 0.35 mm from frame to frame), refinement goes on untested from the path's start,
+// the first step (PoseRefiner::RefineUntested): the poses move towards the true ones. The same schedule on the straight
+// path keeps the tracked poses (the test above).
+TEST(PoseRefinementChoice, UntestedTheTrackedPathDecides)
+{
+  const TrainingData exact = TrialSweep();
+  TrainerSettings s = TrialSettings(300, 100);
+  s.Poses.Start = -1; // chosen: the trial at 40 %, 180 steps after it, fewer than 4 x 100
+  const TrainingData perturbed = PerturbedPoses(exact, exact.TrainFrames, 0.5, 0.5, 21, W, H);
+  Trainer trainer(perturbed, s);
+  ASSERT_EQ(trainer.GetSettings().Poses.RefinePoses, PoseRefinement::On) << "the rule refines this sweep";
+  std::string error;
+  ASSERT_TRUE(trainer.Initialize(&error)) << error;
+  EXPECT_DOUBLE_EQ(trainer.GetSettings().Poses.Start, 0.0) << "decided before the first step";
+  ASSERT_TRUE(trainer.Run(nullptr, nullptr, &error)) << error;
+  const std::string said = synthetic::SettingLine(trainer.GetReport(), "RefinePoses");
+  EXPECT_EQ(
+    said.rfind("RefinePoses = on (untested: the schedule leaves 180 steps after the trial's start, fewer than 4 "
+               "x 100; refined without it from 0 % of the schedule, as the tracked path says: the tracked path "
+               "jitters from frame to frame by ",
+      0),
+    0u)
+    << said;
+  EXPECT_NE(said.find("(over 0.35 mm); the rule alone: from 40 % of the schedule"), std::string::npos) << said;
+  EXPECT_EQ(trainer.GetSettings().Poses.RefinePoses, PoseRefinement::On);
+  EXPECT_EQ(trainer.GetReport().PoseCorrections.size(), exact.TrainFrames.size());
+  EXPECT_LT(CornerError(trainer.GetData(), exact, exact.TrainFrames, W, H),
+    CornerError(perturbed, exact, exact.TrainFrames, W, H));
+  // No frame was held out for a trial: the validation line holds none out for it.
+  const std::string validation = synthetic::SettingLine(trainer.GetReport(), "Validation");
+  EXPECT_EQ(validation.find("until the pose-refinement trial ends"), std::string::npos) << validation;
+}
+
 // A stop that waits for the field to settle (Trainer::IsSettled; bigus benchmark's marks) lets the trial run both
 // branches and choose, where a plain abort inside it ends the trial untested (the test above).
 TEST(PoseRefinementChoice, AStopThatWaitsForTheFieldToSettleLetsTheTrialChoose)
