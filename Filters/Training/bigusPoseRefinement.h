@@ -154,7 +154,8 @@ public:
    * trial ends and the `RefinePoses = on (...)` line of @p lines says why; returns true. Elsewhere returns false and
    * changes nothing (the caller keeps the tracked poses, the simplest candidate). On a liver sweep whose training
    * poses were moved by 0.5 degrees and 0.5 mm, refinement from the first step scored higher than the tracked poses
-   * at 60 and 120 s on 2 cores, where the trial has no room (docs/FINDINGS.md, "Untested, the tracked path decides").
+   * at 60, 120 and 300 s on 2 cores, where the trial has no room (docs/FINDINGS.md, "Untested, the tracked path
+   * decides").
    */
   bool RefineUntested(std::vector<std::string>& lines, const std::string& why);
   /// Adds what the trial found (@p how) to the `RefinePoses = on (...)` line of @p lines.
