@@ -229,8 +229,8 @@ public:
   vtkBooleanMacro(AnchorPosesToTracked, bool);
   ///@}
   ///@{ RefinePoses Auto, where the speckle rule would refine: steps taken each way (on the tracked poses, with
-  /// refinement) from the refinement's start (where chosen, 40 % of the schedule at the earliest:
-  /// bigus::PoseRefiner::TrialStart), scored on held-out frames at their tracked poses, the better going on (default
+  /// refinement) from 40 % of the schedule where the refinement's start is chosen (the given start otherwise:
+  /// bigus::PoseRefiner::GetTrialFraction; where the tracked path jitters, the corrections move before it), scored on held-out frames at their tracked poses, the better going on (default
   /// 400; 0: the rule alone; bigus::PoseRefinementSettings::TrialSteps). Where the steps left after the start are
   /// fewer than 10 x these under a time budget (4 x without one) the trial is not run: the poses are refined from the
   /// first steps where the tracked path jitters over 0.35 mm from frame to frame, and kept elsewhere
@@ -245,8 +245,9 @@ public:
   virtual double GetPoseSmoothness() const;
   ///@}
   ///@{ Where poses are refined: the share of the schedule (0 to 1) trained on the tracked poses before the
-  /// corrections move; negative (default): chosen from the tracked path's jitter (bigus::ChoosePoseRefinementStart),
-  /// and where the choice is measured (PoseTrialSteps) 0.4 at the earliest (TrainingSettings says why).
+  /// corrections move; negative (default): chosen from the tracked path's jitter (bigus::ChoosePoseRefinementStart:
+  /// 0 where it jitters over 0.35 mm, else 0.2), and where the choice is measured (PoseTrialSteps) on a path that
+  /// does not jitter, 0.4, the trial's start (TrainingSettings says why).
   virtual void SetPoseRefinementStart(double value);
   virtual double GetPoseRefinementStart() const;
   ///@}

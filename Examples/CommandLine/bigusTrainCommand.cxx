@@ -755,7 +755,7 @@ Command AddTrainCommand(CLI::App& app)
   trainCommand
     ->add_option("--pose-trial-steps", settings.Poses.TrialSteps,
       "Where the default (Auto) would refine the poses: steps taken each way (on the tracked poses, with refinement) "
-      "from the refinement's start (where chosen, 40 % of the schedule at the earliest), scored on held-out frames at "
+      "from 40 % of the schedule where the refinement's start is chosen (the given start otherwise), scored on held-out frames at "
       "their tracked poses, the better going on; where the steps left after it are fewer than 10 x N under "
       "--time-budget (4 x N without), the choice is untested: refined from the first steps where the tracked path "
       "jitters over 0.35 mm from frame to frame, the tracked poses kept elsewhere (0: the speckle rule alone; the "
@@ -785,8 +785,9 @@ Command AddTrainCommand(CLI::App& app)
   trainCommand
     ->add_option("--pose-refinement-start", settings.Poses.Start,
       "Where poses are refined: the share of the schedule (0 to 1) trained on the tracked poses before the corrections "
-      "move; -1: chosen from the tracked path's jitter (bigus::ChoosePoseRefinementStart), and where the default "
-      "(Auto) measures the choice, 40 % at the earliest (its setting line says why)")
+      "move; -1: chosen from the tracked path's jitter (bigus::ChoosePoseRefinementStart: 0 where it jitters over 0.35 "
+      "mm from frame to frame, else 20 %), and where the default (Auto) measures the choice on a path that does not "
+      "jitter, 40 %, the trial's start (its setting line says why)")
     ->capture_default_str()
     ->excludes("--no-refine-poses")
     ->check(FiniteRange(-1.0, 1.0));

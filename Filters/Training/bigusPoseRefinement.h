@@ -169,6 +169,13 @@ public:
   /// the field forms); from 40 % they do, on a liver sweep whose training poses were moved by 0.5 degrees and 0.5 mm
   /// (docs/FINDINGS.md, "The pose trial from 40 % of the schedule").
   static constexpr double TrialStart = 0.4;
+  /// The share of the schedule a pending trial runs at: Start, or TrialStart where the start is chosen and a refined
+  /// sweep's path jitters over PoseRefinementEarlyJitter (the corrections then move from the path's start, 0, and
+  /// the trial measures whether to keep them: docs/FINDINGS.md, "Untested, the tracked path decides").
+  double GetTrialFraction() const { return this->TrialFraction; }
+  /// Sets every per-frame correction of @p state, its Adam moments and step counts to zero and composes the poses
+  /// again (the tracked poses); returns whether any had moved (nothing changes otherwise).
+  bool ResetCorrections(TrainingState& state);
   /// What the `RefinePoses = on (...)` line said when Configure wrote it, without the brackets (empty where it
   /// wrote no such line): why the rule refines, kept for a line that later replaces it.
   const std::string& GetRuleText() const { return this->RuleText; }
@@ -236,6 +243,7 @@ private:
   bool Suspended = false;
   bool TrialPending = false;
   bool StartChosen = false;            // Start was negative: chosen by Configure
+  double TrialFraction = 0;            // GetTrialFraction
   PoseRefinementStartChoice PathStart; // the tracked path's rule (where Start is chosen or a trial is pending)
   std::string RuleText;                // the `RefinePoses = on (...)` line's text as Configure wrote it
 };

@@ -63,7 +63,15 @@ bool Trainer::TryPoseRefinement(double start, const std::function<void(double, i
     return true;
   };
   double trusted = 0, refined = 0;
+  // Where the corrections moved before the trial (the path jitters: GetTrialFraction), the trusted branch takes the
+  // tracked poses from here.
   this->Poses.Suspend(true);
+  if (this->Poses.ResetCorrections(this->State) && !this->PushState(error))
+  {
+    this->Poses.Suspend(false);
+    this->InPoseTrial = false;
+    return false;
+  }
   const bool ok = branch(trusted);
   this->Poses.Suspend(false);
   if (!ok)
@@ -196,7 +204,7 @@ std::string Trainer::PoseTrialWithoutRoom(bool* recent) const
   // Under a time budget the branch the trial discards is steps the run loses: at 60 s on the liver 4 x cost 1.8 dB
   // held out for branches 0.4 dB apart (PoseRefiner::TrialRoom). The branch's steps are TrialSteps give or take the
   // half densification interval PoseTrialSteps moves its end by.
-  const double left = this->StepsLeftAfter(this->Poses.GetSettings().Start, recent);
+  const double left = this->StepsLeftAfter(this->Poses.GetTrialFraction(), recent);
   const bool budget = this->Settings.TimeBudget > 0;
   const double room = PoseRefiner::TrialRoom(budget);
   const int steps = this->Settings.Poses.TrialSteps;

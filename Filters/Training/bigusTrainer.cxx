@@ -562,7 +562,7 @@ bool Trainer::Iterate(double start, const std::function<void(double, int, double
   if (this->Poses.IsTrialPending() && !this->InPoseTrial && rateKnown)
   {
     bool recent = false;
-    const bool due = this->Poses.RefinesAt(this->ScheduleFraction());
+    const bool due = this->ScheduleFraction() >= this->Poses.GetTrialFraction();
     if (due || (s.TimeBudget > 0 && !this->PoseTrialWithoutRoom(&recent).empty() && recent))
     {
       return this->TryPoseRefinement(start, progress, abort, stop, error);

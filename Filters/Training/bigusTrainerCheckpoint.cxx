@@ -56,6 +56,14 @@ bool Trainer::ReadCheckpoint(const std::string& file, std::string* error)
   this->State = std::move(loaded);
   this->Poses.ComposePoses(
     this->State); // frames never corrected (held out, or before the corrections moved) stay as tracked
+  // Where the corrections move before the pose trial (PoseRefiner::GetTrialFraction), the checkpoint's step says
+  // whether the trial ran (one that kept the tracked poses left no correction: PoseRefiner::Resume).
+  if (this->Poses.IsTrialPending() && this->Poses.GetTrialFraction() > this->Settings.Poses.Start &&
+    this->ScheduleFraction() >= this->Poses.GetTrialFraction())
+  {
+    this->Poses.EndTrial();
+    trialDone = true;
+  }
   if (trialDone && !this->EndPoseTrial("before the checkpoint", error))
   {
     return false;
