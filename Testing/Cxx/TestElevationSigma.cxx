@@ -547,12 +547,22 @@ TEST(PoseRefinementChoice, WhereThePathJittersTheCorrectionsMoveBeforeTheTrial)
   EXPECT_LT(CornerError(trainer.GetData(), exact, exact.TrainFrames, W, H),
     CornerError(perturbed, exact, exact.TrainFrames, W, H))
     << "the corrections moved before the trial";
-  ASSERT_TRUE(trainer.Train(nullptr, nullptr, &error)) << error;
-  const std::string said = synthetic::SettingLine(trainer.GetReport(), "RefinePoses");
-  EXPECT_NE(said.find(" steps each way from step 400 "), std::string::npos) << said;
-  EXPECT_EQ(trainer.GetSettings().Poses.RefinePoses, PoseRefinement::On) << said;
-  EXPECT_LT(CornerError(trainer.GetData(), exact, exact.TrainFrames, W, H),
-    CornerError(perturbed, exact, exact.TrainFrames, W, H));
+  // A checkpoint written here resumes with the trial still to come, though its corrections moved.
+  const std::string checkpoint = std::string(BIGUS_TEST_OUTPUT) + "/jittered_path.ckpt";
+  ASSERT_TRUE(trainer.SaveCheckpoint(checkpoint, &error)) << error;
+  Trainer resumed(perturbed, s);
+  ASSERT_TRUE(resumed.Initialize(&error)) << error;
+  ASSERT_TRUE(resumed.LoadCheckpoint(checkpoint, &error)) << error;
+  EXPECT_TRUE(resumed.GetPoseRefiner().IsTrialPending());
+  for (Trainer* t : { &trainer, &resumed })
+  {
+    ASSERT_TRUE(t->Train(nullptr, nullptr, &error)) << error;
+    const std::string said = synthetic::SettingLine(t->GetReport(), "RefinePoses");
+    EXPECT_NE(said.find(" steps each way from step 400 "), std::string::npos) << said;
+    EXPECT_EQ(t->GetSettings().Poses.RefinePoses, PoseRefinement::On) << said;
+    EXPECT_LT(CornerError(t->GetData(), exact, exact.TrainFrames, W, H),
+      CornerError(perturbed, exact, exact.TrainFrames, W, H));
+  }
 }
 
 // A stop that waits for the field to settle (Trainer::IsSettled; bigus benchmark's marks) lets the trial run both
