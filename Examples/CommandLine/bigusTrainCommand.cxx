@@ -755,7 +755,8 @@ Command AddTrainCommand(CLI::App& app)
   trainCommand
     ->add_option("--pose-trial-steps", settings.Poses.TrialSteps,
       "Where the default (Auto) would refine the poses: steps taken each way (on the tracked poses, with refinement) "
-      "from 40 % of the schedule where the refinement's start is chosen (the given start otherwise), scored on held-out frames at "
+      "from 40 % of the schedule where the refinement's start is chosen (the given start otherwise), scored on "
+      "held-out frames at "
       "their tracked poses, the better going on; where the steps left after it are fewer than 10 x N under "
       "--time-budget (4 x N without), the choice is untested: refined from the first steps where the tracked path "
       "jitters over 0.35 mm from frame to frame, the tracked poses kept elsewhere (0: the speckle rule alone; the "

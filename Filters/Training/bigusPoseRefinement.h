@@ -150,7 +150,7 @@ public:
   /**
    * Where RefinePoses Auto's trial cannot be run (@p why, "untested: ..."), the tracked path decides: where a refined
    * sweep's path jitters over PoseRefinementEarlyJitter (a tracker's noise shows in the path itself), refinement goes
-   * on without the trial from the path's start (ChoosePoseRefinementStart: 0; the given Start where one was given), the
+   * on without the trial from Start (where chosen, the path's: ChoosePoseRefinementStart, 0), the
    * trial ends and the `RefinePoses = on (...)` line of @p lines says why; returns true. Elsewhere returns false and
    * changes nothing (the caller keeps the tracked poses, the simplest candidate). On a liver sweep whose training
    * poses were moved by 0.5 degrees and 0.5 mm, refinement from the first step scored higher than the tracked poses
@@ -242,7 +242,6 @@ private:
   std::vector<char> RefinedSweeps; // RefinePoses: 1 for each sweep whose training frames are refined
   bool Suspended = false;
   bool TrialPending = false;
-  bool StartChosen = false;            // Start was negative: chosen by Configure
   double TrialFraction = 0;            // GetTrialFraction
   PoseRefinementStartChoice PathStart; // the tracked path's rule (where Start is chosen or a trial is pending)
   std::string RuleText;                // the `RefinePoses = on (...)` line's text as Configure wrote it
