@@ -29,6 +29,12 @@ void AdamSteps(int count, const double* g, const double* rate, int t, double* x,
   }
 }
 
+/// Whether any per-frame correction of @p state took an Adam step.
+bool AnyCorrectionMoved(const TrainingState& state)
+{
+  return std::any_of(state.PoseSteps.begin(), state.PoseSteps.end(), [](int steps) { return steps > 0; });
+}
+
 /// Drops every per-frame correction of @p state, its Adam moments and step counts, and the kept copies (the best
 /// field's, the parameter average's): a checkpoint then holds no count of corrections the run does not have.
 void ClearCorrections(TrainingState& state)
@@ -189,7 +195,7 @@ void PoseRefiner::TurnOffCorrections(TrainingState& state, std::vector<std::stri
 
 bool PoseRefiner::ResetCorrections(TrainingState& state)
 {
-  const bool moved = std::any_of(state.PoseSteps.begin(), state.PoseSteps.end(), [](int steps) { return steps > 0; });
+  const bool moved = AnyCorrectionMoved(state);
   if (moved)
   {
     for (auto* v : { &state.PoseCorrections, &state.PoseFirstMoment, &state.PoseSecondMoment })
@@ -511,8 +517,7 @@ bool PoseRefiner::Resume(
   trialDone = false;
   // A checkpoint written before any correction moved holds the tracked poses alone: a run that keeps them (given, or
   // untested where its shorter schedule leaves no room for the trial) goes on from it without corrections.
-  if (this->Settings.RefinePoses != PoseRefinement::On &&
-    std::none_of(loaded.PoseSteps.begin(), loaded.PoseSteps.end(), [](int steps) { return steps > 0; }))
+  if (this->Settings.RefinePoses != PoseRefinement::On && !AnyCorrectionMoved(loaded))
   {
     ClearCorrections(loaded);
   }
@@ -521,8 +526,7 @@ bool PoseRefiner::Resume(
     this->TurnOffCorrections(loaded, lines, "decided before the checkpoint " + file + " was written");
     trialDone = true;
   }
-  else if (this->TrialPending && this->TrialFraction <= this->Settings.Start &&
-    std::any_of(loaded.PoseSteps.begin(), loaded.PoseSteps.end(), [](int steps) { return steps > 0; }))
+  else if (this->TrialPending && !this->MovesBeforeTrial() && AnyCorrectionMoved(loaded))
   {
     // Refined by the trial or untested (RefineUntested). Where they move before the trial, the trainer tells from
     // the checkpoint's step whether it ran.

@@ -173,6 +173,9 @@ public:
   /// sweep's path jitters over PoseRefinementEarlyJitter (the corrections then move from the path's start, 0, and
   /// the trial measures whether to keep them: docs/FINDINGS.md, "Untested, the tracked path decides").
   double GetTrialFraction() const { return this->TrialFraction; }
+  /// Whether the corrections move before a pending trial (GetTrialFraction after Start): a checkpoint's moved
+  /// corrections then do not say whether the trial ran (the trainer tells from its step).
+  bool MovesBeforeTrial() const { return this->TrialFraction > this->Settings.Start; }
   /// Sets every per-frame correction of @p state, its Adam moments and step counts to zero and composes the poses
   /// again (the tracked poses); returns whether any had moved (nothing changes otherwise).
   bool ResetCorrections(TrainingState& state);

@@ -58,7 +58,7 @@ bool Trainer::ReadCheckpoint(const std::string& file, std::string* error)
     this->State); // frames never corrected (held out, or before the corrections moved) stay as tracked
   // Where the corrections move before the pose trial (PoseRefiner::GetTrialFraction), the checkpoint's step says
   // whether the trial ran (one that kept the tracked poses left no correction: PoseRefiner::Resume).
-  if (this->Poses.IsTrialPending() && this->Poses.GetTrialFraction() > this->Settings.Poses.Start &&
+  if (this->Poses.IsTrialPending() && this->Poses.MovesBeforeTrial() &&
     this->ScheduleFraction() >= this->Poses.GetTrialFraction())
   {
     this->Poses.EndTrial();
