@@ -110,11 +110,30 @@ void PoseRefiner::Configure(TrainingData* data, const PoseRefinementSettings& se
   this->TrialFraction = std::max(this->TrialFraction, s.Start);
   if (s.RefinePoses == PoseRefinement::On)
   {
+    // The frames' prior: a tracker's noise as each refined sweep's path shows it (PosePriorScale).
+    this->PriorScales.assign(data->SweepCount(), 1.0);
+    std::string prior;
+    for (int sweep = 0; sweep < data->SweepCount(); ++sweep)
+    {
+      if (!this->IsSweepRefined(sweep))
+      {
+        continue;
+      }
+      const double jitter = s.PriorFromPath ? TrackedPathJitter(*data, sweep) : -1;
+      const double k = this->PriorScales[sweep] =
+        PosePriorScale(*data, sweep, PosePriorJitterRatio * jitter, s.RotationSigma, s.TranslationSigma);
+      prior += (prior.empty() ? "" : ", ") +
+        (data->SweepCount() > 1 ? vtkfmt::sprintf("sweep %d ", sweep) : std::string()) +
+        vtkfmt::sprintf("%.3g degrees and %.3g mm", k * s.RotationSigma * 180 / M_PI, k * s.TranslationSigma) +
+        (jitter >= 0
+            ? vtkfmt::sprintf(" (%g x its tracked path's jitter, %.3f mm at the corners)", PosePriorJitterRatio, jitter)
+            : "");
+    }
     this->RuleText =
-      vtkfmt::sprintf("from %.0f %% of the schedule, %sAdam %.3g rad and %.3g mm per step; prior "
-                      "%.3g at %.3g degrees and %.3g mm, smoothness %.3g; ",
+      vtkfmt::sprintf("from %.0f %% of the schedule, %sAdam %.3g rad and %.3g mm per step; prior %.3g at %s, "
+                      "smoothness %.3g; ",
         100 * s.Start, startBy.empty() ? "" : startBy + "; ", s.RotationLearningRate, s.TranslationLearningRate,
-        s.Prior, s.RotationSigma * 180 / M_PI, s.TranslationSigma, s.Smoothness) +
+        s.Prior, prior, s.Smoothness) +
       refinedBy;
     lines.push_back("RefinePoses = on (" + this->RuleText + ")");
     const std::size_t n = data->Poses.size();
@@ -303,6 +322,7 @@ void PoseRefiner::Step(
       found && at + 1 != train.end() && data.SweepOf(*(at + 1)) == sweep ? &corrections[*(at + 1)] : nullptr;
     double g[6];
     bool finite = true;
+    const double scale = this->PriorScales[sweep];
     for (int k = 0; k < 6; ++k)
     {
       double smooth = 0;
@@ -310,7 +330,7 @@ void PoseRefiner::Step(
       {
         smooth += n ? xi[k] - (*n)[k] : 0.0;
       }
-      g[k] = gradients[6 * b + k] + (s.Prior * xi[k] + s.Smoothness * smooth) / (sigma[k] * sigma[k]);
+      g[k] = gradients[6 * b + k] + (s.Prior * xi[k] / (scale * scale) + s.Smoothness * smooth) / (sigma[k] * sigma[k]);
       finite = finite && std::isfinite(g[k]);
     }
     if (!finite)

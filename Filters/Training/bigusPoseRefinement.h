@@ -57,6 +57,12 @@ struct BIGUSTRAINING_EXPORT PoseRefinementSettings
   double RotationSigma = 0.0175;         ///< rad (1 degree): the prior's scale, a tracker's typical error
   double TranslationSigma = 1.0;         ///< mm
   double Prior = 1e-3;                   ///< weight of the prior against the image loss (0: none)
+  /// The frames' own corrections: RotationSigma and TranslationSigma scaled on each sweep so that the prior's rms
+  /// displacement of a frame's corners is PosePriorJitterRatio times its tracked path's jitter (bigus::PosePriorScale),
+  /// as a tracker's noise
+  /// shows in the path. Off: the sigmas as given on every sweep. The shared corrections (time offset, ImageToProbe)
+  /// and the held-out poses' refinement (RefineHeldOutPoses) take the sigmas as given.
+  bool PriorFromPath = true;
   /// Weight of the smoothness prior Smoothness / 2 sum |xi_f - xi_g|^2 (each component over its sigma squared) over
   /// consecutive training frames f, g of the sweep: a tracker's error drifts along a sweep, while a correction that
   /// jumps from frame to frame fits the image, not the pose (0: none).
@@ -243,6 +249,7 @@ private:
   std::vector<bool> TrackedValid;  // the renderer accepts the tracked pose (others are never corrected)
   PoseTimeline Timeline;           // RefineTimeOffset
   std::vector<char> RefinedSweeps; // RefinePoses: 1 for each sweep whose training frames are refined
+  std::vector<double> PriorScales; // [sweeps] the factor on the frames' prior sigmas (PriorFromPath; else 1)
   bool Suspended = false;
   bool TrialPending = false;
   double TrialFraction = 0;            // GetTrialFraction

@@ -55,6 +55,35 @@ double TrackedPathJitter(const TrainingData& data, int sweep)
   return std::sqrt(meanSquare / 1.5);
 }
 
+double PosePriorScale(const TrainingData& data, int sweep, double jitter, double rotationSigma, double translationSigma)
+{
+  if (jitter < 0)
+  {
+    return 1;
+  }
+  for (int f = 0; f < data.Count(); ++f)
+  {
+    SliceFrame frame;
+    if (data.SweepOf(f) != sweep || !data.IsValid(f) ||
+      ComputeSliceFrame(data.Poses[f].data(), 90, frame) != PoseStatus::Ok)
+    {
+      continue;
+    }
+    // The corners' offsets from the centre pixel: (+-(W - 1) / 2) column + (+-(H - 1) / 2) row, mm.
+    const double* m = data.Poses[f].data();
+    double radius2 = 0;
+    for (int r = 0; r < 3; ++r)
+    {
+      const double u = 0.5 * (data.Width - 1) * m[4 * r], v = 0.5 * (data.Height - 1) * m[4 * r + 1];
+      radius2 += 0.5 * ((u + v) * (u + v) + (u - v) * (u - v)); // the mean over the four corners
+    }
+    const double unit =
+      std::sqrt(3 * translationSigma * translationSigma + 2 * rotationSigma * rotationSigma * radius2);
+    return unit > 0 ? std::max(jitter, PosePriorLeastJitter) / unit : 1.0;
+  }
+  return 1;
+}
+
 PoseRefinementStartChoice ChoosePoseRefinementStart(const TrainingData& data, const std::vector<char>& sweeps)
 {
   PoseRefinementStartChoice choice;

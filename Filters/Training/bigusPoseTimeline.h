@@ -86,6 +86,29 @@ BIGUSTRAINING_EXPORT UntrainedCorrection CorrectUntrainedFrames(
  */
 BIGUSTRAINING_EXPORT double TrackedPathJitter(const TrainingData& data, int sweep);
 
+/// The tracked path's jitter below which PosePriorScale takes this (mm): a path without measurable jitter.
+constexpr double PosePriorLeastJitter = 0.01;
+
+/// The frames' pose prior moves their corners by this many times their sweep's tracked-path jitter (rms;
+/// PoseRefinementSettings::PriorFromPath): 1 and 2 score alike on the jittered liver (within 0.03 dB at 0.1 and 0.5
+/// degrees and mm), 1 misses the synthetic case's aims (corner error 0.597 -> 0.308 mm, fair PSNR 0.7 dB under the
+/// true poses'), 2 meets them.
+constexpr double PosePriorJitterRatio = 2;
+
+/**
+ * The factor on a pose prior's sigmas (@p rotationSigma, rad, and @p translationSigma, mm, per component of a
+ * frame's correction) that makes the prior's root mean square displacement of the corners of sweep @p sweep's frames
+ * equal to @p jitter (mm; the sweep's TrackedPathJitter, at least PosePriorLeastJitter): jitter / sqrt(3
+ * translationSigma^2 + 2 rotationSigma^2 R^2), R^2 the mean squared distance of the four corner pixels from the centre
+ * pixel (mm^2) on the sweep's first valid frame. With independent components, E|t|^2 = 3 sigma_t^2 and
+ * E|omega x r|^2 = 2 sigma_r^2 |r|^2. The prior is then a tracker's noise as the path shows it: where poses are nearly
+ * right it holds the corrections near them, where the path jitters it lets them move. Returns 1 where @p jitter is
+ * negative (too few frames to measure) or the sweep has no valid frame. Measured on the liver with its training poses
+ * moved by 0.1 to 0.5 degrees and mm: docs/FINDINGS.md, "The pose prior from the tracked path".
+ */
+BIGUSTRAINING_EXPORT double PosePriorScale(
+  const TrainingData& data, int sweep, double jitter, double rotationSigma, double translationSigma);
+
 /// When the pose corrections start to move (TrainerSettings::PoseRefinementStart negative), and why.
 struct BIGUSTRAINING_EXPORT PoseRefinementStartChoice
 {
