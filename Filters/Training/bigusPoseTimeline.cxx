@@ -10,6 +10,16 @@
 
 namespace bigus
 {
+namespace
+{
+/// Whether frame @p f belongs to sweep @p sweep's tracked path: valid, with a pose the renderer accepts.
+bool IsPathFrame(const TrainingData& data, int sweep, int f)
+{
+  SliceFrame frame;
+  return data.SweepOf(f) == sweep && data.IsValid(f) &&
+    ComputeSliceFrame(data.Poses[f].data(), 90, frame) == PoseStatus::Ok;
+}
+}
 
 double TrackedPathJitter(const TrainingData& data, int sweep)
 {
@@ -17,9 +27,7 @@ double TrackedPathJitter(const TrainingData& data, int sweep)
   std::vector<std::array<double, 12>> corners;
   for (int f = 0; f < data.Count(); ++f)
   {
-    SliceFrame frame;
-    if (data.SweepOf(f) != sweep || !data.IsValid(f) ||
-      ComputeSliceFrame(data.Poses[f].data(), 90, frame) != PoseStatus::Ok)
+    if (!IsPathFrame(data, sweep, f))
     {
       continue;
     }
@@ -63,9 +71,7 @@ double PosePriorScale(const TrainingData& data, int sweep, double jitter, double
   }
   for (int f = 0; f < data.Count(); ++f)
   {
-    SliceFrame frame;
-    if (data.SweepOf(f) != sweep || !data.IsValid(f) ||
-      ComputeSliceFrame(data.Poses[f].data(), 90, frame) != PoseStatus::Ok)
+    if (!IsPathFrame(data, sweep, f))
     {
       continue;
     }
