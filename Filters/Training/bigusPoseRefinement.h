@@ -59,9 +59,8 @@ struct BIGUSTRAINING_EXPORT PoseRefinementSettings
   double Prior = 1e-3;                   ///< weight of the prior against the image loss (0: none)
   /// The frames' own corrections: RotationSigma and TranslationSigma scaled on each sweep so that the prior's rms
   /// displacement of a frame's corners is PosePriorJitterRatio times its tracked path's jitter (bigus::PosePriorScale),
-  /// as a tracker's noise
-  /// shows in the path. Off: the sigmas as given on every sweep. The shared corrections (time offset, ImageToProbe)
-  /// and the held-out poses' refinement (RefineHeldOutPoses) take the sigmas as given.
+  /// as a tracker's noise shows in the path. Off: the sigmas as given on every sweep. The shared corrections (time
+  /// offset, ImageToProbe) and the held-out poses' refinement (RefineHeldOutPoses) take the sigmas as given.
   bool PriorFromPath = true;
   /// Weight of the smoothness prior Smoothness / 2 sum |xi_f - xi_g|^2 (each component over its sigma squared) over
   /// consecutive training frames f, g of the sweep: a tracker's error drifts along a sweep, while a correction that

@@ -75,13 +75,14 @@ double PosePriorScale(const TrainingData& data, int sweep, double jitter, double
     {
       continue;
     }
-    // The corners' offsets from the centre pixel: (+-(W - 1) / 2) column + (+-(H - 1) / 2) row, mm.
+    // The corners' offsets from the centre pixel are +-u +-v (u = (W - 1) / 2 column, v = (H - 1) / 2 row, mm):
+    // their mean squared length is |u|^2 + |v|^2.
     const double* m = data.Poses[f].data();
     double radius2 = 0;
     for (int r = 0; r < 3; ++r)
     {
       const double u = 0.5 * (data.Width - 1) * m[4 * r], v = 0.5 * (data.Height - 1) * m[4 * r + 1];
-      radius2 += 0.5 * ((u + v) * (u + v) + (u - v) * (u - v)); // the mean over the four corners
+      radius2 += u * u + v * v;
     }
     const double unit =
       std::sqrt(3 * translationSigma * translationSigma + 2 * rotationSigma * rotationSigma * radius2);
